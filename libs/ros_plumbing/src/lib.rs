@@ -1,0 +1,25 @@
+//! ROS 2 plumbing shared by every EezyBot node, so no node repeats it:
+//!
+//! * [`args`]: the `--ros-args` command line (`-r`, `-p`, `--params-file`, `--log-level`);
+//! * [`names`]: absolute name expansion and remapping (ros2-client makes `rt//x` of
+//!   relative root names; we never hand it one);
+//! * [`params`]: declared parameters with defaults and ranges, served to `ros2 param`;
+//! * [`qos`]: the QoS of each topic of `shared/INTERFACES.md`;
+//! * [`logging`]: the `log` crate on stderr and `/rosout`;
+//! * [`diagnostics`]: `diagnostics` publishing;
+//! * [`node`]: [`RosNode`] ties them together around a ros2-client node, honouring
+//!   `ROS_DOMAIN_ID`; [`shutdown_signal`] for SIGINT/SIGTERM.
+
+pub mod args;
+pub mod diagnostics;
+mod error;
+pub mod logging;
+pub mod names;
+pub mod node;
+pub mod params;
+pub mod qos;
+
+pub use error::PlumbingError;
+pub use node::{shutdown_signal, NodeSpec, RosNode};
+pub use params::{ParamRange, ParamSpec, Params};
+pub use ros2_client::ParameterValue;

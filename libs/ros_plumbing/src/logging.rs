@@ -1,0 +1,114 @@
+//! The `log` crate's records on stderr (rcutils' format) and on `/rosout`.
+//!
+//! Records from this project's crates go to both; records from libraries (RustDDS…)
+//! go to stderr only, and only from `warn` up unless the level is `debug`, so that a
+//! library logging from inside a DDS callback can never loop through `/rosout`.
+
+use ros2_client::log::LogLevel;
+use ros2_client::{NodeLoggingHandle, RosoutRaw};
+use std::io::Write;
+use std::sync::OnceLock;
+
+/// Crate-name prefixes of this project: their records are the node's own.
+const OWN_TARGETS: &[&str] =
+    &["compute_ik", "serial_node", "state_publisher", "gui_bridge", "ros_plumbing", "eezybot_"];
+
+struct NodeLogger {
+    level: log::LevelFilter,
+    stderr: bool,
+    /// The node's logger name (`arm2.compute_ik`), set once the node exists.
+    name: OnceLock<String>,
+    rosout: OnceLock<NodeLoggingHandle>,
+}
+
+static LOGGER: OnceLock<NodeLogger> = OnceLock::new();
+
+fn is_own(target: &str) -> bool {
+    OWN_TARGETS.iter().any(|p| target.starts_with(p))
+}
+
+impl log::Log for NodeLogger {
+    fn enabled(&self, meta: &log::Metadata<'_>) -> bool {
+        let ceiling = if is_own(meta.target()) {
+            self.level
+        } else if meta.target() == "ros2_client::distributions" {
+            // "ROS_DISTRO is not set": expected, these nodes need no ROS install.
+            if self.level >= log::LevelFilter::Debug {
+                log::LevelFilter::Warn
+            } else {
+                log::LevelFilter::Error
+            }
+        } else if self.level >= log::LevelFilter::Debug {
+            log::LevelFilter::Info
+        } else {
+            self.level.min(log::LevelFilter::Warn)
+        };
+        meta.level() <= ceiling
+    }
+
+    fn log(&self, record: &log::Record<'_>) {
+        if !self.enabled(record.metadata()) {
+            return;
+        }
+        let name = self.name.get().map(String::as_str).unwrap_or("-");
+        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        if self.stderr {
+            let level = match record.level() {
+                log::Level::Error => "ERROR",
+                log::Level::Warn => "WARN",
+                log::Level::Info => "INFO",
+                log::Level::Debug | log::Level::Trace => "DEBUG",
+            };
+            let who = if is_own(record.target()) { name.to_string() } else { format!("{name}:{}", record.target()) };
+            let _ = writeln!(
+                std::io::stderr().lock(),
+                "[{level}] [{}.{:09}] [{who}]: {}",
+                now.as_secs(),
+                now.subsec_nanos(),
+                record.args()
+            );
+        }
+        if is_own(record.target()) {
+            if let Some(handle) = self.rosout.get() {
+                let level = match record.level() {
+                    log::Level::Error => LogLevel::Error,
+                    log::Level::Warn => LogLevel::Warn,
+                    log::Level::Info => LogLevel::Info,
+                    log::Level::Debug | log::Level::Trace => LogLevel::Debug,
+                };
+                handle.rosout_raw(
+                    ros2_client::builtin_interfaces::Time::now(),
+                    level,
+                    name,
+                    &record.args().to_string(),
+                    record.file().unwrap_or(""),
+                    record.module_path().unwrap_or(""),
+                    record.line().unwrap_or(0),
+                );
+            }
+        }
+    }
+
+    fn flush(&self) {
+        let _ = std::io::stderr().flush();
+    }
+}
+
+/// Install the logger (first call wins). Until [`attach_node`] runs, records go to
+/// stderr only.
+pub fn init(level: log::LevelFilter, stderr: bool) {
+    let logger = LOGGER.get_or_init(|| NodeLogger { level, stderr, name: OnceLock::new(), rosout: OnceLock::new() });
+    if log::set_logger(logger).is_ok() {
+        log::set_max_level(level);
+    }
+}
+
+/// Name the node in log lines and, if `rosout` is given, publish records on `/rosout`.
+pub fn attach_node(logger_name: String, rosout: Option<NodeLoggingHandle>) {
+    if let Some(l) = LOGGER.get() {
+        let _ = l.name.set(logger_name);
+        if let Some(h) = rosout {
+            let _ = l.rosout.set(h);
+        }
+    }
+}

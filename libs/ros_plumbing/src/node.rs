@@ -1,0 +1,252 @@
+//! A ros2-client node set up the ROS way: command line, domain id, names, parameters,
+//! logging, with its spinner running.
+
+use crate::args::{self, RosArgs};
+use crate::diagnostics::DiagnosticsPublisher;
+use crate::error::PlumbingError;
+use crate::logging;
+use crate::names::Resolver;
+use crate::params::{self, ParamSpec, Params};
+use eezybot_msgs::RosMessage;
+use ros2_client::{Context, ContextOptions, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription};
+
+/// What a node is: its default name, a one-line description and its parameters.
+#[derive(Clone, Debug)]
+pub struct NodeSpec {
+    /// Default node name (and the name params-file keys and node-specific rules match).
+    pub name: &'static str,
+    /// One line for `--help`.
+    pub description: &'static str,
+    /// Usage of the node's own (non-ROS) arguments, for `--help`; empty if none.
+    pub usage: &'static str,
+    /// Declared parameters.
+    pub params: Vec<ParamSpec>,
+}
+
+impl NodeSpec {
+    /// The text `--help` prints.
+    pub fn help(&self) -> String {
+        let mut s = format!(
+            "{}: {}\n\nusage: {} {}[--ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] [-p NAME:=VALUE] \
+             [--params-file FILE] [--log-level LEVEL]]\n\nenvironment: ROS_DOMAIN_ID (0..232, default 0)\n\nparameters:\n",
+            self.name,
+            self.description,
+            self.name,
+            if self.usage.is_empty() { String::new() } else { format!("{} ", self.usage) }
+        );
+        for p in &self.params {
+            s.push_str(&format!(
+                "  {:<22} {} (default {}){}\n",
+                p.name,
+                p.description,
+                show(&p.default),
+                if p.read_only { ", read-only" } else { "" }
+            ));
+        }
+        s
+    }
+}
+
+fn show(v: &ros2_client::ParameterValue) -> String {
+    use ros2_client::ParameterValue as P;
+    match v {
+        P::Boolean(b) => b.to_string(),
+        P::Integer(i) => i.to_string(),
+        P::Double(d) => d.to_string(),
+        P::String(s) => format!("{s:?}"),
+        other => format!("{other:?}"),
+    }
+}
+
+/// `ROS_DOMAIN_ID` as rcl reads it: unset or empty means 0.
+pub fn domain_id_from_env(value: Option<&str>) -> Result<u16, PlumbingError> {
+    match value.map(str::trim) {
+        None | Some("") => Ok(0),
+        Some(v) => match v.parse::<u16>() {
+            Ok(id) if id <= 232 => Ok(id),
+            _ => Err(PlumbingError::DomainId { value: v.to_string() }),
+        },
+    }
+}
+
+/// A running node: the ros2-client node (spinner started), its name resolver and
+/// its parameters.
+pub struct RosNode {
+    node: Node,
+    resolver: Resolver,
+    params: Params,
+    user_args: Vec<String>,
+    domain_id: u16,
+    spinner: Option<tokio::task::JoinHandle<()>>,
+    // Dropped last: the DDS participant outlives the node's entities.
+    _context: Context,
+}
+
+impl RosNode {
+    /// Set up from this process's arguments and environment. `--help`/`-h` prints
+    /// the spec's help and exits with 0. Must be called inside a tokio runtime.
+    pub fn start(spec: &NodeSpec) -> Result<RosNode, PlumbingError> {
+        let argv: Vec<String> = std::env::args().skip(1).collect();
+        let (user, _) = args::parse(argv.clone())?;
+        if user.iter().any(|a| a == "--help" || a == "-h") {
+            print!("{}", spec.help());
+            std::process::exit(0);
+        }
+        Self::start_with(spec, argv, std::env::var("ROS_DOMAIN_ID").ok().as_deref())
+    }
+
+    /// Set up from explicit arguments (without argv\[0\]) and `ROS_DOMAIN_ID` value.
+    pub fn start_with(spec: &NodeSpec, argv: Vec<String>, domain_env: Option<&str>) -> Result<RosNode, PlumbingError> {
+        let (user_args, ros): (Vec<String>, RosArgs) = args::parse(argv)?;
+        logging::init(ros.log_level.unwrap_or(log::LevelFilter::Info), ros.stdout_logs.unwrap_or(true));
+        let domain_id = domain_id_from_env(domain_env)?;
+        let name = ros.node_name.clone().unwrap_or_else(|| spec.name.to_string());
+        let resolver = Resolver::new(ros.namespace.as_deref().unwrap_or("/"), &name, spec.name, &ros.remaps)?;
+        let values = params::initial_values(&spec.params, &ros, &resolver.node_fqn(), &name)?;
+        let params = Params::new(values.clone());
+
+        let rosout = ros.rosout_logs.unwrap_or(true);
+        let mut options = NodeOptions::new().enable_rosout(rosout).start_parameter_services(true);
+        for (k, v) in values {
+            options = options.declare_parameter(&k, v);
+        }
+        let specs = spec.params.clone();
+        let current = params.clone();
+        options = options.parameter_validator(Box::new(move |name, value| {
+            let Some(spec) = specs.iter().find(|s| s.name == name) else {
+                return Err(format!("`{name}` is not a parameter of this node"));
+            };
+            let checked = spec.check(value)?;
+            if spec.read_only && current.get(name).is_some_and(|v| v != checked) {
+                return Err(format!("`{name}` is read-only: set it on the command line or in a params file"));
+            }
+            Ok(())
+        }));
+        let store = params.clone();
+        options = options.parameter_set_action(Box::new(move |name, value| {
+            if store.get(name).as_ref() != Some(value) {
+                log::info!("parameter {name} set to {}", show(value));
+                store.set(name, value.clone());
+            }
+            Ok(())
+        }));
+
+        let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
+            .map_err(|e| PlumbingError::Ros(format!("cannot create the DDS participant: {e:?}")))?;
+        let node_name = NodeName::new(resolver.namespace(), &name)
+            .map_err(|e| PlumbingError::Name { name: resolver.node_fqn(), why: format!("{e:?}") })?;
+        let mut node = context
+            .new_node(node_name, options)
+            .map_err(|e| PlumbingError::Ros(format!("cannot create node {}: {e:?}", resolver.node_fqn())))?;
+        let logger_name = resolver.node_fqn().trim_start_matches('/').replace('/', ".");
+        logging::attach_node(logger_name, if rosout { Some(node.logging_handle()) } else { None });
+        let spinner = node.spinner().map_err(|e| PlumbingError::Ros(format!("cannot start the node spinner: {e:?}")))?;
+        let spinner = tokio::spawn(async move {
+            if let Err(e) = spinner.spin().await {
+                log::error!("node spinner stopped: {e:?}");
+            }
+        });
+        log::debug!("node {} up in ROS domain {domain_id}", resolver.node_fqn());
+        Ok(RosNode { node, resolver, params, user_args, domain_id, spinner: Some(spinner), _context: context })
+    }
+
+    /// Stop the spinner (parameter services, discovery) and wait for it, so that every
+    /// DDS entity is removed while the participant still runs; then drop the node.
+    /// Call it after the node's own publishers and subscriptions are dropped.
+    pub async fn shutdown(self) {
+        let RosNode { node, spinner, _context, .. } = self;
+        drop(node); // tells the spinner to stop
+        if let Some(handle) = spinner {
+            if tokio::time::timeout(std::time::Duration::from_secs(2), handle).await.is_err() {
+                log::warn!("node spinner did not stop within 2 s");
+            }
+        }
+    }
+
+    /// The program's own arguments (everything outside `--ros-args … --`).
+    pub fn user_args(&self) -> &[String] {
+        &self.user_args
+    }
+
+    /// Current parameter values (updated by `ros2 param set`).
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// The name resolver (namespace, node name, remaps).
+    pub fn resolver(&self) -> &Resolver {
+        &self.resolver
+    }
+
+    /// The DDS domain in use.
+    pub fn domain_id(&self) -> u16 {
+        self.domain_id
+    }
+
+    /// The ros2-client node.
+    pub fn node(&self) -> &Node {
+        &self.node
+    }
+
+    fn topic<M: RosMessage>(&mut self, topic: &str, qos: &QosProfile) -> Result<(String, rustdds::Topic), PlumbingError> {
+        let resolved = self.resolver.resolve(topic)?;
+        let name = Name::parse(&resolved).map_err(|e| PlumbingError::Name { name: resolved.clone(), why: format!("{e:?}") })?;
+        let t = self
+            .node
+            .create_topic(&name, M::type_name(), qos)
+            .map_err(|e| PlumbingError::Ros(format!("cannot create topic {resolved}: {e:?}")))?;
+        Ok((resolved, t))
+    }
+
+    /// A publisher on `topic` (expanded in the node's namespace and remapped).
+    pub fn publisher<M: RosMessage>(&mut self, topic: &str, qos: QosProfile) -> Result<Publisher<M>, PlumbingError> {
+        let (resolved, t) = self.topic::<M>(topic, &qos)?;
+        self.node
+            .create_publisher::<M>(&t, Some(qos))
+            .map_err(|e| PlumbingError::Ros(format!("cannot publish on {resolved}: {e:?}")))
+    }
+
+    /// A subscription to `topic` (expanded in the node's namespace and remapped).
+    pub fn subscription<M: RosMessage>(&mut self, topic: &str, qos: QosProfile) -> Result<Subscription<M>, PlumbingError> {
+        let (resolved, t) = self.topic::<M>(topic, &qos)?;
+        self.node
+            .create_subscription::<M>(&t, Some(qos))
+            .map_err(|e| PlumbingError::Ros(format!("cannot subscribe to {resolved}: {e:?}")))
+    }
+
+    /// The node's `diagnostics` publisher.
+    pub fn diagnostics(&mut self) -> Result<DiagnosticsPublisher, PlumbingError> {
+        Ok(DiagnosticsPublisher::new(self.publisher("diagnostics", crate::qos::DIAGNOSTICS)?))
+    }
+}
+
+/// Resolves on SIGINT or SIGTERM, with the signal's name.
+pub async fn shutdown_signal() -> &'static str {
+    use tokio::signal::unix::{signal, SignalKind};
+    let (int, term) = (signal(SignalKind::interrupt()), signal(SignalKind::terminate()));
+    match (int, term) {
+        (Ok(mut int), Ok(mut term)) => tokio::select! {
+            _ = int.recv() => "SIGINT",
+            _ = term.recv() => "SIGTERM",
+        },
+        _ => {
+            log::error!("cannot install signal handlers; stop with SIGKILL");
+            std::future::pending().await
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn domain_ids() {
+        assert_eq!(domain_id_from_env(None).unwrap(), 0);
+        assert_eq!(domain_id_from_env(Some("")).unwrap(), 0);
+        assert_eq!(domain_id_from_env(Some("42")).unwrap(), 42);
+        assert!(domain_id_from_env(Some("233")).is_err());
+        assert!(domain_id_from_env(Some("x")).is_err());
+        assert!(domain_id_from_env(Some("-1")).is_err());
+    }
+}

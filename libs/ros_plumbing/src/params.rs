@@ -1,0 +1,393 @@
+//! Declared parameters: defaults, types and ranges, overrides from `-p` and
+//! `--params-file`, and a shared store that the parameter services update.
+
+use crate::args::RosArgs;
+use crate::error::PlumbingError;
+use ros2_client::ParameterValue;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::{Arc, RwLock};
+
+/// What values a parameter accepts beyond its type.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ParamRange {
+    /// Any value of the type.
+    Any,
+    /// An integer in `min..=max`.
+    Integer {
+        /// lowest accepted
+        min: i64,
+        /// highest accepted
+        max: i64,
+    },
+    /// A double in `min..=max` (finite).
+    Double {
+        /// lowest accepted
+        min: f64,
+        /// highest accepted
+        max: f64,
+    },
+}
+
+/// A declared parameter.
+#[derive(Clone, Debug)]
+pub struct ParamSpec {
+    /// Name, e.g. `publish_rate`.
+    pub name: &'static str,
+    /// Default value; its variant is the parameter's type.
+    pub default: ParameterValue,
+    /// What it does, for the README and `--help`.
+    pub description: &'static str,
+    /// Accepted range.
+    pub range: ParamRange,
+    /// If true, it can only be set at start (command line, params file).
+    pub read_only: bool,
+    /// A further check of the value (e.g. that a file loads), after type and range.
+    pub validator: Option<fn(&ParameterValue) -> Result<(), String>>,
+}
+
+impl ParamSpec {
+    /// A read-write parameter with no range.
+    pub fn new(name: &'static str, default: ParameterValue, description: &'static str) -> ParamSpec {
+        ParamSpec { name, default, description, range: ParamRange::Any, read_only: false, validator: None }
+    }
+
+    /// With a range.
+    pub fn range(mut self, range: ParamRange) -> ParamSpec {
+        self.range = range;
+        self
+    }
+
+    /// With a further check of the value.
+    pub fn validator(mut self, check: fn(&ParameterValue) -> Result<(), String>) -> ParamSpec {
+        self.validator = Some(check);
+        self
+    }
+
+    /// Settable only at start.
+    pub fn read_only(mut self) -> ParamSpec {
+        self.read_only = true;
+        self
+    }
+
+    /// Check a value against type and range; an integer is accepted for a double.
+    pub fn check(&self, value: &ParameterValue) -> Result<ParameterValue, String> {
+        let value = match (&self.default, value) {
+            (ParameterValue::Double(_), ParameterValue::Integer(i)) => ParameterValue::Double(*i as f64),
+            (ParameterValue::DoubleArray(_), ParameterValue::IntegerArray(v)) => {
+                ParameterValue::DoubleArray(v.iter().map(|i| *i as f64).collect())
+            }
+            _ => value.clone(),
+        };
+        if std::mem::discriminant(&value) != std::mem::discriminant(&self.default) {
+            return Err(format!("expected {}, got {}", type_name(&self.default), type_name(&value)));
+        }
+        match (&self.range, &value) {
+            (ParamRange::Integer { min, max }, ParameterValue::Integer(v)) if v < min || v > max => {
+                Err(format!("{v} is outside {min}..={max}"))
+            }
+            (ParamRange::Double { min, max }, ParameterValue::Double(v)) if !(v >= min && v <= max) => {
+                Err(format!("{v} is outside {min}..={max}"))
+            }
+            _ => Ok(()),
+        }?;
+        if let Some(check) = self.validator {
+            check(&value)?;
+        }
+        Ok(value)
+    }
+}
+
+fn type_name(v: &ParameterValue) -> &'static str {
+    match v {
+        ParameterValue::NotSet => "not set",
+        ParameterValue::Boolean(_) => "a bool",
+        ParameterValue::Integer(_) => "an integer",
+        ParameterValue::Double(_) => "a double",
+        ParameterValue::String(_) => "a string",
+        ParameterValue::ByteArray(_) => "a byte array",
+        ParameterValue::BooleanArray(_) => "a bool array",
+        ParameterValue::IntegerArray(_) => "an integer array",
+        ParameterValue::DoubleArray(_) => "a double array",
+        ParameterValue::StringArray(_) => "a string array",
+    }
+}
+
+/// A YAML scalar or list as a parameter value, typed as rcl types it.
+pub fn yaml_to_parameter(v: &serde_norway::Value) -> Result<ParameterValue, String> {
+    use serde_norway::Value as Y;
+    let scalar = |v: &Y| -> Result<ParameterValue, String> {
+        match v {
+            Y::Bool(b) => Ok(ParameterValue::Boolean(*b)),
+            Y::Number(n) => match n.as_i64() {
+                Some(i) => Ok(ParameterValue::Integer(i)),
+                None => n.as_f64().map(ParameterValue::Double).ok_or_else(|| format!("number {n} out of range")),
+            },
+            Y::String(s) => Ok(ParameterValue::String(s.clone())),
+            Y::Null => Err("a parameter value cannot be null".into()),
+            Y::Tagged(t) => Err(format!("unsupported YAML tag {}", t.tag)),
+            Y::Sequence(_) | Y::Mapping(_) => Err("arrays must hold scalars of one type".into()),
+        }
+    };
+    let Y::Sequence(items) = v else { return scalar(v) };
+    let items: Vec<ParameterValue> = items.iter().map(scalar).collect::<Result<_, _>>()?;
+    let all = |f: fn(&ParameterValue) -> bool| items.iter().all(f);
+    Ok(if items.is_empty() {
+        ParameterValue::StringArray(vec![])
+    } else if all(|p| matches!(p, ParameterValue::Boolean(_))) {
+        ParameterValue::BooleanArray(items.iter().filter_map(|p| if let ParameterValue::Boolean(b) = p { Some(*b) } else { None }).collect())
+    } else if all(|p| matches!(p, ParameterValue::Integer(_))) {
+        ParameterValue::IntegerArray(items.iter().filter_map(|p| if let ParameterValue::Integer(i) = p { Some(*i) } else { None }).collect())
+    } else if all(|p| matches!(p, ParameterValue::Integer(_) | ParameterValue::Double(_))) {
+        ParameterValue::DoubleArray(
+            items
+                .iter()
+                .filter_map(|p| match p {
+                    ParameterValue::Integer(i) => Some(*i as f64),
+                    ParameterValue::Double(d) => Some(*d),
+                    _ => None,
+                })
+                .collect(),
+        )
+    } else if all(|p| matches!(p, ParameterValue::String(_))) {
+        ParameterValue::StringArray(items.iter().filter_map(|p| if let ParameterValue::String(s) = p { Some(s.clone()) } else { None }).collect())
+    } else {
+        return Err("arrays must hold scalars of one type".into());
+    })
+}
+
+/// Does a params-file node key (`/**`, `/arm2/compute_ik`, `compute_ik`, `/*/compute_ik`,
+/// `/**/compute_ik`) select the node with fully qualified name `fqn`?
+pub fn node_key_matches(key: &str, fqn: &str) -> bool {
+    let key = if key.starts_with('/') { key.to_string() } else { format!("/{key}") };
+    let pat: Vec<&str> = key.trim_start_matches('/').split('/').collect();
+    let name: Vec<&str> = fqn.trim_start_matches('/').split('/').collect();
+    fn m(p: &[&str], n: &[&str]) -> bool {
+        match (p.first(), n.first()) {
+            (None, None) => true,
+            (Some(&"**"), _) => m(&p[1..], n) || (!n.is_empty() && m(p, &n[1..])),
+            (Some(&"*"), Some(_)) => m(&p[1..], &n[1..]),
+            (Some(a), Some(b)) if a == b => m(&p[1..], &n[1..]),
+            _ => false,
+        }
+    }
+    m(&pat, &name)
+}
+
+/// The `ros__parameters` for `fqn` from one params file, flattened to `a.b.c` names,
+/// in file order (later keys win when applied in order).
+pub fn read_params_file(path: &Path, fqn: &str) -> Result<Vec<(String, ParameterValue)>, PlumbingError> {
+    let bad = |why: String| PlumbingError::ParamsFile { path: path.to_path_buf(), why };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let doc: serde_norway::Value = serde_norway::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let serde_norway::Value::Mapping(nodes) = doc else {
+        return Err(bad("the top level must map node names to `ros__parameters:`".into()));
+    };
+    let mut out = Vec::new();
+    for (key, body) in &nodes {
+        let key = key.as_str().ok_or_else(|| bad("node keys must be strings".into()))?;
+        if !node_key_matches(key, fqn) {
+            continue;
+        }
+        let params = body
+            .get("ros__parameters")
+            .ok_or_else(|| bad(format!("`{key}:` has no `ros__parameters:` section")))?;
+        flatten("", params, &mut out).map_err(|e| bad(format!("under `{key}`: {e}")))?;
+    }
+    Ok(out)
+}
+
+fn flatten(prefix: &str, v: &serde_norway::Value, out: &mut Vec<(String, ParameterValue)>) -> Result<(), String> {
+    match v {
+        serde_norway::Value::Mapping(m) => {
+            for (k, child) in m {
+                let k = match k {
+                    serde_norway::Value::String(s) => s.clone(),
+                    other => serde_norway::to_string(other).unwrap_or_default().trim().to_string(),
+                };
+                let name = if prefix.is_empty() { k } else { format!("{prefix}.{k}") };
+                flatten(&name, child, out)?;
+            }
+            Ok(())
+        }
+        other => {
+            let value = yaml_to_parameter(other).map_err(|e| format!("`{prefix}`: {e}"))?;
+            out.push((prefix.to_string(), value));
+            Ok(())
+        }
+    }
+}
+
+/// Starting values: defaults, then params files in order, then `-p` in order; each
+/// checked against its spec. Unknown names are refused (a typo should not pass silently).
+pub fn initial_values(
+    specs: &[ParamSpec],
+    args: &RosArgs,
+    fqn: &str,
+    node_name: &str,
+) -> Result<BTreeMap<String, ParameterValue>, PlumbingError> {
+    let mut values: BTreeMap<String, ParameterValue> =
+        specs.iter().map(|s| (s.name.to_string(), s.default.clone())).collect();
+    let mut overrides: Vec<(String, ParameterValue, String)> = Vec::new();
+    for path in &args.params_files {
+        for (name, value) in read_params_file(path, fqn)? {
+            overrides.push((name, value, path.display().to_string()));
+        }
+    }
+    for p in &args.params {
+        if p.node.as_deref().is_none_or(|n| n == node_name) {
+            overrides.push((p.name.clone(), p.value.clone(), "-p".into()));
+        }
+    }
+    for (name, value, origin) in overrides {
+        if name == "use_sim_time" {
+            // Handled by ros2-client itself; we only accept the harmless default.
+            if value != ParameterValue::Boolean(false) {
+                return Err(PlumbingError::Parameter { name, why: "simulated time is not supported by these nodes".into() });
+            }
+            continue;
+        }
+        let spec = specs.iter().find(|s| s.name == name).ok_or_else(|| PlumbingError::Parameter {
+            name: name.clone(),
+            why: format!(
+                "not a parameter of this node (from {origin}); known: {}",
+                specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+            ),
+        })?;
+        let value = spec.check(&value).map_err(|why| PlumbingError::Parameter { name: name.clone(), why: format!("{why} (from {origin})") })?;
+        values.insert(name, value);
+    }
+    Ok(values)
+}
+
+/// The node's current parameter values, shared with the parameter services.
+/// Cloning gives another handle to the same values.
+#[derive(Clone, Debug)]
+pub struct Params {
+    values: Arc<RwLock<BTreeMap<String, ParameterValue>>>,
+    changed: Arc<tokio::sync::watch::Sender<u64>>,
+}
+
+impl Params {
+    /// A store with these values.
+    pub fn new(values: BTreeMap<String, ParameterValue>) -> Params {
+        let (tx, _rx) = tokio::sync::watch::channel(0);
+        Params { values: Arc::new(RwLock::new(values)), changed: Arc::new(tx) }
+    }
+
+    /// Current value.
+    pub fn get(&self, name: &str) -> Option<ParameterValue> {
+        self.values.read().ok().and_then(|v| v.get(name).cloned())
+    }
+
+    /// Current value of a double parameter.
+    pub fn f64(&self, name: &str) -> Option<f64> {
+        match self.get(name) {
+            Some(ParameterValue::Double(d)) => Some(d),
+            _ => None,
+        }
+    }
+
+    /// Current value of an integer parameter.
+    pub fn i64(&self, name: &str) -> Option<i64> {
+        match self.get(name) {
+            Some(ParameterValue::Integer(i)) => Some(i),
+            _ => None,
+        }
+    }
+
+    /// Current value of a string parameter.
+    pub fn string(&self, name: &str) -> Option<String> {
+        match self.get(name) {
+            Some(ParameterValue::String(s)) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// Current value of a bool parameter.
+    pub fn bool(&self, name: &str) -> Option<bool> {
+        match self.get(name) {
+            Some(ParameterValue::Boolean(b)) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// Store a value (already checked) and wake [`Params::subscribe`]rs.
+    pub fn set(&self, name: &str, value: ParameterValue) {
+        if let Ok(mut v) = self.values.write() {
+            v.insert(name.to_string(), value);
+        }
+        self.changed.send_modify(|n| *n += 1);
+    }
+
+    /// A receiver that wakes when any parameter changes.
+    pub fn subscribe(&self) -> tokio::sync::watch::Receiver<u64> {
+        self.changed.subscribe()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::args::parse;
+
+    #[test]
+    fn node_keys() {
+        assert!(node_key_matches("/**", "/compute_ik"));
+        assert!(node_key_matches("/**", "/arm2/compute_ik"));
+        assert!(node_key_matches("compute_ik", "/compute_ik"));
+        assert!(!node_key_matches("compute_ik", "/arm2/compute_ik"));
+        assert!(node_key_matches("/arm2/compute_ik", "/arm2/compute_ik"));
+        assert!(node_key_matches("/**/compute_ik", "/a/b/compute_ik"));
+        assert!(node_key_matches("/*/compute_ik", "/arm2/compute_ik"));
+        assert!(!node_key_matches("/*/compute_ik", "/compute_ik"));
+        assert!(!node_key_matches("/arm2/serial_node", "/arm2/compute_ik"));
+    }
+
+    fn specs() -> Vec<ParamSpec> {
+        vec![
+            ParamSpec::new("rate", ParameterValue::Double(10.0), "").range(ParamRange::Double { min: 1.0, max: 100.0 }),
+            ParamSpec::new("port", ParameterValue::String("/dev/ttyACM0".into()), ""),
+            ParamSpec::new("nested.gain", ParameterValue::Integer(1), "").range(ParamRange::Integer { min: 0, max: 5 }),
+        ]
+    }
+
+    #[test]
+    fn file_then_command_line_and_ranges() {
+        let dir = std::env::temp_dir().join(format!("plumbing-params-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("p.yaml");
+        std::fs::write(
+            &file,
+            "/**:\n  ros__parameters:\n    rate: 20\n    nested:\n      gain: 3\n/other:\n  ros__parameters:\n    bogus: 1\ncompute_ik:\n  ros__parameters:\n    port: mock\n",
+        )
+        .unwrap();
+        let argv = ["--ros-args", "--params-file", file.to_str().unwrap(), "-p", "rate:=30.5"];
+        let (_, args) = parse(argv.iter().map(|s| s.to_string())).unwrap();
+        let v = initial_values(&specs(), &args, "/compute_ik", "compute_ik").unwrap();
+        assert_eq!(v["rate"], ParameterValue::Double(30.5));
+        assert_eq!(v["port"], ParameterValue::String("mock".into()));
+        assert_eq!(v["nested.gain"], ParameterValue::Integer(3));
+
+        for (bad, needle) in [("rate:=500.0", "outside"), ("rate:=fast", "expected a double"), ("ratee:=1.0", "not a parameter")] {
+            let argv = ["--ros-args", "-p", bad];
+            let (_, args) = parse(argv.iter().map(|s| s.to_string())).unwrap();
+            let err = initial_values(&specs(), &args, "/compute_ik", "compute_ik").unwrap_err().to_string();
+            assert!(err.contains(needle), "{bad}: {err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn malformed_params_file_names_file_and_problem() {
+        let dir = std::env::temp_dir().join(format!("plumbing-badparams-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("bad.yaml");
+        std::fs::write(&file, "/**:\n  parameters:\n    rate: 1\n").unwrap();
+        let err = read_params_file(&file, "/compute_ik").unwrap_err().to_string();
+        assert!(err.contains("bad.yaml") && err.contains("ros__parameters"), "{err}");
+        let err = read_params_file(&dir.join("missing.yaml"), "/x").unwrap_err().to_string();
+        assert!(err.contains("missing.yaml"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

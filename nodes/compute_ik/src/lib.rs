@@ -1,0 +1,152 @@
+//! `compute_ik`: targets → joint states and servo angles.
+//!
+//! Subscribes `xyz_target`, `gripper_target`, `joint_target` and `estop`; publishes
+//! `joint_states`, `servo_angles` and `diagnostics` (see `shared/INTERFACES.md`).
+//! The logic is [`core::IkCore`]; [`run`] is the event loop, handed its inputs and
+//! outputs so that tests can drive it without ROS.
+
+pub mod core;
+
+use crate::core::{IkCore, Output};
+use eezybot_kinematics::ArmConfig;
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::geometry_msgs::PointStamped;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::Time;
+use futures::{Stream, StreamExt};
+use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
+use std::future::Future;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The node's description and parameters.
+pub fn spec() -> ros_plumbing::NodeSpec {
+    ros_plumbing::NodeSpec {
+        name: "compute_ik",
+        description: "inverse kinematics for the EezyBotArm Mk2: xyz_target / gripper_target / joint_target -> \
+                      joint_states + servo_angles",
+        usage: "",
+        params: vec![
+            ParamSpec::new(
+                "arm_config",
+                ParameterValue::String(String::new()),
+                "arm geometry, limits and servo calibration YAML; empty = the shipped config/arm.yaml",
+            )
+            .validator(|v| match v {
+                ParameterValue::String(p) => load_config(p).map(|_| ()).map_err(|e| e.to_string()),
+                _ => Ok(()),
+            }),
+            ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame xyz_target must be given in")
+                .validator(|v| match v {
+                    ParameterValue::String(s) if s.is_empty() => Err("must not be empty".into()),
+                    _ => Ok(()),
+                }),
+            ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
+                .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+        ],
+    }
+}
+
+/// Load the arm configuration named by the `arm_config` parameter.
+pub fn load_config(path: &str) -> Result<ArmConfig, eezybot_kinematics::ConfigError> {
+    if path.is_empty() {
+        ArmConfig::shipped()
+    } else {
+        ArmConfig::load(Path::new(path))
+    }
+}
+
+/// One event for the loop.
+#[derive(Clone, Debug)]
+pub enum Input {
+    /// An `xyz_target` sample.
+    XyzTarget(PointStamped),
+    /// A `gripper_target` sample and when it arrived.
+    GripperTarget(f64, Time),
+    /// A `joint_target` sample.
+    JointTarget(JointState),
+    /// An `estop` sample.
+    Estop(bool),
+    /// A sample that could not be read (malformed, wrong type): topic and error.
+    Unreadable(&'static str, String),
+}
+
+/// Where the loop's results go.
+pub trait Outputs {
+    /// Publish on `joint_states`.
+    fn joint_states(&self, msg: JointState);
+    /// Publish on `servo_angles`.
+    fn servo_angles(&self, msg: JointState);
+    /// Publish a `diagnostics` report with this status.
+    fn diagnostics(&self, status: DiagnosticStatus);
+}
+
+/// Most frequent diagnostics sent at once on a rejection; the periodic report covers the rest.
+const MIN_IMMEDIATE_DIAG_GAP: Duration = Duration::from_millis(100);
+
+/// The event loop: runs until `shutdown` resolves or `inputs` ends.
+pub async fn run(
+    mut core: IkCore,
+    inputs: impl Stream<Item = Input>,
+    outputs: &impl Outputs,
+    params: Params,
+    diag_name: String,
+    shutdown: impl Future<Output = ()>,
+) {
+    let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
+    let mut ticker = tokio::time::interval(period(&params));
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut param_changes = params.subscribe();
+    let mut last_immediate = Instant::now() - MIN_IMMEDIATE_DIAG_GAP;
+    tokio::pin!(inputs);
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            _ = ticker.tick() => outputs.diagnostics(core.diagnostic_status(&diag_name)),
+            Ok(()) = param_changes.changed() => {
+                // Values were validated before they were stored; a file that vanished since is reported.
+                match load_config(&params.string("arm_config").unwrap_or_default()) {
+                    Ok(config) => core.set_config(&config),
+                    Err(e) => log::error!("keeping the previous arm configuration: {e}"),
+                }
+                core.set_base_frame(&params.string("base_frame").unwrap_or_else(|| "base_link".into()));
+                ticker = tokio::time::interval(period(&params));
+            }
+            input = inputs.next() => {
+                let Some(input) = input else { break };
+                let result = match input {
+                    Input::XyzTarget(m) => core.handle_xyz_target(&m),
+                    Input::GripperTarget(v, stamp) => core.handle_gripper_target(v, stamp),
+                    Input::JointTarget(m) => core.handle_joint_target(&m),
+                    Input::Estop(engaged) => {
+                        if engaged != core.estop() {
+                            if engaged { log::warn!("emergency stop engaged: targets refused until estop is false") }
+                            else { log::info!("emergency stop released") }
+                            core.set_estop(engaged);
+                            outputs.diagnostics(core.diagnostic_status(&diag_name));
+                        }
+                        continue;
+                    }
+                    Input::Unreadable(topic, e) => {
+                        log::warn!("unreadable sample on {topic} ignored: {e}");
+                        continue;
+                    }
+                };
+                match result {
+                    Ok(Output { joint_states, servo_angles }) => {
+                        outputs.servo_angles(servo_angles);
+                        outputs.joint_states(joint_states);
+                    }
+                    Err(rejection) => {
+                        log::warn!("{rejection}");
+                        if last_immediate.elapsed() >= MIN_IMMEDIATE_DIAG_GAP {
+                            last_immediate = Instant::now();
+                            outputs.diagnostics(core.diagnostic_status(&diag_name));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,123 @@
+//! `compute_ik` binary: sets up ROS and runs [`compute_ik::run`].
+
+use anyhow::Context as _;
+use compute_ik::{core::IkCore, load_config, Input, Outputs};
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::geometry_msgs::PointStamped;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::{Bool, Float64};
+use eezybot_msgs::Time;
+use futures::StreamExt;
+use ros2_client::Publisher;
+use ros_plumbing::diagnostics::DiagnosticsPublisher;
+use ros_plumbing::{qos, RosNode};
+use std::process::ExitCode;
+
+struct RosOutputs {
+    joint_states: Publisher<JointState>,
+    servo_angles: Publisher<JointState>,
+    diagnostics: DiagnosticsPublisher,
+}
+
+impl Outputs for RosOutputs {
+    fn joint_states(&self, msg: JointState) {
+        if let Err(e) = self.joint_states.publish(msg) {
+            log::warn!("could not publish joint_states: {e:?}");
+        }
+    }
+    fn servo_angles(&self, msg: JointState) {
+        if let Err(e) = self.servo_angles.publish(msg) {
+            log::warn!("could not publish servo_angles: {e:?}");
+        }
+    }
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.publish(vec![status]);
+    }
+}
+
+async fn main_async() -> anyhow::Result<()> {
+    let spec = compute_ik::spec();
+    let mut node = RosNode::start(&spec)?;
+    if let Some(extra) = node.user_args().first() {
+        anyhow::bail!("unexpected argument `{extra}` (see --help)");
+    }
+    let params = node.params().clone();
+    let config = load_config(&params.string("arm_config").unwrap_or_default()).context("arm_config")?;
+    let core = IkCore::new(&config, &params.string("base_frame").unwrap_or_else(|| "base_link".into()));
+
+    let xyz = node.subscription::<PointStamped>("xyz_target", qos::COMMANDS)?;
+    let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
+    let joints = node.subscription::<JointState>("joint_target", qos::COMMANDS)?;
+    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let outputs = RosOutputs {
+        joint_states: node.publisher("joint_states", qos::COMMANDS)?,
+        servo_angles: node.publisher("servo_angles", qos::COMMANDS)?,
+        diagnostics: node.diagnostics()?,
+    };
+
+    let inputs = futures::stream::select_all([
+        xyz.async_stream()
+            .map(|r| match r {
+                Ok((m, _)) => Input::XyzTarget(m),
+                Err(e) => Input::Unreadable("xyz_target", format!("{e:?}")),
+            })
+            .boxed(),
+        gripper
+            .async_stream()
+            .map(|r| match r {
+                Ok((m, _)) => Input::GripperTarget(m.data, Time::now()),
+                Err(e) => Input::Unreadable("gripper_target", format!("{e:?}")),
+            })
+            .boxed(),
+        joints
+            .async_stream()
+            .map(|r| match r {
+                Ok((m, _)) => Input::JointTarget(m),
+                Err(e) => Input::Unreadable("joint_target", format!("{e:?}")),
+            })
+            .boxed(),
+        estop
+            .async_stream()
+            .map(|r| match r {
+                Ok((m, _)) => Input::Estop(m.data),
+                Err(e) => Input::Unreadable("estop", format!("{e:?}")),
+            })
+            .boxed(),
+    ]);
+
+    let diag_name = format!("{}: inverse kinematics", node.resolver().node_name());
+    log::info!(
+        "{} ready in ROS domain {}: {} -> {}, {}",
+        node.resolver().node_fqn(),
+        node.domain_id(),
+        node.resolver().resolve("xyz_target")?,
+        node.resolver().resolve("joint_states")?,
+        node.resolver().resolve("servo_angles")?
+    );
+    let shutdown = async {
+        let signal = ros_plumbing::shutdown_signal().await;
+        log::info!("{signal}: shutting down");
+    };
+    compute_ik::run(core, inputs, &outputs, params, diag_name, shutdown).await;
+    drop(outputs);
+    drop((xyz, gripper, joints, estop));
+    node.shutdown().await;
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("compute_ik: cannot start the async runtime: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match runtime.block_on(main_async()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("compute_ik: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
