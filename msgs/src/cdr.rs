@@ -29,7 +29,8 @@ pub enum CdrError {
 
 /// Serialize `msg` with its encapsulation header, as ros2-client puts it on the wire.
 pub fn encode<M: Serialize>(msg: &M) -> Result<Vec<u8>, CdrError> {
-    let body = CDRSerializerAdapter::<M>::to_bytes(msg).map_err(|e| CdrError::Cdr(e.to_string()))?;
+    let body =
+        CDRSerializerAdapter::<M>::to_bytes(msg).map_err(|e| CdrError::Cdr(e.to_string()))?;
     let rep = CDRSerializerAdapter::<M>::output_encoding().to_bytes();
     let mut out = Vec::with_capacity(body.len() + 4);
     out.extend_from_slice(&[rep[0], rep[1], 0, 0]);
@@ -43,11 +44,12 @@ pub fn decode<M: DeserializeOwned>(bytes: &[u8]) -> Result<M, CdrError> {
         return Err(CdrError::TooShort { len: bytes.len() });
     }
     let rep = [bytes[0], bytes[1]];
-    let rep_id = RepresentationIdentifier::from_bytes(&rep).map_err(|e| CdrError::Cdr(e.to_string()))?;
+    let rep_id =
+        RepresentationIdentifier::from_bytes(&rep).map_err(|e| CdrError::Cdr(e.to_string()))?;
     if rep_id != RepresentationIdentifier::CDR_LE && rep_id != RepresentationIdentifier::CDR_BE {
         return Err(CdrError::UnsupportedRepresentation(rep));
     }
-    let (msg, _consumed) =
-        deserialize_from_cdr_with_rep_id::<M>(&bytes[4..], rep_id).map_err(|e| CdrError::Cdr(e.to_string()))?;
+    let (msg, _consumed) = deserialize_from_cdr_with_rep_id::<M>(&bytes[4..], rep_id)
+        .map_err(|e| CdrError::Cdr(e.to_string()))?;
     Ok(msg)
 }

@@ -22,6 +22,8 @@
 //! assert_eq!(back, m);
 //! ```
 
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
 pub use ros2_client::builtin_interfaces::Time;
 use ros2_client::MessageTypeName;
 use serde::{de::DeserializeOwned, Serialize};
@@ -72,7 +74,10 @@ pub mod std_msgs {
 
     impl Default for Header {
         fn default() -> Self {
-            Header { stamp: Time::ZERO, frame_id: std::string::String::new() }
+            Header {
+                stamp: Time::ZERO,
+                frame_id: std::string::String::new(),
+            }
         }
     }
 
@@ -155,7 +160,12 @@ pub mod geometry_msgs {
     impl Default for Quaternion {
         /// The identity rotation, as in the `.msg` defaults.
         fn default() -> Self {
-            Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 }
+            Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            }
         }
     }
 

@@ -1,16 +1,29 @@
 //! IK and FK timing. `cargo bench -p eezybot_kinematics`.
 use criterion::{criterion_group, criterion_main, Criterion};
-use eezybot_kinematics::{Arm, ArmJoints, ServoCalibrations, ArmState};
+use eezybot_kinematics::{Arm, ArmJoints, ArmState, ServoCalibrations};
 use nalgebra::Vector3;
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
     let arm = Arm::default();
-    // A ring of reachable targets so branch prediction does not see one input.
+    // 64 reachable targets spread over the workspace (FK of in-limit joints), so
+    // branch prediction does not see a single input.
     let targets: Vec<Vector3<f64>> = (0..64)
         .map(|i| {
             let t = i as f64 / 64.0;
-            Vector3::new(0.18 + 0.05 * t, -0.08 + 0.16 * t, 0.12 + 0.06 * (t * 6.0).sin())
+            let alpha_deg = 60.0 + 50.0 * t;
+            let (lo, hi) = (
+                (alpha_deg - 140.0f64).max(-60.0),
+                (alpha_deg - 65.0f64).min(15.0),
+            );
+            let phi_deg = lo + (hi - lo) * ((t * 7.0) % 1.0);
+            let shoulder_rad = alpha_deg.to_radians();
+            let elbow_rad = phi_deg.to_radians() - shoulder_rad;
+            arm.forward(&ArmJoints {
+                base_rad: (-40.0 + 80.0 * t).to_radians(),
+                shoulder_rad,
+                elbow_rad,
+            })
         })
         .collect();
     assert!(targets.iter().all(|p| arm.solve_position(p, 0.0).is_ok()));
@@ -21,11 +34,22 @@ fn bench(c: &mut Criterion) {
             black_box(arm.solve_position(black_box(&targets[i]), 0.0))
         })
     });
-    let q = ArmJoints { base_rad: 0.2, shoulder_rad: 1.3, elbow_rad: -1.6 };
-    c.bench_function("fk_forward", |b| b.iter(|| black_box(arm.forward(black_box(&q)))));
+    let q = ArmJoints {
+        base_rad: 0.2,
+        shoulder_rad: 1.3,
+        elbow_rad: -1.6,
+    };
+    c.bench_function("fk_forward", |b| {
+        b.iter(|| black_box(arm.forward(black_box(&q))))
+    });
     let cal = ServoCalibrations::default();
-    let state = ArmState { joints: q, gripper_opening: 0.3 };
-    c.bench_function("servo_angles", |b| b.iter(|| black_box(cal.servo_angles(black_box(&state)))));
+    let state = ArmState {
+        joints: q,
+        gripper_opening: 0.3,
+    };
+    c.bench_function("servo_angles", |b| {
+        b.iter(|| black_box(cal.servo_angles(black_box(&state))))
+    });
 }
 
 criterion_group!(benches, bench);

@@ -59,7 +59,13 @@ pub struct ArmGeometry {
 
 impl Default for ArmGeometry {
     fn default() -> Self {
-        ArmGeometry { shoulder_height_m: 0.094, main_arm_m: 0.135, forearm_m: 0.147, tool_dx_m: 0.0393, gripper_open_rad: 0.6 }
+        ArmGeometry {
+            shoulder_height_m: 0.094,
+            main_arm_m: 0.135,
+            forearm_m: 0.147,
+            tool_dx_m: 0.0393,
+            gripper_open_rad: 0.6,
+        }
     }
 }
 
@@ -82,7 +88,12 @@ pub struct JointLimitsDeg {
 
 impl Default for JointLimitsDeg {
     fn default() -> Self {
-        JointLimitsDeg { base: [-45.0, 45.0], shoulder: [42.5, 125.0], elbow: [-145.0, -60.0], forearm_elevation: [-65.0, 20.0] }
+        JointLimitsDeg {
+            base: [-45.0, 45.0],
+            shoulder: [42.5, 125.0],
+            elbow: [-145.0, -60.0],
+            forearm_elevation: [-65.0, 20.0],
+        }
     }
 }
 
@@ -119,28 +130,33 @@ impl ArmConfig {
 
     /// Parse and validate YAML text; `origin` names it in errors.
     pub fn from_yaml(text: &str, origin: &str) -> Result<ArmConfig, ConfigError> {
-        let config: ArmConfig = serde_norway::from_str(text)
-            .map_err(|e| ConfigError::Parse { origin: origin.to_string(), message: e.to_string() })?;
+        let config: ArmConfig = serde_norway::from_str(text).map_err(|e| ConfigError::Parse {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
         config.validate(origin)?;
         Ok(config)
     }
 
     /// Read, parse and validate a file.
     pub fn load(path: &Path) -> Result<ArmConfig, ConfigError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_yaml(&text, &path.display().to_string())
     }
 
     /// Check that every value is usable: positive lengths, ordered finite limits,
     /// servo ranges inside 0–180° and plausible pulse widths.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
-        let invalid = |field: &'static str, value: String, why: &'static str| ConfigError::Invalid {
-            origin: origin.to_string(),
-            field,
-            value,
-            why,
-        };
+        let invalid =
+            |field: &'static str, value: String, why: &'static str| ConfigError::Invalid {
+                origin: origin.to_string(),
+                field,
+                value,
+                why,
+            };
         let g = &self.geometry;
         for (field, v) in [
             ("geometry.shoulder_height_m", g.shoulder_height_m),
@@ -153,7 +169,11 @@ impl ArmConfig {
             }
         }
         if !g.tool_dx_m.is_finite() {
-            return Err(invalid("geometry.tool_dx_m", g.tool_dx_m.to_string(), "must be finite"));
+            return Err(invalid(
+                "geometry.tool_dx_m",
+                g.tool_dx_m.to_string(),
+                "must be finite",
+            ));
         }
         let l = &self.limits_deg;
         for (field, [lo, hi]) in [
@@ -163,7 +183,11 @@ impl ArmConfig {
             ("limits_deg.forearm_elevation", l.forearm_elevation),
         ] {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                return Err(invalid(field, format!("[{lo}, {hi}]"), "must be finite with min <= max"));
+                return Err(invalid(
+                    field,
+                    format!("[{lo}, {hi}]"),
+                    "must be finite with min <= max",
+                ));
             }
         }
         if !(l.elbow[1] < 0.0 && l.elbow[0] > -180.0) {
@@ -179,7 +203,10 @@ impl ArmConfig {
 
     /// The arm this configuration describes.
     pub fn arm(&self) -> Arm {
-        Arm { geometry: self.geometry, limits: self.limits_deg.to_radians() }
+        Arm {
+            geometry: self.geometry,
+            limits: self.limits_deg.to_radians(),
+        }
     }
 }
 
@@ -195,9 +222,13 @@ mod tests {
 
     #[test]
     fn unknown_field_is_rejected_with_its_name() {
-        let err = ArmConfig::from_yaml("geometry: { shoulder_hieght_m: 0.1 }", "test.yaml").unwrap_err();
+        let err =
+            ArmConfig::from_yaml("geometry: { shoulder_hieght_m: 0.1 }", "test.yaml").unwrap_err();
         let text = err.to_string();
-        assert!(text.contains("test.yaml") && text.contains("shoulder_hieght_m"), "{text}");
+        assert!(
+            text.contains("test.yaml") && text.contains("shoulder_hieght_m"),
+            "{text}"
+        );
     }
 
     #[test]

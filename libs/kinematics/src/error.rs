@@ -59,7 +59,9 @@ pub enum KinematicsError {
         value: f64,
     },
     /// The wrist would have to be farther from the shoulder than the links reach.
-    #[error("out of reach: wrist {distance_m:.4} m from the shoulder, links reach at most {max_m:.4} m")]
+    #[error(
+        "out of reach: wrist {distance_m:.4} m from the shoulder, links reach at most {max_m:.4} m"
+    )]
     TooFar {
         /// shoulder → wrist distance needed (m)
         distance_m: f64,

@@ -21,6 +21,8 @@
 //! assert!((q.shoulder_rad - home.shoulder_rad).abs() < 1e-12);
 //! ```
 
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
 mod config;
 mod error;
 mod servo;
@@ -49,7 +51,11 @@ pub struct ArmJoints {
 
 impl ArmJoints {
     /// Home pose: base 0, main arm vertical, forearm horizontal.
-    pub const HOME: ArmJoints = ArmJoints { base_rad: 0.0, shoulder_rad: FRAC_PI_2, elbow_rad: -FRAC_PI_2 };
+    pub const HOME: ArmJoints = ArmJoints {
+        base_rad: 0.0,
+        shoulder_rad: FRAC_PI_2,
+        elbow_rad: -FRAC_PI_2,
+    };
 
     /// φ = α + elbow: the forearm's absolute elevation, which the forearm servo sets.
     pub fn forearm_elevation_rad(&self) -> f64 {
@@ -102,14 +108,24 @@ impl JointLimits {
     /// Every limit row at once; the first that fails is named, in the order
     /// base, shoulder, elbow, forearm elevation.
     pub fn check(&self, q: &ArmJoints) -> Result<(), KinematicsError> {
-        for joint in [Joint::Base, Joint::Shoulder, Joint::Elbow, Joint::ForearmElevation] {
+        for joint in [
+            Joint::Base,
+            Joint::Shoulder,
+            Joint::Elbow,
+            Joint::ForearmElevation,
+        ] {
             let (min, max) = self.of(joint).unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
             let value = q.get(joint).unwrap_or(f64::NAN);
             if !value.is_finite() {
                 return Err(KinematicsError::NonFiniteJoint { joint, value });
             }
             if value < min || value > max {
-                return Err(KinematicsError::OutOfLimits { joint, value_rad: value, min_rad: min, max_rad: max });
+                return Err(KinematicsError::OutOfLimits {
+                    joint,
+                    value_rad: value,
+                    min_rad: min,
+                    max_rad: max,
+                });
             }
         }
         Ok(())
@@ -163,7 +179,11 @@ impl Arm {
     /// assert!(matches!(arm.solve_position(&[-0.2, 0.0, 0.15].into(), 0.0),
     ///                  Err(KinematicsError::OutOfLimits { joint: Joint::Base, .. })));
     /// ```
-    pub fn solve_position(&self, target: &Vector3<f64>, previous_base_rad: f64) -> Result<ArmJoints, KinematicsError> {
+    pub fn solve_position(
+        &self,
+        target: &Vector3<f64>,
+        previous_base_rad: f64,
+    ) -> Result<ArmJoints, KinematicsError> {
         for (axis, value) in [("x", target.x), ("y", target.y), ("z", target.z)] {
             if !value.is_finite() {
                 return Err(KinematicsError::NonFiniteTarget { axis, value });
@@ -187,10 +207,16 @@ impl Arm {
         let s2 = r * r + h * h;
         let (min_reach, max_reach) = ((l2 - l3).abs(), l2 + l3);
         if s2 > max_reach * max_reach {
-            return Err(KinematicsError::TooFar { distance_m: s2.sqrt(), max_m: max_reach });
+            return Err(KinematicsError::TooFar {
+                distance_m: s2.sqrt(),
+                max_m: max_reach,
+            });
         }
         if s2 < min_reach * min_reach {
-            return Err(KinematicsError::TooClose { distance_m: s2.sqrt(), min_m: min_reach });
+            return Err(KinematicsError::TooClose {
+                distance_m: s2.sqrt(),
+                min_m: min_reach,
+            });
         }
         let cos_e = (s2 - l2 * l2 - l3 * l3) / (2.0 * l2 * l3);
         // This product form keeps its accuracy at both reach limits.
@@ -198,7 +224,11 @@ impl Arm {
         let sin_e = -prod.sqrt() / (2.0 * l2 * l3);
         let elbow_rad = sin_e.atan2(cos_e);
         let shoulder_rad = h.atan2(r) - (l3 * sin_e).atan2(l2 + l3 * cos_e);
-        let q = ArmJoints { base_rad, shoulder_rad, elbow_rad };
+        let q = ArmJoints {
+            base_rad,
+            shoulder_rad,
+            elbow_rad,
+        };
         self.limits.check(&q)?;
         Ok(q)
     }
@@ -226,8 +256,14 @@ pub struct PassiveJoints {
 
 impl PassiveJoints {
     /// Joint names, in the order of [`PassiveJoints::values`].
-    pub const NAMES: [&'static str; 6] =
-        ["wrist_joint", "crank_joint", "drive_link_joint", "level_link_joint", "triangle_joint", "upper_link_joint"];
+    pub const NAMES: [&'static str; 6] = [
+        "wrist_joint",
+        "crank_joint",
+        "drive_link_joint",
+        "level_link_joint",
+        "triangle_joint",
+        "upper_link_joint",
+    ];
 
     /// The passive joint angles for the arm joints `q`.
     ///
@@ -252,12 +288,24 @@ impl PassiveJoints {
 
     /// Values in the order of [`PassiveJoints::NAMES`].
     pub fn values(&self) -> [f64; 6] {
-        [self.wrist_rad, self.crank_rad, self.drive_link_rad, self.level_link_rad, self.triangle_rad, self.upper_link_rad]
+        [
+            self.wrist_rad,
+            self.crank_rad,
+            self.drive_link_rad,
+            self.level_link_rad,
+            self.triangle_rad,
+            self.upper_link_rad,
+        ]
     }
 }
 
 /// Names of the actuated joints, as on `joint_states` and `joint_target`.
-pub const ACTUATED_JOINTS: [&str; 4] = ["base_joint", "shoulder_joint", "elbow_joint", "gripper_joint"];
+pub const ACTUATED_JOINTS: [&str; 4] = [
+    "base_joint",
+    "shoulder_joint",
+    "elbow_joint",
+    "gripper_joint",
+];
 
 /// Name of the claw's second finger, which mirrors `gripper_joint` (a URDF mimic joint).
 pub const GRIPPER_MIMIC_JOINT: &str = "gripper_mimic_joint";
@@ -273,7 +321,10 @@ pub struct ArmState {
 
 impl Default for ArmState {
     fn default() -> Self {
-        ArmState { joints: ArmJoints::HOME, gripper_opening: 0.0 }
+        ArmState {
+            joints: ArmJoints::HOME,
+            gripper_opening: 0.0,
+        }
     }
 }
 
@@ -324,7 +375,13 @@ mod tests {
 
     #[test]
     fn yaw_axis_keeps_previous_base_angle() {
-        let arm = Arm { limits: JointLimits { base_rad: (-4.0, 4.0), ..Arm::default().limits }, ..Arm::default() };
+        let arm = Arm {
+            limits: JointLimits {
+                base_rad: (-4.0, 4.0),
+                ..Arm::default().limits
+            },
+            ..Arm::default()
+        };
         // On the axis the tool would need r = -tool_dx: out of reach anyway, but the
         // base angle chosen must be the previous one, never NaN.
         match arm.solve_position(&Vector3::new(0.0, 0.0, 0.2), 0.3) {
@@ -335,7 +392,11 @@ mod tests {
 
     #[test]
     fn passive_joints_keep_plate_level() {
-        let q = ArmJoints { base_rad: 0.1, shoulder_rad: 1.2, elbow_rad: -1.5 };
+        let q = ArmJoints {
+            base_rad: 0.1,
+            shoulder_rad: 1.2,
+            elbow_rad: -1.5,
+        };
         let p = PassiveJoints::from_arm(&q);
         // absolute plate pitch = α + elbow + wrist = 0
         assert!((q.shoulder_rad + q.elbow_rad + p.wrist_rad).abs() < 1e-15);

@@ -18,7 +18,12 @@ pub enum ServoId {
 
 impl ServoId {
     /// All servos in `servo_angles` order.
-    pub const ALL: [ServoId; 4] = [ServoId::Base, ServoId::Shoulder, ServoId::Elbow, ServoId::Gripper];
+    pub const ALL: [ServoId; 4] = [
+        ServoId::Base,
+        ServoId::Shoulder,
+        ServoId::Elbow,
+        ServoId::Gripper,
+    ];
 
     /// Name on `servo_angles` / `servo_state`.
     pub fn name(self) -> &'static str {
@@ -54,7 +59,14 @@ pub struct ServoCalibration {
 
 impl ServoCalibration {
     const fn new(offset_deg: f64, gain: f64, min_deg: f64, max_deg: f64) -> Self {
-        ServoCalibration { offset_deg, gain, min_deg, max_deg, pulse_min_us: 544, pulse_max_us: 2400 }
+        ServoCalibration {
+            offset_deg,
+            gain,
+            min_deg,
+            max_deg,
+            pulse_min_us: 544,
+            pulse_max_us: 2400,
+        }
     }
 
     /// Servo angle (deg) for an input, checked against `min_deg … max_deg`.
@@ -146,7 +158,9 @@ impl ServoCalibrations {
     /// ```
     pub fn servo_angles(&self, state: &ArmState) -> Result<ServoAngles, KinematicsError> {
         if !(0.0..=1.0).contains(&state.gripper_opening) {
-            return Err(KinematicsError::GripperOutOfRange { value: state.gripper_opening });
+            return Err(KinematicsError::GripperOutOfRange {
+                value: state.gripper_opening,
+            });
         }
         let q = &state.joints;
         let inputs = [
@@ -179,12 +193,15 @@ impl ServoCalibrations {
                 why,
             };
             if !(c.offset_deg.is_finite() && c.gain.is_finite() && c.gain != 0.0) {
-                return Err(invalid("offset must be finite and gain finite and non-zero"));
+                return Err(invalid(
+                    "offset must be finite and gain finite and non-zero",
+                ));
             }
             if !(0.0 <= c.min_deg && c.min_deg <= c.max_deg && c.max_deg <= 180.0) {
                 return Err(invalid("need 0 <= min_deg <= max_deg <= 180"));
             }
-            if !(400 <= c.pulse_min_us && c.pulse_min_us < c.pulse_max_us && c.pulse_max_us <= 2600) {
+            if !(400 <= c.pulse_min_us && c.pulse_min_us < c.pulse_max_us && c.pulse_max_us <= 2600)
+            {
                 return Err(invalid("need 400 <= pulse_min_us < pulse_max_us <= 2600"));
             }
         }
@@ -201,7 +218,11 @@ mod tests {
     fn robot_md_mapping() {
         let cal = ServoCalibrations::default();
         let state = ArmState {
-            joints: ArmJoints { base_rad: 20f64.to_radians(), shoulder_rad: 100f64.to_radians(), elbow_rad: -110f64.to_radians() },
+            joints: ArmJoints {
+                base_rad: 20f64.to_radians(),
+                shoulder_rad: 100f64.to_radians(),
+                elbow_rad: -110f64.to_radians(),
+            },
             gripper_opening: 0.5,
         };
         let deg = cal.servo_angles(&state).unwrap().rad.map(f64::to_degrees);
@@ -214,8 +235,14 @@ mod tests {
     #[test]
     fn gripper_outside_unit_range_is_refused() {
         let cal = ServoCalibrations::default();
-        let state = ArmState { gripper_opening: 1.5, ..ArmState::default() };
-        assert!(matches!(cal.servo_angles(&state), Err(KinematicsError::GripperOutOfRange { .. })));
+        let state = ArmState {
+            gripper_opening: 1.5,
+            ..ArmState::default()
+        };
+        assert!(matches!(
+            cal.servo_angles(&state),
+            Err(KinematicsError::GripperOutOfRange { .. })
+        ));
     }
 
     #[test]
@@ -223,9 +250,18 @@ mod tests {
         let mut cal = ServoCalibrations::default();
         cal.base.max_deg = 100.0;
         let state = ArmState {
-            joints: ArmJoints { base_rad: (-10f64).to_radians(), ..ArmJoints::HOME },
+            joints: ArmJoints {
+                base_rad: (-10f64).to_radians(),
+                ..ArmJoints::HOME
+            },
             gripper_opening: 0.0,
         };
-        assert!(matches!(cal.servo_angles(&state), Err(KinematicsError::ServoOutOfRange { servo: "base_servo", .. })));
+        assert!(matches!(
+            cal.servo_angles(&state),
+            Err(KinematicsError::ServoOutOfRange {
+                servo: "base_servo",
+                ..
+            })
+        ));
     }
 }

@@ -1,4 +1,9 @@
 //! Property tests of the kinematics invariants (ROBOT.md).
+#![allow(
+    clippy::unwrap_used,
+    clippy::unnecessary_lazy_evaluations,
+    clippy::single_match
+)]
 
 use eezybot_kinematics::{Arm, ArmJoints, Joint, KinematicsError};
 use nalgebra::Vector3;
@@ -11,13 +16,24 @@ fn arm() -> Arm {
 /// Joint angles inside every limit, the α/φ coupling included.
 fn in_limits() -> impl Strategy<Value = ArmJoints> {
     let l = arm().limits;
-    (l.base_rad.0..=l.base_rad.1, l.shoulder_rad.0..=l.shoulder_rad.1, 0.0f64..=1.0)
-        .prop_filter_map("forearm elevation outside its limits", move |(base_rad, shoulder_rad, t)| {
-            // pick φ inside both its own limits and the elbow limits for this α
-            let lo = l.forearm_elevation_rad.0.max(shoulder_rad + l.elbow_rad.0);
-            let hi = l.forearm_elevation_rad.1.min(shoulder_rad + l.elbow_rad.1);
-            (lo <= hi).then(|| ArmJoints { base_rad, shoulder_rad, elbow_rad: lo + t * (hi - lo) - shoulder_rad })
-        })
+    (
+        l.base_rad.0..=l.base_rad.1,
+        l.shoulder_rad.0..=l.shoulder_rad.1,
+        0.0f64..=1.0,
+    )
+        .prop_filter_map(
+            "forearm elevation outside its limits",
+            move |(base_rad, shoulder_rad, t)| {
+                // pick φ inside both its own limits and the elbow limits for this α
+                let lo = l.forearm_elevation_rad.0.max(shoulder_rad + l.elbow_rad.0);
+                let hi = l.forearm_elevation_rad.1.min(shoulder_rad + l.elbow_rad.1);
+                (lo <= hi).then(|| ArmJoints {
+                    base_rad,
+                    shoulder_rad,
+                    elbow_rad: lo + t * (hi - lo) - shoulder_rad,
+                })
+            },
+        )
 }
 
 proptest! {
@@ -139,7 +155,9 @@ fn non_finite_targets_name_the_axis() {
 #[test]
 fn regression_seed_report_sign_loss_atan2_keeps_negative_y() {
     // The seed's θ1 = acos(y/c) lost the sign; a target at -y must turn the base clockwise.
-    let q = arm().solve_position(&Vector3::new(0.2, -0.05, 0.15), 0.0).unwrap();
+    let q = arm()
+        .solve_position(&Vector3::new(0.2, -0.05, 0.15), 0.0)
+        .unwrap();
     assert!(q.base_rad < 0.0);
 }
 

@@ -63,7 +63,9 @@ pub struct RosArgs {
 /// assert_eq!(ros.namespace.as_deref(), Some("/arm2"));
 /// assert_eq!(ros.params[0].value, ros2_client::ParameterValue::Integer(50));
 /// ```
-pub fn parse(argv: impl IntoIterator<Item = String>) -> Result<(Vec<String>, RosArgs), PlumbingError> {
+pub fn parse(
+    argv: impl IntoIterator<Item = String>,
+) -> Result<(Vec<String>, RosArgs), PlumbingError> {
     let mut user = Vec::new();
     let mut ros = RosArgs::default();
     let mut it = argv.into_iter();
@@ -78,7 +80,10 @@ pub fn parse(argv: impl IntoIterator<Item = String>) -> Result<(Vec<String>, Ros
             continue;
         }
         let mut value_of = |flag: &str| {
-            it.next().ok_or_else(|| PlumbingError::BadArgument { arg: flag.to_string(), why: "needs a value after it".into() })
+            it.next().ok_or_else(|| PlumbingError::BadArgument {
+                arg: flag.to_string(),
+                why: "needs a value after it".into(),
+            })
         };
         match arg.as_str() {
             "--" => in_ros = false,
@@ -116,17 +121,26 @@ pub fn parse(argv: impl IntoIterator<Item = String>) -> Result<(Vec<String>, Ros
     Ok((user, ros))
 }
 
-fn split_rule<'a>(rule: &'a str, what: &str) -> Result<(Option<&'a str>, &'a str, &'a str), PlumbingError> {
+fn split_rule<'a>(
+    rule: &'a str,
+    what: &str,
+) -> Result<(Option<&'a str>, &'a str, &'a str), PlumbingError> {
     let (lhs, rhs) = rule
         .split_once(":=")
-        .ok_or_else(|| PlumbingError::BadArgument { arg: rule.to_string(), why: format!("a {what} needs the form name:=value") })?;
+        .ok_or_else(|| PlumbingError::BadArgument {
+            arg: rule.to_string(),
+            why: format!("a {what} needs the form name:=value"),
+        })?;
     // `node:name:=value` applies to one node only.
     let (node, name) = match lhs.split_once(':') {
         Some((node, name)) => (Some(node), name),
         None => (None, lhs),
     };
     if name.is_empty() {
-        return Err(PlumbingError::BadArgument { arg: rule.to_string(), why: format!("the {what} has an empty name") });
+        return Err(PlumbingError::BadArgument {
+            arg: rule.to_string(),
+            why: format!("the {what} has an empty name"),
+        });
     }
     Ok((node, name, rhs))
 }
@@ -134,14 +148,21 @@ fn split_rule<'a>(rule: &'a str, what: &str) -> Result<(Option<&'a str>, &'a str
 fn parse_remap(rule: &str, ros: &mut RosArgs) -> Result<(), PlumbingError> {
     let (node, from, to) = split_rule(rule, "remap rule")?;
     if to.is_empty() {
-        return Err(PlumbingError::BadArgument { arg: rule.to_string(), why: "the remap rule has an empty replacement".into() });
+        return Err(PlumbingError::BadArgument {
+            arg: rule.to_string(),
+            why: "the remap rule has an empty replacement".into(),
+        });
     }
     // Node-specific __ns/__node rules are honoured only for the matching node: keep
     // them as remaps and let the node apply them.
     match (node, from) {
         (None, "__ns") => ros.namespace = Some(to.to_string()),
         (None, "__node" | "__name") => ros.node_name = Some(to.to_string()),
-        _ => ros.remaps.push(Remap { node: node.map(str::to_string), from: from.to_string(), to: to.to_string() }),
+        _ => ros.remaps.push(Remap {
+            node: node.map(str::to_string),
+            from: from.to_string(),
+            to: to.to_string(),
+        }),
     }
     Ok(())
 }
@@ -151,12 +172,20 @@ fn parse_param(rule: &str) -> Result<ParamOverride, PlumbingError> {
     let yaml: serde_norway::Value = if value.is_empty() {
         serde_norway::Value::String(String::new())
     } else {
-        serde_norway::from_str(value)
-            .map_err(|e| PlumbingError::BadArgument { arg: rule.to_string(), why: format!("value is not valid YAML: {e}") })?
+        serde_norway::from_str(value).map_err(|e| PlumbingError::BadArgument {
+            arg: rule.to_string(),
+            why: format!("value is not valid YAML: {e}"),
+        })?
     };
-    let value = yaml_to_parameter(&yaml)
-        .map_err(|why| PlumbingError::BadArgument { arg: rule.to_string(), why })?;
-    Ok(ParamOverride { node: node.map(str::to_string), name: name.to_string(), value })
+    let value = yaml_to_parameter(&yaml).map_err(|why| PlumbingError::BadArgument {
+        arg: rule.to_string(),
+        why,
+    })?;
+    Ok(ParamOverride {
+        node: node.map(str::to_string),
+        name: name.to_string(),
+        value,
+    })
 }
 
 fn parse_level(level: &str) -> Result<log::LevelFilter, PlumbingError> {
@@ -187,15 +216,39 @@ mod tests {
     #[test]
     fn full_command_line() {
         let (user, ros) = p(&[
-            "x", "--ros-args", "-r", "__ns:=/arm2", "-r", "__node:=ik2", "-r", "xyz_target:=/goal", "-r",
-            "compute_ik:servo_angles:=angles", "-p", "rate:=50.5", "--param", "name:=hello", "--params-file",
-            "/tmp/p.yaml", "--log-level", "debug", "--", "y",
+            "x",
+            "--ros-args",
+            "-r",
+            "__ns:=/arm2",
+            "-r",
+            "__node:=ik2",
+            "-r",
+            "xyz_target:=/goal",
+            "-r",
+            "compute_ik:servo_angles:=angles",
+            "-p",
+            "rate:=50.5",
+            "--param",
+            "name:=hello",
+            "--params-file",
+            "/tmp/p.yaml",
+            "--log-level",
+            "debug",
+            "--",
+            "y",
         ])
         .unwrap();
         assert_eq!(user, ["x", "y"]);
         assert_eq!(ros.namespace.as_deref(), Some("/arm2"));
         assert_eq!(ros.node_name.as_deref(), Some("ik2"));
-        assert_eq!(ros.remaps[0], Remap { node: None, from: "xyz_target".into(), to: "/goal".into() });
+        assert_eq!(
+            ros.remaps[0],
+            Remap {
+                node: None,
+                from: "xyz_target".into(),
+                to: "/goal".into()
+            }
+        );
         assert_eq!(ros.remaps[1].node.as_deref(), Some("compute_ik"));
         assert_eq!(ros.params[0].value, ParameterValue::Double(50.5));
         assert_eq!(ros.params[1].value, ParameterValue::String("hello".into()));
@@ -205,8 +258,20 @@ mod tests {
 
     #[test]
     fn yaml_typed_values() {
-        let (_, ros) = p(&["--ros-args", "-p", "a:=true", "-p", "b:=3", "-p", "c:=[1.0, 2]", "-p", "d:=/dev/ttyACM0", "-p", "e:="])
-            .unwrap();
+        let (_, ros) = p(&[
+            "--ros-args",
+            "-p",
+            "a:=true",
+            "-p",
+            "b:=3",
+            "-p",
+            "c:=[1.0, 2]",
+            "-p",
+            "d:=/dev/ttyACM0",
+            "-p",
+            "e:=",
+        ])
+        .unwrap();
         let v: Vec<_> = ros.params.iter().map(|p| p.value.clone()).collect();
         assert_eq!(
             v,
@@ -228,7 +293,10 @@ mod tests {
             (&["--ros-args", "-p", ":=3"][..], ":=3"),
             (&["--ros-args", "--bogus"][..], "--bogus"),
             (&["--ros-args", "--log-level", "loud"][..], "loud"),
-            (&["--ros-args", "-p", "a:=[1, {b: 2}]"][..], "a:=[1, {b: 2}]"),
+            (
+                &["--ros-args", "-p", "a:=[1, {b: 2}]"][..],
+                "a:=[1, {b: 2}]",
+            ),
         ] {
             let err = p(argv).unwrap_err().to_string();
             assert!(err.contains(needle), "{argv:?}: {err}");
@@ -237,7 +305,17 @@ mod tests {
 
     #[test]
     fn several_ros_args_blocks() {
-        let (user, ros) = p(&["--ros-args", "-p", "a:=1", "--", "u", "--ros-args", "-p", "b:=2"]).unwrap();
+        let (user, ros) = p(&[
+            "--ros-args",
+            "-p",
+            "a:=1",
+            "--",
+            "u",
+            "--ros-args",
+            "-p",
+            "b:=2",
+        ])
+        .unwrap();
         assert_eq!(user, ["u"]);
         assert_eq!(ros.params.len(), 2);
     }

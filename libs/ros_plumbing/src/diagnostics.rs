@@ -15,13 +15,25 @@ use ros2_client::Publisher;
 ///                "target out of reach", &[("rejected", "3".into())]);
 /// assert_eq!(s.values[0].key, "rejected");
 /// ```
-pub fn status(level: u8, name: &str, hardware_id: &str, message: &str, values: &[(&str, String)]) -> DiagnosticStatus {
+pub fn status(
+    level: u8,
+    name: &str,
+    hardware_id: &str,
+    message: &str,
+    values: &[(&str, String)],
+) -> DiagnosticStatus {
     DiagnosticStatus {
         level,
         name: name.to_string(),
         message: message.to_string(),
         hardware_id: hardware_id.to_string(),
-        values: values.iter().map(|(k, v)| KeyValue { key: (*k).to_string(), value: v.clone() }).collect(),
+        values: values
+            .iter()
+            .map(|(k, v)| KeyValue {
+                key: (*k).to_string(),
+                value: v.clone(),
+            })
+            .collect(),
     }
 }
 
@@ -38,7 +50,13 @@ impl DiagnosticsPublisher {
 
     /// Publish these statuses stamped now. A failed write is logged, never fatal.
     pub fn publish(&self, status: Vec<DiagnosticStatus>) {
-        let msg = DiagnosticArray { header: Header { stamp: Time::now(), frame_id: String::new() }, status };
+        let msg = DiagnosticArray {
+            header: Header {
+                stamp: Time::now(),
+                frame_id: String::new(),
+            },
+            status,
+        };
         if let Err(e) = self.publisher.publish(msg) {
             log::warn!("could not publish diagnostics: {e:?}");
         }

@@ -10,6 +10,8 @@
 //! * [`node`]: [`RosNode`] ties them together around a ros2-client node, honouring
 //!   `ROS_DOMAIN_ID`; [`shutdown_signal`] for SIGINT/SIGTERM.
 
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
 pub mod args;
 pub mod diagnostics;
 mod error;

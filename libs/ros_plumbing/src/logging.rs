@@ -10,8 +10,14 @@ use std::io::Write;
 use std::sync::OnceLock;
 
 /// Crate-name prefixes of this project: their records are the node's own.
-const OWN_TARGETS: &[&str] =
-    &["compute_ik", "serial_node", "state_publisher", "gui_bridge", "ros_plumbing", "eezybot_"];
+const OWN_TARGETS: &[&str] = &[
+    "compute_ik",
+    "serial_node",
+    "state_publisher",
+    "gui_bridge",
+    "ros_plumbing",
+    "eezybot_",
+];
 
 struct NodeLogger {
     level: log::LevelFilter,
@@ -51,7 +57,9 @@ impl log::Log for NodeLogger {
             return;
         }
         let name = self.name.get().map(String::as_str).unwrap_or("-");
-        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
         if self.stderr {
             let level = match record.level() {
                 log::Level::Error => "ERROR",
@@ -59,7 +67,11 @@ impl log::Log for NodeLogger {
                 log::Level::Info => "INFO",
                 log::Level::Debug | log::Level::Trace => "DEBUG",
             };
-            let who = if is_own(record.target()) { name.to_string() } else { format!("{name}:{}", record.target()) };
+            let who = if is_own(record.target()) {
+                name.to_string()
+            } else {
+                format!("{name}:{}", record.target())
+            };
             let _ = writeln!(
                 std::io::stderr().lock(),
                 "[{level}] [{}.{:09}] [{who}]: {}",
@@ -97,7 +109,12 @@ impl log::Log for NodeLogger {
 /// Install the logger (first call wins). Until [`attach_node`] runs, records go to
 /// stderr only.
 pub fn init(level: log::LevelFilter, stderr: bool) {
-    let logger = LOGGER.get_or_init(|| NodeLogger { level, stderr, name: OnceLock::new(), rosout: OnceLock::new() });
+    let logger = LOGGER.get_or_init(|| NodeLogger {
+        level,
+        stderr,
+        name: OnceLock::new(),
+        rosout: OnceLock::new(),
+    });
     if log::set_logger(logger).is_ok() {
         log::set_max_level(level);
     }

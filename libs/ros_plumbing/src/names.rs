@@ -7,7 +7,10 @@ use crate::args::Remap;
 use crate::error::PlumbingError;
 
 fn name_error(name: &str, why: &str) -> PlumbingError {
-    PlumbingError::Name { name: name.to_string(), why: why.to_string() }
+    PlumbingError::Name {
+        name: name.to_string(),
+        why: why.to_string(),
+    }
 }
 
 fn valid_token(tok: &str) -> bool {
@@ -26,7 +29,10 @@ pub fn canonical_namespace(ns: &str) -> Result<String, PlumbingError> {
     }
     let body = trimmed.strip_prefix('/').unwrap_or(trimmed);
     if !body.split('/').all(valid_token) {
-        return Err(name_error(ns, "a namespace is /-separated tokens of letters, digits and single underscores"));
+        return Err(name_error(
+            ns,
+            "a namespace is /-separated tokens of letters, digits and single underscores",
+        ));
     }
     Ok(format!("/{body}"))
 }
@@ -52,10 +58,19 @@ pub struct Resolver {
 impl Resolver {
     /// A resolver for the node `node_name` in `namespace`, with the remap rules that
     /// apply to it (`original_name` is the name the program gave the node, before `__node`).
-    pub fn new(namespace: &str, node_name: &str, original_name: &str, remaps: &[Remap]) -> Result<Resolver, PlumbingError> {
+    pub fn new(
+        namespace: &str,
+        node_name: &str,
+        original_name: &str,
+        remaps: &[Remap],
+    ) -> Result<Resolver, PlumbingError> {
         let namespace = canonical_namespace(namespace)?;
         check_node_name(node_name)?;
-        let mut r = Resolver { namespace, node_name: node_name.to_string(), rules: Vec::new() };
+        let mut r = Resolver {
+            namespace,
+            node_name: node_name.to_string(),
+            rules: Vec::new(),
+        };
         for rule in remaps {
             if let Some(node) = &rule.node {
                 if node != node_name && node != original_name {
@@ -108,7 +123,10 @@ impl Resolver {
         };
         let body = expanded.strip_prefix('/').unwrap_or(&expanded);
         if body.is_empty() || !body.split('/').all(valid_token) {
-            return Err(name_error(name, "a topic name is /-separated tokens of letters, digits and single underscores"));
+            return Err(name_error(
+                name,
+                "a topic name is /-separated tokens of letters, digits and single underscores",
+            ));
         }
         Ok(expanded)
     }
@@ -116,7 +134,12 @@ impl Resolver {
     /// Expand `name`, then apply the first remap rule whose (expanded) source matches.
     pub fn resolve(&self, name: &str) -> Result<String, PlumbingError> {
         let expanded = self.expand(name)?;
-        Ok(self.rules.iter().find(|(from, _)| *from == expanded).map(|(_, to)| to.clone()).unwrap_or(expanded))
+        Ok(self
+            .rules
+            .iter()
+            .find(|(from, _)| *from == expanded)
+            .map(|(_, to)| to.clone())
+            .unwrap_or(expanded))
     }
 }
 
@@ -133,12 +156,19 @@ mod tests {
     use super::*;
 
     fn remap(node: Option<&str>, from: &str, to: &str) -> Remap {
-        Remap { node: node.map(str::to_string), from: from.into(), to: to.into() }
+        Remap {
+            node: node.map(str::to_string),
+            from: from.into(),
+            to: to.into(),
+        }
     }
 
     #[test]
     fn remaps_match_after_expansion() {
-        let rules = [remap(None, "xyz_target", "goal"), remap(None, "/arm2/servo_angles", "/angles")];
+        let rules = [
+            remap(None, "xyz_target", "goal"),
+            remap(None, "/arm2/servo_angles", "/angles"),
+        ];
         let r = Resolver::new("/arm2", "compute_ik", "compute_ik", &rules).unwrap();
         assert_eq!(r.resolve("xyz_target").unwrap(), "/arm2/goal");
         assert_eq!(r.resolve("servo_angles").unwrap(), "/angles");
@@ -147,7 +177,10 @@ mod tests {
 
     #[test]
     fn node_specific_rules_apply_to_their_node_only() {
-        let rules = [remap(Some("other"), "a", "b"), remap(Some("compute_ik"), "c", "d")];
+        let rules = [
+            remap(Some("other"), "a", "b"),
+            remap(Some("compute_ik"), "c", "d"),
+        ];
         let r = Resolver::new("/", "renamed", "compute_ik", &rules).unwrap();
         assert_eq!(r.resolve("a").unwrap(), "/a");
         assert_eq!(r.resolve("c").unwrap(), "/d");

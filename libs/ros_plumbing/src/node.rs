@@ -8,7 +8,9 @@ use crate::logging;
 use crate::names::Resolver;
 use crate::params::{self, ParamSpec, Params};
 use eezybot_msgs::RosMessage;
-use ros2_client::{Context, ContextOptions, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription};
+use ros2_client::{
+    Context, ContextOptions, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription,
+};
 
 /// What a node is: its default name, a one-line description and its parameters.
 #[derive(Clone, Debug)]
@@ -64,7 +66,9 @@ pub fn domain_id_from_env(value: Option<&str>) -> Result<u16, PlumbingError> {
         None | Some("") => Ok(0),
         Some(v) => match v.parse::<u16>() {
             Ok(id) if id <= 232 => Ok(id),
-            _ => Err(PlumbingError::DomainId { value: v.to_string() }),
+            _ => Err(PlumbingError::DomainId {
+                value: v.to_string(),
+            }),
         },
     }
 }
@@ -96,17 +100,34 @@ impl RosNode {
     }
 
     /// Set up from explicit arguments (without argv\[0\]) and `ROS_DOMAIN_ID` value.
-    pub fn start_with(spec: &NodeSpec, argv: Vec<String>, domain_env: Option<&str>) -> Result<RosNode, PlumbingError> {
+    pub fn start_with(
+        spec: &NodeSpec,
+        argv: Vec<String>,
+        domain_env: Option<&str>,
+    ) -> Result<RosNode, PlumbingError> {
         let (user_args, ros): (Vec<String>, RosArgs) = args::parse(argv)?;
-        logging::init(ros.log_level.unwrap_or(log::LevelFilter::Info), ros.stdout_logs.unwrap_or(true));
+        logging::init(
+            ros.log_level.unwrap_or(log::LevelFilter::Info),
+            ros.stdout_logs.unwrap_or(true),
+        );
         let domain_id = domain_id_from_env(domain_env)?;
-        let name = ros.node_name.clone().unwrap_or_else(|| spec.name.to_string());
-        let resolver = Resolver::new(ros.namespace.as_deref().unwrap_or("/"), &name, spec.name, &ros.remaps)?;
+        let name = ros
+            .node_name
+            .clone()
+            .unwrap_or_else(|| spec.name.to_string());
+        let resolver = Resolver::new(
+            ros.namespace.as_deref().unwrap_or("/"),
+            &name,
+            spec.name,
+            &ros.remaps,
+        )?;
         let values = params::initial_values(&spec.params, &ros, &resolver.node_fqn(), &name)?;
         let params = Params::new(values.clone());
 
         let rosout = ros.rosout_logs.unwrap_or(true);
-        let mut options = NodeOptions::new().enable_rosout(rosout).start_parameter_services(true);
+        let mut options = NodeOptions::new()
+            .enable_rosout(rosout)
+            .start_parameter_services(true);
         for (k, v) in values {
             options = options.declare_parameter(&k, v);
         }
@@ -118,7 +139,9 @@ impl RosNode {
             };
             let checked = spec.check(value)?;
             if spec.read_only && current.get(name).is_some_and(|v| v != checked) {
-                return Err(format!("`{name}` is read-only: set it on the command line or in a params file"));
+                return Err(format!(
+                    "`{name}` is read-only: set it on the command line or in a params file"
+                ));
             }
             Ok(())
         }));
@@ -133,31 +156,62 @@ impl RosNode {
 
         let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
             .map_err(|e| PlumbingError::Ros(format!("cannot create the DDS participant: {e:?}")))?;
-        let node_name = NodeName::new(resolver.namespace(), &name)
-            .map_err(|e| PlumbingError::Name { name: resolver.node_fqn(), why: format!("{e:?}") })?;
-        let mut node = context
-            .new_node(node_name, options)
-            .map_err(|e| PlumbingError::Ros(format!("cannot create node {}: {e:?}", resolver.node_fqn())))?;
-        let logger_name = resolver.node_fqn().trim_start_matches('/').replace('/', ".");
-        logging::attach_node(logger_name, if rosout { Some(node.logging_handle()) } else { None });
-        let spinner = node.spinner().map_err(|e| PlumbingError::Ros(format!("cannot start the node spinner: {e:?}")))?;
+        let node_name =
+            NodeName::new(resolver.namespace(), &name).map_err(|e| PlumbingError::Name {
+                name: resolver.node_fqn(),
+                why: format!("{e:?}"),
+            })?;
+        let mut node = context.new_node(node_name, options).map_err(|e| {
+            PlumbingError::Ros(format!("cannot create node {}: {e:?}", resolver.node_fqn()))
+        })?;
+        let logger_name = resolver
+            .node_fqn()
+            .trim_start_matches('/')
+            .replace('/', ".");
+        logging::attach_node(
+            logger_name,
+            if rosout {
+                Some(node.logging_handle())
+            } else {
+                None
+            },
+        );
+        let spinner = node
+            .spinner()
+            .map_err(|e| PlumbingError::Ros(format!("cannot start the node spinner: {e:?}")))?;
         let spinner = tokio::spawn(async move {
             if let Err(e) = spinner.spin().await {
                 log::error!("node spinner stopped: {e:?}");
             }
         });
         log::debug!("node {} up in ROS domain {domain_id}", resolver.node_fqn());
-        Ok(RosNode { node, resolver, params, user_args, domain_id, spinner: Some(spinner), _context: context })
+        Ok(RosNode {
+            node,
+            resolver,
+            params,
+            user_args,
+            domain_id,
+            spinner: Some(spinner),
+            _context: context,
+        })
     }
 
     /// Stop the spinner (parameter services, discovery) and wait for it, so that every
     /// DDS entity is removed while the participant still runs; then drop the node.
     /// Call it after the node's own publishers and subscriptions are dropped.
     pub async fn shutdown(self) {
-        let RosNode { node, spinner, _context, .. } = self;
+        let RosNode {
+            node,
+            spinner,
+            _context,
+            ..
+        } = self;
         drop(node); // tells the spinner to stop
         if let Some(handle) = spinner {
-            if tokio::time::timeout(std::time::Duration::from_secs(2), handle).await.is_err() {
+            if tokio::time::timeout(std::time::Duration::from_secs(2), handle)
+                .await
+                .is_err()
+            {
                 log::warn!("node spinner did not stop within 2 s");
             }
         }
@@ -188,9 +242,16 @@ impl RosNode {
         &self.node
     }
 
-    fn topic<M: RosMessage>(&mut self, topic: &str, qos: &QosProfile) -> Result<(String, rustdds::Topic), PlumbingError> {
+    fn topic<M: RosMessage>(
+        &mut self,
+        topic: &str,
+        qos: &QosProfile,
+    ) -> Result<(String, rustdds::Topic), PlumbingError> {
         let resolved = self.resolver.resolve(topic)?;
-        let name = Name::parse(&resolved).map_err(|e| PlumbingError::Name { name: resolved.clone(), why: format!("{e:?}") })?;
+        let name = Name::parse(&resolved).map_err(|e| PlumbingError::Name {
+            name: resolved.clone(),
+            why: format!("{e:?}"),
+        })?;
         let t = self
             .node
             .create_topic(&name, M::type_name(), qos)
@@ -199,7 +260,11 @@ impl RosNode {
     }
 
     /// A publisher on `topic` (expanded in the node's namespace and remapped).
-    pub fn publisher<M: RosMessage>(&mut self, topic: &str, qos: QosProfile) -> Result<Publisher<M>, PlumbingError> {
+    pub fn publisher<M: RosMessage>(
+        &mut self,
+        topic: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<M>, PlumbingError> {
         let (resolved, t) = self.topic::<M>(topic, &qos)?;
         self.node
             .create_publisher::<M>(&t, Some(qos))
@@ -207,7 +272,11 @@ impl RosNode {
     }
 
     /// A subscription to `topic` (expanded in the node's namespace and remapped).
-    pub fn subscription<M: RosMessage>(&mut self, topic: &str, qos: QosProfile) -> Result<Subscription<M>, PlumbingError> {
+    pub fn subscription<M: RosMessage>(
+        &mut self,
+        topic: &str,
+        qos: QosProfile,
+    ) -> Result<Subscription<M>, PlumbingError> {
         let (resolved, t) = self.topic::<M>(topic, &qos)?;
         self.node
             .create_subscription::<M>(&t, Some(qos))
@@ -216,14 +285,19 @@ impl RosNode {
 
     /// The node's `diagnostics` publisher.
     pub fn diagnostics(&mut self) -> Result<DiagnosticsPublisher, PlumbingError> {
-        Ok(DiagnosticsPublisher::new(self.publisher("diagnostics", crate::qos::DIAGNOSTICS)?))
+        Ok(DiagnosticsPublisher::new(
+            self.publisher("diagnostics", crate::qos::DIAGNOSTICS)?,
+        ))
     }
 }
 
 /// Resolves on SIGINT or SIGTERM, with the signal's name.
 pub async fn shutdown_signal() -> &'static str {
     use tokio::signal::unix::{signal, SignalKind};
-    let (int, term) = (signal(SignalKind::interrupt()), signal(SignalKind::terminate()));
+    let (int, term) = (
+        signal(SignalKind::interrupt()),
+        signal(SignalKind::terminate()),
+    );
     match (int, term) {
         (Ok(mut int), Ok(mut term)) => tokio::select! {
             _ = int.recv() => "SIGINT",

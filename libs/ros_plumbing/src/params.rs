@@ -29,6 +29,9 @@ pub enum ParamRange {
     },
 }
 
+/// A further check of a parameter value; the error says why it is refused.
+pub type ValueCheck = fn(&ParameterValue) -> Result<(), String>;
+
 /// A declared parameter.
 #[derive(Clone, Debug)]
 pub struct ParamSpec {
@@ -43,13 +46,24 @@ pub struct ParamSpec {
     /// If true, it can only be set at start (command line, params file).
     pub read_only: bool,
     /// A further check of the value (e.g. that a file loads), after type and range.
-    pub validator: Option<fn(&ParameterValue) -> Result<(), String>>,
+    pub validator: Option<ValueCheck>,
 }
 
 impl ParamSpec {
     /// A read-write parameter with no range.
-    pub fn new(name: &'static str, default: ParameterValue, description: &'static str) -> ParamSpec {
-        ParamSpec { name, default, description, range: ParamRange::Any, read_only: false, validator: None }
+    pub fn new(
+        name: &'static str,
+        default: ParameterValue,
+        description: &'static str,
+    ) -> ParamSpec {
+        ParamSpec {
+            name,
+            default,
+            description,
+            range: ParamRange::Any,
+            read_only: false,
+            validator: None,
+        }
     }
 
     /// With a range.
@@ -59,7 +73,7 @@ impl ParamSpec {
     }
 
     /// With a further check of the value.
-    pub fn validator(mut self, check: fn(&ParameterValue) -> Result<(), String>) -> ParamSpec {
+    pub fn validator(mut self, check: ValueCheck) -> ParamSpec {
         self.validator = Some(check);
         self
     }
@@ -73,20 +87,30 @@ impl ParamSpec {
     /// Check a value against type and range; an integer is accepted for a double.
     pub fn check(&self, value: &ParameterValue) -> Result<ParameterValue, String> {
         let value = match (&self.default, value) {
-            (ParameterValue::Double(_), ParameterValue::Integer(i)) => ParameterValue::Double(*i as f64),
+            (ParameterValue::Double(_), ParameterValue::Integer(i)) => {
+                ParameterValue::Double(*i as f64)
+            }
             (ParameterValue::DoubleArray(_), ParameterValue::IntegerArray(v)) => {
                 ParameterValue::DoubleArray(v.iter().map(|i| *i as f64).collect())
             }
             _ => value.clone(),
         };
         if std::mem::discriminant(&value) != std::mem::discriminant(&self.default) {
-            return Err(format!("expected {}, got {}", type_name(&self.default), type_name(&value)));
+            return Err(format!(
+                "expected {}, got {}",
+                type_name(&self.default),
+                type_name(&value)
+            ));
         }
         match (&self.range, &value) {
-            (ParamRange::Integer { min, max }, ParameterValue::Integer(v)) if v < min || v > max => {
+            (ParamRange::Integer { min, max }, ParameterValue::Integer(v))
+                if v < min || v > max =>
+            {
                 Err(format!("{v} is outside {min}..={max}"))
             }
-            (ParamRange::Double { min, max }, ParameterValue::Double(v)) if !(v >= min && v <= max) => {
+            (ParamRange::Double { min, max }, ParameterValue::Double(v))
+                if !(v >= min && v <= max) =>
+            {
                 Err(format!("{v} is outside {min}..={max}"))
             }
             _ => Ok(()),
@@ -121,7 +145,10 @@ pub fn yaml_to_parameter(v: &serde_norway::Value) -> Result<ParameterValue, Stri
             Y::Bool(b) => Ok(ParameterValue::Boolean(*b)),
             Y::Number(n) => match n.as_i64() {
                 Some(i) => Ok(ParameterValue::Integer(i)),
-                None => n.as_f64().map(ParameterValue::Double).ok_or_else(|| format!("number {n} out of range")),
+                None => n
+                    .as_f64()
+                    .map(ParameterValue::Double)
+                    .ok_or_else(|| format!("number {n} out of range")),
             },
             Y::String(s) => Ok(ParameterValue::String(s.clone())),
             Y::Null => Err("a parameter value cannot be null".into()),
@@ -129,15 +156,39 @@ pub fn yaml_to_parameter(v: &serde_norway::Value) -> Result<ParameterValue, Stri
             Y::Sequence(_) | Y::Mapping(_) => Err("arrays must hold scalars of one type".into()),
         }
     };
-    let Y::Sequence(items) = v else { return scalar(v) };
+    let Y::Sequence(items) = v else {
+        return scalar(v);
+    };
     let items: Vec<ParameterValue> = items.iter().map(scalar).collect::<Result<_, _>>()?;
     let all = |f: fn(&ParameterValue) -> bool| items.iter().all(f);
     Ok(if items.is_empty() {
         ParameterValue::StringArray(vec![])
     } else if all(|p| matches!(p, ParameterValue::Boolean(_))) {
-        ParameterValue::BooleanArray(items.iter().filter_map(|p| if let ParameterValue::Boolean(b) = p { Some(*b) } else { None }).collect())
+        ParameterValue::BooleanArray(
+            items
+                .iter()
+                .filter_map(|p| {
+                    if let ParameterValue::Boolean(b) = p {
+                        Some(*b)
+                    } else {
+                        None
+                    }
+                })
+                .collect(),
+        )
     } else if all(|p| matches!(p, ParameterValue::Integer(_))) {
-        ParameterValue::IntegerArray(items.iter().filter_map(|p| if let ParameterValue::Integer(i) = p { Some(*i) } else { None }).collect())
+        ParameterValue::IntegerArray(
+            items
+                .iter()
+                .filter_map(|p| {
+                    if let ParameterValue::Integer(i) = p {
+                        Some(*i)
+                    } else {
+                        None
+                    }
+                })
+                .collect(),
+        )
     } else if all(|p| matches!(p, ParameterValue::Integer(_) | ParameterValue::Double(_))) {
         ParameterValue::DoubleArray(
             items
@@ -150,7 +201,18 @@ pub fn yaml_to_parameter(v: &serde_norway::Value) -> Result<ParameterValue, Stri
                 .collect(),
         )
     } else if all(|p| matches!(p, ParameterValue::String(_))) {
-        ParameterValue::StringArray(items.iter().filter_map(|p| if let ParameterValue::String(s) = p { Some(s.clone()) } else { None }).collect())
+        ParameterValue::StringArray(
+            items
+                .iter()
+                .filter_map(|p| {
+                    if let ParameterValue::String(s) = p {
+                        Some(s.clone())
+                    } else {
+                        None
+                    }
+                })
+                .collect(),
+        )
     } else {
         return Err("arrays must hold scalars of one type".into());
     })
@@ -159,7 +221,11 @@ pub fn yaml_to_parameter(v: &serde_norway::Value) -> Result<ParameterValue, Stri
 /// Does a params-file node key (`/**`, `/arm2/compute_ik`, `compute_ik`, `/*/compute_ik`,
 /// `/**/compute_ik`) select the node with fully qualified name `fqn`?
 pub fn node_key_matches(key: &str, fqn: &str) -> bool {
-    let key = if key.starts_with('/') { key.to_string() } else { format!("/{key}") };
+    let key = if key.starts_with('/') {
+        key.to_string()
+    } else {
+        format!("/{key}")
+    };
     let pat: Vec<&str> = key.trim_start_matches('/').split('/').collect();
     let name: Vec<&str> = fqn.trim_start_matches('/').split('/').collect();
     fn m(p: &[&str], n: &[&str]) -> bool {
@@ -176,16 +242,26 @@ pub fn node_key_matches(key: &str, fqn: &str) -> bool {
 
 /// The `ros__parameters` for `fqn` from one params file, flattened to `a.b.c` names,
 /// in file order (later keys win when applied in order).
-pub fn read_params_file(path: &Path, fqn: &str) -> Result<Vec<(String, ParameterValue)>, PlumbingError> {
-    let bad = |why: String| PlumbingError::ParamsFile { path: path.to_path_buf(), why };
+pub fn read_params_file(
+    path: &Path,
+    fqn: &str,
+) -> Result<Vec<(String, ParameterValue)>, PlumbingError> {
+    let bad = |why: String| PlumbingError::ParamsFile {
+        path: path.to_path_buf(),
+        why,
+    };
     let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
     let doc: serde_norway::Value = serde_norway::from_str(&text).map_err(|e| bad(e.to_string()))?;
     let serde_norway::Value::Mapping(nodes) = doc else {
-        return Err(bad("the top level must map node names to `ros__parameters:`".into()));
+        return Err(bad(
+            "the top level must map node names to `ros__parameters:`".into(),
+        ));
     };
     let mut out = Vec::new();
     for (key, body) in &nodes {
-        let key = key.as_str().ok_or_else(|| bad("node keys must be strings".into()))?;
+        let key = key
+            .as_str()
+            .ok_or_else(|| bad("node keys must be strings".into()))?;
         if !node_key_matches(key, fqn) {
             continue;
         }
@@ -197,15 +273,26 @@ pub fn read_params_file(path: &Path, fqn: &str) -> Result<Vec<(String, Parameter
     Ok(out)
 }
 
-fn flatten(prefix: &str, v: &serde_norway::Value, out: &mut Vec<(String, ParameterValue)>) -> Result<(), String> {
+fn flatten(
+    prefix: &str,
+    v: &serde_norway::Value,
+    out: &mut Vec<(String, ParameterValue)>,
+) -> Result<(), String> {
     match v {
         serde_norway::Value::Mapping(m) => {
             for (k, child) in m {
                 let k = match k {
                     serde_norway::Value::String(s) => s.clone(),
-                    other => serde_norway::to_string(other).unwrap_or_default().trim().to_string(),
+                    other => serde_norway::to_string(other)
+                        .unwrap_or_default()
+                        .trim()
+                        .to_string(),
                 };
-                let name = if prefix.is_empty() { k } else { format!("{prefix}.{k}") };
+                let name = if prefix.is_empty() {
+                    k
+                } else {
+                    format!("{prefix}.{k}")
+                };
                 flatten(&name, child, out)?;
             }
             Ok(())
@@ -226,8 +313,10 @@ pub fn initial_values(
     fqn: &str,
     node_name: &str,
 ) -> Result<BTreeMap<String, ParameterValue>, PlumbingError> {
-    let mut values: BTreeMap<String, ParameterValue> =
-        specs.iter().map(|s| (s.name.to_string(), s.default.clone())).collect();
+    let mut values: BTreeMap<String, ParameterValue> = specs
+        .iter()
+        .map(|s| (s.name.to_string(), s.default.clone()))
+        .collect();
     let mut overrides: Vec<(String, ParameterValue, String)> = Vec::new();
     for path in &args.params_files {
         for (name, value) in read_params_file(path, fqn)? {
@@ -243,18 +332,28 @@ pub fn initial_values(
         if name == "use_sim_time" {
             // Handled by ros2-client itself; we only accept the harmless default.
             if value != ParameterValue::Boolean(false) {
-                return Err(PlumbingError::Parameter { name, why: "simulated time is not supported by these nodes".into() });
+                return Err(PlumbingError::Parameter {
+                    name,
+                    why: "simulated time is not supported by these nodes".into(),
+                });
             }
             continue;
         }
-        let spec = specs.iter().find(|s| s.name == name).ok_or_else(|| PlumbingError::Parameter {
+        let spec =
+            specs
+                .iter()
+                .find(|s| s.name == name)
+                .ok_or_else(|| PlumbingError::Parameter {
+                    name: name.clone(),
+                    why: format!(
+                        "not a parameter of this node (from {origin}); known: {}",
+                        specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+                    ),
+                })?;
+        let value = spec.check(&value).map_err(|why| PlumbingError::Parameter {
             name: name.clone(),
-            why: format!(
-                "not a parameter of this node (from {origin}); known: {}",
-                specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
-            ),
+            why: format!("{why} (from {origin})"),
         })?;
-        let value = spec.check(&value).map_err(|why| PlumbingError::Parameter { name: name.clone(), why: format!("{why} (from {origin})") })?;
         values.insert(name, value);
     }
     Ok(values)
@@ -272,7 +371,10 @@ impl Params {
     /// A store with these values.
     pub fn new(values: BTreeMap<String, ParameterValue>) -> Params {
         let (tx, _rx) = tokio::sync::watch::channel(0);
-        Params { values: Arc::new(RwLock::new(values)), changed: Arc::new(tx) }
+        Params {
+            values: Arc::new(RwLock::new(values)),
+            changed: Arc::new(tx),
+        }
     }
 
     /// Current value.
@@ -346,9 +448,13 @@ mod tests {
 
     fn specs() -> Vec<ParamSpec> {
         vec![
-            ParamSpec::new("rate", ParameterValue::Double(10.0), "").range(ParamRange::Double { min: 1.0, max: 100.0 }),
+            ParamSpec::new("rate", ParameterValue::Double(10.0), "").range(ParamRange::Double {
+                min: 1.0,
+                max: 100.0,
+            }),
             ParamSpec::new("port", ParameterValue::String("/dev/ttyACM0".into()), ""),
-            ParamSpec::new("nested.gain", ParameterValue::Integer(1), "").range(ParamRange::Integer { min: 0, max: 5 }),
+            ParamSpec::new("nested.gain", ParameterValue::Integer(1), "")
+                .range(ParamRange::Integer { min: 0, max: 5 }),
         ]
     }
 
@@ -362,17 +468,29 @@ mod tests {
             "/**:\n  ros__parameters:\n    rate: 20\n    nested:\n      gain: 3\n/other:\n  ros__parameters:\n    bogus: 1\ncompute_ik:\n  ros__parameters:\n    port: mock\n",
         )
         .unwrap();
-        let argv = ["--ros-args", "--params-file", file.to_str().unwrap(), "-p", "rate:=30.5"];
+        let argv = [
+            "--ros-args",
+            "--params-file",
+            file.to_str().unwrap(),
+            "-p",
+            "rate:=30.5",
+        ];
         let (_, args) = parse(argv.iter().map(|s| s.to_string())).unwrap();
         let v = initial_values(&specs(), &args, "/compute_ik", "compute_ik").unwrap();
         assert_eq!(v["rate"], ParameterValue::Double(30.5));
         assert_eq!(v["port"], ParameterValue::String("mock".into()));
         assert_eq!(v["nested.gain"], ParameterValue::Integer(3));
 
-        for (bad, needle) in [("rate:=500.0", "outside"), ("rate:=fast", "expected a double"), ("ratee:=1.0", "not a parameter")] {
+        for (bad, needle) in [
+            ("rate:=500.0", "outside"),
+            ("rate:=fast", "expected a double"),
+            ("ratee:=1.0", "not a parameter"),
+        ] {
             let argv = ["--ros-args", "-p", bad];
             let (_, args) = parse(argv.iter().map(|s| s.to_string())).unwrap();
-            let err = initial_values(&specs(), &args, "/compute_ik", "compute_ik").unwrap_err().to_string();
+            let err = initial_values(&specs(), &args, "/compute_ik", "compute_ik")
+                .unwrap_err()
+                .to_string();
             assert!(err.contains(needle), "{bad}: {err}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
@@ -384,9 +502,16 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join("bad.yaml");
         std::fs::write(&file, "/**:\n  parameters:\n    rate: 1\n").unwrap();
-        let err = read_params_file(&file, "/compute_ik").unwrap_err().to_string();
-        assert!(err.contains("bad.yaml") && err.contains("ros__parameters"), "{err}");
-        let err = read_params_file(&dir.join("missing.yaml"), "/x").unwrap_err().to_string();
+        let err = read_params_file(&file, "/compute_ik")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("bad.yaml") && err.contains("ros__parameters"),
+            "{err}"
+        );
+        let err = read_params_file(&dir.join("missing.yaml"), "/x")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("missing.yaml"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

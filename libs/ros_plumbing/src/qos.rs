@@ -11,7 +11,9 @@ pub const WRITE_WAIT: Duration = Duration::from_millis(20);
 /// Reliable, volatile, keep last `depth`.
 pub const fn reliable(depth: usize) -> QosProfile {
     QosProfile::publisher_default()
-        .reliability(Reliability::Reliable { when_full: WhenFull::Wait(WRITE_WAIT) })
+        .reliability(Reliability::Reliable {
+            when_full: WhenFull::Wait(WRITE_WAIT),
+        })
         .durability(Durability::Volatile)
         .history(History::KeepLast { depth })
 }

@@ -2,7 +2,8 @@
 //! out, or a rejection with its reason. A rejected input never changes the state.
 
 use eezybot_kinematics::{
-    Arm, ArmConfig, ArmJoints, ArmState, Joint, KinematicsError, ServoCalibrations, ServoId, ACTUATED_JOINTS,
+    Arm, ArmConfig, ArmJoints, ArmState, Joint, KinematicsError, ServoCalibrations, ServoId,
+    ACTUATED_JOINTS,
 };
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
@@ -93,14 +94,21 @@ impl fmt::Display for Reason {
                 write!(f, "frame_id `{frame_id}` is not `{expected}` (targets must be given in the arm's base frame)")
             }
             Reason::UnknownJoint { name } => {
-                write!(f, "unknown joint `{name}` (actuated joints: {})", ACTUATED_JOINTS.join(", "))
+                write!(
+                    f,
+                    "unknown joint `{name}` (actuated joints: {})",
+                    ACTUATED_JOINTS.join(", ")
+                )
             }
             Reason::DuplicateJoint { name } => write!(f, "joint `{name}` named twice"),
             Reason::LengthMismatch { names, positions } => {
                 write!(f, "{names} names but {positions} positions")
             }
             Reason::NoJoints => write!(f, "no joint named"),
-            Reason::EmergencyStop => write!(f, "emergency stop engaged: no motion until `estop` is false"),
+            Reason::EmergencyStop => write!(
+                f,
+                "emergency stop engaged: no motion until `estop` is false"
+            ),
         }
     }
 }
@@ -222,24 +230,39 @@ impl IkCore {
             self.check_estop()?;
             let frame = msg.header.frame_id.as_str();
             if !(frame.is_empty() || frame == self.base_frame) {
-                return Err(Reason::WrongFrame { frame_id: frame.to_string(), expected: self.base_frame.clone() });
+                return Err(Reason::WrongFrame {
+                    frame_id: frame.to_string(),
+                    expected: self.base_frame.clone(),
+                });
             }
             let target = Vector3::new(msg.point.x, msg.point.y, msg.point.z);
-            let joints = self.arm.solve_position(&target, self.state.joints.base_rad)?;
-            Ok(ArmState { joints, ..self.state })
+            let joints = self
+                .arm
+                .solve_position(&target, self.state.joints.base_rad)?;
+            Ok(ArmState {
+                joints,
+                ..self.state
+            })
         })();
         self.finish(Source::XyzTarget, stamp, result)
     }
 
     /// Handle a `gripper_target` (0 closed … 1 open); `stamp` is when it arrived,
     /// since std_msgs/Float64 has no header.
-    pub fn handle_gripper_target(&mut self, opening: f64, stamp: Time) -> Result<Output, Rejection> {
+    pub fn handle_gripper_target(
+        &mut self,
+        opening: f64,
+        stamp: Time,
+    ) -> Result<Output, Rejection> {
         let result = (|| {
             self.check_estop()?;
             if !(0.0..=1.0).contains(&opening) {
                 return Err(KinematicsError::GripperOutOfRange { value: opening }.into());
             }
-            Ok(ArmState { gripper_opening: opening, ..self.state })
+            Ok(ArmState {
+                gripper_opening: opening,
+                ..self.state
+            })
         })();
         self.finish(Source::GripperTarget, stamp, result)
     }
@@ -251,7 +274,10 @@ impl IkCore {
         let result = (|| {
             self.check_estop()?;
             if msg.name.len() != msg.position.len() {
-                return Err(Reason::LengthMismatch { names: msg.name.len(), positions: msg.position.len() });
+                return Err(Reason::LengthMismatch {
+                    names: msg.name.len(),
+                    positions: msg.position.len(),
+                });
             }
             if msg.name.is_empty() {
                 return Err(Reason::NoJoints);
@@ -291,7 +317,10 @@ impl IkCore {
                 }
                 .into());
             }
-            Ok(ArmState { joints, gripper_opening: gripper_rad / self.gripper_open_rad })
+            Ok(ArmState {
+                joints,
+                gripper_opening: gripper_rad / self.gripper_open_rad,
+            })
         })();
         self.finish(Source::JointTarget, stamp, result)
     }
@@ -305,7 +334,12 @@ impl IkCore {
     }
 
     /// Turn a candidate state into output (servo ranges checked), or record the rejection.
-    fn finish(&mut self, source: Source, stamp: Time, candidate: Result<ArmState, Reason>) -> Result<Output, Rejection> {
+    fn finish(
+        &mut self,
+        source: Source,
+        stamp: Time,
+        candidate: Result<ArmState, Reason>,
+    ) -> Result<Output, Rejection> {
         self.counters.received += 1;
         let produced = candidate.and_then(|state| {
             let servos = self.calibration.servo_angles(&state)?;
@@ -316,7 +350,10 @@ impl IkCore {
                 self.state = state;
                 self.counters.accepted += 1;
                 self.last_event_rejected = false;
-                let header = Header { stamp, frame_id: String::new() };
+                let header = Header {
+                    stamp,
+                    frame_id: String::new(),
+                };
                 let joints = state.joint_positions(&self.arm.geometry);
                 Ok(Output {
                     joint_states: JointState {
@@ -338,7 +375,11 @@ impl IkCore {
             Err(reason) => {
                 self.counters.rejected += 1;
                 self.last_event_rejected = true;
-                let rejection = Rejection { source, reason, stamp };
+                let rejection = Rejection {
+                    source,
+                    reason,
+                    stamp,
+                };
                 self.last_rejection = Some(rejection.clone());
                 Err(rejection)
             }
@@ -351,7 +392,11 @@ impl IkCore {
         let (level, message) = if self.estop {
             (DiagnosticStatus::WARN, "emergency stop engaged".to_string())
         } else if self.last_event_rejected {
-            let r = self.last_rejection.as_ref().map(|r| r.to_string()).unwrap_or_default();
+            let r = self
+                .last_rejection
+                .as_ref()
+                .map(|r| r.to_string())
+                .unwrap_or_default();
             (DiagnosticStatus::WARN, r)
         } else {
             (DiagnosticStatus::OK, "ok".to_string())
@@ -381,111 +426,5 @@ impl IkCore {
             values.push(("last_rejection_topic", r.source.topic().to_string()));
         }
         ros_plumbing::diagnostics::status(level, name, "eezybot_arm", &message, &values)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use eezybot_msgs::geometry_msgs::Point;
-
-    fn core() -> IkCore {
-        IkCore::new(&ArmConfig::default(), "base_link")
-    }
-
-    fn target(x: f64, y: f64, z: f64, frame: &str) -> PointStamped {
-        PointStamped {
-            header: Header { stamp: Time::from_nanos(1_700_000_000_123_456_789), frame_id: frame.into() },
-            point: Point { x, y, z },
-        }
-    }
-
-    #[test]
-    fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
-        let mut c = core();
-        let out = c.handle_xyz_target(&target(0.2, 0.05, 0.15, "base_link")).unwrap();
-        assert_eq!(out.joint_states.header.stamp, Time::from_nanos(1_700_000_000_123_456_789));
-        assert_eq!(out.servo_angles.header.stamp, out.joint_states.header.stamp);
-        assert_eq!(out.servo_angles.name, ["base_servo", "shoulder_servo", "elbow_servo", "gripper_servo"]);
-        assert_eq!(out.joint_states.name.len(), 11);
-        let arm = Arm::default();
-        let p = arm.forward(&c.state().joints);
-        assert!((p - Vector3::new(0.2, 0.05, 0.15)).norm() < 1e-12);
-        // servo mapping of ROBOT.md
-        let q = c.state().joints;
-        let deg: Vec<f64> = out.servo_angles.position.iter().map(|r| r.to_degrees()).collect();
-        assert!((deg[0] - (90.0 - 2.0 * q.base_rad.to_degrees())).abs() < 1e-9);
-        assert!((deg[1] - (180.0 - q.shoulder_rad.to_degrees())).abs() < 1e-9);
-        assert!((deg[2] - (90.0 + q.forearm_elevation_rad().to_degrees())).abs() < 1e-9);
-        assert!((deg[3] - 60.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn empty_frame_means_base_link() {
-        assert!(core().handle_xyz_target(&target(0.2, 0.0, 0.15, "")).is_ok());
-    }
-
-    #[test]
-    fn every_bad_input_is_refused_and_keeps_the_state() {
-        let mut c = core();
-        c.handle_xyz_target(&target(0.2, 0.0, 0.15, "base_link")).unwrap();
-        let good = *c.state();
-        let bad_joint = |names: &[&str], pos: &[f64]| JointState {
-            name: names.iter().map(|s| s.to_string()).collect(),
-            position: pos.to_vec(),
-            ..JointState::default()
-        };
-        let cases: Vec<(Result<Output, Rejection>, &str)> = vec![
-            (c.handle_xyz_target(&target(1.0, 0.0, 0.15, "base_link")), "too_far"),
-            (c.handle_xyz_target(&target(f64::NAN, 0.0, 0.15, "base_link")), "non_finite_target"),
-            (c.handle_xyz_target(&target(0.2, f64::INFINITY, 0.15, "base_link")), "non_finite_target"),
-            (c.handle_xyz_target(&target(0.2, 0.0, 0.15, "map")), "wrong_frame"),
-            (c.handle_xyz_target(&target(-0.2, 0.0, 0.15, "base_link")), "out_of_limits:base_joint"),
-            (c.handle_gripper_target(1.5, Time::ZERO), "gripper_out_of_range"),
-            (c.handle_gripper_target(f64::NAN, Time::ZERO), "gripper_out_of_range"),
-            (c.handle_joint_target(&bad_joint(&["wrist_joint"], &[0.0])), "unknown_joint"),
-            (c.handle_joint_target(&bad_joint(&["base_joint"], &[])), "length_mismatch"),
-            (c.handle_joint_target(&bad_joint(&[], &[])), "no_joints"),
-            (c.handle_joint_target(&bad_joint(&["base_joint", "base_joint"], &[0.0, 0.1])), "duplicate_joint"),
-            (c.handle_joint_target(&bad_joint(&["shoulder_joint"], &[f64::NAN])), "non_finite_joint:shoulder_joint"),
-            (c.handle_joint_target(&bad_joint(&["shoulder_joint"], &[2.5])), "out_of_limits:shoulder_joint"),
-            (c.handle_joint_target(&bad_joint(&["gripper_joint"], &[2.0])), "out_of_limits:gripper_joint"),
-        ];
-        for (result, code) in cases {
-            let rejection = result.unwrap_err();
-            assert_eq!(rejection.reason.code(), code, "{rejection}");
-            assert_eq!(*c.state(), good);
-        }
-        let d = c.diagnostic_status("compute_ik");
-        assert_eq!(d.level, DiagnosticStatus::WARN);
-        c.handle_gripper_target(0.5, Time::ZERO).unwrap();
-        assert_eq!(c.diagnostic_status("compute_ik").level, DiagnosticStatus::OK);
-        assert_eq!(c.counters(), Counters { received: 16, accepted: 2, rejected: 14 });
-    }
-
-    #[test]
-    fn joint_mode_keeps_unnamed_joints() {
-        let mut c = core();
-        let msg = JointState {
-            name: vec!["base_joint".into(), "gripper_joint".into()],
-            position: vec![0.3, 0.3],
-            ..JointState::default()
-        };
-        let out = c.handle_joint_target(&msg).unwrap();
-        assert_eq!(c.state().joints.base_rad, 0.3);
-        assert_eq!(c.state().joints.shoulder_rad, ArmJoints::HOME.shoulder_rad);
-        assert!((c.state().gripper_opening - 0.5).abs() < 1e-12);
-        assert!((out.servo_angles.position[3].to_degrees() - 120.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn estop_refuses_everything_until_released() {
-        let mut c = core();
-        c.set_estop(true);
-        let r = c.handle_xyz_target(&target(0.2, 0.0, 0.15, "")).unwrap_err();
-        assert_eq!(r.reason, Reason::EmergencyStop);
-        assert_eq!(c.diagnostic_status("x").level, DiagnosticStatus::WARN);
-        c.set_estop(false);
-        assert!(c.handle_xyz_target(&target(0.2, 0.0, 0.15, "")).is_ok());
     }
 }

@@ -5,6 +5,8 @@
 //! The logic is [`core::IkCore`]; [`run`] is the event loop, handed its inputs and
 //! outputs so that tests can drive it without ROS.
 
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
 pub mod core;
 
 use crate::core::{IkCore, Output};

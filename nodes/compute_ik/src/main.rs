@@ -42,8 +42,14 @@ async fn main_async() -> anyhow::Result<()> {
         anyhow::bail!("unexpected argument `{extra}` (see --help)");
     }
     let params = node.params().clone();
-    let config = load_config(&params.string("arm_config").unwrap_or_default()).context("arm_config")?;
-    let core = IkCore::new(&config, &params.string("base_frame").unwrap_or_else(|| "base_link".into()));
+    let config =
+        load_config(&params.string("arm_config").unwrap_or_default()).context("arm_config")?;
+    let core = IkCore::new(
+        &config,
+        &params
+            .string("base_frame")
+            .unwrap_or_else(|| "base_link".into()),
+    );
 
     let xyz = node.subscription::<PointStamped>("xyz_target", qos::COMMANDS)?;
     let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
@@ -106,7 +112,10 @@ async fn main_async() -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
         Ok(rt) => rt,
         Err(e) => {
             eprintln!("compute_ik: cannot start the async runtime: {e}");

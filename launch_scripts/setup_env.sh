@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs what the tests and tools need, idempotently and quietly, and exports
+# EEZYBOT_PYTHON (a Python 3.11 venv with real ROS 2 from PyPI).
+# Source it (`. launch_scripts/setup_env.sh`) or run it; safe to repeat.
+set -euo pipefail
+_here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+_log() { echo "[setup] $*" >&2; }
+
+# Debian packages the project needs (none so far beyond the base image).
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-}
+_missing=()
+for p in $EEZYBOT_APT_PACKAGES; do
+  dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
+done
+if [ ${#_missing[@]} -gt 0 ]; then
+  _log "installing Debian packages: ${_missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq >/dev/null
+  apt-get install -y -qq --no-install-recommends "${_missing[@]}" >/dev/null
+fi
+
+# Python venv, cached per requirements file content.
+_req="$_here/tests/requirements.txt"
+_hash=$(sha256sum "$_req" | cut -c1-12)
+_venv="${EEZYBOT_VENV:-${XDG_CACHE_HOME:-$HOME/.cache}/eezybot/venv-$_hash}"
+if [ ! -f "$_venv/.complete" ]; then
+  _py=""
+  for c in python3.11 python3; do
+    if command -v "$c" >/dev/null 2>&1 && "$c" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+      _py=$(command -v "$c"); break
+    fi
+  done
+  [ -n "$_py" ] || { _log "Python 3.11 is required for the ROS 2 wheels"; exit 1; }
+  _log "creating the ROS 2 Python venv in $_venv (once)"
+  rm -rf "$_venv"
+  "$_py" -m venv "$_venv"
+  "$_venv/bin/pip" install -q --disable-pip-version-check -r "$_req"
+  "$_venv/bin/python" -c 'import rclpy, cyclonedds, pytest' 
+  touch "$_venv/.complete"
+fi
+export EEZYBOT_PYTHON="$_venv/bin/python"

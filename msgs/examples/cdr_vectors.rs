@@ -1,0 +1,325 @@
+//! Test vectors for the rclpy byte-for-byte check (`tests/test_msgs_interop.py`).
+//!
+//! `cdr_vectors encode` prints `name type hex` for every case, serialized by our structs.
+//! `cdr_vectors decode` reads `name hex` lines (rclpy's bytes), decodes each with our
+//! struct, and prints `name OK` if it equals our own value for that case (bit for bit:
+//! NaN, -0.0 and every string byte), else `name MISMATCH …`.
+//!
+//! The values are written again, independently, in `tests/interop/cases.py`.
+
+use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+use eezybot_msgs::geometry_msgs::{
+    Point, PointStamped, Quaternion, Transform, TransformStamped, Vector3,
+};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::{Bool, Float64, Header, String as StringMsg};
+use eezybot_msgs::tf2_msgs::TFMessage;
+use eezybot_msgs::{cdr, RosMessage, Time};
+use std::io::BufRead;
+
+type Check = Box<dyn Fn(&[u8]) -> Result<(), String>>;
+
+struct Case {
+    name: &'static str,
+    ros_type: String,
+    bytes: Vec<u8>,
+    check: Check,
+}
+
+fn case<M: RosMessage + std::fmt::Debug>(name: &'static str, value: M) -> Case {
+    let bytes = cdr::encode(&value).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let want = format!("{value:?}");
+    let ours = bytes.clone();
+    Case {
+        name,
+        ros_type: M::ros_type_string(),
+        bytes,
+        check: Box::new(move |theirs| {
+            let got: M = cdr::decode(theirs).map_err(|e| e.to_string())?;
+            // Debug shows NaN, -0.0 and every character; re-encoding compares every bit.
+            if format!("{got:?}") != want {
+                return Err(format!("decoded {got:?}, expected {want}"));
+            }
+            let again = cdr::encode(&got).map_err(|e| e.to_string())?;
+            if again != ours {
+                return Err("decoded value re-encodes differently".into());
+            }
+            Ok(())
+        }),
+    }
+}
+
+fn t(sec: i32, nanosec: u32) -> Time {
+    Time::from_nanos(i64::from(sec) * 1_000_000_000 + i64::from(nanosec))
+}
+
+fn header(sec: i32, nanosec: u32, frame: &str) -> Header {
+    Header {
+        stamp: t(sec, nanosec),
+        frame_id: frame.into(),
+    }
+}
+
+fn ts(h: Header, child: &str, tr: [f64; 3], rot: [f64; 4]) -> TransformStamped {
+    TransformStamped {
+        header: h,
+        child_frame_id: child.into(),
+        transform: Transform {
+            translation: Vector3 {
+                x: tr[0],
+                y: tr[1],
+                z: tr[2],
+            },
+            rotation: Quaternion {
+                x: rot[0],
+                y: rot[1],
+                z: rot[2],
+                w: rot[3],
+            },
+        },
+    }
+}
+
+const UNICODE: &str = "bäse_link→ü🤖";
+
+fn cases() -> Vec<Case> {
+    let nan = f64::NAN;
+    let inf = f64::INFINITY;
+    vec![
+        case("header_empty", header(0, 0, "")),
+        case("header_max", header(i32::MAX, 999_999_999, UNICODE)),
+        case("header_min", header(i32::MIN, 0, "base_link")),
+        case(
+            "string_empty",
+            StringMsg {
+                data: String::new(),
+            },
+        ),
+        case(
+            "string_unicode",
+            StringMsg {
+                data: format!("{UNICODE} \"quoted\"\n\ttab"),
+            },
+        ),
+        case("float64_neg_zero", Float64 { data: -0.0 }),
+        case("float64_nan", Float64 { data: nan }),
+        case("float64_inf", Float64 { data: inf }),
+        case("float64_neg_inf", Float64 { data: -inf }),
+        case("float64_min_subnormal", Float64 { data: 5e-324 }),
+        case("float64_max", Float64 { data: f64::MAX }),
+        case("bool_true", Bool { data: true }),
+        case("bool_false", Bool { data: false }),
+        case(
+            "point",
+            Point {
+                x: -0.0,
+                y: inf,
+                z: nan,
+            },
+        ),
+        case(
+            "point_stamped",
+            PointStamped {
+                header: header(1_700_000_000, 123_456_789, "base_link"),
+                point: Point {
+                    x: 0.2,
+                    y: -0.05,
+                    z: 0.15,
+                },
+            },
+        ),
+        case(
+            "point_stamped_odd_frame",
+            PointStamped {
+                header: header(-1, 1, "x"),
+                point: Point {
+                    x: f64::MIN,
+                    y: 1e300,
+                    z: -5e-324,
+                },
+            },
+        ),
+        case(
+            "vector3",
+            Vector3 {
+                x: f64::MIN,
+                y: 5e-324,
+                z: -inf,
+            },
+        ),
+        case(
+            "quaternion_identity",
+            Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            },
+        ),
+        case(
+            "quaternion_odd",
+            Quaternion {
+                x: nan,
+                y: -0.0,
+                z: inf,
+                w: -1.0,
+            },
+        ),
+        case(
+            "transform",
+            Transform {
+                translation: Vector3 {
+                    x: 1.0,
+                    y: 2.0,
+                    z: 3.0,
+                },
+                rotation: Quaternion {
+                    x: 0.5,
+                    y: -0.5,
+                    z: 0.5,
+                    w: -0.5,
+                },
+            },
+        ),
+        case(
+            "transform_stamped",
+            ts(
+                header(5, 6, "base_link"),
+                "tool0",
+                [0.1, -0.0, nan],
+                [0.0, 0.0, 0.0, 1.0],
+            ),
+        ),
+        case(
+            "transform_stamped_empty_frames",
+            ts(
+                header(i32::MIN, 999_999_999, ""),
+                "",
+                [inf, -inf, 0.0],
+                [1.0, 0.0, 0.0, 0.0],
+            ),
+        ),
+        case("joint_state_empty", JointState::default()),
+        case(
+            "joint_state_full",
+            JointState {
+                header: header(1_700_000_000, 5, ""),
+                name: vec!["base_joint".into(), UNICODE.into(), String::new()],
+                position: vec![nan, -0.0, inf],
+                velocity: vec![],
+                effort: vec![f64::MAX],
+            },
+        ),
+        case("tf_message_empty", TFMessage { transforms: vec![] }),
+        case(
+            "tf_message_two",
+            TFMessage {
+                transforms: vec![
+                    ts(
+                        header(10, 20, "base_link"),
+                        "turntable",
+                        [0.0, 0.0, 0.094],
+                        [0.0, 0.0, 0.38268343236508984, 0.9238795325112867],
+                    ),
+                    ts(
+                        header(10, 20, UNICODE),
+                        "a",
+                        [-0.0, nan, 1e-300],
+                        [nan, 0.0, 0.0, 1.0],
+                    ),
+                ],
+            },
+        ),
+        case(
+            "key_value",
+            KeyValue {
+                key: String::new(),
+                value: UNICODE.into(),
+            },
+        ),
+        case(
+            "diagnostic_status",
+            DiagnosticStatus {
+                level: 255,
+                name: "compute_ik: inverse kinematics".into(),
+                message: String::new(),
+                hardware_id: "x".into(),
+                values: vec![],
+            },
+        ),
+        case("diagnostic_array_empty", DiagnosticArray::default()),
+        case(
+            "diagnostic_array",
+            DiagnosticArray {
+                header: header(i32::MAX, 0, "odd"),
+                status: vec![
+                    DiagnosticStatus {
+                        level: DiagnosticStatus::WARN,
+                        name: UNICODE.into(),
+                        message: "out of reach".into(),
+                        hardware_id: String::new(),
+                        values: vec![
+                            KeyValue {
+                                key: "k".into(),
+                                value: String::new(),
+                            },
+                            KeyValue {
+                                key: "ü".into(),
+                                value: "v".into(),
+                            },
+                        ],
+                    },
+                    DiagnosticStatus {
+                        level: 0,
+                        ..DiagnosticStatus::default()
+                    },
+                ],
+            },
+        ),
+    ]
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+fn unhex(s: &str) -> Option<Vec<u8>> {
+    (0..s.len())
+        .step_by(2)
+        .map(|i| s.get(i..i + 2).and_then(|h| u8::from_str_radix(h, 16).ok()))
+        .collect()
+}
+
+fn main() {
+    let mode = std::env::args().nth(1).unwrap_or_default();
+    let cases = cases();
+    match mode.as_str() {
+        "encode" => {
+            for c in &cases {
+                println!("{} {} {}", c.name, c.ros_type, hex(&c.bytes));
+            }
+        }
+        "decode" => {
+            for line in std::io::stdin().lock().lines() {
+                let line = line.unwrap_or_default();
+                let mut parts = line.split_whitespace();
+                let (Some(name), Some(h)) = (parts.next(), parts.next()) else {
+                    continue;
+                };
+                let verdict = match (cases.iter().find(|c| c.name == name), unhex(h)) {
+                    (None, _) => "MISMATCH no such case".to_string(),
+                    (_, None) => "MISMATCH bad hex".to_string(),
+                    (Some(c), Some(bytes)) => match (c.check)(&bytes) {
+                        Ok(()) => "OK".into(),
+                        Err(e) => format!("MISMATCH {e}"),
+                    },
+                };
+                println!("{name} {verdict}");
+            }
+        }
+        _ => {
+            eprintln!("usage: cdr_vectors encode|decode");
+            std::process::exit(2);
+        }
+    }
+}

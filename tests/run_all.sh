@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Every test of the project: Rust unit, property and doc tests, then the
+# integration tests that run our real binaries against real ROS 2 (rclpy, Fast DDS,
+# Cyclone DDS). Installs what it needs on first run.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+. launch_scripts/setup_env.sh
+export CARGO_TERM_QUIET=true
+echo "== cargo build"
+cargo build --workspace --bins --examples
+echo "== cargo test"
+cargo test --workspace
+echo "== integration tests (real ROS 2)"
+"$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider "$@"

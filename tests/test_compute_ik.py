@@ -1,0 +1,325 @@
+"""compute_ik as a real process, driven and observed by real rclpy (Fast DDS)."""
+import math
+import signal
+import subprocess
+import time
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped
+from rcl_interfaces.msg import Log, Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+
+from conftest import LATCHED, Observer, bin_path
+
+# ROBOT.md, written out again here so the test does not trust the code under test.
+H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
+GRIPPER_OPEN_RAD = 0.6
+SERVOS = ["base_servo", "shoulder_servo", "elbow_servo", "gripper_servo"]
+PASSIVE = ["wrist_joint", "crank_joint", "drive_link_joint", "level_link_joint", "triangle_joint", "upper_link_joint"]
+
+
+def fk(base, shoulder, elbow):
+    phi = shoulder + elbow
+    r = L2 * math.cos(shoulder) + L3 * math.cos(phi) + TOOL_DX
+    return (r * math.cos(base), r * math.sin(base), H + L2 * math.sin(shoulder) + L3 * math.sin(phi))
+
+
+def servo_deg(base, shoulder, elbow, opening):
+    d = math.degrees
+    return [90 - 2 * d(base), 180 - d(shoulder), 90 + d(shoulder + elbow), 60 + 120 * opening]
+
+
+def target(x, y, z, frame="base_link", sec=0, nanosec=0):
+    m = PointStamped()
+    m.header.frame_id = frame
+    m.header.stamp.sec, m.header.stamp.nanosec = sec, nanosec
+    m.point.x, m.point.y, m.point.z = float(x), float(y), float(z)
+    return m
+
+
+def joint_target(names, positions):
+    return JointState(name=list(names), position=[float(p) for p in positions])
+
+
+class IkRig:
+    """compute_ik plus an observer wired to all its topics under namespace `ns`."""
+
+    def __init__(self, launch, observer, *args, ns=""):
+        self.proc = launch("compute_ik", *args)
+        self.o = observer
+        self.joint_states = observer.sub(f"{ns}/joint_states", JointState)
+        self.servo_angles = observer.sub(f"{ns}/servo_angles", JointState)
+        self.diagnostics = observer.sub(f"{ns}/diagnostics", DiagnosticArray)
+        self.xyz = observer.pub(f"{ns}/xyz_target", PointStamped)
+        self.gripper = observer.pub(f"{ns}/gripper_target", Float64)
+        self.joints = observer.pub(f"{ns}/joint_target", JointState)
+        self.estop = observer.pub(f"{ns}/estop", Bool, LATCHED)
+        for p in (self.xyz, self.gripper, self.joints, self.estop):
+            observer.wait_matched(p)
+        for topic in ("joint_states", "servo_angles", "diagnostics"):
+            observer.wait_publisher(f"{ns}/{topic}")
+
+    def send_and_wait(self, publisher, msg, stamp=None, timeout=10):
+        """Publish and wait for the servo_angles and joint_states it causes."""
+        n_sa, n_js = len(self.servo_angles), len(self.joint_states)
+        publisher.publish(msg)
+        ok = self.o.spin_until(lambda: len(self.servo_angles) > n_sa and len(self.joint_states) > n_js, timeout)
+        assert ok, "no servo_angles/joint_states for a valid input"
+        sa, js = self.servo_angles[-1][1], self.joint_states[-1][1]
+        if stamp is not None:
+            assert (sa.header.stamp.sec, sa.header.stamp.nanosec) == stamp
+            assert (js.header.stamp.sec, js.header.stamp.nanosec) == stamp
+        return js, sa
+
+    def last_diag(self):
+        status = self.diagnostics[-1][1].status[0]
+        return status, {kv.key: kv.value for kv in status.values}
+
+    def rejected_count(self):
+        if not self.diagnostics:
+            return 0
+        return int(self.last_diag()[1]["rejected"])
+
+
+def joints_of(js):
+    return dict(zip(js.name, js.position))
+
+
+def check_state(js, sa, opening):
+    q = joints_of(js)
+    base, shoulder, elbow = q["base_joint"], q["shoulder_joint"], q["elbow_joint"]
+    phi = shoulder + elbow
+    # every passive joint, derived from ROBOT.md's parallelograms
+    expected_passive = {
+        "wrist_joint": -phi, "crank_joint": phi, "drive_link_joint": shoulder - phi,
+        "level_link_joint": shoulder, "triangle_joint": -shoulder, "upper_link_joint": phi,
+    }
+    for name, value in expected_passive.items():
+        assert q[name] == pytest.approx(value, abs=1e-12), name
+    assert q["gripper_joint"] == pytest.approx(opening * GRIPPER_OPEN_RAD, abs=1e-12)
+    assert q["gripper_mimic_joint"] == pytest.approx(-opening * GRIPPER_OPEN_RAD, abs=1e-12)
+    assert sa.name == SERVOS
+    got_deg = [math.degrees(r) for r in sa.position]
+    assert got_deg == pytest.approx(servo_deg(base, shoulder, elbow, opening), abs=1e-9)
+    return base, shoulder, elbow
+
+
+def test_targets_in_joint_states_and_servo_angles_out(launch, observer):
+    rig = IkRig(launch, observer)
+    for i, p in enumerate([(0.2, 0.05, 0.15), (0.15, -0.1, 0.2), (0.25, 0.0, 0.1), (0.19, 0.0, 0.08)]):
+        stamp = (1_700_000_000 + i, 123_456_789 + i)
+        js, sa = rig.send_and_wait(rig.xyz, target(*p, sec=stamp[0], nanosec=stamp[1]), stamp)
+        assert set(js.name) == {"base_joint", "shoulder_joint", "elbow_joint", "gripper_joint", *PASSIVE, "gripper_mimic_joint"}
+        base, shoulder, elbow = check_state(js, sa, 0.0)
+        assert fk(base, shoulder, elbow) == pytest.approx(p, abs=1e-9)
+        assert elbow <= 0
+    # the claw alone: the arm stays where it is
+    arm_before = [joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")]
+    js, sa = rig.send_and_wait(rig.gripper, Float64(data=0.5))
+    check_state(js, sa, 0.5)
+    assert [joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")] == arm_before
+    assert math.degrees(sa.position[3]) == pytest.approx(120.0)
+    # joint mode, an empty frame meaning base_link
+    js, sa = rig.send_and_wait(rig.joints, joint_target(["base_joint", "shoulder_joint", "elbow_joint"], [0.1, 1.4, -1.7]))
+    assert [joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")] == [0.1, 1.4, -1.7]
+    check_state(js, sa, 0.5)
+    js, sa = rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15, frame=""))
+    assert fk(*[joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")]) == pytest.approx((0.2, 0, 0.15), abs=1e-9)
+
+
+BAD_INPUTS = [
+    ("xyz", target(1.0, 0.0, 0.1), "too_far", "out of reach"),
+    ("xyz", target(0.10, 0.0, 0.15), "out_of_limits:elbow_joint", "elbow_joint"),
+    ("xyz", target(-0.2, 0.0, 0.15), "out_of_limits:base_joint", "base_joint"),
+    ("xyz", target(0.26, 0.0, 0.1), "out_of_limits:shoulder_joint", "shoulder_joint"),
+    ("xyz", target(math.nan, 0.0, 0.15), "non_finite_target", "NaN"),
+    ("xyz", target(0.2, math.inf, 0.15), "non_finite_target", "inf"),
+    ("xyz", target(0.2, 0.0, 0.15, frame="map"), "wrong_frame", "`map`"),
+    ("gripper", Float64(data=1.5), "gripper_out_of_range", "1.5"),
+    ("gripper", Float64(data=math.nan), "gripper_out_of_range", "NaN"),
+    ("joints", joint_target(["wrist_joint"], [0.0]), "unknown_joint", "wrist_joint"),
+    ("joints", joint_target(["shoulder_joint"], [2.5]), "out_of_limits:shoulder_joint", "shoulder_joint"),
+    ("joints", joint_target(["elbow_joint"], [math.nan]), "non_finite_joint:elbow_joint", "NaN"),
+    ("joints", JointState(name=["base_joint", "elbow_joint"], position=[0.1]), "length_mismatch", "2 names but 1 positions"),
+    ("joints", joint_target(["gripper_joint"], [1.0]), "out_of_limits:gripper_joint", "gripper_joint"),
+]
+
+
+def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
+    rig = IkRig(launch, observer)
+    good = (0.2, 0.05, 0.15)
+    js, _ = rig.send_and_wait(rig.xyz, target(*good))
+    kept = joints_of(js)
+    publishers = {"xyz": rig.xyz, "gripper": rig.gripper, "joints": rig.joints}
+    for i, (topic, msg, code, text) in enumerate(BAD_INPUTS, start=1):
+        n_sa = len(rig.servo_angles)
+        publishers[topic].publish(msg)
+        assert observer.spin_until(lambda: rig.rejected_count() >= i, 10), f"no diagnostics for {code}"
+        status, values = rig.last_diag()
+        assert values["last_rejection_code"] == code
+        assert text in values["last_rejection"], values["last_rejection"]
+        assert status.level == b"\x01"  # WARN
+        observer.spin_for(0.3)
+        assert len(rig.servo_angles) == n_sa, f"{code}: servo_angles published for a bad input"
+    # the last good state was kept: a claw-only change shows the same arm joints
+    js, _ = rig.send_and_wait(rig.gripper, Float64(data=0.25))
+    for j in ("base_joint", "shoulder_joint", "elbow_joint"):
+        assert joints_of(js)[j] == kept[j]
+    # back to OK once an input is accepted
+    assert observer.spin_until(lambda: rig.last_diag()[0].level == b"\x00", 5)
+    # one log line per rejection
+    assert rig.proc.output().count("rejected:") == len(BAD_INPUTS)
+
+
+def test_diagnostics_are_periodic_and_on_rosout_too(launch, observer):
+    rosout = observer.sub("/rosout", Log)
+    rig = IkRig(launch, observer)
+    n0 = len(rig.diagnostics)
+    observer.spin_for(3.5)
+    assert len(rig.diagnostics) - n0 >= 2, "diagnostics should arrive about once a second"
+    status, values = rig.last_diag()
+    assert status.name == "compute_ik: inverse kinematics"
+    assert status.level == b"\x00"
+    rig.xyz.publish(target(2.0, 0.0, 0.0))
+    assert observer.spin_until(lambda: any("rejected" in m.msg and m.name == "compute_ik" for _, m in rosout), 10)
+
+
+def test_estop_blocks_targets_until_released(launch, observer):
+    rig = IkRig(launch, observer)
+    rig.estop.publish(Bool(data=True))
+    assert observer.spin_until(lambda: rig.diagnostics and rig.last_diag()[1].get("estop") == "true", 10)
+    n_sa = len(rig.servo_angles)
+    rig.xyz.publish(target(0.2, 0.0, 0.15))
+    assert observer.spin_until(lambda: rig.last_diag()[1].get("last_rejection_code") == "estop", 10)
+    observer.spin_for(0.3)
+    assert len(rig.servo_angles) == n_sa
+    rig.estop.publish(Bool(data=False))
+    assert observer.spin_until(lambda: rig.last_diag()[1].get("estop") == "false", 10)
+    rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15))
+
+
+def test_namespace_moves_every_topic(launch, observer):
+    root_angles = observer.sub("/servo_angles", JointState)
+    rig = IkRig(launch, observer, "--ros-args", "-r", "__ns:=/arm2", ns="/arm2")
+    rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15))
+    observer.spin_for(0.3)
+    assert root_angles == []
+    names = observer.node.get_publisher_names_and_types_by_node("compute_ik", "/arm2")
+    topics = {t for t, _ in names} - {"/rosout", "/parameter_events"}
+    assert topics == {"/arm2/joint_states", "/arm2/servo_angles", "/arm2/diagnostics"}, topics
+    subs = {t for t, _ in observer.node.get_subscriber_names_and_types_by_node("compute_ik", "/arm2")}
+    assert {"/arm2/xyz_target", "/arm2/gripper_target", "/arm2/joint_target", "/arm2/estop"} <= subs
+
+
+def test_remap_and_params_file(launch, observer, tmp_path):
+    params = tmp_path / "ik.yaml"
+    # keys match the node name after remapping, as in rcl
+    params.write_text("ik:\n  ros__parameters:\n    base_frame: arm_base\n    diagnostics_period: 0.5\n")
+    rig_proc = launch("compute_ik", "--ros-args", "--params-file", str(params), "-r", "xyz_target:=goal", "-r", "__node:=ik")
+    angles = observer.sub("/servo_angles", JointState)
+    goal = observer.pub("/goal", PointStamped)
+    observer.wait_matched(goal)
+    observer.wait_publisher("/servo_angles")
+    goal.publish(target(0.2, 0.0, 0.15, frame="arm_base"))
+    assert observer.spin_until(lambda: angles, 10)
+    assert ("ik", "/") in observer.node.get_node_names_and_namespaces()
+    assert rig_proc.proc.poll() is None
+
+
+def call(observer, client, request, timeout=10):
+    assert client.wait_for_service(timeout_sec=timeout), f"{client.srv_name} not offered"
+    future = client.call_async(request)
+    assert observer.spin_until(future.done, timeout)
+    return future.result()
+
+
+def test_parameters_through_the_standard_services(launch, observer):
+    rig = IkRig(launch, observer)
+    node = observer.node
+    listed = call(observer, node.create_client(ListParameters, "/compute_ik/list_parameters"), ListParameters.Request())
+    assert {"arm_config", "base_frame", "diagnostics_period", "use_sim_time"} <= set(listed.result.names)
+
+    get = node.create_client(GetParameters, "/compute_ik/get_parameters")
+    values = call(observer, get, GetParameters.Request(names=["base_frame", "diagnostics_period"])).values
+    assert values[0].string_value == "base_link"
+    assert values[1].double_value == 1.0
+
+    setp = node.create_client(SetParameters, "/compute_ik/set_parameters")
+
+    def set_param(name, **value):
+        v = ParameterValue(**value)
+        return call(observer, setp, SetParameters.Request(parameters=[Parameter(name=name, value=v)])).results[0]
+
+    out_of_range = set_param("diagnostics_period", type=ParameterType.PARAMETER_DOUBLE, double_value=500.0)
+    assert not out_of_range.successful and "outside" in out_of_range.reason
+    missing = set_param("arm_config", type=ParameterType.PARAMETER_STRING, string_value="/nonexistent/arm.yaml")
+    assert not missing.successful and "/nonexistent/arm.yaml" in missing.reason
+    assert set_param("base_frame", type=ParameterType.PARAMETER_STRING, string_value="world").successful
+    values = call(observer, get, GetParameters.Request(names=["base_frame"])).values
+    assert values[0].string_value == "world"
+    # the new value is in force
+    rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15, frame="world"))
+    rejected = rig.rejected_count()
+    rig.xyz.publish(target(0.2, 0.0, 0.15, frame="base_link"))
+    assert observer.spin_until(lambda: rig.rejected_count() > rejected, 10)
+    assert rig.last_diag()[1]["last_rejection_code"] == "wrong_frame"
+
+
+def test_a_custom_calibration_file_is_used(launch, observer, tmp_path):
+    cfg = tmp_path / "arm.yaml"
+    cfg.write_text("servos:\n  base: { offset_deg: 95.0, gain: -2.0, min_deg: 0.0, max_deg: 180.0, pulse_min_us: 544, pulse_max_us: 2400 }\n")
+    rig = IkRig(launch, observer, "--ros-args", "-p", f"arm_config:={cfg}")
+    js, sa = rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15))
+    assert math.degrees(sa.position[0]) == pytest.approx(95.0, abs=1e-9)
+
+
+def test_domains_do_not_hear_each_other(launch, observer, other_domain):
+    stranger = Observer(other_domain, "stranger")
+    try:
+        rig = IkRig(launch, observer)
+        heard = stranger.sub("/servo_angles", JointState)
+        pub = stranger.pub("/xyz_target", PointStamped)
+        end = time.monotonic() + 3
+        while time.monotonic() < end:
+            pub.publish(target(0.2, 0.0, 0.15))
+            stranger.spin_for(0.1)
+        rig.send_and_wait(rig.xyz, target(0.21, 0.0, 0.15))  # our own domain still works
+        stranger.spin_for(0.5)
+        assert heard == []
+        assert pub.get_subscription_count() == 0
+        assert ("compute_ik", "/") not in stranger.node.get_node_names_and_namespaces()
+        # only our one target reached the node
+        n = len(rig.diagnostics)
+        assert observer.spin_until(lambda: len(rig.diagnostics) > n, 5)
+        assert rig.last_diag()[1]["received"] == "1"
+    finally:
+        stranger.close()
+
+
+def test_sigterm_exits_with_zero(launch, observer):
+    rig = IkRig(launch, observer)
+    assert rig.proc.stop(signal.SIGTERM) == 0
+
+
+@pytest.mark.parametrize(
+    "args,env,message",
+    [
+        (["--ros-args", "-p", "nope:=1"], {}, "not a parameter"),
+        (["--ros-args", "-p", "diagnostics_period:=0.0"], {}, "outside"),
+        (["--ros-args", "-p", "base_frame:=3"], {}, "expected a string"),
+        (["--ros-args", "-r"], {}, "needs a value"),
+        (["--ros-args", "--params-file", "/nonexistent/p.yaml"], {}, "/nonexistent/p.yaml"),
+        (["--ros-args", "-r", "__ns:=/bad ns"], {}, "bad ns"),
+        (["stray"], {}, "unexpected argument"),
+        ([], {"ROS_DOMAIN_ID": "999"}, "ROS_DOMAIN_ID"),
+    ],
+)
+def test_bad_command_lines_exit_nonzero_with_a_reason(args, env, message, domain):
+    import os
+    run_env = {**os.environ, "ROS_DOMAIN_ID": str(domain), **env}
+    r = subprocess.run([bin_path("compute_ik"), *args], capture_output=True, text=True, env=run_env, timeout=20)
+    assert r.returncode != 0
+    assert message in r.stderr, r.stderr
