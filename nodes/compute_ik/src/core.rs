@@ -69,6 +69,11 @@ pub enum Reason {
     NoJoints,
     /// The emergency stop is engaged.
     EmergencyStop,
+    /// The sample could not be deserialized.
+    Unreadable {
+        /// what the middleware said
+        error: String,
+    },
 }
 
 impl Reason {
@@ -82,6 +87,7 @@ impl Reason {
             Reason::LengthMismatch { .. } => "length_mismatch".into(),
             Reason::NoJoints => "no_joints".into(),
             Reason::EmergencyStop => "estop".into(),
+            Reason::Unreadable { .. } => "unreadable".into(),
         }
     }
 }
@@ -109,6 +115,7 @@ impl fmt::Display for Reason {
                 f,
                 "emergency stop engaged: no motion until `estop` is false"
             ),
+            Reason::Unreadable { error } => write!(f, "unreadable sample: {error}"),
         }
     }
 }
@@ -323,6 +330,24 @@ impl IkCore {
             })
         })();
         self.finish(Source::JointTarget, stamp, result)
+    }
+
+    /// Record a sample on `source` that could not be read at all.
+    pub fn reject_unreadable(&mut self, source: Source, error: String) -> Rejection {
+        self.counters.received += 1;
+        self.reject(source, Time::now(), Reason::Unreadable { error })
+    }
+
+    fn reject(&mut self, source: Source, stamp: Time, reason: Reason) -> Rejection {
+        self.counters.rejected += 1;
+        self.last_event_rejected = true;
+        let rejection = Rejection {
+            source,
+            reason,
+            stamp,
+        };
+        self.last_rejection = Some(rejection.clone());
+        rejection
     }
 
     fn check_estop(&self) -> Result<(), Reason> {

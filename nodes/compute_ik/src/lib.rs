@@ -69,8 +69,8 @@ pub enum Input {
     JointTarget(JointState),
     /// An `estop` sample.
     Estop(bool),
-    /// A sample that could not be read (malformed, wrong type): topic and error.
-    Unreadable(&'static str, String),
+    /// A sample that could not be read (malformed): where, and the error.
+    Unreadable(core::Source, String),
 }
 
 /// Where the loop's results go.
@@ -130,10 +130,7 @@ pub async fn run(
                         }
                         continue;
                     }
-                    Input::Unreadable(topic, e) => {
-                        log::warn!("unreadable sample on {topic} ignored: {e}");
-                        continue;
-                    }
+                    Input::Unreadable(source, e) => Err(core.reject_unreadable(source, e)),
                 };
                 match result {
                     Ok(Output { joint_states, servo_angles }) => {

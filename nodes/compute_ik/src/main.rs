@@ -1,7 +1,8 @@
 //! `compute_ik` binary: sets up ROS and runs [`compute_ik::run`].
 
 use anyhow::Context as _;
-use compute_ik::{core::IkCore, load_config, Input, Outputs};
+use compute_ik::core::{IkCore, Source};
+use compute_ik::{load_config, Input, Outputs};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -65,28 +66,34 @@ async fn main_async() -> anyhow::Result<()> {
         xyz.async_stream()
             .map(|r| match r {
                 Ok((m, _)) => Input::XyzTarget(m),
-                Err(e) => Input::Unreadable("xyz_target", format!("{e:?}")),
+                Err(e) => Input::Unreadable(Source::XyzTarget, format!("{e:?}")),
             })
             .boxed(),
         gripper
             .async_stream()
             .map(|r| match r {
                 Ok((m, _)) => Input::GripperTarget(m.data, Time::now()),
-                Err(e) => Input::Unreadable("gripper_target", format!("{e:?}")),
+                Err(e) => Input::Unreadable(Source::GripperTarget, format!("{e:?}")),
             })
             .boxed(),
         joints
             .async_stream()
             .map(|r| match r {
                 Ok((m, _)) => Input::JointTarget(m),
-                Err(e) => Input::Unreadable("joint_target", format!("{e:?}")),
+                Err(e) => Input::Unreadable(Source::JointTarget, format!("{e:?}")),
             })
             .boxed(),
         estop
             .async_stream()
-            .map(|r| match r {
-                Ok((m, _)) => Input::Estop(m.data),
-                Err(e) => Input::Unreadable("estop", format!("{e:?}")),
+            .filter_map(|r| async move {
+                match r {
+                    Ok((m, _)) => Some(Input::Estop(m.data)),
+                    Err(e) => {
+                        // never guess an e-stop state from a broken sample: keep the current one
+                        log::warn!("unreadable sample on estop ignored: {e:?}");
+                        None
+                    }
+                }
             })
             .boxed(),
     ]);

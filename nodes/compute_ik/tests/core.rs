@@ -184,3 +184,15 @@ fn estop_refuses_everything_until_released() {
     c.set_estop(false);
     assert!(c.handle_xyz_target(&target(0.2, 0.0, 0.15, "")).is_ok());
 }
+
+#[test]
+fn unreadable_samples_are_counted_and_reported() {
+    let mut c = core();
+    let r = c.reject_unreadable(Source::JointTarget, "bad CDR".into());
+    assert_eq!(r.reason.code(), "unreadable");
+    let d = c.diagnostic_status("compute_ik");
+    assert_eq!(d.level, DiagnosticStatus::WARN);
+    assert!(d.message.contains("bad CDR"), "{}", d.message);
+    assert_eq!(c.counters().rejected, 1);
+    assert_eq!(*c.state(), eezybot_kinematics::ArmState::default());
+}
