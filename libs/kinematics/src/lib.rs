@@ -26,6 +26,7 @@
 mod config;
 mod error;
 mod servo;
+pub mod urdf;
 
 pub use config::{ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LimitDeg};
 pub use error::{Joint, KinematicsError};
