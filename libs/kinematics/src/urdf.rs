@@ -107,18 +107,25 @@ pub struct JointModel {
 impl JointModel {
     /// Does it move with a position (revolute, continuous, prismatic)?
     pub fn is_movable(&self) -> bool {
-        matches!(self.kind, JointKind::Revolute { .. } | JointKind::Continuous { .. } | JointKind::Prismatic { .. })
+        matches!(
+            self.kind,
+            JointKind::Revolute { .. } | JointKind::Continuous { .. } | JointKind::Prismatic { .. }
+        )
     }
 
     /// Pose of the child link frame in the parent link frame at position `q`.
     pub fn transform(&self, q: f64) -> Isometry3<f64> {
         let motion = match &self.kind {
             JointKind::Revolute { axis, .. } | JointKind::Continuous { axis } => {
-                Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_axis_angle(axis, q))
+                Isometry3::from_parts(
+                    Translation3::identity(),
+                    UnitQuaternion::from_axis_angle(axis, q),
+                )
             }
-            JointKind::Prismatic { axis, .. } => {
-                Isometry3::from_parts(Translation3::from(axis.into_inner() * q), UnitQuaternion::identity())
-            }
+            JointKind::Prismatic { axis, .. } => Isometry3::from_parts(
+                Translation3::from(axis.into_inner() * q),
+                UnitQuaternion::identity(),
+            ),
             JointKind::Fixed | JointKind::Unsupported => Isometry3::identity(),
         };
         self.origin * motion
@@ -142,22 +149,33 @@ pub struct RobotModel {
 fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
     let [x, y, z] = p.xyz.0;
     let [r, pi, yaw] = p.rpy.0;
-    Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::from_euler_angles(r, pi, yaw))
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(r, pi, yaw),
+    )
 }
 
 impl RobotModel {
     /// Read and validate a URDF file.
     pub fn load(path: &Path) -> Result<RobotModel, UrdfError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| UrdfError::Read { origin: origin.clone(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| UrdfError::Read {
+            origin: origin.clone(),
+            message: e.to_string(),
+        })?;
         Self::from_urdf_str(&text, &origin)
     }
 
     /// Parse and validate URDF text; `origin` names it in errors.
     pub fn from_urdf_str(text: &str, origin: &str) -> Result<RobotModel, UrdfError> {
-        let robot = urdf_rs::read_from_string(text)
-            .map_err(|e| UrdfError::Parse { origin: origin.to_string(), message: e.to_string() })?;
-        let bad = |message: String| UrdfError::Structure { origin: origin.to_string(), message };
+        let robot = urdf_rs::read_from_string(text).map_err(|e| UrdfError::Parse {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        let bad = |message: String| UrdfError::Structure {
+            origin: origin.to_string(),
+            message,
+        };
         if robot.links.is_empty() {
             return Err(bad("the robot has no link".into()));
         }
@@ -177,21 +195,33 @@ impl RobotModel {
             seen_joints.push(&j.name);
             for (role, l) in [("parent", &j.parent.link), ("child", &j.child.link)] {
                 if !links.contains(l) {
-                    return Err(bad(format!("joint `{}`: {role} link `{l}` does not exist", j.name)));
+                    return Err(bad(format!(
+                        "joint `{}`: {role} link `{l}` does not exist",
+                        j.name
+                    )));
                 }
             }
             if let Some(previous) = parent_of.insert(&j.child.link, &j.name) {
-                return Err(bad(format!("link `{}` is the child of two joints, `{previous}` and `{}`", j.child.link, j.name)));
+                return Err(bad(format!(
+                    "link `{}` is the child of two joints, `{previous}` and `{}`",
+                    j.child.link, j.name
+                )));
             }
         }
-        let roots: Vec<&String> = links.iter().filter(|l| !parent_of.contains_key(l.as_str())).collect();
+        let roots: Vec<&String> = links
+            .iter()
+            .filter(|l| !parent_of.contains_key(l.as_str()))
+            .collect();
         let root = match roots.as_slice() {
             [root] => (*root).clone(),
             [] => return Err(bad("every link is a child: the joints form a loop".into())),
             many => {
                 return Err(bad(format!(
                     "several root links ({}): a URDF is one tree",
-                    many.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+                    many.iter()
+                        .map(|s| s.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 )))
             }
         };
@@ -209,40 +239,66 @@ impl RobotModel {
             }
         }
         if ordered.len() != robot.joints.len() {
-            return Err(bad("some links are not connected to the root (a loop of joints)".into()));
+            return Err(bad(
+                "some links are not connected to the root (a loop of joints)".into(),
+            ));
         }
-        let index: HashMap<String, usize> = ordered.iter().enumerate().map(|(i, j)| (j.name.clone(), i)).collect();
+        let index: HashMap<String, usize> = ordered
+            .iter()
+            .enumerate()
+            .map(|(i, j)| (j.name.clone(), i))
+            .collect();
         let mut joints = Vec::with_capacity(ordered.len());
         for j in &ordered {
             let axis = || {
                 let v = Vector3::from(j.axis.xyz.0);
-                Unit::try_new(v, 1e-12).ok_or_else(|| bad(format!("joint `{}` has a zero axis", j.name)))
+                Unit::try_new(v, 1e-12)
+                    .ok_or_else(|| bad(format!("joint `{}` has a zero axis", j.name)))
             };
             let limits = || {
                 let (lo, hi) = (j.limit.lower, j.limit.upper);
                 if lo.is_nan() || hi.is_nan() || lo > hi {
-                    Err(bad(format!("joint `{}` has limits lower {lo} > upper {hi}", j.name)))
+                    Err(bad(format!(
+                        "joint `{}` has limits lower {lo} > upper {hi}",
+                        j.name
+                    )))
                 } else {
                     Ok((lo, hi))
                 }
             };
             let kind = match j.joint_type {
                 urdf_rs::JointType::Fixed => JointKind::Fixed,
-                urdf_rs::JointType::Revolute => JointKind::Revolute { axis: axis()?, limits: limits()? },
+                urdf_rs::JointType::Revolute => JointKind::Revolute {
+                    axis: axis()?,
+                    limits: limits()?,
+                },
                 urdf_rs::JointType::Continuous => JointKind::Continuous { axis: axis()? },
-                urdf_rs::JointType::Prismatic => JointKind::Prismatic { axis: axis()?, limits: limits()? },
+                urdf_rs::JointType::Prismatic => JointKind::Prismatic {
+                    axis: axis()?,
+                    limits: limits()?,
+                },
                 _ => JointKind::Unsupported,
             };
             let mimic = match &j.mimic {
                 None => None,
                 Some(m) => {
-                    let leader = *index
-                        .get(&m.joint)
-                        .ok_or_else(|| bad(format!("joint `{}` mimics `{}`, which does not exist", j.name, m.joint)))?;
+                    let leader = *index.get(&m.joint).ok_or_else(|| {
+                        bad(format!(
+                            "joint `{}` mimics `{}`, which does not exist",
+                            j.name, m.joint
+                        ))
+                    })?;
                     if ordered[leader].mimic.is_some() {
-                        return Err(bad(format!("joint `{}` mimics `{}`, itself a mimic joint", j.name, m.joint)));
+                        return Err(bad(format!(
+                            "joint `{}` mimics `{}`, itself a mimic joint",
+                            j.name, m.joint
+                        )));
                     }
-                    Some(Mimic { leader, multiplier: m.multiplier.unwrap_or(1.0), offset: m.offset.unwrap_or(0.0) })
+                    Some(Mimic {
+                        leader,
+                        multiplier: m.multiplier.unwrap_or(1.0),
+                        offset: m.offset.unwrap_or(0.0),
+                    })
                 }
             };
             joints.push(JointModel {
@@ -257,11 +313,20 @@ impl RobotModel {
         for j in &joints {
             if let Some(m) = &j.mimic {
                 if !joints[m.leader].is_movable() {
-                    return Err(bad(format!("joint `{}` mimics `{}`, which does not move", j.name, joints[m.leader].name)));
+                    return Err(bad(format!(
+                        "joint `{}` mimics `{}`, which does not move",
+                        j.name, joints[m.leader].name
+                    )));
                 }
             }
         }
-        Ok(RobotModel { name: robot.name, root, links, joints, index })
+        Ok(RobotModel {
+            name: robot.name,
+            root,
+            links,
+            joints,
+            index,
+        })
     }
 
     /// The joint with this name.
@@ -276,7 +341,9 @@ impl RobotModel {
 
     /// Joints whose position comes from `joint_states`: movable and not mimic.
     pub fn independent_joints(&self) -> impl Iterator<Item = &JointModel> {
-        self.joints.iter().filter(|j| j.is_movable() && j.mimic.is_none())
+        self.joints
+            .iter()
+            .filter(|j| j.is_movable() && j.mimic.is_none())
     }
 
     /// Pose of every link in the root frame for these joint positions (mimic joints
@@ -296,7 +363,10 @@ impl RobotModel {
         let mut poses = HashMap::with_capacity(self.links.len());
         poses.insert(self.root.clone(), Isometry3::identity());
         for (i, j) in self.joints.iter().enumerate() {
-            let parent = poses.get(&j.parent).copied().unwrap_or_else(Isometry3::identity);
+            let parent = poses
+                .get(&j.parent)
+                .copied()
+                .unwrap_or_else(Isometry3::identity);
             poses.insert(j.child.clone(), parent * j.transform(q[i]));
         }
         poses
@@ -313,8 +383,14 @@ mod tests {
     #[test]
     fn structure_errors_name_the_problem() {
         let cases = [
-            (r#"<robot name="r"><link name="a"/><link name="a"/></robot>"#, "defined twice"),
-            (r#"<robot name="r"><link name="a"/><link name="b"/></robot>"#, "several root links"),
+            (
+                r#"<robot name="r"><link name="a"/><link name="a"/></robot>"#,
+                "defined twice",
+            ),
+            (
+                r#"<robot name="r"><link name="a"/><link name="b"/></robot>"#,
+                "several root links",
+            ),
             (
                 r#"<robot name="r"><link name="a"/><joint name="j" type="fixed"><parent link="a"/><child link="x"/></joint></robot>"#,
                 "`x` does not exist",
@@ -333,7 +409,9 @@ mod tests {
             ("<robot name=", "not a valid URDF"),
         ];
         for (text, needle) in cases {
-            let err = RobotModel::from_urdf_str(text, "t.urdf").unwrap_err().to_string();
+            let err = RobotModel::from_urdf_str(text, "t.urdf")
+                .unwrap_err()
+                .to_string();
             assert!(err.contains(needle) && err.contains("t.urdf"), "{err}");
         }
     }

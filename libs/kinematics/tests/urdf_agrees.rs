@@ -9,7 +9,8 @@ use proptest::prelude::*;
 use std::path::Path;
 
 static MODEL: std::sync::LazyLock<RobotModel> = std::sync::LazyLock::new(|| {
-    RobotModel::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../urdf/eezybot.urdf")).unwrap()
+    RobotModel::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../urdf/eezybot.urdf"))
+        .unwrap()
 });
 
 fn model() -> &'static RobotModel {
@@ -18,21 +19,35 @@ fn model() -> &'static RobotModel {
 
 fn in_limits() -> impl Strategy<Value = ArmState> {
     let l = Arm::default().limits;
-    (l.base_rad.0..=l.base_rad.1, l.shoulder_rad.0..=l.shoulder_rad.1, 0.0f64..=1.0, 0.0f64..=1.0).prop_filter_map(
-        "no forearm elevation fits",
-        move |(base_rad, shoulder_rad, t, g)| {
-            let lo = l.forearm_elevation_rad.0.max(shoulder_rad + l.elbow_rad.0);
-            let hi = l.forearm_elevation_rad.1.min(shoulder_rad + l.elbow_rad.1);
-            (lo <= hi).then(|| ArmState {
-                joints: ArmJoints { base_rad, shoulder_rad, elbow_rad: lo + t * (hi - lo) - shoulder_rad },
-                gripper_opening: g,
-            })
-        },
+    (
+        l.base_rad.0..=l.base_rad.1,
+        l.shoulder_rad.0..=l.shoulder_rad.1,
+        0.0f64..=1.0,
+        0.0f64..=1.0,
     )
+        .prop_filter_map(
+            "no forearm elevation fits",
+            move |(base_rad, shoulder_rad, t, g)| {
+                let lo = l.forearm_elevation_rad.0.max(shoulder_rad + l.elbow_rad.0);
+                let hi = l.forearm_elevation_rad.1.min(shoulder_rad + l.elbow_rad.1);
+                (lo <= hi).then(|| ArmState {
+                    joints: ArmJoints {
+                        base_rad,
+                        shoulder_rad,
+                        elbow_rad: lo + t * (hi - lo) - shoulder_rad,
+                    },
+                    gripper_opening: g,
+                })
+            },
+        )
 }
 
 /// A point given in `link`'s frame, expressed in the turntable frame (the arm plane is x-z).
-fn in_turntable(poses: &std::collections::HashMap<String, Isometry3<f64>>, link: &str, p: [f64; 3]) -> Point3<f64> {
+fn in_turntable(
+    poses: &std::collections::HashMap<String, Isometry3<f64>>,
+    link: &str,
+    p: [f64; 3],
+) -> Point3<f64> {
     poses["turntable"].inverse() * (poses[link] * Point3::from(p))
 }
 
@@ -84,9 +99,17 @@ proptest! {
 #[test]
 fn joint_states_names_are_the_urdf_non_fixed_joints() {
     let m = model();
-    let mut urdf: Vec<&str> = m.joints.iter().filter(|j| j.is_movable()).map(|j| j.name.as_str()).collect();
-    let mut published: Vec<&str> =
-        ArmState::default().joint_positions(&Arm::default().geometry).into_iter().map(|(n, _)| n).collect();
+    let mut urdf: Vec<&str> = m
+        .joints
+        .iter()
+        .filter(|j| j.is_movable())
+        .map(|j| j.name.as_str())
+        .collect();
+    let mut published: Vec<&str> = ArmState::default()
+        .joint_positions(&Arm::default().geometry)
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
     urdf.sort_unstable();
     published.sort_unstable();
     assert_eq!(urdf, published);
@@ -96,10 +119,17 @@ fn joint_states_names_are_the_urdf_non_fixed_joints() {
 fn urdf_limits_are_the_configured_limits() {
     let m = model();
     let l = Arm::default().limits;
-    for (name, (lo, hi)) in [("base_joint", l.base_rad), ("shoulder_joint", l.shoulder_rad), ("elbow_joint", l.elbow_rad)] {
+    for (name, (lo, hi)) in [
+        ("base_joint", l.base_rad),
+        ("shoulder_joint", l.shoulder_rad),
+        ("elbow_joint", l.elbow_rad),
+    ] {
         match &m.joint(name).unwrap().kind {
             JointKind::Revolute { limits, .. } => {
-                assert!((limits.0 - lo).abs() < 1e-6 && (limits.1 - hi).abs() < 1e-6, "{name}: {limits:?}");
+                assert!(
+                    (limits.0 - lo).abs() < 1e-6 && (limits.1 - hi).abs() < 1e-6,
+                    "{name}: {limits:?}"
+                );
             }
             other => panic!("{name} is {other:?}"),
         }

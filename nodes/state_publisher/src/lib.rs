@@ -1,0 +1,223 @@
+//! `state_publisher`: a robot_state_publisher for our stack.
+//!
+//! Publishes `robot_description` and `tf_static` (both transient-local) once per URDF,
+//! and `tf` for the movable joints of every `joint_states` message, mimic joints
+//! included. Works for any URDF tree. [`core::TfCore`] is the logic; [`run`] the loop.
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
+pub mod core;
+
+use crate::core::TfCore;
+use eezybot_kinematics::urdf::RobotModel;
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::geometry_msgs::TransformStamped;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::tf2_msgs::TFMessage;
+use eezybot_msgs::Time;
+use futures::{Stream, StreamExt};
+use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
+use std::collections::{BTreeMap, VecDeque};
+use std::future::Future;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The URDF shipped with the project (the `urdf` parameter's default).
+pub const SHIPPED_URDF: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../urdf/eezybot.urdf");
+
+/// The node's description and parameters.
+pub fn spec() -> ros_plumbing::NodeSpec {
+    ros_plumbing::NodeSpec {
+        name: "state_publisher",
+        description: "URDF + joint_states -> tf, tf_static and robot_description (like robot_state_publisher)",
+        usage: "",
+        params: vec![
+            ParamSpec::new("urdf", ParameterValue::String(shipped_urdf_path()), "path of the URDF to publish")
+                .validator(|v| match v {
+                    ParameterValue::String(p) => load_urdf(p).map(|_| ()),
+                    _ => Ok(()),
+                }),
+            ParamSpec::new("frame_prefix", ParameterValue::String(String::new()), "prefix for every frame id, e.g. arm2/"),
+            ParamSpec::new(
+                "publish_frequency",
+                ParameterValue::Double(0.0),
+                "most tf messages a second for movable joints (latest wins); 0 = one per joint_states",
+            )
+            .range(ParamRange::Double { min: 0.0, max: 10_000.0 }),
+            ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
+                .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+        ],
+    }
+}
+
+fn shipped_urdf_path() -> String {
+    std::fs::canonicalize(SHIPPED_URDF)
+        .map(|p| p.display().to_string())
+        .unwrap_or_else(|_| SHIPPED_URDF.to_string())
+}
+
+/// A parsed URDF with its text.
+#[derive(Clone, Debug)]
+pub struct Description {
+    /// The model.
+    pub model: RobotModel,
+    /// The file's text, as published on `robot_description`.
+    pub text: String,
+}
+
+/// Read and validate a URDF file; the error names the file and the problem.
+pub fn load_urdf(path: &str) -> Result<Description, String> {
+    let text = std::fs::read_to_string(Path::new(path))
+        .map_err(|e| format!("{path}: cannot read: {e}"))?;
+    let model = RobotModel::from_urdf_str(&text, path).map_err(|e| e.to_string())?;
+    Ok(Description { model, text })
+}
+
+/// Where the loop's results go.
+pub trait Outputs {
+    /// Publish on `tf`.
+    fn tf(&self, msg: TFMessage);
+    /// Publish on `tf_static`.
+    fn tf_static(&self, msg: TFMessage);
+    /// Publish on `robot_description`.
+    fn robot_description(&self, urdf: String);
+    /// Publish a `diagnostics` report.
+    fn diagnostics(&self, status: DiagnosticStatus);
+}
+
+/// One event for the loop.
+#[derive(Clone, Debug)]
+pub enum Input {
+    /// A `joint_states` sample and when it was taken from the reader.
+    JointStates(JointState, Instant),
+    /// A sample that could not be read.
+    Unreadable(String),
+}
+
+/// Latencies (µs) from taking a `joint_states` sample to having published its tf.
+#[derive(Default)]
+struct LatencyWindow(VecDeque<f64>);
+
+impl LatencyWindow {
+    fn push(&mut self, us: f64) {
+        if self.0.len() == 1000 {
+            self.0.pop_front();
+        }
+        self.0.push_back(us);
+    }
+    fn percentiles(&self) -> Vec<(&'static str, String)> {
+        if self.0.is_empty() {
+            return vec![];
+        }
+        let mut v: Vec<f64> = self.0.iter().copied().collect();
+        v.sort_by(f64::total_cmp);
+        let at = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+        vec![
+            ("tf_latency_us_p50", format!("{:.1}", at(0.5))),
+            ("tf_latency_us_p99", format!("{:.1}", at(0.99))),
+        ]
+    }
+}
+
+/// The loop: runs until `shutdown` resolves or `inputs` ends.
+pub async fn run(
+    description: Description,
+    inputs: impl Stream<Item = Input>,
+    outputs: &impl Outputs,
+    params: Params,
+    diag_name: String,
+    shutdown: impl Future<Output = ()>,
+) {
+    let prefix = |p: &Params| p.string("frame_prefix").unwrap_or_default();
+    let mut core = TfCore::new(description.model, &prefix(&params));
+    outputs.robot_description(description.text);
+    outputs.tf_static(core.static_transforms(Time::now()));
+    let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
+    let min_interval = |p: &Params| {
+        let f = p.f64("publish_frequency").unwrap_or(0.0);
+        (f > 0.0).then(|| Duration::from_secs_f64(1.0 / f))
+    };
+    let mut ticker = tokio::time::interval(period(&params));
+    let mut param_changes = params.subscribe();
+    let mut latency = LatencyWindow::default();
+    let mut last_tf = Instant::now() - Duration::from_secs(3600);
+    let mut pending: BTreeMap<String, TransformStamped> = BTreeMap::new();
+    let mut pending_since: Option<Instant> = None;
+    let mut unreadable = 0u64;
+    tokio::pin!(inputs);
+    tokio::pin!(shutdown);
+    loop {
+        let flush_at = match (min_interval(&params), pending.is_empty()) {
+            (Some(iv), false) => Some(tokio::time::Instant::from_std(last_tf + iv)),
+            _ => None,
+        };
+        tokio::select! {
+            _ = &mut shutdown => break,
+            _ = ticker.tick() => {
+                let mut extra = latency.percentiles();
+                extra.push(("unreadable_samples", unreadable.to_string()));
+                outputs.diagnostics(core.diagnostic_status(&diag_name, &extra));
+            }
+            _ = async { if let Some(t) = flush_at { tokio::time::sleep_until(t).await } }, if flush_at.is_some() => {
+                outputs.tf(TFMessage { transforms: std::mem::take(&mut pending).into_values().collect() });
+                last_tf = Instant::now();
+                if let Some(t0) = pending_since.take() {
+                    latency.push(t0.elapsed().as_secs_f64() * 1e6);
+                }
+            }
+            Ok(()) = param_changes.changed() => {
+                let path = params.string("urdf").unwrap_or_default();
+                match load_urdf(&path) {
+                    Ok(d) => {
+                        core = TfCore::new(d.model, &prefix(&params));
+                        pending.clear();
+                        outputs.robot_description(d.text);
+                        outputs.tf_static(core.static_transforms(Time::now()));
+                        log::info!("publishing {path} with frame prefix `{}`", prefix(&params));
+                    }
+                    Err(e) => log::error!("keeping the previous URDF: {e}"),
+                }
+                ticker = tokio::time::interval(period(&params));
+            }
+            input = inputs.next() => {
+                let Some(input) = input else { break };
+                let (msg, taken) = match input {
+                    Input::JointStates(msg, taken) => (msg, taken),
+                    Input::Unreadable(e) => {
+                        unreadable += 1;
+                        log::warn!("unreadable joint_states sample ignored: {e}");
+                        continue;
+                    }
+                };
+                let (tf, problems) = core.handle_joint_states(&msg);
+                for p in &problems {
+                    log::warn!("joint_states: {p}; skipped");
+                }
+                if tf.transforms.is_empty() {
+                    continue;
+                }
+                match min_interval(&params) {
+                    Some(iv) if last_tf.elapsed() < iv => {
+                        for t in tf.transforms {
+                            pending.insert(t.child_frame_id.clone(), t);
+                        }
+                        pending_since.get_or_insert(taken);
+                    }
+                    _ => {
+                        let transforms = if pending.is_empty() {
+                            tf.transforms
+                        } else {
+                            for t in tf.transforms {
+                                pending.insert(t.child_frame_id.clone(), t);
+                            }
+                            std::mem::take(&mut pending).into_values().collect()
+                        };
+                        outputs.tf(TFMessage { transforms });
+                        last_tf = Instant::now();
+                        pending_since = None;
+                        latency.push(taken.elapsed().as_secs_f64() * 1e6);
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,106 @@
+//! `state_publisher` binary: sets up ROS and runs [`state_publisher::run`].
+
+use anyhow::Context as _;
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::String as StringMsg;
+use eezybot_msgs::tf2_msgs::TFMessage;
+use futures::StreamExt;
+use ros2_client::Publisher;
+use ros_plumbing::diagnostics::DiagnosticsPublisher;
+use ros_plumbing::{qos, RosNode};
+use state_publisher::{load_urdf, Input, Outputs};
+use std::process::ExitCode;
+use std::time::Instant;
+
+struct RosOutputs {
+    tf: Publisher<TFMessage>,
+    tf_static: Publisher<TFMessage>,
+    robot_description: Publisher<StringMsg>,
+    diagnostics: DiagnosticsPublisher,
+}
+
+impl Outputs for RosOutputs {
+    fn tf(&self, msg: TFMessage) {
+        if let Err(e) = self.tf.publish(msg) {
+            log::warn!("could not publish tf: {e:?}");
+        }
+    }
+    fn tf_static(&self, msg: TFMessage) {
+        if let Err(e) = self.tf_static.publish(msg) {
+            log::warn!("could not publish tf_static: {e:?}");
+        }
+    }
+    fn robot_description(&self, urdf: String) {
+        if let Err(e) = self.robot_description.publish(StringMsg { data: urdf }) {
+            log::warn!("could not publish robot_description: {e:?}");
+        }
+    }
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.publish(vec![status]);
+    }
+}
+
+async fn main_async() -> anyhow::Result<()> {
+    let spec = state_publisher::spec();
+    let mut node = RosNode::start(&spec)?;
+    if let Some(extra) = node.user_args().first() {
+        anyhow::bail!("unexpected argument `{extra}` (see --help)");
+    }
+    let params = node.params().clone();
+    let path = params.string("urdf").unwrap_or_default();
+    let description = load_urdf(&path)
+        .map_err(anyhow::Error::msg)
+        .context("urdf")?;
+    let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
+    let outputs = RosOutputs {
+        tf: node.publisher("tf", qos::TF)?,
+        tf_static: node.publisher("tf_static", qos::TF_STATIC)?,
+        robot_description: node.publisher("robot_description", qos::ROBOT_DESCRIPTION)?,
+        diagnostics: node.diagnostics()?,
+    };
+    let inputs = joint_states.async_stream().map(|r| match r {
+        Ok((m, _)) => Input::JointStates(m, Instant::now()),
+        Err(e) => Input::Unreadable(format!("{e:?}")),
+    });
+    log::info!(
+        "{} ready in ROS domain {}: {} ({} links) on {}, {}, {}",
+        node.resolver().node_fqn(),
+        node.domain_id(),
+        path,
+        description.model.links.len(),
+        node.resolver().resolve("robot_description")?,
+        node.resolver().resolve("tf_static")?,
+        node.resolver().resolve("tf")?
+    );
+    let diag_name = format!("{}: robot state", node.resolver().node_name());
+    let shutdown = async {
+        let signal = ros_plumbing::shutdown_signal().await;
+        log::info!("{signal}: shutting down");
+    };
+    state_publisher::run(description, inputs, &outputs, params, diag_name, shutdown).await;
+    drop(outputs);
+    drop(joint_states);
+    node.shutdown().await;
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("state_publisher: cannot start the async runtime: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match runtime.block_on(main_async()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("state_publisher: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
