@@ -47,6 +47,7 @@ def main():
     lease = DomainLease()
     node = NodeProcess("compute_ik", [], lease.id)
     obs = Observer(lease.id, "bench")
+    obs.nodes.append(node)
     received = {}
     obs.node.create_subscription(
         JointState, "/servo_angles",

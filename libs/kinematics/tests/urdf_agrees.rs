@@ -30,7 +30,7 @@ fn in_limits() -> impl Strategy<Value = ArmState> {
             move |(base_rad, shoulder_rad, t, g)| {
                 let lo = l.forearm_elevation_rad.0.max(shoulder_rad + l.elbow_rad.0);
                 let hi = l.forearm_elevation_rad.1.min(shoulder_rad + l.elbow_rad.1);
-                (lo <= hi).then(|| ArmState {
+                (lo <= hi).then_some(ArmState {
                     joints: ArmJoints {
                         base_rad,
                         shoulder_rad,

@@ -44,6 +44,9 @@ impl log::Log for NodeLogger {
             } else {
                 log::LevelFilter::Error
             }
+        } else if self.level >= log::LevelFilter::Trace {
+            // `--log-level trace`: the libraries' (RustDDS, ros2-client) debug output too
+            log::LevelFilter::Debug
         } else if self.level >= log::LevelFilter::Debug {
             log::LevelFilter::Info
         } else {
