@@ -2,7 +2,7 @@
 # Runs the whole EezyBot graph that exists on this machine, in one ROS domain
 # (ROS_DOMAIN_ID, default 0). Ctrl-C stops every node.
 #
-# Nodes so far: compute_ik. Extra ROS arguments for every node can follow, e.g.
+# Nodes so far: compute_ik, state_publisher. Extra ROS arguments for every node can follow, e.g.
 #   launch_scripts/run_graph.sh -r __ns:=/arm2
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,7 +20,8 @@ ros_args=()
 [ $# -gt 0 ] && ros_args=(--ros-args "$@")
 
 "$bin/compute_ik" "${ros_args[@]}" & pids+=($!)
+"$bin/state_publisher" "${ros_args[@]}" & pids+=($!)
 
-echo "graph running in ROS domain ${ROS_DOMAIN_ID:-0}: compute_ik (Ctrl-C to stop)" >&2
+echo "graph running in ROS domain ${ROS_DOMAIN_ID:-0}: compute_ik, state_publisher (Ctrl-C to stop)" >&2
 echo "try: ros2 topic pub --once /xyz_target geometry_msgs/msg/PointStamped \"{header: {frame_id: base_link}, point: {x: 0.2, y: 0.0, z: 0.15}}\"" >&2
 wait -n "${pids[@]}"

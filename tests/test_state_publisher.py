@@ -132,3 +132,15 @@ def test_bad_urdf_exits_nonzero_naming_file_and_problem(tmp_path, domain, conten
     r = subprocess.run([bin_path("state_publisher"), "--ros-args", "-p", f"urdf:={path}"], capture_output=True, text=True, env=env, timeout=20)
     assert r.returncode != 0
     assert str(path) in r.stderr and message in r.stderr, r.stderr
+
+
+def test_arm_is_in_tf_before_any_target(launch, observer, domain):
+    """compute_ik sends its current pose to a joint_states subscriber that joins, so a
+    viewer shows the whole arm at once (home: tool0 at L3 + tool_dx forward, H + L2 up)."""
+    tf = TfListener(domain)
+    launch("compute_ik")
+    launch("state_publisher")
+    observer.wait_publisher("/tf")
+    assert wait_tf(observer, tf, lambda: "main_arm" in tf.dynamic and "tool0" in tf.static, 15)
+    pos, _ = compose_chain(tf.transforms(), "base_link", "tool0")
+    assert pos == pytest.approx((0.147 + 0.0393, 0.0, 0.094 + 0.135), abs=1e-9)

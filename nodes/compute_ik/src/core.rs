@@ -375,21 +375,13 @@ impl IkCore {
                 self.state = state;
                 self.counters.accepted += 1;
                 self.last_event_rejected = false;
-                let header = Header {
-                    stamp,
-                    frame_id: String::new(),
-                };
-                let joints = state.joint_positions(&self.arm.geometry);
                 Ok(Output {
-                    joint_states: JointState {
-                        header: header.clone(),
-                        name: joints.iter().map(|(n, _)| (*n).to_string()).collect(),
-                        position: joints.iter().map(|(_, v)| *v).collect(),
-                        velocity: vec![],
-                        effort: vec![],
-                    },
+                    joint_states: self.joint_states(stamp),
                     servo_angles: JointState {
-                        header,
+                        header: Header {
+                            stamp,
+                            frame_id: String::new(),
+                        },
                         name: ServoId::ALL.iter().map(|s| s.name().to_string()).collect(),
                         position: servos.rad.to_vec(),
                         velocity: vec![],
@@ -408,6 +400,21 @@ impl IkCore {
                 self.last_rejection = Some(rejection.clone());
                 Err(rejection)
             }
+        }
+    }
+
+    /// `joint_states` for the last good state (every non-fixed URDF joint), with this stamp.
+    pub fn joint_states(&self, stamp: Time) -> JointState {
+        let joints = self.state.joint_positions(&self.arm.geometry);
+        JointState {
+            header: Header {
+                stamp,
+                frame_id: String::new(),
+            },
+            name: joints.iter().map(|(n, _)| (*n).to_string()).collect(),
+            position: joints.iter().map(|(_, v)| *v).collect(),
+            velocity: vec![],
+            effort: vec![],
         }
     }
 

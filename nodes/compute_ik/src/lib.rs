@@ -81,7 +81,12 @@ pub trait Outputs {
     fn servo_angles(&self, msg: JointState);
     /// Publish a `diagnostics` report with this status.
     fn diagnostics(&self, status: DiagnosticStatus);
+    /// How many subscriptions `joint_states` has matched now.
+    fn joint_states_subscribers(&self) -> usize;
 }
+
+/// How often to look for new `joint_states` subscribers.
+const SUBSCRIBER_POLL: Duration = Duration::from_millis(250);
 
 /// Most frequent diagnostics sent at once on a rejection; the periodic report covers the rest.
 const MIN_IMMEDIATE_DIAG_GAP: Duration = Duration::from_millis(100);
@@ -100,12 +105,23 @@ pub async fn run(
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut param_changes = params.subscribe();
     let mut last_immediate = Instant::now() - MIN_IMMEDIATE_DIAG_GAP;
+    // A viewer (state_publisher, RViz, the GUI) that joins gets the current pose at once,
+    // not at the next target: joint_states, stamped now (no servo moves for it).
+    let mut subscriber_poll = tokio::time::interval(SUBSCRIBER_POLL);
+    let mut subscribers = 0;
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
             _ = ticker.tick() => outputs.diagnostics(core.diagnostic_status(&diag_name)),
+            _ = subscriber_poll.tick() => {
+                let now = outputs.joint_states_subscribers();
+                if now > subscribers {
+                    outputs.joint_states(core.joint_states(Time::now()));
+                }
+                subscribers = now;
+            }
             Ok(()) = param_changes.changed() => {
                 // Values were validated before they were stored; a file that vanished since is reported.
                 match load_config(&params.string("arm_config").unwrap_or_default()) {

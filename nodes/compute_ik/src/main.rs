@@ -14,13 +14,14 @@ use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::{qos, RosNode};
 use std::process::ExitCode;
 
-struct RosOutputs {
+struct RosOutputs<'a> {
+    node: &'a ros2_client::Node,
     joint_states: Publisher<JointState>,
     servo_angles: Publisher<JointState>,
     diagnostics: DiagnosticsPublisher,
 }
 
-impl Outputs for RosOutputs {
+impl Outputs for RosOutputs<'_> {
     fn joint_states(&self, msg: JointState) {
         if let Err(e) = self.joint_states.publish(msg) {
             log::warn!("could not publish joint_states: {e:?}");
@@ -33,6 +34,9 @@ impl Outputs for RosOutputs {
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
+    }
+    fn joint_states_subscribers(&self) -> usize {
+        self.joint_states.get_subscription_count(self.node)
     }
 }
 
@@ -56,10 +60,14 @@ async fn main_async() -> anyhow::Result<()> {
     let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
     let joints = node.subscription::<JointState>("joint_target", qos::COMMANDS)?;
     let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let joint_states = node.publisher("joint_states", qos::COMMANDS)?;
+    let servo_angles = node.publisher("servo_angles", qos::COMMANDS)?;
+    let diagnostics = node.diagnostics()?;
     let outputs = RosOutputs {
-        joint_states: node.publisher("joint_states", qos::COMMANDS)?,
-        servo_angles: node.publisher("servo_angles", qos::COMMANDS)?,
-        diagnostics: node.diagnostics()?,
+        node: node.node(),
+        joint_states,
+        servo_angles,
+        diagnostics,
     };
 
     let inputs = futures::stream::select_all([
