@@ -1,0 +1,519 @@
+//! The device side of the protocol, as the firmware implements it, with the servos'
+//! motion modelled: the virtual Arduino (`port:=mock`, or the `virtual_arduino` binary
+//! behind a pseudo-terminal).
+//!
+//! [`Device`] is pure (time is passed in); [`VirtualArduino`] wraps it as a
+//! `Read + Write` byte stream on the real clock, like a serial port.
+
+use crate::frame::{
+    decode, encode, DeviceState, Frame, Message, WatchdogAction, PROTOCOL_VERSION, SERVOS,
+};
+use std::collections::VecDeque;
+use std::io::{self, Read, Write};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+/// Firmware version the virtual device reports (the firmware's own constants).
+pub const FIRMWARE_VERSION: (u8, u8) = (1, 0);
+
+/// Servo speed in ticks per second: `deg_per_s` × ticks per degree (0.5 µs ticks, 544–2400 µs over 180°).
+const fn ticks_per_s(deg_per_s: f64) -> f64 {
+    deg_per_s * (4800.0 - 1088.0) / 180.0
+}
+
+/// What the device is configured with (the firmware's `config.h`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DeviceConfig {
+    /// Per channel (min, max) ticks; commands are clamped into them.
+    pub limits: [(u16, u16); SERVOS],
+    /// Watchdog timeout at power-up (ms).
+    pub watchdog_ms: u16,
+    /// Watchdog action at power-up.
+    pub watchdog_action: WatchdogAction,
+    /// Horn speed of each servo (ticks/s): MG995 ≈ 0.2 s per 60°, SG90 ≈ 0.12 s per 60°.
+    pub speed_ticks_per_s: [f64; SERVOS],
+}
+
+impl Default for DeviceConfig {
+    fn default() -> Self {
+        DeviceConfig {
+            limits: [(1088, 4800); SERVOS],
+            watchdog_ms: 500,
+            watchdog_action: WatchdogAction::Hold,
+            speed_ticks_per_s: [
+                ticks_per_s(300.0),
+                ticks_per_s(300.0),
+                ticks_per_s(300.0),
+                ticks_per_s(500.0),
+            ],
+        }
+    }
+}
+
+/// The device: protocol, limits, watchdog and servo motion.
+#[derive(Clone, Debug)]
+pub struct Device {
+    config: DeviceConfig,
+    watchdog_ms: u16,
+    watchdog_action: WatchdogAction,
+    state: DeviceState,
+    /// Commanded pulses after clamping (0 = none).
+    applied: [u16; SERVOS],
+    /// Modelled horn positions (ticks).
+    horn: [f64; SERVOS],
+    clamped: bool,
+    rx_errors: u8,
+    last_seq: u8,
+    tx_seq: u8,
+    last_rx: Duration,
+    last_tick: Duration,
+    rx: Vec<u8>,
+    out: Vec<u8>,
+}
+
+impl Device {
+    /// A device just powered up (idle: no pulses until the first command).
+    pub fn new(config: DeviceConfig) -> Device {
+        let mid = |(lo, hi): (u16, u16)| f64::from(lo + (hi - lo) / 2);
+        Device {
+            watchdog_ms: config.watchdog_ms,
+            watchdog_action: config.watchdog_action,
+            horn: config.limits.map(mid),
+            config,
+            state: DeviceState::Idle,
+            applied: [0; SERVOS],
+            clamped: false,
+            rx_errors: 0,
+            last_seq: 0,
+            tx_seq: 0,
+            last_rx: Duration::ZERO,
+            last_tick: Duration::ZERO,
+            rx: Vec::new(),
+            out: Vec::new(),
+        }
+    }
+
+    /// Current state.
+    pub fn state(&self) -> DeviceState {
+        self.state
+    }
+
+    /// Pulses on the pins (ticks, 0 = none).
+    pub fn pulses(&self) -> [u16; SERVOS] {
+        match self.state {
+            DeviceState::WatchdogDetached | DeviceState::Idle => [0; SERVOS],
+            _ => self.applied,
+        }
+    }
+
+    /// Modelled horn positions (ticks).
+    pub fn horn(&self) -> [f64; SERVOS] {
+        self.horn
+    }
+
+    /// Frames dropped so far (wrapping).
+    pub fn rx_errors(&self) -> u8 {
+        self.rx_errors
+    }
+
+    fn reply(&mut self, msg: Message) {
+        self.tx_seq = self.tx_seq.wrapping_add(1);
+        self.out.extend(encode(&Frame {
+            seq: self.tx_seq,
+            msg,
+        }));
+    }
+
+    fn state_msg(&self) -> Message {
+        // What the servos are at: the modelled horn while pulses go out, 0 when none.
+        let ticks = match self.state {
+            DeviceState::Idle | DeviceState::WatchdogDetached => [0; SERVOS],
+            _ => self.horn.map(|h| h.round() as u16),
+        };
+        Message::State {
+            ack_seq: self.last_seq,
+            state: self.state,
+            clamped: self.clamped,
+            rx_errors: self.rx_errors,
+            ticks,
+        }
+    }
+
+    /// Bytes from the host, arriving at `now` (time since power-up).
+    pub fn receive(&mut self, bytes: &[u8], now: Duration) {
+        self.tick(now);
+        self.rx.extend_from_slice(bytes);
+        loop {
+            match decode(&mut self.rx) {
+                Ok(None) => break,
+                Err(_) => self.rx_errors = self.rx_errors.wrapping_add(1),
+                Ok(Some(frame)) => self.handle(frame, now),
+            }
+        }
+    }
+
+    fn handle(&mut self, frame: Frame, now: Duration) {
+        self.last_seq = frame.seq;
+        match frame.msg {
+            Message::Hello { .. } => {
+                self.last_rx = now;
+                let (firmware_major, firmware_minor) = FIRMWARE_VERSION;
+                self.reply(Message::HelloAck {
+                    version: PROTOCOL_VERSION,
+                    firmware_major,
+                    firmware_minor,
+                    servos: SERVOS as u8,
+                    watchdog_ms: self.watchdog_ms,
+                });
+                return;
+            }
+            Message::SetPulses { ticks } => {
+                self.last_rx = now;
+                if self.state != DeviceState::Estop {
+                    let mut clamped = false;
+                    for (i, t) in ticks.iter().enumerate() {
+                        let (lo, hi) = self.config.limits[i];
+                        self.applied[i] = if *t == 0 {
+                            0
+                        } else {
+                            clamped |= *t < lo || *t > hi;
+                            (*t).clamp(lo, hi)
+                        };
+                    }
+                    if self.state == DeviceState::Idle
+                        || self.state == DeviceState::WatchdogDetached
+                    {
+                        // pulses start where the horn is assumed to be: at the target
+                        for i in 0..SERVOS {
+                            if self.applied[i] != 0 {
+                                self.horn[i] = f64::from(self.applied[i]);
+                            }
+                        }
+                    }
+                    self.clamped = clamped;
+                    self.state = DeviceState::Running;
+                }
+            }
+            Message::Heartbeat => self.last_rx = now,
+            Message::Estop { engaged } => {
+                self.last_rx = now;
+                if engaged {
+                    self.state = DeviceState::Estop;
+                } else if self.state == DeviceState::Estop {
+                    self.state = if self.applied.iter().any(|t| *t != 0) {
+                        DeviceState::Running
+                    } else {
+                        DeviceState::Idle
+                    };
+                }
+            }
+            Message::Config {
+                watchdog_ms,
+                action,
+            } => {
+                self.last_rx = now;
+                self.watchdog_ms = watchdog_ms.max(20);
+                self.watchdog_action = action;
+            }
+            // device-to-host messages are not for a device
+            Message::HelloAck { .. } | Message::State { .. } => {
+                self.rx_errors = self.rx_errors.wrapping_add(1);
+                return;
+            }
+        }
+        let msg = self.state_msg();
+        self.reply(msg);
+    }
+
+    /// Let time pass: servo motion and the watchdog.
+    pub fn tick(&mut self, now: Duration) {
+        let dt = now.saturating_sub(self.last_tick).as_secs_f64();
+        self.last_tick = now;
+        if matches!(
+            self.state,
+            DeviceState::Running | DeviceState::WatchdogHold | DeviceState::Estop
+        ) {
+            for i in 0..SERVOS {
+                if self.applied[i] != 0 {
+                    let target = f64::from(self.applied[i]);
+                    let step = self.config.speed_ticks_per_s[i] * dt;
+                    let d = target - self.horn[i];
+                    self.horn[i] = if d.abs() <= step {
+                        target
+                    } else {
+                        self.horn[i] + step * d.signum()
+                    };
+                }
+            }
+        }
+        if self.state == DeviceState::Running
+            && now.saturating_sub(self.last_rx) > Duration::from_millis(self.watchdog_ms.into())
+        {
+            self.state = match self.watchdog_action {
+                WatchdogAction::Hold => DeviceState::WatchdogHold,
+                WatchdogAction::Detach => DeviceState::WatchdogDetached,
+            };
+            let msg = self.state_msg();
+            self.reply(msg);
+        }
+    }
+
+    /// Bytes the device has sent since the last call.
+    pub fn take_output(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.out)
+    }
+}
+
+struct Shared {
+    device: Device,
+    start: Instant,
+    to_host: VecDeque<u8>,
+    plugged: bool,
+}
+
+/// A [`Device`] on the real clock behind a `Read + Write` byte stream, as a serial
+/// port is. Clones share the device (one for a reader thread, one for a writer).
+#[derive(Clone)]
+pub struct VirtualArduino {
+    shared: Arc<(Mutex<Shared>, Condvar)>,
+    read_timeout: Duration,
+}
+
+impl VirtualArduino {
+    /// A device powered up now.
+    pub fn new(config: DeviceConfig) -> VirtualArduino {
+        VirtualArduino {
+            shared: Arc::new((
+                Mutex::new(Shared {
+                    device: Device::new(config),
+                    start: Instant::now(),
+                    to_host: VecDeque::new(),
+                    plugged: true,
+                }),
+                Condvar::new(),
+            )),
+            read_timeout: Duration::from_millis(50),
+        }
+    }
+
+    /// How long `read` waits for bytes before `TimedOut`.
+    pub fn set_read_timeout(&mut self, timeout: Duration) {
+        self.read_timeout = timeout;
+    }
+
+    /// Simulate pulling the USB cable (false) or plugging it back (true, a fresh power-up).
+    pub fn set_plugged(&self, plugged: bool) {
+        let (lock, cv) = &*self.shared;
+        if let Ok(mut s) = lock.lock() {
+            if plugged && !s.plugged {
+                s.device = Device::new(s.device.config);
+                s.start = Instant::now();
+                s.to_host.clear();
+            }
+            s.plugged = plugged;
+        }
+        cv.notify_all();
+    }
+
+    /// Let the device's clock run (watchdog, motion) and collect its output.
+    fn pump(s: &mut Shared) {
+        let now = s.start.elapsed();
+        s.device.tick(now);
+        let out = s.device.take_output();
+        s.to_host.extend(out);
+    }
+
+    /// A snapshot of the device (for tests and diagnostics).
+    pub fn device(&self) -> Option<Device> {
+        let (lock, _) = &*self.shared;
+        lock.lock().ok().map(|mut s| {
+            Self::pump(&mut s);
+            s.device.clone()
+        })
+    }
+}
+
+fn unplugged() -> io::Error {
+    io::Error::new(io::ErrorKind::BrokenPipe, "virtual Arduino unplugged")
+}
+
+impl Read for VirtualArduino {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let (lock, cv) = &*self.shared;
+        let deadline = Instant::now() + self.read_timeout;
+        let mut s = lock
+            .lock()
+            .map_err(|_| io::Error::other("virtual Arduino poisoned"))?;
+        loop {
+            if !s.plugged {
+                return Err(unplugged());
+            }
+            Self::pump(&mut s);
+            if !s.to_host.is_empty() {
+                let n = buf.len().min(s.to_host.len());
+                for (dst, src) in buf.iter_mut().zip(s.to_host.drain(..n)) {
+                    *dst = src;
+                }
+                return Ok(n);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    "no bytes from the virtual Arduino",
+                ));
+            }
+            // wake at least every 5 ms so the watchdog can fire on time
+            let wait = (deadline - now).min(Duration::from_millis(5));
+            s = cv
+                .wait_timeout(s, wait)
+                .map_err(|_| io::Error::other("virtual Arduino poisoned"))?
+                .0;
+        }
+    }
+}
+
+impl Write for VirtualArduino {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let (lock, cv) = &*self.shared;
+        let mut s = lock
+            .lock()
+            .map_err(|_| io::Error::other("virtual Arduino poisoned"))?;
+        if !s.plugged {
+            return Err(unplugged());
+        }
+        let now = s.start.elapsed();
+        s.device.receive(buf, now);
+        Self::pump(&mut s);
+        cv.notify_all();
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    fn states(d: &mut Device) -> Vec<Message> {
+        let mut out = d.take_output();
+        let mut v = vec![];
+        while let Ok(Some(f)) = decode(&mut out) {
+            v.push(f.msg);
+        }
+        v
+    }
+
+    fn send(d: &mut Device, seq: u8, msg: Message, now: Duration) {
+        d.receive(&encode(&Frame { seq, msg }), now);
+    }
+
+    #[test]
+    fn clamps_to_its_table_and_says_so() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(
+            &mut d,
+            1,
+            Message::SetPulses {
+                ticks: [100, 3000, 9000, 0],
+            },
+            ms(0),
+        );
+        assert_eq!(d.pulses(), [1088, 3000, 4800, 0]);
+        match states(&mut d).as_slice() {
+            [Message::State {
+                ack_seq: 1,
+                state: DeviceState::Running,
+                clamped: true,
+                ..
+            }] => {}
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn watchdog_holds_or_detaches_at_the_configured_time() {
+        for (action, expect) in [
+            (WatchdogAction::Hold, DeviceState::WatchdogHold),
+            (WatchdogAction::Detach, DeviceState::WatchdogDetached),
+        ] {
+            let mut d = Device::new(DeviceConfig::default());
+            send(
+                &mut d,
+                1,
+                Message::Config {
+                    watchdog_ms: 300,
+                    action,
+                },
+                ms(0),
+            );
+            send(&mut d, 2, Message::SetPulses { ticks: [2944; 4] }, ms(10));
+            states(&mut d);
+            d.tick(ms(300));
+            assert_eq!(d.state(), DeviceState::Running);
+            d.tick(ms(311));
+            assert_eq!(d.state(), expect);
+            assert!(
+                matches!(states(&mut d).as_slice(), [Message::State { state, .. }] if *state == expect)
+            );
+            assert_eq!(d.pulses() == [0; 4], action == WatchdogAction::Detach);
+        }
+    }
+
+    #[test]
+    fn horn_moves_at_servo_speed() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::SetPulses { ticks: [2944; 4] }, ms(0));
+        // 60 degrees in ticks
+        let sixty = (4800.0 - 1088.0) / 3.0;
+        send(
+            &mut d,
+            2,
+            Message::SetPulses {
+                ticks: [2944 + sixty as u16; 4],
+            },
+            ms(10),
+        );
+        d.tick(ms(110)); // 0.1 s: MG995 half way, SG90 further
+        let h = d.horn();
+        assert!((h[0] - (2944.0 + sixty / 2.0)).abs() < 2.0, "{h:?}");
+        assert!(h[3] > h[0]);
+        d.tick(ms(220));
+        assert!((d.horn()[0] - (2944.0 + sixty.floor())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn estop_ignores_commands_until_released() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
+        send(&mut d, 2, Message::Estop { engaged: true }, ms(1));
+        send(&mut d, 3, Message::SetPulses { ticks: [4000; 4] }, ms(2));
+        assert_eq!(d.pulses(), [3000; 4]);
+        assert_eq!(d.state(), DeviceState::Estop);
+        send(&mut d, 4, Message::Estop { engaged: false }, ms(3));
+        assert_eq!(d.state(), DeviceState::Running);
+        assert_eq!(d.pulses(), [3000; 4]);
+    }
+
+    #[test]
+    fn garbage_is_counted_and_changes_nothing() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
+        let mut bad = encode(&Frame {
+            seq: 2,
+            msg: Message::SetPulses { ticks: [4000; 4] },
+        });
+        bad[5] ^= 0x10;
+        d.receive(&bad, ms(1));
+        d.receive(&[0x00, 0xFF, 0xA5, 0x13], ms(2));
+        assert_eq!(d.pulses(), [3000; 4]);
+        assert!(d.rx_errors() >= 1);
+    }
+}

@@ -1,0 +1,450 @@
+//! Frames of the servo link and their encoding (see `firmware/servo_control/PROTOCOL.md`).
+//!
+//! ```text
+//! 0xA5 | type<<4 | len | seq | payload[len] | crc8(type/len .. payload)
+//! ```
+
+/// Start marker of every frame.
+pub const SYNC: u8 = 0xA5;
+/// Protocol version this code speaks.
+pub const PROTOCOL_VERSION: u8 = 1;
+/// Number of servo channels.
+pub const SERVOS: usize = 4;
+/// Pulse widths are counted in Timer1 ticks of 0.5 µs (16 MHz / 8).
+pub const TICKS_PER_US: u16 = 2;
+/// Largest payload a frame can carry (4-bit length).
+pub const MAX_PAYLOAD: usize = 15;
+/// Bytes around the payload: sync, type/len, seq, crc.
+pub const OVERHEAD: usize = 4;
+
+/// Message types (the high nibble of the second byte).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum MsgType {
+    /// host → device: protocol version
+    Hello = 0x1,
+    /// device → host: versions and limits
+    HelloAck = 0x2,
+    /// host → device: four pulse widths
+    SetPulses = 0x3,
+    /// host → device: keep-alive
+    Heartbeat = 0x4,
+    /// device → host: state and applied pulses
+    State = 0x5,
+    /// host → device: engage/release the emergency stop
+    Estop = 0x6,
+    /// host → device: watchdog timeout and action
+    Config = 0x7,
+}
+
+impl MsgType {
+    fn from_nibble(n: u8) -> Option<MsgType> {
+        Some(match n {
+            0x1 => MsgType::Hello,
+            0x2 => MsgType::HelloAck,
+            0x3 => MsgType::SetPulses,
+            0x4 => MsgType::Heartbeat,
+            0x5 => MsgType::State,
+            0x6 => MsgType::Estop,
+            0x7 => MsgType::Config,
+            _ => return None,
+        })
+    }
+
+    /// The payload length this type must have.
+    pub fn payload_len(self) -> usize {
+        match self {
+            MsgType::Hello => 1,
+            MsgType::HelloAck => 6,
+            MsgType::SetPulses => 8,
+            MsgType::Heartbeat => 0,
+            MsgType::State => 12,
+            MsgType::Estop => 1,
+            MsgType::Config => 3,
+        }
+    }
+}
+
+/// What the device does on silence longer than its watchdog timeout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WatchdogAction {
+    /// Keep sending the last pulses.
+    Hold,
+    /// Stop the pulses (servos go limp).
+    Detach,
+}
+
+/// The device's state, as reported in [`Message::State`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DeviceState {
+    /// Powered up, no command yet: no pulses.
+    Idle,
+    /// Following commands.
+    Running,
+    /// Watchdog fired: holding the last pulses.
+    WatchdogHold,
+    /// Watchdog fired: pulses stopped.
+    WatchdogDetached,
+    /// Emergency stop: holding, commands ignored.
+    Estop,
+}
+
+impl DeviceState {
+    fn to_byte(self) -> u8 {
+        match self {
+            DeviceState::Idle => 0,
+            DeviceState::Running => 1,
+            DeviceState::WatchdogHold => 2,
+            DeviceState::WatchdogDetached => 3,
+            DeviceState::Estop => 4,
+        }
+    }
+    fn from_byte(b: u8) -> Option<DeviceState> {
+        Some(match b {
+            0 => DeviceState::Idle,
+            1 => DeviceState::Running,
+            2 => DeviceState::WatchdogHold,
+            3 => DeviceState::WatchdogDetached,
+            4 => DeviceState::Estop,
+            _ => return None,
+        })
+    }
+    /// A short name for logs and diagnostics.
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceState::Idle => "idle",
+            DeviceState::Running => "running",
+            DeviceState::WatchdogHold => "watchdog hold",
+            DeviceState::WatchdogDetached => "watchdog detached",
+            DeviceState::Estop => "e-stop",
+        }
+    }
+}
+
+/// A decoded message (the payload of a frame).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Message {
+    /// host → device: start a session speaking `version`.
+    Hello {
+        /// protocol version the host speaks
+        version: u8,
+    },
+    /// device → host: answer to Hello.
+    HelloAck {
+        /// protocol version the device speaks
+        version: u8,
+        /// firmware version, major
+        firmware_major: u8,
+        /// firmware version, minor
+        firmware_minor: u8,
+        /// number of servo channels
+        servos: u8,
+        /// current watchdog timeout (ms)
+        watchdog_ms: u16,
+    },
+    /// host → device: pulse widths in 0.5 µs ticks; 0 = no pulses on that channel.
+    SetPulses {
+        /// ticks for pins 8, 9, 10, 11
+        ticks: [u16; SERVOS],
+    },
+    /// host → device: keep-alive; the device answers with State.
+    Heartbeat,
+    /// device → host: state, errors and the pulses on the pins.
+    State {
+        /// sequence number of the frame this answers (or of the last received frame)
+        ack_seq: u8,
+        /// what the device is doing
+        state: DeviceState,
+        /// bit 0: the last SetPulses was clamped to the device's limits
+        clamped: bool,
+        /// frames the device dropped (bad CRC, bad length, unknown type), wrapping
+        rx_errors: u8,
+        /// pulse widths being output, ticks (0 = none)
+        ticks: [u16; SERVOS],
+    },
+    /// host → device: engage (true) or release (false) the emergency stop.
+    Estop {
+        /// engaged?
+        engaged: bool,
+    },
+    /// host → device: watchdog settings.
+    Config {
+        /// silence (ms) after which the watchdog acts
+        watchdog_ms: u16,
+        /// what it does then
+        action: WatchdogAction,
+    },
+}
+
+impl Message {
+    /// The type of this message.
+    pub fn msg_type(&self) -> MsgType {
+        match self {
+            Message::Hello { .. } => MsgType::Hello,
+            Message::HelloAck { .. } => MsgType::HelloAck,
+            Message::SetPulses { .. } => MsgType::SetPulses,
+            Message::Heartbeat => MsgType::Heartbeat,
+            Message::State { .. } => MsgType::State,
+            Message::Estop { .. } => MsgType::Estop,
+            Message::Config { .. } => MsgType::Config,
+        }
+    }
+}
+
+/// A frame: a message and its sequence number.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Frame {
+    /// Sequence number (wraps).
+    pub seq: u8,
+    /// The message.
+    pub msg: Message,
+}
+
+/// CRC-8, polynomial 0x07, init 0 (CRC-8/SMBUS), as in the firmware.
+///
+/// # Examples
+/// ```
+/// assert_eq!(servo_protocol::crc8(b"123456789"), 0xF4);
+/// ```
+pub fn crc8(data: &[u8]) -> u8 {
+    let mut crc = 0u8;
+    for &b in data {
+        crc ^= b;
+        for _ in 0..8 {
+            crc = if crc & 0x80 != 0 {
+                (crc << 1) ^ 0x07
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc
+}
+
+fn put_u16(out: &mut Vec<u8>, v: u16) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+/// Encode a frame.
+///
+/// # Examples
+/// ```
+/// use servo_protocol::{encode, Frame, Message};
+/// let bytes = encode(&Frame { seq: 7, msg: Message::SetPulses { ticks: [2944; 4] } });
+/// assert_eq!(bytes.len(), 12); // 1.04 ms at 115200 baud
+/// assert_eq!(bytes[0], 0xA5);
+/// ```
+pub fn encode(frame: &Frame) -> Vec<u8> {
+    let mut payload = Vec::with_capacity(MAX_PAYLOAD);
+    match frame.msg {
+        Message::Hello { version } => payload.push(version),
+        Message::HelloAck {
+            version,
+            firmware_major,
+            firmware_minor,
+            servos,
+            watchdog_ms,
+        } => {
+            payload.extend_from_slice(&[version, firmware_major, firmware_minor, servos]);
+            put_u16(&mut payload, watchdog_ms);
+        }
+        Message::SetPulses { ticks } => ticks.iter().for_each(|t| put_u16(&mut payload, *t)),
+        Message::Heartbeat => {}
+        Message::State {
+            ack_seq,
+            state,
+            clamped,
+            rx_errors,
+            ticks,
+        } => {
+            payload.extend_from_slice(&[ack_seq, state.to_byte(), u8::from(clamped), rx_errors]);
+            ticks.iter().for_each(|t| put_u16(&mut payload, *t));
+        }
+        Message::Estop { engaged } => payload.push(u8::from(engaged)),
+        Message::Config {
+            watchdog_ms,
+            action,
+        } => {
+            put_u16(&mut payload, watchdog_ms);
+            payload.push(match action {
+                WatchdogAction::Hold => 0,
+                WatchdogAction::Detach => 1,
+            });
+        }
+    }
+    debug_assert_eq!(payload.len(), frame.msg.msg_type().payload_len());
+    let mut out = Vec::with_capacity(payload.len() + OVERHEAD);
+    out.push(SYNC);
+    out.push(((frame.msg.msg_type() as u8) << 4) | payload.len() as u8);
+    out.push(frame.seq);
+    out.extend_from_slice(&payload);
+    out.push(crc8(&out[1..]));
+    out
+}
+
+/// Why bytes at the front of the buffer are not a frame. The decoder has dropped
+/// them (at least one byte), so decoding can go on.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// Bytes before a start marker.
+    #[error("{skipped} byte(s) of garbage before a frame start")]
+    Garbage {
+        /// how many were dropped
+        skipped: usize,
+    },
+    /// The checksum does not match.
+    #[error("bad CRC (got {got:#04x}, computed {computed:#04x})")]
+    BadCrc {
+        /// the frame's CRC byte
+        got: u8,
+        /// the CRC of the bytes received
+        computed: u8,
+    },
+    /// Unknown message type.
+    #[error("unknown message type {0:#x}")]
+    UnknownType(u8),
+    /// The length does not fit the type.
+    #[error("message type {msg_type:?} needs {expected} payload bytes, frame says {got}")]
+    BadLength {
+        /// the type
+        msg_type: MsgType,
+        /// what it needs
+        expected: usize,
+        /// what the frame says
+        got: usize,
+    },
+    /// A field holds a value the protocol does not define.
+    #[error("bad field value: {0}")]
+    BadValue(&'static str),
+}
+
+fn u16_at(p: &[u8], i: usize) -> u16 {
+    u16::from_le_bytes([p[i], p[i + 1]])
+}
+
+fn ticks_at(p: &[u8], start: usize) -> [u16; SERVOS] {
+    [
+        u16_at(p, start),
+        u16_at(p, start + 2),
+        u16_at(p, start + 4),
+        u16_at(p, start + 6),
+    ]
+}
+
+/// Take one frame from the front of `buf`.
+///
+/// * `Ok(Some(frame))`: a frame was removed from `buf`;
+/// * `Ok(None)`: `buf` holds only the beginning of a frame (or nothing): wait for more bytes;
+/// * `Err(e)`: bytes were invalid and were dropped; call again.
+///
+/// A frame that fails its CRC costs only its start byte, so a `0xA5` inside a
+/// payload cannot make the decoder lose the next real frame.
+///
+/// # Examples
+/// ```
+/// use servo_protocol::{decode, encode, Frame, Message};
+/// let f = Frame { seq: 1, msg: Message::Heartbeat };
+/// let mut buf = encode(&f);
+/// buf.insert(0, 0x42); // garbage
+/// assert!(decode(&mut buf).is_err());
+/// assert_eq!(decode(&mut buf), Ok(Some(f)));
+/// assert_eq!(decode(&mut buf), Ok(None));
+/// ```
+pub fn decode(buf: &mut Vec<u8>) -> Result<Option<Frame>, DecodeError> {
+    match buf.iter().position(|b| *b == SYNC) {
+        None => {
+            let skipped = buf.len();
+            buf.clear();
+            return if skipped == 0 {
+                Ok(None)
+            } else {
+                Err(DecodeError::Garbage { skipped })
+            };
+        }
+        Some(0) => {}
+        Some(n) => {
+            buf.drain(..n);
+            return Err(DecodeError::Garbage { skipped: n });
+        }
+    }
+    if buf.len() < 2 {
+        return Ok(None);
+    }
+    let len = usize::from(buf[1] & 0x0F);
+    let total = len + OVERHEAD;
+    if buf.len() < total {
+        return Ok(None);
+    }
+    let computed = crc8(&buf[1..total - 1]);
+    let got = buf[total - 1];
+    let reject = |buf: &mut Vec<u8>, e: DecodeError| {
+        buf.drain(..1);
+        Err(e)
+    };
+    if computed != got {
+        return reject(buf, DecodeError::BadCrc { got, computed });
+    }
+    let Some(msg_type) = MsgType::from_nibble(buf[1] >> 4) else {
+        let t = buf[1] >> 4;
+        return reject(buf, DecodeError::UnknownType(t));
+    };
+    if len != msg_type.payload_len() {
+        return reject(
+            buf,
+            DecodeError::BadLength {
+                msg_type,
+                expected: msg_type.payload_len(),
+                got: len,
+            },
+        );
+    }
+    let seq = buf[2];
+    let p = &buf[3..3 + len];
+    let msg = match msg_type {
+        MsgType::Hello => Message::Hello { version: p[0] },
+        MsgType::HelloAck => Message::HelloAck {
+            version: p[0],
+            firmware_major: p[1],
+            firmware_minor: p[2],
+            servos: p[3],
+            watchdog_ms: u16_at(p, 4),
+        },
+        MsgType::SetPulses => Message::SetPulses {
+            ticks: ticks_at(p, 0),
+        },
+        MsgType::Heartbeat => Message::Heartbeat,
+        MsgType::State => {
+            let Some(state) = DeviceState::from_byte(p[1]) else {
+                return reject(buf, DecodeError::BadValue("device state"));
+            };
+            if p[2] > 1 {
+                return reject(buf, DecodeError::BadValue("clamped flag"));
+            }
+            Message::State {
+                ack_seq: p[0],
+                state,
+                clamped: p[2] == 1,
+                rx_errors: p[3],
+                ticks: ticks_at(p, 4),
+            }
+        }
+        MsgType::Estop => match p[0] {
+            0 | 1 => Message::Estop { engaged: p[0] == 1 },
+            _ => return reject(buf, DecodeError::BadValue("estop flag")),
+        },
+        MsgType::Config => {
+            let action = match p[2] {
+                0 => WatchdogAction::Hold,
+                1 => WatchdogAction::Detach,
+                _ => return reject(buf, DecodeError::BadValue("watchdog action")),
+            };
+            Message::Config {
+                watchdog_ms: u16_at(p, 0),
+                action,
+            }
+        }
+    };
+    buf.drain(..total);
+    Ok(Some(Frame { seq, msg }))
+}

@@ -1,0 +1,69 @@
+//! The servo link between `serial_node` and the Arduino (`firmware/servo_control/`):
+//! a framed binary protocol sized for an 8-bit Uno at 115200 baud (a 4-servo command is
+//! 12 bytes, 1.04 ms on the wire). See `firmware/servo_control/PROTOCOL.md`.
+//!
+//! * [`encode`] / [`decode`]: pure, no I/O; `decode` tells *incomplete* (`Ok(None)`)
+//!   from *invalid* (`Err`, bytes dropped so decoding goes on);
+//! * [`FrameReader`]: owns the receive buffer of any `Read` (a serial port, a pty, the
+//!   virtual device);
+//! * [`device`]: the device side as the firmware implements it, with the servos'
+//!   motion modelled: the virtual Arduino.
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
+pub mod device;
+mod frame;
+
+pub use frame::{
+    crc8, decode, encode, DecodeError, DeviceState, Frame, Message, MsgType, WatchdogAction,
+    MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SERVOS, SYNC, TICKS_PER_US,
+};
+
+use std::io::{self, Read};
+
+/// Reads frames from a byte stream, keeping partial frames between reads.
+pub struct FrameReader<R: Read> {
+    port: R,
+    buf: Vec<u8>,
+    chunk: Box<[u8]>,
+}
+
+impl<R: Read> FrameReader<R> {
+    /// Wrap a byte stream.
+    pub fn new(port: R) -> Self {
+        FrameReader {
+            port,
+            buf: Vec::with_capacity(256),
+            chunk: vec![0; 256].into_boxed_slice(),
+        }
+    }
+
+    /// Read what is available (one `read` call; it may block up to the stream's
+    /// timeout) and decode every complete frame. Invalid bytes come back as `Err`
+    /// items, already dropped. A timeout yields an empty list.
+    pub fn read_frames(&mut self) -> io::Result<Vec<Result<Frame, DecodeError>>> {
+        match self.port.read(&mut self.chunk) {
+            Ok(0) => return Err(io::Error::new(io::ErrorKind::UnexpectedEof, "port closed")),
+            Ok(n) => self.buf.extend_from_slice(&self.chunk[..n]),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::TimedOut
+                        | io::ErrorKind::WouldBlock
+                        | io::ErrorKind::Interrupted
+                ) =>
+            {
+                return Ok(vec![])
+            }
+            Err(e) => return Err(e),
+        }
+        let mut out = vec![];
+        loop {
+            match decode(&mut self.buf) {
+                Ok(None) => break,
+                Ok(Some(f)) => out.push(Ok(f)),
+                Err(e) => out.push(Err(e)),
+            }
+        }
+        Ok(out)
+    }
+}
