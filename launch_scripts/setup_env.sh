@@ -7,8 +7,8 @@ _here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
 _log() { echo "[setup] $*" >&2; }
 
-# Debian packages the project needs (none so far beyond the base image).
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-}
+# Debian packages: the AVR toolchain and Arduino core for the firmware, simavr for its tests.
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev}
 _missing=()
 for p in $EEZYBOT_APT_PACKAGES; do
   dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")

@@ -6,6 +6,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . launch_scripts/setup_env.sh
 export CARGO_TERM_QUIET=true
+echo "== firmware (avr-gcc) and its simavr harness"
+make -s -C firmware/servo_control all sim
 echo "== cargo build"
 cargo build --workspace --bins --examples
 echo "== cargo test"

@@ -13,6 +13,9 @@ use std::io::{self, Read, Write};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
+/// A partial frame older than this is dropped, as the firmware does (`FRAME_GAP_MS`).
+pub const FRAME_GAP: Duration = Duration::from_millis(5);
+
 /// Firmware version the virtual device reports (the firmware's own constants).
 pub const FIRMWARE_VERSION: (u8, u8) = (1, 0);
 
@@ -67,6 +70,7 @@ pub struct Device {
     tx_seq: u8,
     last_rx: Duration,
     last_tick: Duration,
+    last_byte: Duration,
     rx: Vec<u8>,
     out: Vec<u8>,
 }
@@ -88,6 +92,7 @@ impl Device {
             tx_seq: 0,
             last_rx: Duration::ZERO,
             last_tick: Duration::ZERO,
+            last_byte: Duration::ZERO,
             rx: Vec::new(),
             out: Vec::new(),
         }
@@ -142,6 +147,11 @@ impl Device {
     /// Bytes from the host, arriving at `now` (time since power-up).
     pub fn receive(&mut self, bytes: &[u8], now: Duration) {
         self.tick(now);
+        if !self.rx.is_empty() && now.saturating_sub(self.last_byte) > FRAME_GAP {
+            self.rx.clear(); // the rest of that frame is not coming
+            self.rx_errors = self.rx_errors.wrapping_add(1);
+        }
+        self.last_byte = now;
         self.rx.extend_from_slice(bytes);
         loop {
             match decode(&mut self.rx) {
@@ -514,6 +524,9 @@ mod tests {
         d.receive(&bad, ms(1));
         d.receive(&[0x00, 0xFF, 0xA5, 0x13], ms(2));
         assert_eq!(d.pulses(), [3000; 4]);
+        // the dangling partial frame is dropped after the gap: the next frame works
+        send(&mut d, 3, Message::SetPulses { ticks: [3500; 4] }, ms(20));
+        assert_eq!(d.pulses(), [3500; 4]);
         assert!(d.rx_errors() >= 1);
     }
 }

@@ -148,3 +148,18 @@ fn a_four_servo_command_is_12_bytes() {
     let wire_s = 12.0 * 10.0 / 115_200.0; // 10 bits a byte
     assert!(wire_s <= 1.1e-3, "{wire_s}");
 }
+
+#[test]
+fn protocol_md_example_frame() {
+    let f = Frame {
+        seq: 7,
+        msg: Message::SetPulses { ticks: [2944; 4] },
+    };
+    let hex: Vec<String> = encode(&f).iter().map(|b| format!("{b:02X}")).collect();
+    let doc = include_str!("../../../firmware/servo_control/PROTOCOL.md");
+    assert!(
+        doc.contains(&hex.join(" ")),
+        "PROTOCOL.md example is not {}",
+        hex.join(" ")
+    );
+}

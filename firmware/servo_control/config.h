@@ -1,0 +1,27 @@
+// Device configuration of the servo_control firmware. Edit for your build of the arm.
+#pragma once
+#include <stdint.h>
+
+#define FIRMWARE_MAJOR 1
+#define FIRMWARE_MINOR 0
+#define PROTOCOL_VERSION 1
+
+#define SERVO_COUNT 4
+#define SERIAL_BAUD 115200UL
+
+// Pulse widths in Timer1 ticks of 0.5 us (16 MHz / 8). Every command is clamped into
+// these, whatever the host sends: 544..2400 us is the Servo library's full range.
+static const uint16_t SERVO_MIN_TICKS[SERVO_COUNT] = {1088, 1088, 1088, 1088};
+static const uint16_t SERVO_MAX_TICKS[SERVO_COUNT] = {4800, 4800, 4800, 4800};
+
+// Refresh period of every servo, as the Servo library: 20 ms.
+#define REFRESH_TICKS 40000U
+
+// Silence after which the watchdog acts, and what it does (host can change both).
+#define WATCHDOG_MS_DEFAULT 500
+#define WATCHDOG_DETACH_DEFAULT 0   // 0: hold the last pulses, 1: stop the pulses
+#define WATCHDOG_MS_MIN 20
+
+// A partial frame older than this is dropped (a 12-byte frame takes ~1 ms at 115200),
+// so bytes lost mid-frame never hold up the next frame.
+#define FRAME_GAP_MS 5

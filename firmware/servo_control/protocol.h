@@ -1,0 +1,43 @@
+// The servo link's frames (PROTOCOL.md): 0xA5 | type<<4|len | seq | payload | crc8.
+#pragma once
+#include <stdint.h>
+#include <stddef.h>
+
+#define PROTO_SYNC 0xA5
+#define PROTO_MAX_PAYLOAD 15
+#define PROTO_OVERHEAD 4
+
+enum MsgType {
+  MSG_HELLO = 0x1,
+  MSG_HELLO_ACK = 0x2,
+  MSG_SET_PULSES = 0x3,
+  MSG_HEARTBEAT = 0x4,
+  MSG_STATE = 0x5,
+  MSG_ESTOP = 0x6,
+  MSG_CONFIG = 0x7,
+};
+
+struct Frame {
+  uint8_t type;
+  uint8_t len;
+  uint8_t seq;
+  uint8_t payload[PROTO_MAX_PAYLOAD];
+};
+
+uint8_t proto_crc8(const uint8_t *data, size_t n);
+
+// Payload length each type must have, or -1 for an unknown type.
+int8_t proto_payload_len(uint8_t type);
+
+// Streaming decoder: feed bytes one by one; returns 1 when `out` holds a frame,
+// 0 otherwise. Invalid frames are dropped and counted in `errors`.
+struct Decoder {
+  uint8_t buf[PROTO_MAX_PAYLOAD + PROTO_OVERHEAD];
+  uint8_t n;
+  uint8_t errors;
+};
+void proto_decoder_init(Decoder *d);
+int proto_decoder_push(Decoder *d, uint8_t byte, Frame *out);
+
+// Encode a frame into `out` (at least len + PROTO_OVERHEAD bytes); returns its size.
+uint8_t proto_encode(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len, uint8_t *out);

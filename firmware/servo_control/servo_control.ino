@@ -1,0 +1,143 @@
+// EezyBotArm Mk2 servo controller for an Arduino Uno.
+//
+// Speaks the framed binary protocol of PROTOCOL.md with serial_node over USB at
+// 115200 baud and drives the servos on pins 8 (base), 9 (shoulder), 10 (elbow) and
+// 11 (gripper) with its own Timer1 pulse driver (servo_pwm.cpp: the Servo library's
+// timing, 544-2400 us every 20 ms). Malformed frames are ignored and counted; every
+// command is clamped to the limits in config.h; on silence longer than the watchdog
+// timeout it holds (or stops) the pulses and says so.
+//
+// Builds in the Arduino IDE (board: Arduino Uno) and with `make` (avr-gcc + Debian's
+// arduino-core-avr).
+
+#include <Arduino.h>
+#include "config.h"
+#include "protocol.h"
+#include "servo_pwm.h"
+
+enum DeviceState {
+  STATE_IDLE = 0,
+  STATE_RUNNING = 1,
+  STATE_WATCHDOG_HOLD = 2,
+  STATE_WATCHDOG_DETACHED = 3,
+  STATE_ESTOP = 4,
+};
+
+static Decoder decoder;
+static uint8_t state = STATE_IDLE;
+static uint16_t applied[SERVO_COUNT];  // clamped command, ticks (0 = no pulses)
+static uint8_t clamped = 0;
+static uint8_t last_seq = 0;
+static uint8_t tx_seq = 0;
+static uint16_t watchdog_ms = WATCHDOG_MS_DEFAULT;
+static uint8_t watchdog_detach = WATCHDOG_DETACH_DEFAULT;
+static unsigned long last_rx_ms = 0;
+static unsigned long last_byte_ms = 0;
+
+static void put_u16(uint8_t *p, uint16_t v) {
+  p[0] = (uint8_t)(v & 0xFF);
+  p[1] = (uint8_t)(v >> 8);
+}
+
+static uint16_t get_u16(const uint8_t *p) {
+  return (uint16_t)p[0] | ((uint16_t)p[1] << 8);
+}
+
+static void send(uint8_t type, const uint8_t *payload, uint8_t len) {
+  uint8_t out[PROTO_MAX_PAYLOAD + PROTO_OVERHEAD];
+  tx_seq++;
+  uint8_t n = proto_encode(type, tx_seq, payload, len, out);
+  Serial.write(out, n);
+}
+
+static void send_state() {
+  uint8_t p[12];
+  p[0] = last_seq;
+  p[1] = state;
+  p[2] = clamped;
+  p[3] = decoder.errors;
+  for (uint8_t i = 0; i < SERVO_COUNT; i++) put_u16(p + 4 + 2 * i, servo_pwm_get(i));
+  send(MSG_STATE, p, sizeof(p));
+}
+
+// Output what `applied` says, or nothing when detached / idle.
+static void output_pulses(bool on) {
+  for (uint8_t i = 0; i < SERVO_COUNT; i++) servo_pwm_set(i, on ? applied[i] : 0);
+}
+
+static void handle(const Frame *f) {
+  last_seq = f->seq;
+  last_rx_ms = millis();
+  switch (f->type) {
+    case MSG_HELLO: {
+      uint8_t p[6] = {PROTOCOL_VERSION, FIRMWARE_MAJOR, FIRMWARE_MINOR, SERVO_COUNT, 0, 0};
+      put_u16(p + 4, watchdog_ms);
+      send(MSG_HELLO_ACK, p, sizeof(p));
+      return;
+    }
+    case MSG_SET_PULSES:
+      if (state != STATE_ESTOP) {
+        clamped = 0;
+        for (uint8_t i = 0; i < SERVO_COUNT; i++) {
+          uint16_t t = get_u16(f->payload + 2 * i);
+          if (t != 0) {
+            if (t < SERVO_MIN_TICKS[i]) { t = SERVO_MIN_TICKS[i]; clamped = 1; }
+            if (t > SERVO_MAX_TICKS[i]) { t = SERVO_MAX_TICKS[i]; clamped = 1; }
+          }
+          applied[i] = t;
+        }
+        state = STATE_RUNNING;
+        output_pulses(true);
+      }
+      break;
+    case MSG_HEARTBEAT:
+      break;
+    case MSG_ESTOP:
+      if (f->payload[0] == 1) {
+        state = STATE_ESTOP;  // hold the pulses, ignore commands
+      } else if (f->payload[0] == 0 && state == STATE_ESTOP) {
+        bool any = false;
+        for (uint8_t i = 0; i < SERVO_COUNT; i++) any |= applied[i] != 0;
+        state = any ? STATE_RUNNING : STATE_IDLE;
+      }
+      break;
+    case MSG_CONFIG: {
+      uint16_t ms = get_u16(f->payload);
+      watchdog_ms = ms < WATCHDOG_MS_MIN ? WATCHDOG_MS_MIN : ms;
+      watchdog_detach = f->payload[2] == 1;
+      break;
+    }
+    default:  // device-to-host types sent to the device
+      decoder.errors++;
+      return;
+  }
+  send_state();
+}
+
+void setup() {
+  Serial.begin(SERIAL_BAUD);
+  proto_decoder_init(&decoder);
+  servo_pwm_begin();  // no pulses until the first command
+  last_rx_ms = millis();
+}
+
+void loop() {
+  while (Serial.available() > 0) {
+    Frame f;
+    last_byte_ms = millis();
+    if (proto_decoder_push(&decoder, (uint8_t)Serial.read(), &f)) handle(&f);
+  }
+  if (decoder.n > 0 && (unsigned long)(millis() - last_byte_ms) > FRAME_GAP_MS) {
+    decoder.n = 0;  // the rest of that frame is not coming
+    decoder.errors++;
+  }
+  if (state == STATE_RUNNING && (unsigned long)(millis() - last_rx_ms) > watchdog_ms) {
+    if (watchdog_detach) {
+      state = STATE_WATCHDOG_DETACHED;
+      output_pulses(false);
+    } else {
+      state = STATE_WATCHDOG_HOLD;
+    }
+    send_state();
+  }
+}

@@ -1,0 +1,157 @@
+"""The servo link protocol (firmware/servo_control/PROTOCOL.md), written again from the
+document for the tests: frames, a decoder, and helpers to run the firmware in simavr."""
+import os
+import signal
+import struct
+import subprocess
+import termios
+import time
+import tty
+from pathlib import Path
+
+SYNC = 0xA5
+HELLO, HELLO_ACK, SET_PULSES, HEARTBEAT, STATE, ESTOP, CONFIG = 1, 2, 3, 4, 5, 6, 7
+PAYLOAD_LEN = {HELLO: 1, HELLO_ACK: 6, SET_PULSES: 8, HEARTBEAT: 0, STATE: 12, ESTOP: 1, CONFIG: 3}
+STATES = {0: "idle", 1: "running", 2: "watchdog hold", 3: "watchdog detached", 4: "estop"}
+CYCLES_PER_US = 16
+
+
+def crc8(data):
+    crc = 0
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc
+
+
+def frame(msg_type, seq, payload=b""):
+    body = bytes([(msg_type << 4) | len(payload), seq & 0xFF]) + payload
+    return bytes([SYNC]) + body + bytes([crc8(body)])
+
+
+def set_pulses(seq, ticks):
+    return frame(SET_PULSES, seq, struct.pack("<4H", *ticks))
+
+
+def config(seq, watchdog_ms, detach):
+    return frame(CONFIG, seq, struct.pack("<HB", watchdog_ms, 1 if detach else 0))
+
+
+class Decoder:
+    def __init__(self):
+        self.buf = bytearray()
+
+    def feed(self, data):
+        """Append bytes; return the complete, valid frames as (type, seq, payload)."""
+        self.buf += data
+        out = []
+        while True:
+            i = self.buf.find(SYNC)
+            if i < 0:
+                self.buf.clear()
+                return out
+            del self.buf[:i]
+            if len(self.buf) < 2:
+                return out
+            n = (self.buf[1] & 0x0F) + 4
+            if len(self.buf) < n:
+                return out
+            f = bytes(self.buf[:n])
+            if crc8(f[1:-1]) != f[-1] or PAYLOAD_LEN.get(f[1] >> 4) != n - 4:
+                del self.buf[:1]
+                continue
+            out.append((f[1] >> 4, f[2], f[3:-1]))
+            del self.buf[:n]
+
+
+def parse_state(payload):
+    ack_seq, state, clamped, rx_errors = payload[:4]
+    return {"ack_seq": ack_seq, "state": STATES[state], "clamped": bool(clamped), "rx_errors": rx_errors,
+            "ticks": list(struct.unpack("<4H", payload[4:12]))}
+
+
+class SimulatedUno:
+    """The servo_control ELF in simavr (firmware/servo_control/build/servo_sim)."""
+
+    def __init__(self, workdir, firmware_dir):
+        self.workdir = Path(workdir)
+        self.tty_path = self.workdir / "tty"
+        self.events_path = self.workdir / "events.txt"
+        self.log = open(self.workdir / "servo_sim.log", "w")
+        sim = Path(firmware_dir) / "build" / "servo_sim"
+        elf = Path(firmware_dir) / "build" / "servo_control.elf"
+        self.proc = subprocess.Popen([str(sim), str(elf), "--pty-link", str(self.tty_path), "--events", str(self.events_path)],
+                                     stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 10
+        while not self.tty_path.exists():
+            assert time.monotonic() < deadline, "servo_sim did not create its pty"
+            assert self.proc.poll() is None, "servo_sim exited"
+            time.sleep(0.01)
+        self.fd = None
+        self.decoder = Decoder()
+
+    def open(self):
+        self.fd = os.open(self.tty_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        tty.setraw(self.fd)
+        termios.tcflush(self.fd, termios.TCIOFLUSH)
+
+    def send(self, data):
+        os.write(self.fd, data)
+
+    def receive(self, seconds):
+        """Frames received within `seconds`."""
+        out = []
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                data = os.read(self.fd, 256)
+            except BlockingIOError:
+                time.sleep(0.005)
+                continue
+            out += self.decoder.feed(data)
+        return out
+
+    def wait_for(self, predicate, seconds=5):
+        end = time.monotonic() + seconds
+        seen = []
+        while time.monotonic() < end:
+            for f in self.receive(0.05):
+                seen.append(f)
+                if predicate(f):
+                    return f, seen
+        raise AssertionError(f"no matching frame in {seconds} s; got {seen}")
+
+    def events(self):
+        """Pin edges [(cycle, pin, level)] and bytes delivered to the AVR [(cycle, byte)]."""
+        edges, rx = [], []
+        for line in self.events_path.read_text().splitlines():
+            parts = line.split()
+            if len(parts) == 4 and parts[0] == "e":
+                edges.append((int(parts[1]), int(parts[2]), int(parts[3])))
+            elif len(parts) == 3 and parts[0] == "r":
+                rx.append((int(parts[1]), int(parts[2])))
+        return edges, rx
+
+    def stop(self):
+        if self.fd is not None:
+            os.close(self.fd)
+        self.proc.send_signal(signal.SIGINT)
+        code = self.proc.wait(10)
+        self.log.close()
+        return code
+
+
+def pulses(edges, pin, after_cycle=0):
+    """(rise_cycle, width_us) of every complete pulse on `pin` that starts after `after_cycle`."""
+    out, rise = [], None
+    for cycle, p, level in edges:
+        if p != pin:
+            continue
+        if level == 1:
+            rise = cycle
+        elif rise is not None:
+            if rise >= after_cycle:
+                out.append((rise, (cycle - rise) / CYCLES_PER_US))
+            rise = None
+    return out
