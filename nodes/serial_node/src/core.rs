@@ -1,0 +1,229 @@
+//! Pure logic of serial_node: servo angles ↔ pulse ticks with the calibration's ranges.
+
+use eezybot_kinematics::{ServoCalibration, ServoCalibrations, ServoId};
+use eezybot_msgs::sensor_msgs::JointState;
+use servo_protocol::{SERVOS, TICKS_PER_US};
+use std::fmt;
+
+/// Why a `servo_angles` message was refused.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Rejection {
+    /// `name` and `position` differ in length.
+    LengthMismatch {
+        /// names
+        names: usize,
+        /// positions
+        positions: usize,
+    },
+    /// A name that is not one of the four servos.
+    UnknownServo {
+        /// the name
+        name: String,
+    },
+    /// A servo is missing from the message.
+    MissingServo {
+        /// the servo
+        name: &'static str,
+    },
+    /// A position is NaN or infinite.
+    NonFinite {
+        /// the servo
+        name: String,
+        /// the value
+        value: f64,
+    },
+    /// An angle outside the servo's calibrated range.
+    OutOfRange {
+        /// the servo
+        name: &'static str,
+        /// the angle (deg)
+        angle_deg: f64,
+        /// lowest allowed (deg)
+        min_deg: f64,
+        /// highest allowed (deg)
+        max_deg: f64,
+    },
+}
+
+impl Rejection {
+    /// Short machine-readable code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            Rejection::LengthMismatch { .. } => "length_mismatch",
+            Rejection::UnknownServo { .. } => "unknown_servo",
+            Rejection::MissingServo { .. } => "missing_servo",
+            Rejection::NonFinite { .. } => "non_finite",
+            Rejection::OutOfRange { .. } => "out_of_range",
+        }
+    }
+}
+
+impl fmt::Display for Rejection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Rejection::LengthMismatch { names, positions } => write!(f, "{names} names but {positions} positions"),
+            Rejection::UnknownServo { name } => write!(
+                f,
+                "unknown servo `{name}` (servos: base_servo, shoulder_servo, elbow_servo, gripper_servo)"
+            ),
+            Rejection::MissingServo { name } => write!(f, "no position for `{name}`"),
+            Rejection::NonFinite { name, value } => write!(f, "`{name}` is {value}"),
+            Rejection::OutOfRange { name, angle_deg, min_deg, max_deg } => write!(
+                f,
+                "`{name}` at {angle_deg:.2}° is outside its range {min_deg:.2}° … {max_deg:.2}°"
+            ),
+        }
+    }
+}
+
+/// Pulse width in 0.5 µs ticks for a servo angle, as the Servo library maps 0–180°.
+///
+/// # Examples
+/// ```
+/// use eezybot_kinematics::ServoCalibrations;
+/// let c = ServoCalibrations::default().base;
+/// assert_eq!(serial_node::core::angle_to_ticks(&c, 90f64.to_radians()), 2944); // 1472 µs
+/// ```
+pub fn angle_to_ticks(cal: &ServoCalibration, angle_rad: f64) -> u16 {
+    let us = cal.pulse_us(angle_rad.to_degrees());
+    (us * f64::from(TICKS_PER_US))
+        .round()
+        .clamp(1.0, f64::from(u16::MAX)) as u16
+}
+
+/// The servo angle (rad) a pulse width stands for; 0 ticks (no pulses) gives NaN.
+pub fn ticks_to_angle(cal: &ServoCalibration, ticks: u16) -> f64 {
+    if ticks == 0 {
+        return f64::NAN;
+    }
+    let (lo, hi) = (f64::from(cal.pulse_min_us), f64::from(cal.pulse_max_us));
+    let us = f64::from(ticks) / f64::from(TICKS_PER_US);
+    ((us - lo) / (hi - lo) * 180.0).to_radians()
+}
+
+/// Check a `servo_angles` message and turn it into the four pulse widths.
+/// Names may come in any order; all four servos must be there.
+pub fn angles_to_ticks(
+    cal: &ServoCalibrations,
+    msg: &JointState,
+) -> Result<[u16; SERVOS], Rejection> {
+    if msg.name.len() != msg.position.len() {
+        return Err(Rejection::LengthMismatch {
+            names: msg.name.len(),
+            positions: msg.position.len(),
+        });
+    }
+    let mut angles = [None; SERVOS];
+    for (name, &value) in msg.name.iter().zip(&msg.position) {
+        let Some(i) = ServoId::ALL.iter().position(|s| s.name() == name) else {
+            return Err(Rejection::UnknownServo { name: name.clone() });
+        };
+        if !value.is_finite() {
+            return Err(Rejection::NonFinite {
+                name: name.clone(),
+                value,
+            });
+        }
+        angles[i] = Some(value);
+    }
+    let mut ticks = [0u16; SERVOS];
+    for (i, servo) in ServoId::ALL.into_iter().enumerate() {
+        let angle = angles[i].ok_or(Rejection::MissingServo { name: servo.name() })?;
+        let c = cal.get(servo);
+        let deg = angle.to_degrees();
+        const EPS_DEG: f64 = 1e-6;
+        if deg < c.min_deg - EPS_DEG || deg > c.max_deg + EPS_DEG {
+            return Err(Rejection::OutOfRange {
+                name: servo.name(),
+                angle_deg: deg,
+                min_deg: c.min_deg,
+                max_deg: c.max_deg,
+            });
+        }
+        ticks[i] = angle_to_ticks(c, deg.clamp(c.min_deg, c.max_deg).to_radians());
+    }
+    Ok(ticks)
+}
+
+/// The four servo angles (rad) for reported pulse widths.
+pub fn ticks_to_angles(cal: &ServoCalibrations, ticks: &[u16; SERVOS]) -> [f64; SERVOS] {
+    let mut out = [0.0; SERVOS];
+    for (i, servo) in ServoId::ALL.into_iter().enumerate() {
+        out[i] = ticks_to_angle(cal.get(servo), ticks[i]);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msg(names: &[&str], pos: &[f64]) -> JointState {
+        JointState {
+            name: names.iter().map(|s| s.to_string()).collect(),
+            position: pos.to_vec(),
+            ..JointState::default()
+        }
+    }
+
+    const ALL: [&str; 4] = [
+        "base_servo",
+        "shoulder_servo",
+        "elbow_servo",
+        "gripper_servo",
+    ];
+
+    #[test]
+    fn robot_md_pulses() {
+        let cal = ServoCalibrations::default();
+        let deg = [0.0f64, 90.0, 180.0, 120.0];
+        let t = angles_to_ticks(&cal, &msg(&ALL, &deg.map(f64::to_radians))).unwrap();
+        // 544 + 1856 * deg / 180 µs, in half microseconds
+        assert_eq!(t, [1088, 2944, 4800, 3563]);
+        let back = ticks_to_angles(&cal, &t);
+        for (b, d) in back.iter().zip(deg) {
+            assert!((b.to_degrees() - d).abs() < 0.05);
+        }
+    }
+
+    #[test]
+    fn any_order_of_names() {
+        let cal = ServoCalibrations::default();
+        let a = angles_to_ticks(
+            &cal,
+            &msg(
+                &[
+                    "gripper_servo",
+                    "elbow_servo",
+                    "shoulder_servo",
+                    "base_servo",
+                ],
+                &[1.2, 1.0, 1.5, 1.6],
+            ),
+        );
+        let b = angles_to_ticks(&cal, &msg(&ALL, &[1.6, 1.5, 1.0, 1.2]));
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn bad_messages_are_named() {
+        let cal = ServoCalibrations::default();
+        let cases = [
+            (msg(&ALL, &[1.0, 1.0, 1.0]), "length_mismatch"),
+            (
+                msg(
+                    &["base_servo", "x", "elbow_servo", "gripper_servo"],
+                    &[1.0; 4],
+                ),
+                "unknown_servo",
+            ),
+            (msg(&ALL[..3], &[1.0; 3]), "missing_servo"),
+            (msg(&ALL, &[1.0, f64::NAN, 1.0, 1.2]), "non_finite"),
+            (msg(&ALL, &[1.0, 1.0, 1.0, 0.5]), "out_of_range"), // gripper below 60°
+            (msg(&ALL, &[-0.1, 1.0, 1.0, 1.2]), "out_of_range"),
+        ];
+        for (m, code) in cases {
+            assert_eq!(angles_to_ticks(&cal, &m).unwrap_err().code(), code, "{m:?}");
+        }
+    }
+}

@@ -1,0 +1,389 @@
+//! `serial_node`: `servo_angles` → the Arduino over a serial port; device feedback → ROS.
+//!
+//! Subscribes `servo_angles` and `estop`, converts angles to pulse widths with the
+//! calibration, and hands the newest command to the [`link::Link`] (latest wins, at most
+//! one frame per servo refresh period). Publishes `servo_state` from the device's
+//! replies and `diagnostics` (port, connection, frame counters, round-trip time).
+//! `port:=mock` uses the built-in virtual Arduino.
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
+pub mod core;
+pub mod link;
+
+use crate::core::{angles_to_ticks, ticks_to_angles};
+use crate::link::{Link, LinkEvent};
+use eezybot_kinematics::{ServoCalibrations, ServoId};
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::Time;
+use futures::{Stream, StreamExt};
+use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
+use servo_protocol::DeviceState;
+use std::collections::VecDeque;
+use std::future::Future;
+use std::time::{Duration, Instant};
+use tokio::sync::mpsc::UnboundedReceiver;
+
+/// The node's description and parameters.
+pub fn spec() -> ros_plumbing::NodeSpec {
+    let int = |name, default, min, max, what| {
+        ParamSpec::new(name, ParameterValue::Integer(default), what)
+            .range(ParamRange::Integer { min, max })
+            .read_only()
+    };
+    ros_plumbing::NodeSpec {
+        name: "serial_node",
+        description: "servo_angles -> the Arduino (servo_control firmware) over a serial port; its replies -> servo_state",
+        usage: "",
+        params: vec![
+            ParamSpec::new(
+                "port",
+                ParameterValue::String("/dev/ttyACM0".into()),
+                "serial device of the Arduino, or `mock` for the built-in virtual Arduino",
+            )
+            .read_only(),
+            int("baud", 115_200, 1_200, 4_000_000, "serial speed"),
+            ParamSpec::new("send_rate", ParameterValue::Double(50.0), "most SET_PULSES frames a second (latest wins)")
+                .range(ParamRange::Double { min: 1.0, max: 500.0 })
+                .read_only(),
+            int("watchdog_ms", 500, 20, 60_000, "device holds/detaches after this much silence"),
+            ParamSpec::new("watchdog_action", ParameterValue::String("hold".into()), "`hold` or `detach` on watchdog")
+                .validator(|v| match v {
+                    ParameterValue::String(s) if s == "hold" || s == "detach" => Ok(()),
+                    _ => Err("must be `hold` or `detach`".into()),
+                })
+                .read_only(),
+            ParamSpec::new("heartbeat_period", ParameterValue::Double(0.1), "seconds of silence before a HEARTBEAT")
+                .range(ParamRange::Double { min: 0.01, max: 10.0 })
+                .read_only(),
+            ParamSpec::new(
+                "arm_config",
+                ParameterValue::String(String::new()),
+                "servo calibration (pulse ranges) YAML; empty = the shipped config/arm.yaml",
+            )
+            .validator(|v| match v {
+                ParameterValue::String(p) => load_calibration(p).map(|_| ()),
+                _ => Ok(()),
+            }),
+            ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
+                .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+        ],
+    }
+}
+
+/// The servo calibration from the `arm_config` file (empty: the shipped one).
+pub fn load_calibration(path: &str) -> Result<ServoCalibrations, String> {
+    let config = if path.is_empty() {
+        eezybot_kinematics::ArmConfig::shipped()
+    } else {
+        eezybot_kinematics::ArmConfig::load(std::path::Path::new(path))
+    };
+    config.map(|c| c.servos).map_err(|e| e.to_string())
+}
+
+/// One event for the loop.
+#[derive(Clone, Debug)]
+pub enum Input {
+    /// A `servo_angles` sample and when it was taken.
+    ServoAngles(JointState, Instant),
+    /// An `estop` sample.
+    Estop(bool),
+    /// A sample that could not be read.
+    Unreadable(String),
+}
+
+/// Where the loop's results go.
+pub trait Outputs {
+    /// Publish on `servo_state`.
+    fn servo_state(&self, msg: JointState);
+    /// Publish a `diagnostics` report.
+    fn diagnostics(&self, status: DiagnosticStatus);
+}
+
+/// What the node knows about the link, for diagnostics.
+#[derive(Debug, Default)]
+pub struct LinkStatus {
+    connected: Option<(u8, u8)>,
+    ever_connected: bool,
+    last_disconnect: Option<String>,
+    device_state: Option<DeviceState>,
+    clamped: bool,
+    device_rx_errors: Option<u8>,
+    sent: u64,
+    acked: u64,
+    garbage: u64,
+    reconnects: u64,
+    last_rtt: Option<Duration>,
+    rejected_inputs: u64,
+    last_rejection: Option<String>,
+    estop: bool,
+    send_latency_us: VecDeque<f64>,
+}
+
+fn percentile(v: &VecDeque<f64>, p: f64) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mut s: Vec<f64> = v.iter().copied().collect();
+    s.sort_by(f64::total_cmp);
+    Some(s[((s.len() - 1) as f64 * p).round() as usize])
+}
+
+impl LinkStatus {
+    /// Update from a link event; returns the `servo_state` to publish, if any.
+    pub fn on_event(&mut self, event: LinkEvent, cal: &ServoCalibrations) -> Option<JointState> {
+        match event {
+            LinkEvent::Connected { firmware } => {
+                log::info!(
+                    "device answered: servo_control firmware {}.{}",
+                    firmware.0,
+                    firmware.1
+                );
+                if self.ever_connected {
+                    self.reconnects += 1;
+                }
+                self.ever_connected = true;
+                self.connected = Some(firmware);
+                None
+            }
+            LinkEvent::Disconnected { reason, retry_in } => {
+                if self.connected.is_some()
+                    || self.last_disconnect.as_deref() != Some(reason.as_str())
+                {
+                    log::warn!(
+                        "serial link down: {reason}; retrying in {:.2} s",
+                        retry_in.as_secs_f64()
+                    );
+                }
+                self.connected = None;
+                self.device_state = None;
+                self.last_disconnect = Some(reason);
+                None
+            }
+            LinkEvent::VersionMismatch { device } => {
+                log::error!("the device speaks protocol version {device}; flash firmware/servo_control of this release");
+                None
+            }
+            LinkEvent::Garbage { error } => {
+                self.garbage += 1;
+                log::debug!("ignored bytes from the device: {error}");
+                None
+            }
+            LinkEvent::Sent { latency } => {
+                self.sent += 1;
+                if self.send_latency_us.len() == 1000 {
+                    self.send_latency_us.pop_front();
+                }
+                self.send_latency_us.push_back(latency.as_secs_f64() * 1e6);
+                None
+            }
+            LinkEvent::State {
+                state,
+                clamped,
+                rx_errors,
+                ticks,
+                answered,
+                ..
+            } => {
+                if self.device_state != Some(state) {
+                    match state {
+                        DeviceState::WatchdogHold | DeviceState::WatchdogDetached => {
+                            log::warn!("device watchdog fired: {}", state.name())
+                        }
+                        _ => log::info!("device state: {}", state.name()),
+                    }
+                }
+                if clamped && !self.clamped {
+                    log::warn!(
+                        "the device clamped a command to its own limits (firmware config.h)"
+                    );
+                }
+                self.device_state = Some(state);
+                self.clamped = clamped;
+                self.device_rx_errors = Some(rx_errors);
+                let stamp = match answered {
+                    Some((stamp, rtt)) => {
+                        self.acked += 1;
+                        self.last_rtt = Some(rtt);
+                        stamp
+                    }
+                    None => Time::now(),
+                };
+                Some(JointState {
+                    header: Header {
+                        stamp,
+                        frame_id: String::new(),
+                    },
+                    name: ServoId::ALL.iter().map(|s| s.name().to_string()).collect(),
+                    position: ticks_to_angles(cal, &ticks).to_vec(),
+                    velocity: vec![],
+                    effort: vec![],
+                })
+            }
+        }
+    }
+
+    /// The diagnostics entry.
+    pub fn diagnostic_status(&self, name: &str, port: &str) -> DiagnosticStatus {
+        let (level, message) = match (&self.connected, self.device_state) {
+            (None, _) => (
+                DiagnosticStatus::ERROR,
+                format!(
+                    "not connected: {}",
+                    self.last_disconnect.as_deref().unwrap_or("connecting")
+                ),
+            ),
+            (
+                Some(_),
+                Some(
+                    s @ (DeviceState::WatchdogHold
+                    | DeviceState::WatchdogDetached
+                    | DeviceState::Estop),
+                ),
+            ) => (DiagnosticStatus::WARN, format!("device {}", s.name())),
+            (Some(_), _) if self.estop => (DiagnosticStatus::WARN, "e-stop engaged".to_string()),
+            (Some(_), _) if self.last_rejection.is_some() => (
+                DiagnosticStatus::WARN,
+                format!(
+                    "servo_angles rejected: {}",
+                    self.last_rejection.as_deref().unwrap_or_default()
+                ),
+            ),
+            (Some(_), s) => (
+                DiagnosticStatus::OK,
+                format!(
+                    "connected, device {}",
+                    s.map(|s| s.name()).unwrap_or("idle")
+                ),
+            ),
+        };
+        let mut values = vec![
+            ("port", port.to_string()),
+            (
+                "connection",
+                if self.connected.is_some() {
+                    "connected".into()
+                } else {
+                    "disconnected".into()
+                },
+            ),
+            (
+                "device_state",
+                self.device_state
+                    .map(|s| s.name().to_string())
+                    .unwrap_or_default(),
+            ),
+            ("frames_sent", self.sent.to_string()),
+            ("frames_acknowledged", self.acked.to_string()),
+            (
+                "frames_rejected_by_device",
+                self.device_rx_errors
+                    .map(|n| n.to_string())
+                    .unwrap_or_default(),
+            ),
+            ("garbage_from_device", self.garbage.to_string()),
+            ("reconnects", self.reconnects.to_string()),
+            (
+                "last_rtt_ms",
+                self.last_rtt
+                    .map(|d| format!("{:.3}", d.as_secs_f64() * 1e3))
+                    .unwrap_or_default(),
+            ),
+            ("clamped_by_device", self.clamped.to_string()),
+            ("inputs_rejected", self.rejected_inputs.to_string()),
+            ("estop", self.estop.to_string()),
+        ];
+        if let Some((a, b)) = self.connected {
+            values.push(("firmware", format!("{a}.{b}")));
+        }
+        if let Some(d) = &self.last_disconnect {
+            values.push(("last_disconnect", d.clone()));
+        }
+        if let Some(r) = &self.last_rejection {
+            values.push(("last_rejection", r.clone()));
+        }
+        if let (Some(p50), Some(p99)) = (
+            percentile(&self.send_latency_us, 0.5),
+            percentile(&self.send_latency_us, 0.99),
+        ) {
+            values.push(("send_latency_us_p50", format!("{p50:.1}")));
+            values.push(("send_latency_us_p99", format!("{p99:.1}")));
+        }
+        ros_plumbing::diagnostics::status(level, name, port, &message, &values)
+    }
+}
+
+/// The loop: runs until `shutdown` resolves or `inputs` ends.
+#[allow(clippy::too_many_arguments)]
+pub async fn run(
+    link: &Link,
+    inputs: impl Stream<Item = Input>,
+    mut events: UnboundedReceiver<LinkEvent>,
+    outputs: &impl Outputs,
+    params: Params,
+    diag_name: String,
+    port_name: String,
+    shutdown: impl Future<Output = ()>,
+) {
+    let mut cal =
+        load_calibration(&params.string("arm_config").unwrap_or_default()).unwrap_or_default();
+    let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
+    let mut ticker = tokio::time::interval(period(&params));
+    let mut param_changes = params.subscribe();
+    let mut status = LinkStatus::default();
+    tokio::pin!(inputs);
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            _ = ticker.tick() => outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name)),
+            Ok(()) = param_changes.changed() => {
+                match load_calibration(&params.string("arm_config").unwrap_or_default()) {
+                    Ok(c) => cal = c,
+                    Err(e) => log::error!("keeping the previous calibration: {e}"),
+                }
+                ticker = tokio::time::interval(period(&params));
+            }
+            Some(event) = events.recv() => {
+                if let Some(msg) = status.on_event(event, &cal) {
+                    outputs.servo_state(msg);
+                }
+            }
+            input = inputs.next() => {
+                let Some(input) = input else { break };
+                match input {
+                    Input::ServoAngles(msg, received) => match angles_to_ticks(&cal, &msg) {
+                        Ok(ticks) => {
+                            link.command(ticks, msg.header.stamp, received);
+                            status.last_rejection = None;
+                        }
+                        Err(r) => {
+                            log::warn!("servo_angles rejected: {r}");
+                            status.rejected_inputs += 1;
+                            let first = status.last_rejection.is_none();
+                            status.last_rejection = Some(r.to_string());
+                            if first {
+                                outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name));
+                            }
+                        }
+                    },
+                    Input::Estop(engaged) => {
+                        if engaged != status.estop {
+                            if engaged { log::warn!("emergency stop engaged: the device holds, commands are dropped") }
+                            else { log::info!("emergency stop released: waiting for a new command") }
+                            status.estop = engaged;
+                            link.set_estop(engaged);
+                            outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name));
+                        }
+                    }
+                    Input::Unreadable(e) => {
+                        status.rejected_inputs += 1;
+                        status.last_rejection = Some(format!("unreadable sample: {e}"));
+                        log::warn!("unreadable sample ignored: {e}");
+                    }
+                }
+            }
+        }
+    }
+}

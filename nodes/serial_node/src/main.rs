@@ -1,0 +1,130 @@
+//! `serial_node` binary: sets up ROS and the serial link and runs [`serial_node::run`].
+
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Bool;
+use futures::StreamExt;
+use ros2_client::Publisher;
+use ros_plumbing::diagnostics::DiagnosticsPublisher;
+use ros_plumbing::{qos, RosNode};
+use serial_node::link::{self, Link, LinkConfig};
+use serial_node::{Input, Outputs};
+use servo_protocol::WatchdogAction;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+struct RosOutputs {
+    servo_state: Publisher<JointState>,
+    diagnostics: DiagnosticsPublisher,
+}
+
+impl Outputs for RosOutputs {
+    fn servo_state(&self, msg: JointState) {
+        if let Err(e) = self.servo_state.publish(msg) {
+            log::warn!("could not publish servo_state: {e:?}");
+        }
+    }
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.publish(vec![status]);
+    }
+}
+
+async fn main_async() -> anyhow::Result<()> {
+    let spec = serial_node::spec();
+    let mut node = RosNode::start(&spec)?;
+    if let Some(extra) = node.user_args().first() {
+        anyhow::bail!("unexpected argument `{extra}` (see --help)");
+    }
+    let params = node.params().clone();
+    let port = params.string("port").unwrap_or_default();
+    let baud = params.i64("baud").unwrap_or(115_200);
+    let config = LinkConfig {
+        send_period: Duration::from_secs_f64(1.0 / params.f64("send_rate").unwrap_or(50.0)),
+        heartbeat_period: Duration::from_secs_f64(params.f64("heartbeat_period").unwrap_or(0.1)),
+        watchdog_ms: u16::try_from(params.i64("watchdog_ms").unwrap_or(500)).unwrap_or(u16::MAX),
+        watchdog_action: if params.string("watchdog_action").as_deref() == Some("detach") {
+            WatchdogAction::Detach
+        } else {
+            WatchdogAction::Hold
+        },
+    };
+    let opener = if port == "mock" {
+        link::mock_opener(link::virtual_arduino())
+    } else {
+        link::serial_opener(port.clone(), u32::try_from(baud).unwrap_or(115_200))
+    };
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let link = Link::start(opener, config, tx)?;
+
+    let angles = node.subscription::<JointState>("servo_angles", qos::COMMANDS)?;
+    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let outputs = RosOutputs {
+        servo_state: node.publisher("servo_state", qos::COMMANDS)?,
+        diagnostics: node.diagnostics()?,
+    };
+    let inputs = futures::stream::select(
+        angles.async_stream().map(|r| match r {
+            Ok((m, _)) => Input::ServoAngles(m, Instant::now()),
+            Err(e) => Input::Unreadable(format!("{e:?}")),
+        }),
+        estop.async_stream().filter_map(|r| async move {
+            match r {
+                Ok((m, _)) => Some(Input::Estop(m.data)),
+                Err(e) => {
+                    log::warn!("unreadable sample on estop ignored: {e:?}");
+                    None
+                }
+            }
+        }),
+    );
+    log::info!(
+        "{} ready in ROS domain {}: {} -> {} ({}), replies on {}",
+        node.resolver().node_fqn(),
+        node.domain_id(),
+        node.resolver().resolve("servo_angles")?,
+        if port == "mock" {
+            "the virtual Arduino".to_string()
+        } else {
+            format!("{port} at {baud} baud")
+        },
+        format_args!(
+            "{:.0} frames/s at most",
+            1.0 / config.send_period.as_secs_f64()
+        ),
+        node.resolver().resolve("servo_state")?,
+    );
+    let diag_name = format!("{}: servo link", node.resolver().node_name());
+    let shutdown = async {
+        let signal = ros_plumbing::shutdown_signal().await;
+        log::info!("{signal}: shutting down");
+    };
+    serial_node::run(
+        &link, inputs, rx, &outputs, params, diag_name, port, shutdown,
+    )
+    .await;
+    link.shutdown();
+    drop(outputs);
+    drop((angles, estop));
+    node.shutdown().await;
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("serial_node: cannot start the async runtime: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match runtime.block_on(main_async()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("serial_node: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,227 @@
+"""serial_node with the virtual Arduino (in-process and behind a pty), a misbehaving
+device, and the real firmware in simavr at the end of the whole chain."""
+import math
+import os
+import signal
+import statistics
+import subprocess
+import time
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+
+from conftest import LATCHED, REPO, bin_path
+from interop.servo_link import HELLO, HELLO_ACK, STATE, Decoder, SimulatedUno, frame, pulses
+import struct
+
+SERVOS = ["base_servo", "shoulder_servo", "elbow_servo", "gripper_servo"]
+FIRMWARE = REPO / "firmware" / "servo_control"
+
+
+def angles(deg, sec=0):
+    m = JointState(name=list(SERVOS), position=[math.radians(d) for d in deg])
+    m.header.stamp.sec = sec
+    return m
+
+
+def pulse_us(deg):
+    """ROBOT.md / the Servo library: 544 us at 0 deg, 2400 us at 180 deg."""
+    return 544 + (2400 - 544) * deg / 180
+
+
+class SerialRig:
+    def __init__(self, launch, observer, port="mock", *extra):
+        self.proc = launch("serial_node", "--ros-args", "-p", f"port:={port}", "-p", "diagnostics_period:=0.2", *extra)
+        self.o = observer
+        self.state = observer.sub("/servo_state", JointState)
+        self.diags = observer.sub("/diagnostics", DiagnosticArray)
+        self.angles = observer.pub("/servo_angles", JointState)
+        self.estop = observer.pub("/estop", Bool, LATCHED)
+        observer.wait_matched(self.angles)
+        observer.wait_publisher("/diagnostics")
+
+    def diag(self):
+        if not self.diags:
+            return None, {}
+        s = [x for x in self.diags[-1][1].status if x.name.startswith("serial_node")][0]
+        return s, {kv.key: kv.value for kv in s.values}
+
+    def wait_diag(self, pred, timeout=10):
+        return self.o.spin_until(lambda: self.diags and pred(*self.diag()), timeout)
+
+
+def test_mock_arduino_acknowledges_with_the_command_stamp(launch, observer):
+    rig = SerialRig(launch, observer)
+    assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    rig.angles.publish(angles([80, 100, 70, 120], sec=42))
+    assert observer.spin_until(lambda: any(m.header.stamp.sec == 42 for _, m in rig.state), 10)
+    # the modelled horns reach the command at servo speed; heartbeats report them
+    assert observer.spin_until(lambda: [round(math.degrees(p), 1) for p in rig.state[-1][1].position] == [80.0, 100.0, 70.0, 120.0], 5)
+    assert rig.wait_diag(lambda s, v: int(v["frames_sent"]) >= 1 and int(v["frames_acknowledged"]) >= 1 and v["last_rtt_ms"])
+
+
+def test_bad_servo_angles_are_refused_and_nothing_is_sent(launch, observer):
+    rig = SerialRig(launch, observer)
+    assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    rig.angles.publish(angles([90, 90, 90, 90]))
+    assert rig.wait_diag(lambda s, v: v["frames_sent"] == "1")
+    bad = [
+        (angles([90, 90, 90, 30]), "outside its range"),        # gripper below 60 deg
+        (angles([90, math.nan, 90, 90]), "is nan"),
+        (JointState(name=["base_servo"], position=[1.0]), "no position"),
+        (JointState(name=SERVOS + ["x"], position=[1.0] * 5), "unknown servo"),
+    ]
+    for i, (msg, text) in enumerate(bad, start=1):
+        rig.angles.publish(msg)
+        assert rig.wait_diag(lambda s, v: v["inputs_rejected"] == str(i)), text
+        assert text in rig.diag()[1]["last_rejection"].lower()
+    observer.spin_for(0.3)
+    assert rig.diag()[1]["frames_sent"] == "1"
+    assert rig.proc.proc.poll() is None
+
+
+def test_latest_wins_at_1khz(launch, observer):
+    rig = SerialRig(launch, observer)
+    assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    start = time.monotonic()
+    n = 0
+    while time.monotonic() - start < 2.0:
+        rig.angles.publish(angles([60 + (n % 60), 90, 90, 90]))
+        n += 1
+        observer.executor.spin_once(timeout_sec=0.0005)
+    last = 60 + ((n - 1) % 60)
+    observer.spin_for(1.0)
+    sent = int(rig.diag()[1]["frames_sent"])
+    assert n > 1000
+    assert sent <= 2.0 * 50 + 10, f"{sent} frames for {n} commands: more than the 50 Hz rate"
+    assert sent >= 2.0 * 50 * 0.5
+    # the newest command is the one applied
+    assert observer.spin_until(lambda: round(math.degrees(rig.state[-1][1].position[0]), 1) == last, 3)
+
+
+def test_estop_drops_commands_until_released(launch, observer):
+    rig = SerialRig(launch, observer)
+    assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    rig.angles.publish(angles([90, 90, 90, 90]))
+    assert rig.wait_diag(lambda s, v: v["frames_sent"] == "1")
+    rig.estop.publish(Bool(data=True))
+    assert rig.wait_diag(lambda s, v: v["device_state"] == "e-stop")
+    rig.angles.publish(angles([100, 90, 90, 90]))
+    observer.spin_for(0.5)
+    assert rig.diag()[1]["frames_sent"] == "1"
+    rig.estop.publish(Bool(data=False))
+    assert rig.wait_diag(lambda s, v: v["device_state"] == "running")
+    observer.spin_for(0.3)
+    assert rig.diag()[1]["frames_sent"] == "1", "a command from during the e-stop was sent"
+    rig.angles.publish(angles([110, 90, 90, 90]))
+    assert rig.wait_diag(lambda s, v: v["frames_sent"] == "2")
+
+
+def start_virtual_arduino(link):
+    p = subprocess.Popen([bin_path("virtual_arduino"), str(link)], stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 10
+    while not os.path.exists(link):
+        assert time.monotonic() < deadline and p.poll() is None, "virtual_arduino did not start"
+        time.sleep(0.01)
+    return p
+
+
+def test_missing_port_then_unplug_and_replug(launch, observer, tmp_path):
+    link = tmp_path / "tty"
+    rig = SerialRig(launch, observer, str(link))
+    # no device yet: the node keeps running and says why
+    assert rig.wait_diag(lambda s, v: s.level == b"\x02" and "No such file" in s.message)
+    dev = start_virtual_arduino(link)
+    try:
+        assert rig.wait_diag(lambda s, v: v.get("connection") == "connected", 15)
+        rig.angles.publish(angles([70, 95, 85, 100], sec=7))
+        assert observer.spin_until(lambda: any(m.header.stamp.sec == 7 for _, m in rig.state), 10)
+        # unplug
+        dev.kill()
+        dev.wait()
+        assert rig.wait_diag(lambda s, v: v.get("connection") == "disconnected")
+        n_state = len(rig.state)
+        # replug: handshake again and continue from the newest command, unasked
+        dev = start_virtual_arduino(link)
+        assert rig.wait_diag(lambda s, v: v.get("connection") == "connected" and v["reconnects"] == "1", 15)
+        assert observer.spin_until(lambda: len(rig.state) > n_state
+                                   and [round(math.degrees(p)) for p in rig.state[-1][1].position] == [70, 95, 85, 100], 10)
+        assert rig.proc.proc.poll() is None
+    finally:
+        dev.send_signal(signal.SIGINT)
+        assert dev.wait(5) == 0
+
+
+def test_garbage_from_the_device_is_counted_and_ignored(launch, observer, tmp_path):
+    """A device that answers the handshake but also sends noise and broken frames."""
+    import pty
+    import tty
+    master, slave = pty.openpty()
+    tty.setraw(slave)
+    link = tmp_path / "tty"
+    os.symlink(os.ttyname(slave), link)
+    os.set_blocking(master, False)
+    rig = SerialRig(launch, observer, str(link))
+    decoder, seq = Decoder(), 0
+    try:
+        def serve(seconds):
+            nonlocal seq
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                observer.executor.spin_once(timeout_sec=0.01)
+                try:
+                    data = os.read(master, 256)
+                except BlockingIOError:
+                    continue
+                for msg_type, s, _ in decoder.feed(data):
+                    seq += 1
+                    if msg_type == HELLO:
+                        reply = frame(HELLO_ACK, seq, struct.pack("<BBBBH", 1, 9, 9, 4, 500))
+                    else:
+                        reply = frame(STATE, seq, struct.pack("<BBBB4H", s, 1, 0, 0, 3000, 3000, 3000, 3000))
+                    broken = bytearray(reply)
+                    broken[-1] ^= 0xFF
+                    os.write(master, b"\x00garbage\xff" + bytes(broken) + reply)
+        serve(2.0)
+        assert rig.diags and rig.diag()[1].get("connection") == "connected"
+        assert int(rig.diag()[1]["garbage_from_device"]) > 0
+        rig.angles.publish(angles([90, 90, 90, 90], sec=5))
+        serve(1.0)
+        assert any(m.header.stamp.sec == 5 for _, m in rig.state)
+        assert rig.proc.proc.poll() is None
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_path):
+    """rclpy xyz_target -> compute_ik -> serial_node -> pty -> servo_control in simavr:
+    the pulse widths on pins 8..11 are ROBOT.md's servo mapping, within 2 us."""
+    uno = SimulatedUno(tmp_path, FIRMWARE)
+    try:
+        launch("compute_ik")
+        rig = SerialRig(launch, observer, str(uno.tty_path))
+        sa = observer.sub("/servo_angles", JointState)
+        xyz = observer.pub("/xyz_target", PointStamped)
+        observer.wait_matched(xyz)
+        assert rig.wait_diag(lambda s, v: v.get("connection") == "connected", 15)
+        for i, p in enumerate([(0.2, 0.05, 0.15), (0.16, -0.08, 0.21)]):
+            m = PointStamped()
+            m.header.frame_id = "base_link"
+            m.header.stamp.sec = 300 + i
+            m.point.x, m.point.y, m.point.z = p
+            xyz.publish(m)
+            assert observer.spin_until(lambda: any(s.header.stamp.sec == 300 + i for _, s in rig.state), 10)
+            deg = [math.degrees(a) for a in [s for _, s in sa if s.header.stamp.sec == 300 + i][0].position]
+            acked_at = uno.events()[1][-1][0]
+            observer.spin_for(0.25)
+            edges, _ = uno.events()
+            for pin in range(4):
+                widths = [w for _, w in pulses(edges, pin, acked_at)][2:9]
+                assert statistics.median(widths) == pytest.approx(pulse_us(deg[pin]), abs=2.0), f"pin {8 + pin}"
+    finally:
+        code = uno.stop()
+    assert code == 0
