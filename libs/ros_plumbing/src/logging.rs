@@ -75,13 +75,9 @@ impl log::Log for NodeLogger {
             } else {
                 format!("{name}:{}", record.target())
             };
-            let _ = writeln!(
-                std::io::stderr().lock(),
-                "[{level}] [{}.{:09}] [{who}]: {}",
-                now.as_secs(),
-                now.subsec_nanos(),
-                record.args()
-            );
+            // one write per line, so lines of several nodes on one terminal do not interleave
+            let line = format!("[{level}] [{}.{:09}] [{who}]: {}\n", now.as_secs(), now.subsec_nanos(), record.args());
+            let _ = std::io::stderr().lock().write_all(line.as_bytes());
         }
         if is_own(record.target()) {
             if let Some(handle) = self.rosout.get() {
