@@ -76,7 +76,12 @@ impl log::Log for NodeLogger {
                 format!("{name}:{}", record.target())
             };
             // one write per line, so lines of several nodes on one terminal do not interleave
-            let line = format!("[{level}] [{}.{:09}] [{who}]: {}\n", now.as_secs(), now.subsec_nanos(), record.args());
+            let line = format!(
+                "[{level}] [{}.{:09}] [{who}]: {}\n",
+                now.as_secs(),
+                now.subsec_nanos(),
+                record.args()
+            );
             let _ = std::io::stderr().lock().write_all(line.as_bytes());
         }
         if is_own(record.target()) {

@@ -107,7 +107,10 @@ pub async fn run(
     let mut last_immediate = Instant::now() - MIN_IMMEDIATE_DIAG_GAP;
     // A viewer (state_publisher, RViz, the GUI) that joins gets the current pose at once,
     // not at the next target: joint_states, stamped now (no servo moves for it).
-    let mut subscriber_poll = tokio::time::interval_at(tokio::time::Instant::now() + SUBSCRIBER_POLL, SUBSCRIBER_POLL);
+    let mut subscriber_poll = tokio::time::interval_at(
+        tokio::time::Instant::now() + SUBSCRIBER_POLL,
+        SUBSCRIBER_POLL,
+    );
     let mut subscribers = 0;
     tokio::pin!(inputs);
     tokio::pin!(shutdown);

@@ -11,7 +11,7 @@ pub mod core;
 pub mod link;
 
 use crate::core::{angles_to_ticks, ticks_to_angles};
-use crate::link::{Link, LinkEvent};
+use crate::link::{Link, LinkEvent, SendStats};
 use eezybot_kinematics::{ServoCalibrations, ServoId};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -110,7 +110,6 @@ pub struct LinkStatus {
     device_state: Option<DeviceState>,
     clamped: bool,
     device_rx_errors: Option<u8>,
-    sent: u64,
     acked: u64,
     garbage: u64,
     reconnects: u64,
@@ -118,7 +117,8 @@ pub struct LinkStatus {
     rejected_inputs: u64,
     last_rejection: Option<String>,
     estop: bool,
-    send_latency_us: VecDeque<f64>,
+    /// ticks and state of the last servo_state published, to skip repeats
+    last_published: Option<([u16; servo_protocol::SERVOS], DeviceState)>,
 }
 
 fn percentile(v: &VecDeque<f64>, p: f64) -> Option<f64> {
@@ -170,14 +170,6 @@ impl LinkStatus {
                 log::debug!("ignored bytes from the device: {error}");
                 None
             }
-            LinkEvent::Sent { latency } => {
-                self.sent += 1;
-                if self.send_latency_us.len() == 1000 {
-                    self.send_latency_us.pop_front();
-                }
-                self.send_latency_us.push_back(latency.as_secs_f64() * 1e6);
-                None
-            }
             LinkEvent::State {
                 state,
                 clamped,
@@ -208,8 +200,11 @@ impl LinkStatus {
                         self.last_rtt = Some(rtt);
                         stamp
                     }
+                    // a heartbeat's or the watchdog's report: only worth a message if it changed
+                    None if self.last_published == Some((ticks, state)) => return None,
                     None => Time::now(),
                 };
+                self.last_published = Some((ticks, state));
                 Some(JointState {
                     header: Header {
                         stamp,
@@ -224,8 +219,8 @@ impl LinkStatus {
         }
     }
 
-    /// The diagnostics entry.
-    pub fn diagnostic_status(&self, name: &str, port: &str) -> DiagnosticStatus {
+    /// The diagnostics entry; `sent` holds the link's send counters.
+    pub fn diagnostic_status(&self, name: &str, port: &str, sent: &SendStats) -> DiagnosticStatus {
         let (level, message) = match (&self.connected, self.device_state) {
             (None, _) => (
                 DiagnosticStatus::ERROR,
@@ -274,7 +269,7 @@ impl LinkStatus {
                     .map(|s| s.name().to_string())
                     .unwrap_or_default(),
             ),
-            ("frames_sent", self.sent.to_string()),
+            ("frames_sent", sent.sent.to_string()),
             ("frames_acknowledged", self.acked.to_string()),
             (
                 "frames_rejected_by_device",
@@ -304,8 +299,8 @@ impl LinkStatus {
             values.push(("last_rejection", r.clone()));
         }
         if let (Some(p50), Some(p99)) = (
-            percentile(&self.send_latency_us, 0.5),
-            percentile(&self.send_latency_us, 0.99),
+            percentile(&sent.latency_us, 0.5),
+            percentile(&sent.latency_us, 0.99),
         ) {
             values.push(("send_latency_us_p50", format!("{p50:.1}")));
             values.push(("send_latency_us_p99", format!("{p99:.1}")));
@@ -337,7 +332,7 @@ pub async fn run(
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
-            _ = ticker.tick() => outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name)),
+            _ = ticker.tick() => outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name, &link.send_stats())),
             Ok(()) = param_changes.changed() => {
                 match load_calibration(&params.string("arm_config").unwrap_or_default()) {
                     Ok(c) => cal = c,
@@ -364,7 +359,7 @@ pub async fn run(
                             let first = status.last_rejection.is_none();
                             status.last_rejection = Some(r.to_string());
                             if first {
-                                outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name));
+                                outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name, &link.send_stats()));
                             }
                         }
                     },
@@ -374,7 +369,7 @@ pub async fn run(
                             else { log::info!("emergency stop released: waiting for a new command") }
                             status.estop = engaged;
                             link.set_estop(engaged);
-                            outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name));
+                            outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name, &link.send_stats()));
                         }
                     }
                     Input::Unreadable(e) => {

@@ -108,11 +108,16 @@ pub enum LinkEvent {
         /// why
         error: String,
     },
-    /// A SET_PULSES went out (for counting), with the delay from `command()` to the write.
-    Sent {
-        /// command() → first byte written
-        latency: Duration,
-    },
+}
+
+/// Counters of the sending side, read by the node for diagnostics (kept here rather
+/// than sent as events: one thread wake-up less per command).
+#[derive(Clone, Debug, Default)]
+pub struct SendStats {
+    /// SET_PULSES frames written.
+    pub sent: u64,
+    /// The last (up to) 1000 delays from a command's arrival to its first byte written, µs.
+    pub latency_us: std::collections::VecDeque<f64>,
 }
 
 #[derive(Default)]
@@ -148,6 +153,7 @@ impl InFlight {
 /// The running link. Dropping it does not stop it: call [`Link::shutdown`].
 pub struct Link {
     shared: Arc<(Mutex<Shared>, Condvar)>,
+    stats: Arc<Mutex<SendStats>>,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -159,14 +165,21 @@ impl Link {
         events: UnboundedSender<LinkEvent>,
     ) -> io::Result<Link> {
         let shared = Arc::new((Mutex::new(Shared::default()), Condvar::new()));
-        let s = shared.clone();
+        let stats = Arc::new(Mutex::new(SendStats::default()));
+        let (s, st) = (shared.clone(), stats.clone());
         let thread = std::thread::Builder::new()
             .name("serial link".into())
-            .spawn(move || writer_loop(opener, config, s, events))?;
+            .spawn(move || writer_loop(opener, config, s, st, events))?;
         Ok(Link {
             shared,
+            stats,
             thread: Some(thread),
         })
+    }
+
+    /// A copy of the sending side's counters.
+    pub fn send_stats(&self) -> SendStats {
+        self.stats.lock().map(|s| s.clone()).unwrap_or_default()
     }
 
     /// Hand in the newest command (`received`: when its message arrived); an older one
@@ -229,6 +242,7 @@ fn writer_loop(
     mut opener: PortOpener,
     config: LinkConfig,
     shared: Arc<(Mutex<Shared>, Condvar)>,
+    stats: Arc<Mutex<SendStats>>,
     events: UnboundedSender<LinkEvent>,
 ) {
     let mut backoff = Duration::from_millis(250);
@@ -247,7 +261,9 @@ fn writer_loop(
                 continue;
             }
         };
-        match run_session(port, &config, &shared, &events, &mut seq, &in_flight) {
+        match run_session(
+            port, &config, &shared, &stats, &events, &mut seq, &in_flight,
+        ) {
             Ok(()) => break, // shutdown
             Err((reason, connected)) => {
                 if connected {
@@ -361,6 +377,7 @@ fn run_session(
     mut port: Box<dyn Port>,
     config: &LinkConfig,
     shared: &Arc<(Mutex<Shared>, Condvar)>,
+    stats: &Arc<Mutex<SendStats>>,
     events: &UnboundedSender<LinkEvent>,
     seq: &mut u8,
     in_flight: &Arc<Mutex<InFlight>>,
@@ -382,6 +399,7 @@ fn run_session(
         &mut port,
         config,
         shared,
+        stats,
         events,
         seq,
         in_flight,
@@ -410,6 +428,7 @@ fn session_body(
     port: &mut Box<dyn Port>,
     config: &LinkConfig,
     shared: &Arc<(Mutex<Shared>, Condvar)>,
+    stats: &Arc<Mutex<SendStats>>,
     events: &UnboundedSender<LinkEvent>,
     seq: &mut u8,
     in_flight: &Arc<Mutex<InFlight>>,
@@ -535,7 +554,13 @@ fn session_body(
             }
             let latency = handed_in.elapsed();
             send(port, seq, Message::SetPulses { ticks })?;
-            let _ = events.send(LinkEvent::Sent { latency });
+            if let Ok(mut st) = stats.lock() {
+                st.sent += 1;
+                if st.latency_us.len() == 1000 {
+                    st.latency_us.pop_front();
+                }
+                st.latency_us.push_back(latency.as_secs_f64() * 1e6);
+            }
             last_command_sent = Some(Instant::now());
             last_any_sent = Instant::now();
         } else if Instant::now() >= last_any_sent + config.heartbeat_period {
