@@ -2,8 +2,9 @@
 # Runs the whole EezyBot graph that exists on this machine, in one ROS domain
 # (ROS_DOMAIN_ID, default 0). Ctrl-C stops every node.
 #
-# Nodes: compute_ik, state_publisher, serial_node. serial_node uses the Arduino on
-# SERIAL_PORT (default /dev/ttyACM0) if it exists, else the built-in virtual Arduino.
+# Nodes: gui_bridge (web panel on http://127.0.0.1:8080, or GUI_BIND), compute_ik,
+# state_publisher, serial_node. serial_node uses the Arduino on SERIAL_PORT (default
+# /dev/ttyACM0) if it exists, else the built-in virtual Arduino.
 # Extra ROS arguments for every node can follow, e.g.
 #   launch_scripts/run_graph.sh -r __ns:=/arm2
 set -euo pipefail
@@ -26,7 +27,10 @@ ros_args=()
 port=${SERIAL_PORT:-/dev/ttyACM0}
 [ -e "$port" ] || port=mock
 "$bin/serial_node" --ros-args -p "port:=$port" "$@" & pids+=($!)
+bind=${GUI_BIND:-127.0.0.1:8080}
+"$bin/gui_bridge" --ros-args -p "bind:=$bind" "$@" & pids+=($!)
 
-echo "graph running in ROS domain ${ROS_DOMAIN_ID:-0}: compute_ik, state_publisher, serial_node (port $port) (Ctrl-C to stop)" >&2
+echo "graph running in ROS domain ${ROS_DOMAIN_ID:-0}: compute_ik, state_publisher, serial_node (port $port), gui_bridge" >&2
+echo "open http://$bind/ (Ctrl-C to stop)" >&2
 echo "try: ros2 topic pub --once /xyz_target geometry_msgs/msg/PointStamped \"{header: {frame_id: base_link}, point: {x: 0.2, y: 0.0, z: 0.15}}\"" >&2
 wait -n "${pids[@]}"

@@ -7,8 +7,9 @@ _here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
 _log() { echo "[setup] $*" >&2; }
 
-# Debian packages: the AVR toolchain and Arduino core for the firmware, simavr for its tests.
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev}
+# Debian packages: the AVR toolchain and Arduino core for the firmware, simavr for its
+# tests, Chromium for the browser tests of the web panel.
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium}
 _missing=()
 for p in $EEZYBOT_APT_PACKAGES; do
   dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
@@ -36,7 +37,7 @@ if [ ! -f "$_venv/.complete" ]; then
   rm -rf "$_venv"
   "$_py" -m venv "$_venv"
   "$_venv/bin/pip" install -q --disable-pip-version-check -r "$_req"
-  "$_venv/bin/python" -c 'import rclpy, cyclonedds, pytest' 
+  "$_venv/bin/python" -c 'import rclpy, cyclonedds, pytest, playwright'
   touch "$_venv/.complete"
 fi
 export EEZYBOT_PYTHON="$_venv/bin/python"

@@ -112,6 +112,7 @@ pub async fn run(
         SUBSCRIBER_POLL,
     );
     let mut subscribers = 0;
+    let mut greet_polls = 0u8;
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
@@ -121,9 +122,15 @@ pub async fn run(
             _ = subscriber_poll.tick() => {
                 let now = outputs.joint_states_subscribers();
                 if now > subscribers {
-                    outputs.joint_states(core.joint_states(Time::now()));
+                    // the new reader may match our writer a little after we match it:
+                    // send the pose over the next second, not only once
+                    greet_polls = 4;
                 }
                 subscribers = now;
+                if greet_polls > 0 {
+                    greet_polls -= 1;
+                    outputs.joint_states(core.joint_states(Time::now()));
+                }
             }
             Ok(()) = param_changes.changed() => {
                 // Values were validated before they were stored; a file that vanished since is reported.

@@ -1,0 +1,327 @@
+//! `gui_bridge`: operator input → targets.
+//!
+//! A web page (served by the node, no build step, WebSocket) with x/y/z and gripper
+//! sliders, a joint mode, keyboard jog, gamepad with deadman, a live side and top view,
+//! node status, end-to-end latency and an e-stop button; and a command-line driver
+//! (`--once X Y Z`, `--play waypoints.csv`, `--record out.csv`). The operator logic is
+//! [`teleop::Teleop`]; [`run`] is the loop between the browsers and ROS.
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
+
+pub mod teleop;
+pub mod web;
+
+use crate::teleop::{Command, Event, Teleop};
+use crate::web::{ClientRequest, FromClient};
+use eezybot_kinematics::urdf::RobotModel;
+use eezybot_kinematics::{ArmJoints, ACTUATED_JOINTS};
+use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::Time;
+use futures::{Stream, StreamExt};
+use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
+use serde_json::json;
+use std::collections::{BTreeMap, VecDeque};
+use std::future::Future;
+use std::time::{Duration, Instant};
+use tokio::sync::{broadcast, mpsc};
+
+/// The node's description and parameters.
+pub fn spec() -> ros_plumbing::NodeSpec {
+    ros_plumbing::NodeSpec {
+        name: "gui_bridge",
+        description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
+        usage: "[--once X Y Z [--gripper G] | --play WAYPOINTS.csv | --record OUT.csv] [--timeout S]",
+        params: vec![
+            ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
+            ParamSpec::new("rate", ParameterValue::Double(50.0), "most messages a second on each target topic (latest wins)")
+                .range(ParamRange::Double { min: 1.0, max: 500.0 }),
+            ParamSpec::new(
+                "arm_config",
+                ParameterValue::String(String::new()),
+                "arm geometry and limits for the reachability check; empty = the shipped config/arm.yaml",
+            )
+            .validator(|v| match v {
+                ParameterValue::String(p) => load_arm(p).map(|_| ()),
+                _ => Ok(()),
+            }),
+            ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
+        ],
+    }
+}
+
+/// The arm model from an `arm_config` path (empty: the shipped configuration).
+pub fn load_arm(path: &str) -> Result<eezybot_kinematics::Arm, String> {
+    let c = if path.is_empty() {
+        eezybot_kinematics::ArmConfig::shipped()
+    } else {
+        eezybot_kinematics::ArmConfig::load(std::path::Path::new(path))
+    };
+    c.map(|c| c.arm()).map_err(|e| e.to_string())
+}
+
+/// One ROS input of the bridge.
+#[derive(Clone, Debug)]
+pub enum Input {
+    /// `joint_states`
+    JointStates(JointState),
+    /// `robot_description`
+    RobotDescription(String),
+    /// `diagnostics`
+    Diagnostics(DiagnosticArray),
+    /// `servo_state`
+    ServoState(JointState),
+    /// `estop`
+    Estop(bool),
+}
+
+/// Where the bridge's targets go.
+pub trait Outputs {
+    /// Publish on `xyz_target` with this stamp.
+    fn xyz_target(&self, xyz: [f64; 3], stamp: Time);
+    /// Publish on `gripper_target`.
+    fn gripper_target(&self, opening: f64);
+    /// Publish on `joint_target` with this stamp.
+    fn joint_target(&self, positions: &[(String, f64)], stamp: Time);
+    /// Publish on `estop`.
+    fn estop(&self, engaged: bool);
+}
+
+/// Health of the other nodes, from their `diagnostics`.
+#[derive(Default)]
+struct NodeHealth {
+    seen: BTreeMap<String, (u8, String, Instant)>,
+    last_rejection: Option<String>,
+}
+
+impl NodeHealth {
+    fn update(&mut self, msg: &DiagnosticArray) {
+        for s in &msg.status {
+            let node = s
+                .name
+                .split(':')
+                .next()
+                .unwrap_or(&s.name)
+                .trim()
+                .to_string();
+            if node.starts_with("compute_ik") {
+                if let Some(kv) = s.values.iter().find(|kv| kv.key == "last_rejection") {
+                    self.last_rejection = Some(kv.value.clone());
+                }
+            }
+            self.seen
+                .insert(node, (s.level, s.message.clone(), Instant::now()));
+        }
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let mut nodes = serde_json::Map::new();
+        for name in ["compute_ik", "state_publisher", "serial_node"] {
+            let v = match self.seen.get(name) {
+                Some((level, message, at)) => {
+                    let age = at.elapsed().as_secs_f64();
+                    json!({"up": age < 3.0, "level": level, "message": message, "age_s": age})
+                }
+                None => json!({"up": false, "level": 3, "message": "not seen", "age_s": null}),
+            };
+            nodes.insert(name.to_string(), v);
+        }
+        json!({"t": "status", "nodes": nodes, "last_rejection": self.last_rejection})
+    }
+}
+
+/// Arrival time − stamp of `servo_state` replies to our own targets.
+#[derive(Default)]
+struct Latency {
+    ours: VecDeque<i64>,
+    ms: VecDeque<f64>,
+}
+
+impl Latency {
+    fn sent(&mut self, stamp: Time) {
+        if self.ours.len() == 200 {
+            self.ours.pop_front();
+        }
+        self.ours.push_back(stamp.to_nanos());
+    }
+    fn reply(&mut self, stamp: Time) -> Option<serde_json::Value> {
+        let i = self.ours.iter().position(|s| *s == stamp.to_nanos())?;
+        self.ours.remove(i);
+        let ms = (Time::now().to_nanos() - stamp.to_nanos()) as f64 / 1e6;
+        if self.ms.len() == 50 {
+            self.ms.pop_front();
+        }
+        self.ms.push_back(ms);
+        let mut sorted: Vec<f64> = self.ms.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        Some(
+            json!({"t": "latency", "ms": ms, "median_ms": sorted[sorted.len() / 2], "n": sorted.len()}),
+        )
+    }
+}
+
+fn joints_json(q: &ArmJoints) -> serde_json::Value {
+    json!({"base_joint": q.base_rad, "shoulder_joint": q.shoulder_rad, "elbow_joint": q.elbow_rad})
+}
+
+/// The snapshot a browser gets when it connects.
+pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
+    let arm = teleop.arm();
+    let l = arm.limits;
+    let g = arm.geometry;
+    json!({
+        "t": "hello",
+        "target": teleop.target(),
+        "rate": rate,
+        "limits": {
+            "base_joint": [l.base_rad.0, l.base_rad.1],
+            "shoulder_joint": [l.shoulder_rad.0, l.shoulder_rad.1],
+            "elbow_joint": [l.elbow_rad.0, l.elbow_rad.1],
+            "gripper_joint": [0.0, g.gripper_open_rad],
+        },
+        "workspace": {"x": [0.0, 0.30], "y": [-0.22, 0.22], "z": [0.0, 0.30]},
+        "geometry": {"shoulder_height": g.shoulder_height_m, "main_arm": g.main_arm_m, "forearm": g.forearm_m, "tool_dx": g.tool_dx_m},
+    })
+    .to_string()
+}
+
+/// Segments (parent origin → child origin, child link name) of every joint of the URDF
+/// for these joint positions, for the page's side and top views.
+fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
+    let positions: Vec<(&str, f64)> = js
+        .name
+        .iter()
+        .map(String::as_str)
+        .zip(js.position.iter().copied())
+        .collect();
+    let poses = model.link_poses(&positions);
+    model
+        .joints
+        .iter()
+        .filter_map(|j| {
+            let a = poses.get(&j.parent)?.translation.vector;
+            let b = poses.get(&j.child)?.translation.vector;
+            ((b - a).norm() > 1e-6).then(|| ([a.x, a.y, a.z, b.x, b.y, b.z], j.child.clone()))
+        })
+        .collect()
+}
+
+/// The loop between browsers and ROS; runs until `shutdown` resolves.
+#[allow(clippy::too_many_arguments)]
+pub async fn run(
+    teleop: std::sync::Arc<std::sync::Mutex<Teleop>>,
+    inputs: impl Stream<Item = Input>,
+    mut requests: mpsc::UnboundedReceiver<FromClient>,
+    to_browsers: broadcast::Sender<String>,
+    outputs: &impl Outputs,
+    params: Params,
+    shutdown: impl Future<Output = ()>,
+) {
+    let mut health = NodeHealth::default();
+    let mut latency = Latency::default();
+    let mut model: Option<RobotModel> = None;
+    let mut status_tick = tokio::time::interval(Duration::from_millis(500));
+    let mut param_changes = params.subscribe();
+    let send = |v: serde_json::Value| {
+        let _ = to_browsers.send(v.to_string());
+    };
+    tokio::pin!(inputs);
+    tokio::pin!(shutdown);
+    loop {
+        let due = teleop.lock().ok().and_then(|t| t.next_due(Instant::now()));
+        tokio::select! {
+            _ = &mut shutdown => break,
+            _ = status_tick.tick() => send(health.json()),
+            Ok(()) = param_changes.changed() => {
+                if let Ok(mut t) = teleop.lock() {
+                    t.set_rate(params.f64("rate").unwrap_or(50.0));
+                }
+            }
+            _ = async { if let Some(d) = due { tokio::time::sleep_until(d.into()).await } }, if due.is_some() => {
+                let commands = teleop.lock().map(|mut t| t.take_due(Instant::now())).unwrap_or_default();
+                for c in commands {
+                    let stamp = Time::now();
+                    match &c {
+                        Command::Target(xyz) => {
+                            outputs.xyz_target(*xyz, stamp);
+                            latency.sent(stamp);
+                            send(json!({"t": "sent", "topic": "xyz_target", "xyz": xyz, "stamp_ns": stamp.to_nanos()}));
+                        }
+                        Command::Gripper(g) => {
+                            outputs.gripper_target(*g);
+                            send(json!({"t": "sent", "topic": "gripper_target", "value": g}));
+                        }
+                        Command::Joints(q) => {
+                            outputs.joint_target(q, stamp);
+                            latency.sent(stamp);
+                            send(json!({"t": "sent", "topic": "joint_target", "q": q, "stamp_ns": stamp.to_nanos()}));
+                        }
+                        Command::Estop(on) => {
+                            outputs.estop(*on);
+                            send(json!({"t": "sent", "topic": "estop", "on": on}));
+                        }
+                    }
+                }
+            }
+            Some(FromClient { request, reply }) = requests.recv() => {
+                let event = match request {
+                    ClientRequest::Check { xyz } => {
+                        let answer = match teleop.lock().map(|t| t.check(xyz)) {
+                            Ok(Ok(q)) => json!({"t": "check", "xyz": xyz, "reachable": true, "joints": joints_json(&q)}),
+                            Ok(Err(e)) => json!({"t": "check", "xyz": xyz, "reachable": false, "reason": e.to_string()}),
+                            Err(_) => continue,
+                        };
+                        let _ = reply.send(answer.to_string());
+                        continue;
+                    }
+                    ClientRequest::Target { xyz } => Event::SetTarget { xyz },
+                    ClientRequest::Jog { d } => Event::Jog { dxyz: d },
+                    ClientRequest::Gripper { v } => Event::Gripper { opening: v },
+                    ClientRequest::Joints { q } => Event::Joints { positions: q.into_iter().collect() },
+                    ClientRequest::Estop { on } => Event::Estop { engaged: on },
+                };
+                let result = teleop.lock().map(|mut t| t.handle_event(event));
+                let answer = match result {
+                    Ok(Ok(f)) => json!({"t": "ack", "target": f.target, "joints": joints_json(&f.joints), "reachable": true}),
+                    Ok(Err(refusal)) => json!({"t": "refused", "reason": refusal.to_string(), "reachable": false}),
+                    Err(_) => continue,
+                };
+                let _ = reply.send(answer.to_string());
+            }
+            input = inputs.next() => {
+                let Some(input) = input else { break };
+                match input {
+                    Input::JointStates(js) => {
+                        let get = |n: &str| js.name.iter().position(|x| x == n).and_then(|i| js.position.get(i).copied());
+                        if let (Some(b), Some(s), Some(e)) = (get(ACTUATED_JOINTS[0]), get(ACTUATED_JOINTS[1]), get(ACTUATED_JOINTS[2])) {
+                            if b.is_finite() && s.is_finite() && e.is_finite() {
+                                let q = ArmJoints { base_rad: b, shoulder_rad: s, elbow_rad: e };
+                                let tool = teleop.lock().map(|mut t| { t.observe_joints(q); t.arm().forward(&q) });
+                                let segs = model.as_ref().map(|m| segments(m, &js)).unwrap_or_default();
+                                send(json!({
+                                    "t": "pose", "joints": joints_json(&q),
+                                    "gripper": get(ACTUATED_JOINTS[3]),
+                                    "tool": tool.map(|p| [p.x, p.y, p.z]).ok(),
+                                    "segments": segs,
+                                }));
+                            }
+                        }
+                    }
+                    Input::RobotDescription(text) => match RobotModel::from_urdf_str(&text, "robot_description") {
+                        Ok(m) => {
+                            log::info!("robot_description: {} ({} links)", m.name, m.links.len());
+                            model = Some(m);
+                        }
+                        Err(e) => log::warn!("robot_description not usable for the live view: {e}"),
+                    },
+                    Input::Diagnostics(d) => health.update(&d),
+                    Input::ServoState(s) => {
+                        if let Some(v) = latency.reply(s.header.stamp) {
+                            send(v);
+                        }
+                    }
+                    Input::Estop(on) => send(json!({"t": "estop", "on": on})),
+                }
+            }
+        }
+    }
+}

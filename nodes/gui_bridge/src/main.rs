@@ -1,0 +1,443 @@
+//! `gui_bridge` binary: the web panel (default), or the command-line driver:
+//!
+//! ```text
+//! gui_bridge                                   web page on http://127.0.0.1:8080 (parameter `bind`)
+//! gui_bridge --once 0.2 0 0.15 [--gripper 0.5] publish one target, exit when compute_ik took it
+//! gui_bridge --play waypoints.csv              play x,y,z,gripper,dwell rows
+//! gui_bridge --record taught.csv               save what the operator sends, as such rows
+//! ```
+
+use anyhow::{anyhow, bail, Context as _};
+use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::geometry_msgs::{Point, PointStamped};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::{Bool, Float64, Header, String as StringMsg};
+use eezybot_msgs::Time;
+use futures::StreamExt;
+use gui_bridge::teleop::{format_waypoint, parse_waypoints, Teleop, Waypoint, WAYPOINT_HEADER};
+use gui_bridge::web::WebState;
+use gui_bridge::{Input, Outputs};
+use ros2_client::{Publisher, Subscription};
+use ros_plumbing::{qos, RosNode};
+use std::io::Write as _;
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+struct RosOutputs {
+    xyz: Publisher<PointStamped>,
+    gripper: Publisher<Float64>,
+    joints: Publisher<JointState>,
+    estop: Publisher<Bool>,
+    frame: String,
+}
+
+impl Outputs for RosOutputs {
+    fn xyz_target(&self, xyz: [f64; 3], stamp: Time) {
+        let msg = PointStamped {
+            header: Header {
+                stamp,
+                frame_id: self.frame.clone(),
+            },
+            point: Point {
+                x: xyz[0],
+                y: xyz[1],
+                z: xyz[2],
+            },
+        };
+        if let Err(e) = self.xyz.publish(msg) {
+            log::warn!("could not publish xyz_target: {e:?}");
+        }
+    }
+    fn gripper_target(&self, opening: f64) {
+        if let Err(e) = self.gripper.publish(Float64 { data: opening }) {
+            log::warn!("could not publish gripper_target: {e:?}");
+        }
+    }
+    fn joint_target(&self, positions: &[(String, f64)], stamp: Time) {
+        let msg = JointState {
+            header: Header {
+                stamp,
+                frame_id: String::new(),
+            },
+            name: positions.iter().map(|(n, _)| n.clone()).collect(),
+            position: positions.iter().map(|(_, v)| *v).collect(),
+            velocity: vec![],
+            effort: vec![],
+        };
+        if let Err(e) = self.joints.publish(msg) {
+            log::warn!("could not publish joint_target: {e:?}");
+        }
+    }
+    fn estop(&self, engaged: bool) {
+        if let Err(e) = self.estop.publish(Bool { data: engaged }) {
+            log::warn!("could not publish estop: {e:?}");
+        }
+    }
+}
+
+enum Mode {
+    Web,
+    Once { xyz: [f64; 3], gripper: Option<f64> },
+    Play(String),
+    Record(String),
+}
+
+fn parse_mode(args: &[String]) -> anyhow::Result<(Mode, Duration)> {
+    let mut mode = Mode::Web;
+    let mut gripper = None;
+    let mut timeout = Duration::from_secs(15);
+    let mut it = args.iter();
+    let num = |s: Option<&String>, what: &str| -> anyhow::Result<f64> {
+        let s = s.ok_or_else(|| anyhow!("{what} is missing"))?;
+        s.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| anyhow!("{what} `{s}` is not a number"))
+    };
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--once" => {
+                mode = Mode::Once {
+                    xyz: [
+                        num(it.next(), "X")?,
+                        num(it.next(), "Y")?,
+                        num(it.next(), "Z")?,
+                    ],
+                    gripper: None,
+                }
+            }
+            "--gripper" => gripper = Some(num(it.next(), "gripper opening")?),
+            "--play" => {
+                mode = Mode::Play(
+                    it.next()
+                        .ok_or_else(|| anyhow!("--play needs a CSV file"))?
+                        .clone(),
+                )
+            }
+            "--record" => {
+                mode = Mode::Record(
+                    it.next()
+                        .ok_or_else(|| anyhow!("--record needs a CSV file"))?
+                        .clone(),
+                )
+            }
+            "--timeout" => timeout = Duration::from_secs_f64(num(it.next(), "timeout")?.max(0.1)),
+            other => bail!("unexpected argument `{other}` (see --help)"),
+        }
+    }
+    if let Mode::Once { gripper: g, .. } = &mut mode {
+        *g = gripper;
+    }
+    Ok((mode, timeout))
+}
+
+/// Waits for the effect of one target: compute_ik's `joint_states` carrying its stamp
+/// (taken), or its diagnostics naming a rejection.
+struct Delivery<'a> {
+    node: &'a RosNode,
+    joint_states: &'a Subscription<JointState>,
+    diagnostics: &'a Subscription<DiagnosticArray>,
+    rejected_seen: Option<u64>,
+}
+
+impl Delivery<'_> {
+    /// Wait until someone subscribes `xyz_target`.
+    async fn wait_for_subscriber(
+        &self,
+        publisher: &Publisher<PointStamped>,
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        let deadline = Instant::now() + timeout;
+        while publisher.get_subscription_count(self.node.node()) == 0 {
+            if Instant::now() > deadline {
+                bail!(
+                    "nobody subscribes {} (is compute_ik running in this ROS domain?)",
+                    self.node.resolver().resolve("xyz_target")?
+                );
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Ok(())
+    }
+
+    /// Publish `xyz` (after the local reachability check) and wait for compute_ik.
+    async fn send(
+        &mut self,
+        out: &RosOutputs,
+        arm: &eezybot_kinematics::Arm,
+        xyz: [f64; 3],
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        arm.solve_position(&xyz.into(), 0.0)
+            .map_err(|e| anyhow!("target {xyz:?} refused before sending: {e}"))?;
+        let stamp = Time::now();
+        out.xyz_target(xyz, stamp);
+        let deadline = tokio::time::Instant::now() + timeout;
+        let js = self.joint_states.async_stream();
+        let diags = self.diagnostics.async_stream();
+        tokio::pin!(js);
+        tokio::pin!(diags);
+        loop {
+            tokio::select! {
+                _ = tokio::time::sleep_until(deadline) => bail!("no answer from compute_ik within {:.1} s", timeout.as_secs_f64()),
+                Some(Ok((m, _))) = js.next() => if m.header.stamp == stamp { return Ok(()) },
+                Some(Ok((d, _))) = diags.next() => {
+                    for s in d.status.iter().filter(|s| s.name.starts_with("compute_ik")) {
+                        let get = |k: &str| s.values.iter().find(|kv| kv.key == k).map(|kv| kv.value.clone());
+                        let rejected: u64 = get("rejected").and_then(|v| v.parse().ok()).unwrap_or(0);
+                        if self.rejected_seen.is_some_and(|n| rejected > n) && get("last_rejection_topic").as_deref() == Some("xyz_target") {
+                            bail!("compute_ik rejected {xyz:?}: {}", get("last_rejection").unwrap_or_default());
+                        }
+                        self.rejected_seen = Some(rejected);
+                    }
+                }
+            }
+        }
+    }
+}
+
+async fn main_async() -> anyhow::Result<()> {
+    let spec = gui_bridge::spec();
+    let mut node = RosNode::start(&spec)?;
+    let (mode, timeout) = parse_mode(node.user_args())?;
+    let params = node.params().clone();
+    let arm = gui_bridge::load_arm(&params.string("arm_config").unwrap_or_default())
+        .map_err(anyhow::Error::msg)?;
+    let outputs = RosOutputs {
+        xyz: node.publisher("xyz_target", qos::COMMANDS)?,
+        gripper: node.publisher("gripper_target", qos::COMMANDS)?,
+        joints: node.publisher("joint_target", qos::COMMANDS)?,
+        estop: node.publisher("estop", qos::ESTOP)?,
+        frame: params
+            .string("base_frame")
+            .unwrap_or_else(|| "base_link".into()),
+    };
+    let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
+    let diagnostics = node.subscription::<DiagnosticArray>("diagnostics", qos::DIAGNOSTICS)?;
+    let shutdown = async {
+        let signal = ros_plumbing::shutdown_signal().await;
+        log::info!("{signal}: shutting down");
+    };
+    let result = match mode {
+        Mode::Once { xyz, gripper } => {
+            let mut d = Delivery {
+                node: &node,
+                joint_states: &joint_states,
+                diagnostics: &diagnostics,
+                rejected_seen: None,
+            };
+            d.wait_for_subscriber(&outputs.xyz, timeout).await?;
+            tokio::time::sleep(Duration::from_millis(200)).await; // let the reader see our writer too
+            d.send(&outputs, &arm, xyz, timeout).await?;
+            if let Some(g) = gripper {
+                outputs.gripper_target(g); // at the target, as a waypoint's gripper
+            }
+            println!("delivered {xyz:?}");
+            Ok(())
+        }
+        Mode::Play(path) => {
+            let text =
+                std::fs::read_to_string(&path).with_context(|| format!("cannot read {path}"))?;
+            let waypoints = parse_waypoints(&text).map_err(|e| anyhow!("{path}: {e}"))?;
+            let mut d = Delivery {
+                node: &node,
+                joint_states: &joint_states,
+                diagnostics: &diagnostics,
+                rejected_seen: None,
+            };
+            d.wait_for_subscriber(&outputs.xyz, timeout).await?;
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            let play = async {
+                for (i, w) in waypoints.iter().enumerate() {
+                    // move, then set the claw there: the order --record writes rows in
+                    d.send(&outputs, &arm, w.xyz, timeout)
+                        .await
+                        .with_context(|| format!("waypoint {}", i + 1))?;
+                    if let Some(g) = w.gripper {
+                        outputs.gripper_target(g);
+                    }
+                    println!(
+                        "waypoint {}/{}: {:?} gripper {:?}, dwell {:.2} s",
+                        i + 1,
+                        waypoints.len(),
+                        w.xyz,
+                        w.gripper,
+                        w.dwell_s
+                    );
+                    tokio::time::sleep(Duration::from_secs_f64(w.dwell_s)).await;
+                }
+                anyhow::Ok(())
+            };
+            tokio::select! {
+                r = play => r,
+                _ = shutdown => Ok(()),
+            }
+        }
+        Mode::Record(path) => record(&mut node, &path, shutdown).await,
+        Mode::Web => {
+            web(
+                &mut node,
+                arm,
+                &outputs,
+                &joint_states,
+                &diagnostics,
+                params,
+                shutdown,
+            )
+            .await
+        }
+    };
+    drop(outputs);
+    drop((joint_states, diagnostics));
+    node.shutdown().await;
+    result
+}
+
+async fn record(
+    node: &mut RosNode,
+    path: &str,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let mut file = std::fs::File::create(path).with_context(|| format!("cannot create {path}"))?;
+    writeln!(file, "{WAYPOINT_HEADER}")?;
+    let targets = node.subscription::<PointStamped>("xyz_target", qos::COMMANDS)?;
+    let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
+    println!(
+        "recording {} and {} into {path}; Ctrl-C to stop",
+        node.resolver().resolve("xyz_target")?,
+        node.resolver().resolve("gripper_target")?
+    );
+    let (t, g) = (targets.async_stream(), gripper.async_stream());
+    tokio::pin!(t, g, shutdown);
+    let mut pending: Option<(Waypoint, Instant)> = None;
+    let mut opening: Option<f64> = None;
+    let mut rows = 0;
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            Some(Ok((m, _))) = t.next() => {
+                if let Some((mut w, at)) = pending.take() {
+                    w.dwell_s = at.elapsed().as_secs_f64();
+                    writeln!(file, "{}", format_waypoint(&w))?;
+                    rows += 1;
+                }
+                pending = Some((Waypoint { xyz: [m.point.x, m.point.y, m.point.z], gripper: opening, dwell_s: 0.0 }, Instant::now()));
+            }
+            Some(Ok((m, _))) = g.next() => {
+                opening = Some(m.data);
+                if let Some((w, _)) = pending.as_mut() {
+                    w.gripper = opening;
+                }
+            }
+        }
+    }
+    if let Some((w, _)) = pending {
+        writeln!(file, "{}", format_waypoint(&w))?;
+        rows += 1;
+    }
+    file.flush()?;
+    println!("recorded {rows} waypoints into {path}");
+    Ok(())
+}
+
+async fn web(
+    node: &mut RosNode,
+    arm: eezybot_kinematics::Arm,
+    outputs: &RosOutputs,
+    joint_states: &Subscription<JointState>,
+    diagnostics: &Subscription<DiagnosticArray>,
+    params: ros_plumbing::Params,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let rate = params.f64("rate").unwrap_or(50.0);
+    let teleop = Arc::new(Mutex::new(Teleop::new(arm, rate)));
+    let description =
+        node.subscription::<StringMsg>("robot_description", qos::ROBOT_DESCRIPTION)?;
+    let servo_state = node.subscription::<JointState>("servo_state", qos::COMMANDS)?;
+    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let (to_browsers, _) = tokio::sync::broadcast::channel(256);
+    let (req_tx, req_rx) = tokio::sync::mpsc::unbounded_channel();
+    let t = teleop.clone();
+    let p = params.clone();
+    let state = WebState {
+        broadcast: to_browsers.clone(),
+        requests: req_tx,
+        hello: Arc::new(move || {
+            t.lock()
+                .map(|t| gui_bridge::hello_json(&t, p.f64("rate").unwrap_or(50.0)))
+                .unwrap_or_default()
+        }),
+    };
+    let bind = params
+        .string("bind")
+        .unwrap_or_else(|| "127.0.0.1:8080".into());
+    let listener = tokio::net::TcpListener::bind(&bind)
+        .await
+        .with_context(|| format!("cannot listen on {bind}"))?;
+    log::info!(
+        "{} ready in ROS domain {}: web panel on http://{bind}/ -> {}",
+        node.resolver().node_fqn(),
+        node.domain_id(),
+        node.resolver().resolve("xyz_target")?
+    );
+    let server = tokio::spawn(async move {
+        if let Err(e) = axum::serve(listener, gui_bridge::web::router(state)).await {
+            log::error!("web server stopped: {e}");
+        }
+    });
+    let inputs = futures::stream::select_all([
+        joint_states
+            .async_stream()
+            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::JointStates(m)) })
+            .boxed(),
+        description
+            .async_stream()
+            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::RobotDescription(m.data)) })
+            .boxed(),
+        diagnostics
+            .async_stream()
+            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::Diagnostics(m)) })
+            .boxed(),
+        servo_state
+            .async_stream()
+            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::ServoState(m)) })
+            .boxed(),
+        estop
+            .async_stream()
+            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::Estop(m.data)) })
+            .boxed(),
+    ]);
+    gui_bridge::run(
+        teleop,
+        inputs,
+        req_rx,
+        to_browsers,
+        outputs,
+        params,
+        shutdown,
+    )
+    .await;
+    server.abort();
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("gui_bridge: cannot start the async runtime: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match runtime.block_on(main_async()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("gui_bridge: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,483 @@
+//! Operator input as a state machine: UI events → [`Event`] → [`Teleop::handle_event`]
+//! → the targets to publish. No I/O: the web server, the keyboard, the gamepad and the
+//! command line all feed it the same events.
+
+use eezybot_kinematics::{Arm, ArmJoints, Joint, KinematicsError, ACTUATED_JOINTS};
+use nalgebra::Vector3;
+use std::time::{Duration, Instant};
+
+/// Something the operator did.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// Move `tool0` to a point (m, `base_link`).
+    SetTarget {
+        /// the point
+        xyz: [f64; 3],
+    },
+    /// Move `tool0` by a step (m) from the current target (keyboard jog, gamepad).
+    Jog {
+        /// the step
+        dxyz: [f64; 3],
+    },
+    /// Claw opening, 0 closed … 1 open.
+    Gripper {
+        /// opening
+        opening: f64,
+    },
+    /// Joint mode: positions (rad) of some actuated joints.
+    Joints {
+        /// (name, position)
+        positions: Vec<(String, f64)>,
+    },
+    /// Engage or release the emergency stop.
+    Estop {
+        /// engaged?
+        engaged: bool,
+    },
+}
+
+/// Something to publish.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    /// On `xyz_target`.
+    Target([f64; 3]),
+    /// On `gripper_target`.
+    Gripper(f64),
+    /// On `joint_target`.
+    Joints(Vec<(String, f64)>),
+    /// On `estop`.
+    Estop(bool),
+}
+
+/// Why an event sends nothing.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Refusal {
+    /// The target is not reachable (the same check compute_ik makes).
+    #[error("{0}")]
+    Unreachable(KinematicsError),
+    /// A value is not a finite number or is out of its range.
+    #[error("{0}")]
+    BadValue(String),
+}
+
+/// What the operator sees after an event.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Feedback {
+    /// The cartesian target now (m).
+    pub target: [f64; 3],
+    /// The joints that reach it.
+    pub joints: ArmJoints,
+}
+
+/// Latest-wins rate limiting per output: at most one message per `min_interval`.
+#[derive(Clone, Debug)]
+struct Slot<T> {
+    pending: Option<T>,
+    last_sent: Option<Instant>,
+}
+
+impl<T> Default for Slot<T> {
+    fn default() -> Self {
+        Slot {
+            pending: None,
+            last_sent: None,
+        }
+    }
+}
+
+impl<T> Slot<T> {
+    fn due(&self, now: Instant, min_interval: Duration) -> Option<Instant> {
+        self.pending.as_ref()?;
+        Some(
+            self.last_sent
+                .map(|t| (t + min_interval).max(now))
+                .unwrap_or(now),
+        )
+    }
+    fn take(&mut self, now: Instant, min_interval: Duration) -> Option<T> {
+        if self.due(now, min_interval)? <= now {
+            self.last_sent = Some(now);
+            self.pending.take()
+        } else {
+            None
+        }
+    }
+}
+
+/// The teleoperation state.
+#[derive(Clone, Debug)]
+pub struct Teleop {
+    arm: Arm,
+    target: Vector3<f64>,
+    joints: ArmJoints,
+    min_interval: Duration,
+    xyz: Slot<[f64; 3]>,
+    gripper: Slot<f64>,
+    joint_target: Slot<Vec<(String, f64)>>,
+    estop: Option<bool>,
+}
+
+impl Teleop {
+    /// A state starting at the home pose, publishing each output at most `rate_hz` times a second.
+    pub fn new(arm: Arm, rate_hz: f64) -> Teleop {
+        let joints = ArmJoints::HOME;
+        Teleop {
+            target: arm.forward(&joints),
+            arm,
+            joints,
+            min_interval: Duration::from_secs_f64(1.0 / rate_hz.max(0.1)),
+            xyz: Slot::default(),
+            gripper: Slot::default(),
+            joint_target: Slot::default(),
+            estop: None,
+        }
+    }
+
+    /// Change the publish rate limit.
+    pub fn set_rate(&mut self, rate_hz: f64) {
+        self.min_interval = Duration::from_secs_f64(1.0 / rate_hz.max(0.1));
+    }
+
+    /// The current cartesian target.
+    pub fn target(&self) -> [f64; 3] {
+        [self.target.x, self.target.y, self.target.z]
+    }
+
+    /// The arm model used for the checks.
+    pub fn arm(&self) -> &Arm {
+        &self.arm
+    }
+
+    /// The arm moved (from `joint_states`): jogs continue from where it is.
+    pub fn observe_joints(&mut self, joints: ArmJoints) {
+        self.joints = joints;
+        if self.xyz.pending.is_none() {
+            self.target = self.arm.forward(&joints);
+        }
+    }
+
+    /// Would `xyz` be reachable? The check compute_ik makes, without sending anything.
+    pub fn check(&self, xyz: [f64; 3]) -> Result<ArmJoints, Refusal> {
+        self.arm
+            .solve_position(&Vector3::from(xyz), self.joints.base_rad)
+            .map_err(Refusal::Unreachable)
+    }
+
+    /// Apply an operator event. A refused event changes nothing and sends nothing.
+    pub fn handle_event(&mut self, event: Event) -> Result<Feedback, Refusal> {
+        match event {
+            Event::SetTarget { xyz } => self.move_to(xyz),
+            Event::Jog { dxyz } => {
+                if dxyz.iter().any(|d| !d.is_finite() || d.abs() > 0.05) {
+                    return Err(Refusal::BadValue(format!(
+                        "jog step {dxyz:?} is not a number within ±0.05 m"
+                    )));
+                }
+                let t = self.target();
+                self.move_to([t[0] + dxyz[0], t[1] + dxyz[1], t[2] + dxyz[2]])
+            }
+            Event::Gripper { opening } => {
+                if !(0.0..=1.0).contains(&opening) {
+                    return Err(Refusal::BadValue(format!(
+                        "gripper opening {opening} outside 0 … 1"
+                    )));
+                }
+                self.gripper.pending = Some(opening);
+                Ok(self.feedback())
+            }
+            Event::Joints { positions } => {
+                let mut q = self.joints;
+                for (name, value) in &positions {
+                    let joint = match name.as_str() {
+                        "base_joint" => Joint::Base,
+                        "shoulder_joint" => Joint::Shoulder,
+                        "elbow_joint" => Joint::Elbow,
+                        "gripper_joint" => continue,
+                        _ => {
+                            return Err(Refusal::BadValue(format!(
+                                "unknown joint `{name}` (actuated: {})",
+                                ACTUATED_JOINTS.join(", ")
+                            )))
+                        }
+                    };
+                    if !value.is_finite() {
+                        return Err(Refusal::BadValue(format!("{name} is {value}")));
+                    }
+                    match joint {
+                        Joint::Base => q.base_rad = *value,
+                        Joint::Shoulder => q.shoulder_rad = *value,
+                        _ => q.elbow_rad = *value,
+                    }
+                }
+                self.arm.limits.check(&q).map_err(Refusal::Unreachable)?;
+                self.joints = q;
+                self.target = self.arm.forward(&q);
+                self.xyz.pending = None;
+                self.joint_target.pending = Some(positions);
+                Ok(self.feedback())
+            }
+            Event::Estop { engaged } => {
+                self.estop = Some(engaged);
+                Ok(self.feedback())
+            }
+        }
+    }
+
+    fn move_to(&mut self, xyz: [f64; 3]) -> Result<Feedback, Refusal> {
+        let joints = self.check(xyz)?;
+        self.target = Vector3::from(xyz);
+        self.joints = joints;
+        self.joint_target.pending = None;
+        self.xyz.pending = Some(xyz);
+        Ok(self.feedback())
+    }
+
+    fn feedback(&self) -> Feedback {
+        Feedback {
+            target: self.target(),
+            joints: self.joints,
+        }
+    }
+
+    /// When the next pending output may go out (None: nothing pending).
+    pub fn next_due(&self, now: Instant) -> Option<Instant> {
+        if self.estop.is_some() {
+            return Some(now);
+        }
+        [
+            self.xyz.due(now, self.min_interval),
+            self.gripper.due(now, self.min_interval),
+            self.joint_target.due(now, self.min_interval),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// The outputs due now (latest wins; the e-stop is never delayed).
+    pub fn take_due(&mut self, now: Instant) -> Vec<Command> {
+        let mut out = vec![];
+        if let Some(e) = self.estop.take() {
+            out.push(Command::Estop(e));
+        }
+        if let Some(t) = self.xyz.take(now, self.min_interval) {
+            out.push(Command::Target(t));
+        }
+        if let Some(g) = self.gripper.take(now, self.min_interval) {
+            out.push(Command::Gripper(g));
+        }
+        if let Some(j) = self.joint_target.take(now, self.min_interval) {
+            out.push(Command::Joints(j));
+        }
+        out
+    }
+}
+
+/// One row of a waypoint script: where, how open, how long to stay.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Waypoint {
+    /// `tool0` position (m).
+    pub xyz: [f64; 3],
+    /// Claw opening, if given.
+    pub gripper: Option<f64>,
+    /// Seconds to wait after reaching it.
+    pub dwell_s: f64,
+}
+
+/// The header of a waypoint file.
+pub const WAYPOINT_HEADER: &str = "x,y,z,gripper,dwell";
+
+/// Parse a waypoint CSV (`x,y,z,gripper,dwell`; header line and `#` comments allowed,
+/// an empty gripper keeps the claw as it is). Errors name the line.
+///
+/// # Examples
+/// ```
+/// let w = gui_bridge::teleop::parse_waypoints("x,y,z,gripper,dwell\n0.2,0,0.15,1,0.5\n0.18,0.05,0.12,,0\n").unwrap();
+/// assert_eq!(w.len(), 2);
+/// assert_eq!(w[1].gripper, None);
+/// ```
+pub fn parse_waypoints(text: &str) -> Result<Vec<Waypoint>, String> {
+    let mut out = vec![];
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') || line.replace(' ', "") == WAYPOINT_HEADER {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != 5 {
+            return Err(format!(
+                "line {}: expected 5 fields x,y,z,gripper,dwell, got {}",
+                i + 1,
+                fields.len()
+            ));
+        }
+        let num = |k: usize, what: &str| {
+            fields[k]
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("line {}: {what} `{}` is not a number", i + 1, fields[k]))
+        };
+        let xyz = [num(0, "x")?, num(1, "y")?, num(2, "z")?];
+        let gripper = if fields[3].is_empty() {
+            None
+        } else {
+            Some(num(3, "gripper")?)
+        };
+        if gripper.is_some_and(|g| !(0.0..=1.0).contains(&g)) {
+            return Err(format!("line {}: gripper must be within 0 … 1", i + 1));
+        }
+        let dwell_s = num(4, "dwell")?;
+        if dwell_s < 0.0 {
+            return Err(format!("line {}: dwell must not be negative", i + 1));
+        }
+        out.push(Waypoint {
+            xyz,
+            gripper,
+            dwell_s,
+        });
+    }
+    Ok(out)
+}
+
+/// One CSV row for a waypoint.
+pub fn format_waypoint(w: &Waypoint) -> String {
+    format!(
+        "{:.5},{:.5},{:.5},{},{:.3}",
+        w.xyz[0],
+        w.xyz[1],
+        w.xyz[2],
+        w.gripper.map(|g| format!("{g:.3}")).unwrap_or_default(),
+        w.dwell_s
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn teleop() -> Teleop {
+        Teleop::new(Arm::default(), 50.0)
+    }
+
+    #[test]
+    fn unreachable_targets_send_nothing_and_keep_the_target() {
+        let mut t = teleop();
+        let before = t.target();
+        let e = t
+            .handle_event(Event::SetTarget {
+                xyz: [1.0, 0.0, 0.1],
+            })
+            .unwrap_err();
+        assert!(e.to_string().contains("out of reach"));
+        assert_eq!(t.target(), before);
+        assert!(t.take_due(Instant::now()).is_empty());
+    }
+
+    #[test]
+    fn jog_moves_by_the_step_from_the_current_target() {
+        let mut t = teleop();
+        t.handle_event(Event::SetTarget {
+            xyz: [0.2, 0.0, 0.15],
+        })
+        .unwrap();
+        t.handle_event(Event::Jog {
+            dxyz: [0.0, 0.01, 0.0],
+        })
+        .unwrap();
+        let now = Instant::now();
+        assert_eq!(t.take_due(now), vec![Command::Target([0.2, 0.01, 0.15])]);
+    }
+
+    #[test]
+    fn latest_wins_within_the_rate_limit() {
+        let mut t = teleop();
+        let t0 = Instant::now();
+        t.handle_event(Event::SetTarget {
+            xyz: [0.2, 0.0, 0.15],
+        })
+        .unwrap();
+        assert_eq!(t.take_due(t0).len(), 1);
+        for y in [0.01, 0.02, 0.03] {
+            t.handle_event(Event::SetTarget {
+                xyz: [0.2, y, 0.15],
+            })
+            .unwrap();
+        }
+        assert!(
+            t.take_due(t0 + Duration::from_millis(5)).is_empty(),
+            "within 20 ms of the last"
+        );
+        assert_eq!(
+            t.next_due(t0 + Duration::from_millis(5)),
+            Some(t0 + Duration::from_millis(20))
+        );
+        assert_eq!(
+            t.take_due(t0 + Duration::from_millis(20)),
+            vec![Command::Target([0.2, 0.03, 0.15])]
+        );
+    }
+
+    #[test]
+    fn estop_goes_out_at_once() {
+        let mut t = teleop();
+        t.handle_event(Event::SetTarget {
+            xyz: [0.2, 0.0, 0.15],
+        })
+        .unwrap();
+        let t0 = Instant::now();
+        t.take_due(t0);
+        t.handle_event(Event::Estop { engaged: true }).unwrap();
+        assert_eq!(t.take_due(t0), vec![Command::Estop(true)]);
+    }
+
+    #[test]
+    fn joint_mode_checks_limits() {
+        let mut t = teleop();
+        assert!(t
+            .handle_event(Event::Joints {
+                positions: vec![("shoulder_joint".into(), 2.5)]
+            })
+            .is_err());
+        assert!(t
+            .handle_event(Event::Joints {
+                positions: vec![("wrist_joint".into(), 0.0)]
+            })
+            .is_err());
+        let f = t
+            .handle_event(Event::Joints {
+                positions: vec![("base_joint".into(), 0.2)],
+            })
+            .unwrap();
+        assert!((f.joints.base_rad - 0.2).abs() < 1e-15);
+    }
+
+    #[test]
+    fn waypoints_roundtrip_and_name_bad_lines() {
+        let w = vec![
+            Waypoint {
+                xyz: [0.2, 0.0, 0.15],
+                gripper: Some(0.5),
+                dwell_s: 1.0,
+            },
+            Waypoint {
+                xyz: [0.18, 0.05, 0.12],
+                gripper: None,
+                dwell_s: 0.0,
+            },
+        ];
+        let text = format!(
+            "{WAYPOINT_HEADER}\n{}\n{}\n",
+            format_waypoint(&w[0]),
+            format_waypoint(&w[1])
+        );
+        assert_eq!(parse_waypoints(&text).unwrap(), w);
+        assert!(parse_waypoints("0.2,0,0.15,2,0")
+            .unwrap_err()
+            .contains("line 1"));
+        assert!(parse_waypoints("x,y,z,gripper,dwell\n0.2,zero,0.15,,0")
+            .unwrap_err()
+            .contains("line 2"));
+    }
+}
