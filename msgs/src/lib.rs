@@ -16,10 +16,11 @@
 //!     header: Header { stamp: eezybot_msgs::Time::ZERO, frame_id: "base_link".into() },
 //!     point: Point { x: 0.2, y: 0.0, z: 0.15 },
 //! };
-//! let bytes = cdr::encode(&m).unwrap();
+//! let bytes = cdr::encode(&m)?;
 //! assert_eq!(&bytes[..4], &[0x00, 0x01, 0x00, 0x00]); // CDR little endian
-//! let back: PointStamped = cdr::decode(&bytes).unwrap();
+//! let back: PointStamped = cdr::decode(&bytes)?;
 //! assert_eq!(back, m);
+//! # Ok::<(), eezybot_msgs::cdr::CdrError>(())
 //! ```
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]

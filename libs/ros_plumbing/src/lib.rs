@@ -22,6 +22,6 @@ pub mod params;
 pub mod qos;
 
 pub use error::PlumbingError;
-pub use node::{shutdown_signal, NodeSpec, RosNode};
+pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode};
 pub use params::{ParamRange, ParamSpec, Params};
 pub use ros2_client::ParameterValue;

@@ -291,6 +291,42 @@ impl RosNode {
     }
 }
 
+/// A node's `main`: runs `main` on a single-threaded tokio runtime, prints an error
+/// (with its causes, `{:#}`) to stderr as `name: error` and exits with `error_code`.
+pub fn run_main<F, E>(
+    name: &str,
+    error_code: u8,
+    main: impl FnOnce() -> F,
+) -> std::process::ExitCode
+where
+    F: std::future::Future<Output = Result<(), E>>,
+    E: std::fmt::Display,
+{
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("{name}: cannot start the async runtime: {e}");
+            return std::process::ExitCode::from(error_code);
+        }
+    };
+    match runtime.block_on(main()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{name}: {e:#}");
+            std::process::ExitCode::from(error_code)
+        }
+    }
+}
+
+/// [`shutdown_signal`], logging which signal it was.
+pub async fn shutdown_logged() {
+    let signal = shutdown_signal().await;
+    log::info!("{signal}: shutting down");
+}
+
 /// Resolves on SIGINT or SIGTERM, with the signal's name.
 pub async fn shutdown_signal() -> &'static str {
     use tokio::signal::unix::{signal, SignalKind};

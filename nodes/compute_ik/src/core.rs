@@ -389,17 +389,7 @@ impl IkCore {
                     },
                 })
             }
-            Err(reason) => {
-                self.counters.rejected += 1;
-                self.last_event_rejected = true;
-                let rejection = Rejection {
-                    source,
-                    reason,
-                    stamp,
-                };
-                self.last_rejection = Some(rejection.clone());
-                Err(rejection)
-            }
+            Err(reason) => Err(self.reject(source, stamp, reason)),
         }
     }
 

@@ -115,10 +115,7 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolver().resolve("joint_states")?,
         node.resolver().resolve("servo_angles")?
     );
-    let shutdown = async {
-        let signal = ros_plumbing::shutdown_signal().await;
-        log::info!("{signal}: shutting down");
-    };
+    let shutdown = ros_plumbing::shutdown_logged();
     compute_ik::run(core, inputs, &outputs, params, diag_name, shutdown).await;
     drop(outputs);
     drop((xyz, gripper, joints, estop));
@@ -127,21 +124,5 @@ async fn main_async() -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            eprintln!("compute_ik: cannot start the async runtime: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    match runtime.block_on(main_async()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("compute_ik: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ros_plumbing::run_main("compute_ik", 2, main_async)
 }

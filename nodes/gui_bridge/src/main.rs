@@ -141,7 +141,26 @@ struct Delivery<'a> {
     rejected_seen: Option<u64>,
 }
 
-impl Delivery<'_> {
+impl<'a> Delivery<'a> {
+    /// Ready to send once someone subscribes `xyz_target`.
+    async fn connect(
+        node: &'a RosNode,
+        joint_states: &'a Subscription<JointState>,
+        diagnostics: &'a Subscription<DiagnosticArray>,
+        outputs: &RosOutputs,
+        timeout: Duration,
+    ) -> anyhow::Result<Delivery<'a>> {
+        let d = Delivery {
+            node,
+            joint_states,
+            diagnostics,
+            rejected_seen: None,
+        };
+        d.wait_for_subscriber(&outputs.xyz, timeout).await?;
+        tokio::time::sleep(Duration::from_millis(200)).await; // let the reader see our writer too
+        Ok(d)
+    }
+
     /// Wait until someone subscribes `xyz_target`.
     async fn wait_for_subscriber(
         &self,
@@ -215,20 +234,11 @@ async fn main_async() -> anyhow::Result<()> {
     };
     let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
     let diagnostics = node.subscription::<DiagnosticArray>("diagnostics", qos::DIAGNOSTICS)?;
-    let shutdown = async {
-        let signal = ros_plumbing::shutdown_signal().await;
-        log::info!("{signal}: shutting down");
-    };
+    let shutdown = ros_plumbing::shutdown_logged();
     let result = match mode {
         Mode::Once { xyz, gripper } => {
-            let mut d = Delivery {
-                node: &node,
-                joint_states: &joint_states,
-                diagnostics: &diagnostics,
-                rejected_seen: None,
-            };
-            d.wait_for_subscriber(&outputs.xyz, timeout).await?;
-            tokio::time::sleep(Duration::from_millis(200)).await; // let the reader see our writer too
+            let mut d =
+                Delivery::connect(&node, &joint_states, &diagnostics, &outputs, timeout).await?;
             d.send(&outputs, &arm, xyz, timeout).await?;
             if let Some(g) = gripper {
                 outputs.gripper_target(g); // at the target, as a waypoint's gripper
@@ -240,14 +250,8 @@ async fn main_async() -> anyhow::Result<()> {
             let text =
                 std::fs::read_to_string(&path).with_context(|| format!("cannot read {path}"))?;
             let waypoints = parse_waypoints(&text).map_err(|e| anyhow!("{path}: {e}"))?;
-            let mut d = Delivery {
-                node: &node,
-                joint_states: &joint_states,
-                diagnostics: &diagnostics,
-                rejected_seen: None,
-            };
-            d.wait_for_subscriber(&outputs.xyz, timeout).await?;
-            tokio::time::sleep(Duration::from_millis(200)).await;
+            let mut d =
+                Delivery::connect(&node, &joint_states, &diagnostics, &outputs, timeout).await?;
             let play = async {
                 for (i, w) in waypoints.iter().enumerate() {
                     // move, then set the claw there: the order --record writes rows in
@@ -423,21 +427,5 @@ async fn web(
 }
 
 fn main() -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            eprintln!("gui_bridge: cannot start the async runtime: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    match runtime.block_on(main_async()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("gui_bridge: {e:#}");
-            ExitCode::from(1)
-        }
-    }
+    ros_plumbing::run_main("gui_bridge", 1, main_async)
 }

@@ -94,10 +94,7 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolver().resolve("servo_state")?,
     );
     let diag_name = format!("{}: servo link", node.resolver().node_name());
-    let shutdown = async {
-        let signal = ros_plumbing::shutdown_signal().await;
-        log::info!("{signal}: shutting down");
-    };
+    let shutdown = ros_plumbing::shutdown_logged();
     serial_node::run(
         &link, inputs, rx, &outputs, params, diag_name, port, shutdown,
     )
@@ -110,21 +107,5 @@ async fn main_async() -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            eprintln!("serial_node: cannot start the async runtime: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    match runtime.block_on(main_async()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("serial_node: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ros_plumbing::run_main("serial_node", 2, main_async)
 }

@@ -74,10 +74,7 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolver().resolve("tf")?
     );
     let diag_name = format!("{}: robot state", node.resolver().node_name());
-    let shutdown = async {
-        let signal = ros_plumbing::shutdown_signal().await;
-        log::info!("{signal}: shutting down");
-    };
+    let shutdown = ros_plumbing::shutdown_logged();
     state_publisher::run(description, inputs, &outputs, params, diag_name, shutdown).await;
     drop(outputs);
     drop(joint_states);
@@ -86,21 +83,5 @@ async fn main_async() -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            eprintln!("state_publisher: cannot start the async runtime: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    match runtime.block_on(main_async()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("state_publisher: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ros_plumbing::run_main("state_publisher", 2, main_async)
 }
