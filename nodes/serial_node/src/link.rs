@@ -246,8 +246,14 @@ fn writer_loop(
     events: UnboundedSender<LinkEvent>,
 ) {
     let mut backoff = Duration::from_millis(250);
-    let mut seq: u8 = 0;
-    let in_flight = Arc::new(Mutex::new(InFlight::default()));
+    let mut w = Writer {
+        config,
+        shared: shared.clone(),
+        stats,
+        events: events.clone(),
+        in_flight: Arc::new(Mutex::new(InFlight::default())),
+        seq: 0,
+    };
     while !is_shutdown(&shared) {
         let port = match opener() {
             Ok(p) => p,
@@ -261,9 +267,7 @@ fn writer_loop(
                 continue;
             }
         };
-        match run_session(
-            port, &config, &shared, &stats, &events, &mut seq, &in_flight,
-        ) {
+        match w.run_session(port) {
             Ok(()) => break, // shutdown
             Err((reason, connected)) => {
                 if connected {
@@ -371,48 +375,43 @@ fn spawn_reader(
         })
 }
 
-/// One connection: handshake, then commands until the port breaks (`Err`, with whether
-/// the handshake had succeeded) or shutdown (`Ok`).
-fn run_session(
-    mut port: Box<dyn Port>,
-    config: &LinkConfig,
-    shared: &Arc<(Mutex<Shared>, Condvar)>,
-    stats: &Arc<Mutex<SendStats>>,
-    events: &UnboundedSender<LinkEvent>,
-    seq: &mut u8,
-    in_flight: &Arc<Mutex<InFlight>>,
-) -> Result<(), (String, bool)> {
-    let session = Arc::new((Mutex::new(Session::default()), Condvar::new()));
-    let reader_port = port
-        .try_clone_port()
-        .map_err(|e| (format!("cannot split the port: {e}"), false))?;
-    let reader = spawn_reader(
-        reader_port,
-        session.clone(),
-        shared.clone(),
-        in_flight.clone(),
-        events.clone(),
-    )
-    .map_err(|e| (format!("cannot start the reader: {e}"), false))?;
-    let mut connected = false;
-    let result = session_body(
-        &mut port,
-        config,
-        shared,
-        stats,
-        events,
-        seq,
-        in_flight,
-        &session,
-        &mut connected,
-    )
-    .map_err(|e| (e, connected));
-    if let Ok(mut s) = session.0.lock() {
-        s.broken.get_or_insert_with(|| "session over".into());
+/// What the writer thread keeps across connections.
+struct Writer {
+    config: LinkConfig,
+    shared: Arc<(Mutex<Shared>, Condvar)>,
+    stats: Arc<Mutex<SendStats>>,
+    events: UnboundedSender<LinkEvent>,
+    in_flight: Arc<Mutex<InFlight>>,
+    seq: u8,
+}
+
+impl Writer {
+    /// One connection: handshake, then commands until the port breaks (`Err`, with
+    /// whether the handshake had succeeded) or shutdown (`Ok`).
+    fn run_session(&mut self, mut port: Box<dyn Port>) -> Result<(), (String, bool)> {
+        let session = Arc::new((Mutex::new(Session::default()), Condvar::new()));
+        let reader_port = port
+            .try_clone_port()
+            .map_err(|e| (format!("cannot split the port: {e}"), false))?;
+        let reader = spawn_reader(
+            reader_port,
+            session.clone(),
+            self.shared.clone(),
+            self.in_flight.clone(),
+            self.events.clone(),
+        )
+        .map_err(|e| (format!("cannot start the reader: {e}"), false))?;
+        let mut connected = false;
+        let result = self
+            .session_body(&mut port, &session, &mut connected)
+            .map_err(|e| (e, connected));
+        if let Ok(mut s) = session.0.lock() {
+            s.broken.get_or_insert_with(|| "session over".into());
+        }
+        drop(port);
+        let _ = reader.join();
+        result
     }
-    drop(port);
-    let _ = reader.join();
-    result
 }
 
 fn send(port: &mut Box<dyn Port>, seq: &mut u8, msg: Message) -> Result<u8, String> {
@@ -423,149 +422,158 @@ fn send(port: &mut Box<dyn Port>, seq: &mut u8, msg: Message) -> Result<u8, Stri
     Ok(*seq)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn session_body(
-    port: &mut Box<dyn Port>,
-    config: &LinkConfig,
-    shared: &Arc<(Mutex<Shared>, Condvar)>,
-    stats: &Arc<Mutex<SendStats>>,
-    events: &UnboundedSender<LinkEvent>,
-    seq: &mut u8,
-    in_flight: &Arc<Mutex<InFlight>>,
-    session: &Arc<(Mutex<Session>, Condvar)>,
-    connected: &mut bool,
-) -> Result<(), String> {
-    // Handshake: a Uno resets when the port opens; its bootloader takes ~1.5 s.
-    let deadline = Instant::now() + Duration::from_secs(4);
-    let firmware = loop {
-        if is_shutdown(shared) {
-            return Ok(());
-        }
-        if Instant::now() > deadline {
-            return Err(
-                "no answer to HELLO within 4 s (is the servo_control firmware on the board?)"
-                    .into(),
-            );
-        }
+impl Writer {
+    fn session_body(
+        &mut self,
+        port: &mut Box<dyn Port>,
+        session: &Arc<(Mutex<Session>, Condvar)>,
+        connected: &mut bool,
+    ) -> Result<(), String> {
+        let Writer {
+            config,
+            shared,
+            stats,
+            events,
+            in_flight,
+            seq,
+        } = self;
+        // Handshake: a Uno resets when the port opens; its bootloader takes ~1.5 s.
+        let deadline = Instant::now() + Duration::from_secs(4);
+        let firmware = loop {
+            if is_shutdown(shared) {
+                return Ok(());
+            }
+            if Instant::now() > deadline {
+                return Err(
+                    "no answer to HELLO within 4 s (is the servo_control firmware on the board?)"
+                        .into(),
+                );
+            }
+            send(
+                port,
+                seq,
+                Message::Hello {
+                    version: PROTOCOL_VERSION,
+                },
+            )?;
+            let (lock, cv) = &**session;
+            let guard = lock.lock().map_err(|_| "poisoned".to_string())?;
+            let (guard, _) = cv
+                .wait_timeout_while(guard, Duration::from_millis(250), |s| {
+                    s.hello_ack.is_none() && s.broken.is_none()
+                })
+                .map_err(|_| "poisoned".to_string())?;
+            if let Some(b) = &guard.broken {
+                return Err(b.clone());
+            }
+            if let Some((version, major, minor)) = guard.hello_ack {
+                if version != PROTOCOL_VERSION {
+                    let _ = events.send(LinkEvent::VersionMismatch { device: version });
+                    return Err(format!(
+                        "device speaks protocol {version}, this node {PROTOCOL_VERSION}"
+                    ));
+                }
+                break (major, minor);
+            }
+        };
         send(
             port,
             seq,
-            Message::Hello {
-                version: PROTOCOL_VERSION,
+            Message::Config {
+                watchdog_ms: config.watchdog_ms,
+                action: config.watchdog_action,
             },
         )?;
-        let (lock, cv) = &**session;
-        let guard = lock.lock().map_err(|_| "poisoned".to_string())?;
-        let (guard, _) = cv
-            .wait_timeout_while(guard, Duration::from_millis(250), |s| {
-                s.hello_ack.is_none() && s.broken.is_none()
-            })
-            .map_err(|_| "poisoned".to_string())?;
-        if let Some(b) = &guard.broken {
-            return Err(b.clone());
-        }
-        if let Some((version, major, minor)) = guard.hello_ack {
-            if version != PROTOCOL_VERSION {
-                let _ = events.send(LinkEvent::VersionMismatch { device: version });
-                return Err(format!(
-                    "device speaks protocol {version}, this node {PROTOCOL_VERSION}"
-                ));
-            }
-            break (major, minor);
-        }
-    };
-    send(
-        port,
-        seq,
-        Message::Config {
-            watchdog_ms: config.watchdog_ms,
-            action: config.watchdog_action,
-        },
-    )?;
-    let _ = events.send(LinkEvent::Connected { firmware });
-    *connected = true;
+        let _ = events.send(LinkEvent::Connected { firmware });
+        *connected = true;
 
-    // The device starts with the e-stop released; tell it the current state, then
-    // continue from the newest command.
-    let (mut sent_generation, mut sent_estop_generation, mut estop_sent) = (0u64, u64::MAX, false);
-    let mut last_command_sent: Option<Instant> = None;
-    let mut last_any_sent = Instant::now();
-    loop {
-        let (lock, cv) = &**shared;
-        let mut s = lock.lock().map_err(|_| "poisoned".to_string())?;
+        // The device starts with the e-stop released; tell it the current state, then
+        // continue from the newest command.
+        let (mut sent_generation, mut sent_estop_generation, mut estop_sent) =
+            (0u64, u64::MAX, false);
+        let mut last_command_sent: Option<Instant> = None;
+        let mut last_any_sent = Instant::now();
         loop {
-            if s.shutdown {
-                return Ok(());
-            }
-            if let Some(b) = session.0.lock().ok().and_then(|x| x.broken.clone()) {
-                return Err(b);
-            }
-            let now = Instant::now();
-            let estop_due = s.estop_generation != sent_estop_generation;
-            let command_waiting = s.generation != sent_generation && s.latest.is_some() && !s.estop;
-            let command_allowed_at = last_command_sent
-                .map(|t| t + config.send_period)
-                .unwrap_or(now);
-            let heartbeat_at = last_any_sent + config.heartbeat_period;
-            if estop_due || (command_waiting && now >= command_allowed_at) || now >= heartbeat_at {
-                break;
-            }
-            let wake = if command_waiting {
-                command_allowed_at.min(heartbeat_at)
-            } else {
-                heartbeat_at
-            };
-            s = cv
-                .wait_timeout(s, wake.saturating_duration_since(now))
-                .map_err(|_| "poisoned".to_string())?
-                .0;
-        }
-        // Decide under the lock, write without it.
-        let now = Instant::now();
-        let estop = s.estop;
-        let estop_due = s.estop_generation != sent_estop_generation;
-        sent_estop_generation = s.estop_generation;
-        let command = if !estop
-            && s.generation != sent_generation
-            && now
-                >= last_command_sent
-                    .map(|t| t + config.send_period)
-                    .unwrap_or(now)
-        {
-            sent_generation = s.generation;
-            s.latest
-        } else {
-            if estop {
-                // commands during an e-stop are dropped, not kept for later
-                sent_generation = s.generation;
-            }
-            None
-        };
-        drop(s);
-        if estop_due && (estop || estop_sent) {
-            send(port, seq, Message::Estop { engaged: estop })?;
-            estop_sent = estop;
-            last_any_sent = Instant::now();
-        }
-        if let Some((ticks, stamp, handed_in)) = command {
-            let next = seq.wrapping_add(1);
-            if let Ok(mut f) = in_flight.lock() {
-                f.record(next, stamp, Instant::now());
-            }
-            let latency = handed_in.elapsed();
-            send(port, seq, Message::SetPulses { ticks })?;
-            if let Ok(mut st) = stats.lock() {
-                st.sent += 1;
-                if st.latency_us.len() == 1000 {
-                    st.latency_us.pop_front();
+            let (lock, cv) = &**shared;
+            let mut s = lock.lock().map_err(|_| "poisoned".to_string())?;
+            loop {
+                if s.shutdown {
+                    return Ok(());
                 }
-                st.latency_us.push_back(latency.as_secs_f64() * 1e6);
+                if let Some(b) = session.0.lock().ok().and_then(|x| x.broken.clone()) {
+                    return Err(b);
+                }
+                let now = Instant::now();
+                let estop_due = s.estop_generation != sent_estop_generation;
+                let command_waiting =
+                    s.generation != sent_generation && s.latest.is_some() && !s.estop;
+                let command_allowed_at = last_command_sent
+                    .map(|t| t + config.send_period)
+                    .unwrap_or(now);
+                let heartbeat_at = last_any_sent + config.heartbeat_period;
+                if estop_due
+                    || (command_waiting && now >= command_allowed_at)
+                    || now >= heartbeat_at
+                {
+                    break;
+                }
+                let wake = if command_waiting {
+                    command_allowed_at.min(heartbeat_at)
+                } else {
+                    heartbeat_at
+                };
+                s = cv
+                    .wait_timeout(s, wake.saturating_duration_since(now))
+                    .map_err(|_| "poisoned".to_string())?
+                    .0;
             }
-            last_command_sent = Some(Instant::now());
-            last_any_sent = Instant::now();
-        } else if Instant::now() >= last_any_sent + config.heartbeat_period {
-            send(port, seq, Message::Heartbeat)?;
-            last_any_sent = Instant::now();
+            // Decide under the lock, write without it.
+            let now = Instant::now();
+            let estop = s.estop;
+            let estop_due = s.estop_generation != sent_estop_generation;
+            sent_estop_generation = s.estop_generation;
+            let command = if !estop
+                && s.generation != sent_generation
+                && now
+                    >= last_command_sent
+                        .map(|t| t + config.send_period)
+                        .unwrap_or(now)
+            {
+                sent_generation = s.generation;
+                s.latest
+            } else {
+                if estop {
+                    // commands during an e-stop are dropped, not kept for later
+                    sent_generation = s.generation;
+                }
+                None
+            };
+            drop(s);
+            if estop_due && (estop || estop_sent) {
+                send(port, seq, Message::Estop { engaged: estop })?;
+                estop_sent = estop;
+                last_any_sent = Instant::now();
+            }
+            if let Some((ticks, stamp, handed_in)) = command {
+                let next = seq.wrapping_add(1);
+                if let Ok(mut f) = in_flight.lock() {
+                    f.record(next, stamp, Instant::now());
+                }
+                let latency = handed_in.elapsed();
+                send(port, seq, Message::SetPulses { ticks })?;
+                if let Ok(mut st) = stats.lock() {
+                    st.sent += 1;
+                    if st.latency_us.len() == 1000 {
+                        st.latency_us.pop_front();
+                    }
+                    st.latency_us.push_back(latency.as_secs_f64() * 1e6);
+                }
+                last_command_sent = Some(Instant::now());
+                last_any_sent = Instant::now();
+            } else if Instant::now() >= last_any_sent + config.heartbeat_period {
+                send(port, seq, Message::Heartbeat)?;
+                last_any_sent = Instant::now();
+            }
         }
     }
 }
