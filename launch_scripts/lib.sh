@@ -1,0 +1,133 @@
+# Shared by run_graph.sh, pc.sh and pi.sh (sourced, not run): finding or building the
+# binaries, ROS arguments for every node, starting nodes, and stopping all of them on
+# Ctrl-C / SIGTERM (each child gets SIGINT, is waited for, and is killed if it hangs;
+# the script then exits 0).
+#
+# The caller sets EEZYBOT_SCRIPT (its name, for messages) and calls, in order:
+#   eezybot_find_binaries BIN...   -> sets EEZYBOT_BIN (a directory)
+#   eezybot_ros_args "$@"          -> sets EEZYBOT_ROS_ARGS (array: the user's ROS arguments)
+#   eezybot_start NAME ARG...      -> starts $EEZYBOT_BIN/NAME ARG... in the background
+#   eezybot_wait                   -> waits; returns when a node exits or on Ctrl-C/SIGTERM
+
+EEZYBOT_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+EEZYBOT_PIDS=()
+EEZYBOT_NAMES=()
+EEZYBOT_STOPPING=0
+
+eezybot_say() { echo "[${EEZYBOT_SCRIPT:-eezybot}] $*" >&2; }
+
+# Where the binaries come from, in this order:
+#  1. EEZYBOT_BIN_DIR, if set;
+#  2. bin/ next to launch_scripts/ (a bundle from cross_build.sh, copied to a Pi);
+#  3. in a source tree with cargo: `cargo build --release` (progress shown), then target/release;
+#  4. in a source tree without cargo: target/release, if it holds the binaries.
+eezybot_find_binaries() {
+  local b missing
+  if [ -n "${EEZYBOT_BIN_DIR:-}" ]; then
+    EEZYBOT_BIN="$EEZYBOT_BIN_DIR"
+  elif [ -x "$EEZYBOT_ROOT/bin/$1" ]; then
+    EEZYBOT_BIN="$EEZYBOT_ROOT/bin"
+  elif [ -f "$EEZYBOT_ROOT/Cargo.toml" ] && command -v cargo >/dev/null 2>&1; then
+    eezybot_say "building the nodes: cargo build --release (the first build takes a few minutes)"
+    (cd "$EEZYBOT_ROOT" && cargo build --release --bins) || {
+      eezybot_say "the build failed"; exit 1; }
+    EEZYBOT_BIN="$EEZYBOT_ROOT/target/release"
+  else
+    EEZYBOT_BIN="$EEZYBOT_ROOT/target/release"
+  fi
+  missing=()
+  for b in "$@"; do [ -x "$EEZYBOT_BIN/$b" ] || missing+=("$b"); done
+  if [ ${#missing[@]} -gt 0 ]; then
+    eezybot_say "missing in $EEZYBOT_BIN: ${missing[*]}"
+    eezybot_say "build them here (cargo build --release), or cross-build on a PC with"
+    eezybot_say "launch_scripts/cross_build.sh and copy the bundle (see README: PC + Raspberry Pi)"
+    exit 1
+  fi
+}
+
+# The script's own arguments are ROS arguments for every node. A leading --ros-args is
+# accepted and dropped (the nodes get one --ros-args block each).
+eezybot_ros_args() {
+  EEZYBOT_ROS_ARGS=("$@")
+  if [ ${#EEZYBOT_ROS_ARGS[@]} -gt 0 ] && [ "${EEZYBOT_ROS_ARGS[0]}" = "--ros-args" ]; then
+    EEZYBOT_ROS_ARGS=("${EEZYBOT_ROS_ARGS[@]:1}")
+  fi
+}
+
+# Start one node: eezybot_start NAME [ROS ARGS...]. The node gets --ros-args, then the
+# given node-specific arguments, then the user's (so the user's win).
+eezybot_start() {
+  local name=$1; shift
+  "$EEZYBOT_BIN/$name" --ros-args "$@" "${EEZYBOT_ROS_ARGS[@]}" &
+  EEZYBOT_PIDS+=($!)
+  EEZYBOT_NAMES+=("$name")
+}
+
+eezybot_stop_all() {
+  local i p deadline
+  for p in "${EEZYBOT_PIDS[@]}"; do kill -INT "$p" 2>/dev/null || true; done
+  deadline=$((SECONDS + ${EEZYBOT_STOP_TIMEOUT:-5}))
+  for i in "${!EEZYBOT_PIDS[@]}"; do
+    p=${EEZYBOT_PIDS[$i]}
+    while kill -0 "$p" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.1; done
+    if kill -0 "$p" 2>/dev/null; then
+      eezybot_say "${EEZYBOT_NAMES[$i]} (pid $p) did not stop within ${EEZYBOT_STOP_TIMEOUT:-5} s: killing it"
+      kill -KILL "$p" 2>/dev/null || true
+    fi
+  done
+  wait 2>/dev/null || true
+}
+
+eezybot_on_signal() {
+  EEZYBOT_STOPPING=1
+  eezybot_say "$1: stopping ${EEZYBOT_NAMES[*]}"
+}
+
+# Wait until a node exits or a signal arrives, then stop every node. Exits 0 after
+# Ctrl-C / SIGTERM, else with the exit code of the node that stopped first.
+eezybot_wait() {
+  local code=0 i
+  trap 'eezybot_on_signal SIGINT' INT
+  trap 'eezybot_on_signal SIGTERM' TERM
+  trap 'eezybot_stop_all' EXIT
+  wait -n "${EEZYBOT_PIDS[@]}" || code=$?
+  if [ "$EEZYBOT_STOPPING" = 0 ]; then
+    for i in "${!EEZYBOT_PIDS[@]}"; do
+      kill -0 "${EEZYBOT_PIDS[$i]}" 2>/dev/null || eezybot_say "${EEZYBOT_NAMES[$i]} exited (code $code): stopping the others"
+    done
+  else
+    code=0
+  fi
+  trap - EXIT
+  eezybot_stop_all
+  exit "$code"
+}
+
+# One line on where this runs: host name and its IPv4 addresses.
+eezybot_host() {
+  local addrs
+  addrs=$(hostname -I 2>/dev/null | tr ' ' '\n' | grep -E '^[0-9.]+$' | tr '\n' ' ' | sed 's/ *$//')
+  echo "$(hostname 2>/dev/null || echo this host)${addrs:+ ($addrs)}"
+}
+
+eezybot_banner() {
+  eezybot_say "host $(eezybot_host), ROS domain ${ROS_DOMAIN_ID:-0}, binaries $EEZYBOT_BIN"
+  [ ${#EEZYBOT_ROS_ARGS[@]} -eq 0 ] || eezybot_say "ROS arguments for every node: ${EEZYBOT_ROS_ARGS[*]}"
+}
+
+# The serial device for serial_node: SERIAL_PORT if set (mock = the virtual Arduino),
+# else /dev/eezybot (udev rule), else /dev/ttyACM0. Prints nothing; sets EEZYBOT_PORT
+# and EEZYBOT_PORT_FOUND (1 if the device exists or is the mock).
+eezybot_serial_port() {
+  EEZYBOT_PORT_FOUND=1
+  if [ -n "${SERIAL_PORT:-}" ]; then
+    EEZYBOT_PORT=$SERIAL_PORT
+  elif [ -e /dev/eezybot ]; then
+    EEZYBOT_PORT=/dev/eezybot
+  elif [ -e /dev/ttyACM0 ]; then
+    EEZYBOT_PORT=/dev/ttyACM0
+  else
+    EEZYBOT_PORT=/dev/eezybot
+  fi
+  [ "$EEZYBOT_PORT" = mock ] || [ -e "$EEZYBOT_PORT" ] || EEZYBOT_PORT_FOUND=0
+}

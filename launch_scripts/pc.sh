@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The operator's PC half of the graph: gui_bridge (web panel on GUI_BIND, default
+# 127.0.0.1:8080; 0.0.0.0:8080 to reach it from another machine), compute_ik and
+# state_publisher, in ROS domain ROS_DOMAIN_ID (default 0). Run pi.sh on the Raspberry
+# Pi next to the Arduino, in the same domain, on the same network (multicast allowed).
+#
+# Arguments are ROS arguments for every node, e.g.
+#   launch_scripts/pc.sh -r __ns:=/arm2
+# Ctrl-C (or SIGTERM) stops every node; the script then exits 0.
+set -euo pipefail
+EEZYBOT_SCRIPT=pc.sh
+. "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+
+eezybot_find_binaries compute_ik state_publisher gui_bridge
+eezybot_ros_args "$@"
+bind=${GUI_BIND:-127.0.0.1:8080}
+
+eezybot_start compute_ik
+eezybot_start state_publisher
+eezybot_start gui_bridge -p "bind:=$bind"
+
+eezybot_banner
+eezybot_say "running here (operator PC): compute_ik, state_publisher, gui_bridge"
+eezybot_say "expected on the Pi (pi.sh, same ROS domain): serial_node"
+eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
+eezybot_wait

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# The Raspberry Pi half of the graph: serial_node, next to the Arduino, in ROS domain
+# ROS_DOMAIN_ID (default 0). The Arduino is SERIAL_PORT, else /dev/eezybot (the udev rule
+# in deploy/), else /dev/ttyACM0. If none exists, serial_node starts on /dev/eezybot
+# anyway and connects when the board is plugged in (it never falls back to the virtual
+# Arduino by itself); SERIAL_PORT=mock runs the built-in virtual Arduino instead.
+# Uses the prebuilt binaries in bin/ when they are there (a bundle from
+# cross_build.sh), so the Pi needs no Rust toolchain.
+#
+# Arguments are ROS arguments for serial_node, e.g.
+#   launch_scripts/pi.sh -r __ns:=/arm2
+# Ctrl-C (or SIGTERM) stops it; the script then exits 0.
+set -euo pipefail
+EEZYBOT_SCRIPT=pi.sh
+. "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+
+eezybot_find_binaries serial_node
+eezybot_ros_args "$@"
+eezybot_serial_port
+
+eezybot_start serial_node -p "port:=$EEZYBOT_PORT"
+
+eezybot_banner
+if [ "$EEZYBOT_PORT" = mock ]; then
+  eezybot_say "running here (Pi): serial_node with the built-in virtual Arduino (SERIAL_PORT=mock)"
+elif [ "$EEZYBOT_PORT_FOUND" = 1 ]; then
+  eezybot_say "running here (Pi): serial_node on $EEZYBOT_PORT"
+else
+  eezybot_say "WARNING: no Arduino at ${SERIAL_PORT:-/dev/eezybot or /dev/ttyACM0}; serial_node waits for $EEZYBOT_PORT to appear"
+  eezybot_say "(plug in the board, check the udev rule and the dialout group; SERIAL_PORT=mock for the virtual Arduino)"
+  eezybot_say "running here (Pi): serial_node on $EEZYBOT_PORT (not connected yet)"
+fi
+eezybot_say "expected on the PC (pc.sh, same ROS domain): compute_ik, state_publisher, gui_bridge"
+eezybot_wait
