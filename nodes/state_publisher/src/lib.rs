@@ -21,8 +21,12 @@ use std::future::Future;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// The URDF shipped with the project (the `urdf` parameter's default).
-pub const SHIPPED_URDF: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../urdf/eezybot.urdf");
+/// The URDF shipped in `urdf/eezybot.urdf`, compiled in: what the `urdf` parameter's
+/// default (`""`) publishes, so the binary needs no file of the source tree at run time.
+pub const SHIPPED_URDF: &str = include_str!("../../../urdf/eezybot.urdf");
+
+/// How logs and errors name [`SHIPPED_URDF`].
+pub const SHIPPED_URDF_ORIGIN: &str = "urdf/eezybot.urdf (built in)";
 
 /// The node's description and parameters.
 pub fn spec() -> ros_plumbing::NodeSpec {
@@ -31,7 +35,11 @@ pub fn spec() -> ros_plumbing::NodeSpec {
         description: "URDF + joint_states -> tf, tf_static and robot_description (like robot_state_publisher)",
         usage: "",
         params: vec![
-            ParamSpec::new("urdf", ParameterValue::String(shipped_urdf_path()), "path of the URDF to publish")
+            ParamSpec::new(
+                "urdf",
+                ParameterValue::String(String::new()),
+                "path of the URDF to publish; empty = the EezyBotArm URDF built into this binary (urdf/eezybot.urdf)",
+            )
                 .validator(|v| match v {
                     ParameterValue::String(p) => load_urdf(p).map(|_| ()),
                     _ => Ok(()),
@@ -49,12 +57,6 @@ pub fn spec() -> ros_plumbing::NodeSpec {
     }
 }
 
-fn shipped_urdf_path() -> String {
-    std::fs::canonicalize(SHIPPED_URDF)
-        .map(|p| p.display().to_string())
-        .unwrap_or_else(|_| SHIPPED_URDF.to_string())
-}
-
 /// A parsed URDF with its text.
 #[derive(Clone, Debug)]
 pub struct Description {
@@ -64,12 +66,29 @@ pub struct Description {
     pub text: String,
 }
 
-/// Read and validate a URDF file; the error names the file and the problem.
+/// Read and validate a URDF file; `""` is the built-in [`SHIPPED_URDF`]. The error names
+/// the file and the problem.
 pub fn load_urdf(path: &str) -> Result<Description, String> {
+    if path.is_empty() {
+        return parse_urdf(SHIPPED_URDF.to_string(), SHIPPED_URDF_ORIGIN);
+    }
     let text = std::fs::read_to_string(Path::new(path))
         .map_err(|e| format!("{path}: cannot read: {e}"))?;
-    let model = RobotModel::from_urdf_str(&text, path).map_err(|e| e.to_string())?;
+    parse_urdf(text, path)
+}
+
+fn parse_urdf(text: String, origin: &str) -> Result<Description, String> {
+    let model = RobotModel::from_urdf_str(&text, origin).map_err(|e| e.to_string())?;
     Ok(Description { model, text })
+}
+
+/// How logs name the `urdf` parameter's value: the path, or the built-in URDF for `""`.
+pub fn urdf_origin(path: &str) -> &str {
+    if path.is_empty() {
+        SHIPPED_URDF_ORIGIN
+    } else {
+        path
+    }
 }
 
 /// Where the loop's results go.
@@ -172,7 +191,7 @@ pub async fn run(
                         pending.clear();
                         outputs.robot_description(d.text);
                         outputs.tf_static(core.static_transforms(Time::now()));
-                        log::info!("publishing {path} with frame prefix `{}`", prefix(&params));
+                        log::info!("publishing {} with frame prefix `{}`", urdf_origin(&path), prefix(&params));
                     }
                     Err(e) => log::error!("keeping the previous URDF: {e}"),
                 }

@@ -9,7 +9,7 @@ use futures::StreamExt;
 use ros2_client::Publisher;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::{qos, RosNode};
-use state_publisher::{load_urdf, Input, Outputs};
+use state_publisher::{load_urdf, urdf_origin, Input, Outputs};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -67,7 +67,7 @@ async fn main_async() -> anyhow::Result<()> {
         "{} ready in ROS domain {}: {} ({} links) on {}, {}, {}",
         node.resolver().node_fqn(),
         node.domain_id(),
-        path,
+        urdf_origin(&path),
         description.model.links.len(),
         node.resolver().resolve("robot_description")?,
         node.resolver().resolve("tf_static")?,

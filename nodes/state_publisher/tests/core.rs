@@ -118,7 +118,7 @@ fn bad_joints_are_skipped_and_named() {
 
 #[test]
 fn shipped_urdf_publishes_every_movable_joint_from_compute_ik_output() {
-    let model = RobotModel::load(Path::new(state_publisher::SHIPPED_URDF)).unwrap();
+    let model = state_publisher::load_urdf("").unwrap().model;
     let fixed = model.joints.iter().filter(|j| !j.is_movable()).count();
     let mut core = TfCore::new(model, "");
     let state = eezybot_kinematics::ArmState::default();
@@ -129,4 +129,30 @@ fn shipped_urdf_publishes_every_movable_joint_from_compute_ik_output() {
     assert!(problems.is_empty(), "{problems:?}");
     assert_eq!(tf.transforms.len() + fixed, core.model().joints.len());
     assert_eq!(core.diagnostic_status("x", &[]).level, 0);
+}
+
+#[test]
+fn built_in_urdf_is_the_shipped_file() {
+    let file = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../urdf/eezybot.urdf"),
+    )
+    .unwrap();
+    assert_eq!(state_publisher::SHIPPED_URDF, file);
+    assert_eq!(state_publisher::load_urdf("").unwrap().text, file);
+}
+
+/// Regression: the default was a path into the build tree, absent on a Raspberry Pi
+/// that got the binary alone.
+#[test]
+fn urdf_default_needs_no_file_of_the_build_tree() {
+    let spec = state_publisher::spec();
+    let urdf = spec.params.iter().find(|p| p.name == "urdf").unwrap();
+    assert!(
+        matches!(&urdf.default, ros_plumbing::ParameterValue::String(s) if s.is_empty()),
+        "{:?}",
+        urdf.default
+    );
+    let help = spec.help();
+    assert!(!help.contains(env!("CARGO_MANIFEST_DIR")), "{help}");
+    assert!(help.contains("built into this binary"), "{help}");
 }
