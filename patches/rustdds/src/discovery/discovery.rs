@@ -1092,6 +1092,32 @@ impl Discovery {
       // the readers, so this processes the pending samples of all participants,
       // not only those of this one.
       debug!("Participant rediscovery start");
+      // Its readers and writers that the DB restored from the attic must be
+      // matched with our endpoints again: the participant may not send their
+      // SEDP samples again, because it did not lose us (its lease on us may be
+      // longer than ours on it), so its SEDP writers consider them delivered.
+      let (readers, writers) =
+        discovery_db_read(&self.discovery_db).participant_endpoints(guid_prefix);
+      for discovered_reader_data in readers {
+        info!(
+          "Rediscovered reader {:?} topic={:?}",
+          discovered_reader_data.reader_proxy.remote_reader_guid,
+          discovered_reader_data.subscription_topic_data.topic_name()
+        );
+        self.send_discovery_notification(DiscoveryNotificationType::ReaderUpdated {
+          discovered_reader_data,
+        });
+      }
+      for discovered_writer_data in writers {
+        info!(
+          "Rediscovered writer {:?} topic={:?}",
+          discovered_writer_data.writer_proxy.remote_writer_guid,
+          discovered_writer_data.publication_topic_data.topic_name
+        );
+        self.send_discovery_notification(DiscoveryNotificationType::WriterUpdated {
+          discovered_writer_data,
+        });
+      }
       self.sedp_receive_topic_data(Some(guid_prefix));
       self.sedp_receive_subscription(Some(guid_prefix));
       self.sedp_receive_publication(Some(guid_prefix));
@@ -1101,6 +1127,7 @@ impl Discovery {
 
   fn process_participant_dispose(&mut self, participant_guidp: GuidPrefix) {
     discovery_db_write(&self.discovery_db).remove_participant(participant_guidp, true); // true = actively removed
+    self.forget_participant_samples(participant_guidp);
     self.send_discovery_notification(DiscoveryNotificationType::ParticipantLost {
       guid_prefix: participant_guidp,
     });
@@ -1764,11 +1791,48 @@ impl Discovery {
     let removed = discovery_db_write(&self.discovery_db).participant_cleanup();
     for (guid_prefix, reason) in removed {
       debug!("participant cleanup - timeout for {guid_prefix:?}");
+      self.forget_participant_samples(guid_prefix);
       self.send_discovery_notification(DiscoveryNotificationType::ParticipantLost { guid_prefix });
       self.send_participant_status(DomainParticipantStatusEvent::ParticipantLost {
         id: guid_prefix,
         reason,
       });
+    }
+  }
+
+  // A remote participant was removed. Forget the discovery samples its writers
+  // sent us, so that they are processed again if it comes back, e.g. after a
+  // network outage longer than its lease: its SPDP and SEDP writers then send
+  // the same sequence numbers again, which would otherwise be dropped as
+  // duplicates, and the participant and its endpoints would never be
+  // rediscovered.
+  fn forget_participant_samples(&self, guid_prefix: GuidPrefix) {
+    self.dcps_participant.reader.forget_participant(guid_prefix);
+    self.dcps_subscription.reader.forget_participant(guid_prefix);
+    self.dcps_publication.reader.forget_participant(guid_prefix);
+    self.dcps_topic.reader.forget_participant(guid_prefix);
+    self
+      .dcps_participant_message
+      .reader
+      .forget_participant(guid_prefix);
+    #[cfg(feature = "security")]
+    {
+      self
+        .dcps_participant_secure
+        .reader
+        .forget_participant(guid_prefix);
+      self
+        .dcps_publications_secure
+        .reader
+        .forget_participant(guid_prefix);
+      self
+        .dcps_subscriptions_secure
+        .reader
+        .forget_participant(guid_prefix);
+      self
+        .dcps_participant_message_secure
+        .reader
+        .forget_participant(guid_prefix);
     }
   }
 

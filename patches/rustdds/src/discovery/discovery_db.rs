@@ -257,6 +257,26 @@ impl DiscoveryDB {
     self.participant_proxies.get(&guid_prefix)
   }
 
+  // The remote readers and writers of a participant that are in the DB, e.g.
+  // the ones restored from the attic when it was rediscovered.
+  pub fn participant_endpoints(
+    &self,
+    guid_prefix: GuidPrefix,
+  ) -> (Vec<DiscoveredReaderData>, Vec<DiscoveredWriterData>) {
+    (
+      self
+        .external_topic_readers
+        .range(guid_prefix.range())
+        .map(|(_, d)| d.clone())
+        .collect(),
+      self
+        .external_topic_writers
+        .range(guid_prefix.range())
+        .map(|(_, d)| d.clone())
+        .collect(),
+    )
+  }
+
   fn remove_topic_reader_with_prefix(&mut self, guid_prefix: GuidPrefix) {
     // TODO: Implement this using .drain_filter() in BTreeMap once it lands in
     // stable.

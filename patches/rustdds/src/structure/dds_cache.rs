@@ -20,7 +20,7 @@ use crate::{
     CreateError, CreateResult,
   },
   rtps::constant::MAX_WITHHELD_BYTES_PER_TOPIC,
-  structure::{sequence_number::SequenceNumber, time::Timestamp},
+  structure::{guid::GuidPrefix, sequence_number::SequenceNumber, time::Timestamp},
   GUID,
 };
 use super::cache_change::CacheChange;
@@ -244,6 +244,29 @@ impl TopicCache {
   // The Writer is gone, so samples it never completed are no longer awaited.
   pub fn forget_reliable_writer(&mut self, writer: GUID) {
     self.received_reliably_before.remove(&writer);
+  }
+
+  // A remote Participant is gone (lease expired or disposed): forget every change
+  // its Writers sent, with the sequence numbers that duplicate detection keys on.
+  // If the Participant comes back (e.g. after a network outage), its Writers send
+  // the same sequence numbers again: FastDDS repeats its SPDP sample with SN 1, and
+  // SEDP Writers replay their history from SN 1 to the rematched Reader. Without
+  // this, those samples are discarded as duplicates and the Participant is never
+  // rediscovered.
+  pub fn forget_participant(&mut self, prefix: GuidPrefix) {
+    let writers: Vec<GUID> = self
+      .sequence_numbers
+      .range(prefix.range())
+      .map(|(g, _)| *g)
+      .collect();
+    for writer in writers {
+      if let Some(sn_map) = self.sequence_numbers.remove(&writer) {
+        for instant in sn_map.values() {
+          self.changes.remove(instant);
+        }
+      }
+      self.received_reliably_before.remove(&writer);
+    }
   }
 
   // The oldest change that a Reliable DataReader cannot yet take, because an
@@ -706,6 +729,70 @@ mod tests {
     assert_eq!(
       read_after_repair(&Discovery::builtin_sedp_reader_qos()),
       [SequenceNumber::new(1), SequenceNumber::new(2)]
+    );
+  }
+
+  // A participant that comes back after its lease expired sends the same
+  // sequence numbers again: Fast DDS repeats its SPDP sample with SN 1, and SEDP
+  // writers replay their history from SN 1. Once the participant is forgotten,
+  // those samples must be taken as new, not dropped as duplicates, and a reliable
+  // reader must read them again; samples of other participants stay.
+  #[test]
+  fn forgotten_participant_samples_are_accepted_again() {
+    let sample = |writer, sn| {
+      CacheChange::new(
+        writer,
+        SequenceNumber::new(sn),
+        WriteOptions::default(),
+        DDSData::new(SerializedPayload::default()),
+      )
+    };
+    let lost = GuidPrefix::new(&[1; 12]);
+    let other = GuidPrefix::new(&[2; 12]);
+    let lost_writer = GUID::new(lost, EntityId::SEDP_BUILTIN_PUBLICATIONS_WRITER);
+    let other_writer = GUID::new(other, EntityId::SEDP_BUILTIN_PUBLICATIONS_WRITER);
+    let mut topic_cache = TopicCache::new(
+      "DCPSPublication".to_string(),
+      TypeDesc::new("DiscoveredWriterData".to_string()),
+      &Discovery::builtin_sedp_reader_qos(),
+    );
+    let receive = |topic_cache: &mut TopicCache, writer, sns: &[i64]| {
+      for &sn in sns {
+        topic_cache.add_change(&Timestamp::now(), sample(writer, sn));
+      }
+      topic_cache.mark_reliably_received_before(writer, SequenceNumber::new(3));
+    };
+    // What a reliable DataReader reads, advancing its read pointers
+    let read = |topic_cache: &TopicCache, last_read_sn: &mut BTreeMap<GUID, SequenceNumber>| {
+      let got: Vec<(GUID, SequenceNumber)> = topic_cache
+        .get_changes_in_range_reliable(last_read_sn)
+        .map(|(_, cc)| (cc.writer_guid, cc.sequence_number))
+        .collect();
+      for (writer, sn) in &got {
+        last_read_sn.insert(*writer, *sn);
+      }
+      got
+    };
+    let mut last_read_sn = BTreeMap::new();
+    receive(&mut topic_cache, lost_writer, &[1, 2]);
+    receive(&mut topic_cache, other_writer, &[1, 2]);
+    assert_eq!(read(&topic_cache, &mut last_read_sn).len(), 4);
+
+    // The same samples again, before the participant is forgotten: duplicates
+    receive(&mut topic_cache, lost_writer, &[1, 2]);
+    assert!(read(&topic_cache, &mut last_read_sn).is_empty());
+
+    // Lease expired: the participant is forgotten, then it comes back
+    topic_cache.forget_participant(lost);
+    last_read_sn.retain(|writer, _| writer.prefix != lost);
+    assert_eq!(topic_cache.changes.len(), 2);
+    receive(&mut topic_cache, lost_writer, &[1, 2]);
+    assert_eq!(
+      read(&topic_cache, &mut last_read_sn),
+      [
+        (lost_writer, SequenceNumber::new(1)),
+        (lost_writer, SequenceNumber::new(2))
+      ]
     );
   }
 

@@ -23,7 +23,7 @@ use crate::{
   },
   discovery::sedp_messages::PublicationBuiltinTopicData,
   serialization::CDRDeserializerAdapter,
-  structure::{duration::Duration, entity::RTPSEntity, guid::GUID, time::Timestamp},
+  structure::{duration::Duration, entity::RTPSEntity, guid::{GuidPrefix, GUID}, time::Timestamp},
 };
 
 /// Simplified type for CDR encoding
@@ -86,6 +86,12 @@ where
       simple_data_reader,
       datasample_cache: dsc,
     }
+  }
+
+  // The remote Participant `prefix` is gone: its samples are delivered again if
+  // it is rediscovered. See `TopicCache::forget_participant`.
+  pub(crate) fn forget_participant(&self, prefix: GuidPrefix) {
+    self.simple_data_reader.forget_participant(prefix);
   }
 }
 

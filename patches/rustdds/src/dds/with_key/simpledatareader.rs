@@ -33,7 +33,7 @@ use crate::{
     cache_change::CacheChange,
     dds_cache::TopicCache,
     entity::RTPSEntity,
-    guid::{EntityId, GUID},
+    guid::{EntityId, GuidPrefix, GUID},
     sequence_number::SequenceNumber,
     time::Timestamp,
   },
@@ -426,6 +426,19 @@ where
       simple_datareader: self,
       decoder,
     }
+  }
+
+  // The remote Participant `prefix` is gone: forget what its Writers sent, so
+  // that the same samples are delivered again if it is rediscovered. See
+  // `TopicCache::forget_participant`.
+  pub(crate) fn forget_participant(&self, prefix: GuidPrefix) {
+    self.acquire_the_topic_cache_guard().forget_participant(prefix);
+    self
+      .read_state
+      .lock()
+      .unwrap()
+      .last_read_sn
+      .retain(|writer, _| writer.prefix != prefix);
   }
 
   fn acquire_the_topic_cache_guard(&self) -> MutexGuard<'_, TopicCache> {
