@@ -38,6 +38,12 @@ pub struct UDPSender {
   // sent immediately. Drained on write readiness by `flush_control`.
   // (see src/rtps/nonblocking_transmit_design.md)
   control_queues: RefCell<HashMap<SocketId, ControlQueue>>,
+
+  // Sockets whose last send failed, with that error's OS code. While a network
+  // is down (e.g. "Network is unreachable" during a Wi-Fi outage), every send
+  // fails: the error is logged once, and again only after a send succeeded or
+  // the error changed.
+  failing: RefCell<HashMap<SocketId, Option<i32>>>,
 }
 
 impl UDPSender {
@@ -160,6 +166,7 @@ impl UDPSender {
       unicast_socket,
       multicast_sockets,
       control_queues: RefCell::new(HashMap::new()),
+      failing: RefCell::new(HashMap::new()),
     };
     info!("UDPSender::new() --> {sender:?}");
     Ok(sender)
@@ -221,6 +228,9 @@ impl UDPSender {
     }
     match socket.send_to(buffer, addr) {
       Ok(bytes_sent) => {
+        if self.failing.borrow_mut().remove(&id).is_some() {
+          info!("raw_send: {id:?} sends again (to {addr})");
+        }
         if bytes_sent != buffer.len() {
           error!(
             "raw_send: {id:?} tried {} bytes, sent only {bytes_sent}",
@@ -231,7 +241,15 @@ impl UDPSender {
       }
       Err(e) if e.kind() == io::ErrorKind::WouldBlock => SendOutcome::WouldBlock,
       Err(e) => {
-        warn!("raw_send: {id:?} to {addr} : {e:?} len={}", buffer.len());
+        let code = e.raw_os_error();
+        if self.failing.borrow_mut().insert(id, code) == Some(code) {
+          debug!("raw_send: {id:?} to {addr} : {e:?} len={}", buffer.len());
+        } else {
+          warn!(
+            "raw_send: {id:?} to {addr} : {e:?} len={} (not repeated until a send succeeds)",
+            buffer.len()
+          );
+        }
         SendOutcome::Dropped
       }
     }
