@@ -81,6 +81,8 @@ pub struct DomainParticipantBuilder {
   socket_receive_buffer_size: usize,
   socket_send_buffer_size: usize,
 
+  spdp_publish_period: std::time::Duration, // SPDP announcement period; lease = 5 x this
+
   #[cfg(feature = "security")]
   security_plugins: Option<SecurityPlugins>,
   #[cfg(feature = "security")]
@@ -95,6 +97,7 @@ impl DomainParticipantBuilder {
       same_host_loopback: true,
       socket_receive_buffer_size: Self::DEFAULT_SOCKET_RECEIVE_BUFFER_SIZE,
       socket_send_buffer_size: Self::DEFAULT_SOCKET_SEND_BUFFER_SIZE,
+      spdp_publish_period: Self::DEFAULT_SPDP_PUBLISH_PERIOD,
       #[cfg(feature = "security")]
       security_plugins: None,
       #[cfg(feature = "security")]
@@ -161,6 +164,19 @@ impl DomainParticipantBuilder {
   /// - Linux: `sudo sysctl -w net.core.wmem_max=<bytes>`.
   pub fn socket_send_buffer_size(mut self, size: usize) -> Self {
     self.socket_send_buffer_size = size;
+    self
+  }
+
+  pub const DEFAULT_SPDP_PUBLISH_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+
+  /// How often the participant announces itself to the domain (SPDP). The lease
+  /// duration it announces is five periods: remote participants that hear no
+  /// announcement for that long consider it lost. A shorter period lets a
+  /// participant that comes back after a network outage be rediscovered sooner
+  /// (the first announcement after the network returns does it), and a lost one
+  /// be noticed sooner. The default is 10 s (lease 50 s).
+  pub fn spdp_publish_period(mut self, period: std::time::Duration) -> Self {
+    self.spdp_publish_period = period;
     self
   }
 
@@ -358,6 +374,7 @@ impl DomainParticipantBuilder {
     // Construct and start background thread
     let dp_clone = dp.weak_clone();
     let disc_db_clone = dp.discovery_db();
+    let spdp_publish_period = self.spdp_publish_period;
     let discovery_handle = thread::Builder::new()
       .name("RustDDS discovery thread".to_string())
       .spawn(move || {
@@ -372,6 +389,7 @@ impl DomainParticipantBuilder {
           security_plugins_handle,
           discovery_waker,
           discovery_sample_receiver,
+          spdp_publish_period,
         ) {
           discovery.discovery_event_loop(); // run the event loop
         }

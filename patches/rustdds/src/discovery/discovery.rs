@@ -187,7 +187,7 @@ mod no_key {
 #[derive(Clone, Copy, Debug)]
 enum DiscoveryTimerEvent {
   // `reschedule` distinguishes the periodic SPDP announce (true, reschedules
-  // itself at SPDP_PUBLISH_PERIOD) from a one-shot quick response to a newly
+  // itself at spdp_publish_period) from a one-shot quick response to a newly
   // discovered participant (false, does not reschedule).
   SendParticipantInfo {
     reschedule: bool,
@@ -296,12 +296,14 @@ pub(crate) struct Discovery {
   // discovery phase. See `spdp_receive`.
   #[cfg(feature = "security")]
   spdp_quick_response_sent: std::collections::HashSet<GuidPrefix>,
+
+  // How often we announce ourselves (SPDP); our lease is five periods.
+  spdp_publish_period: StdDuration,
 }
 
 impl Discovery {
   const PARTICIPANT_CLEANUP_PERIOD: StdDuration = StdDuration::from_secs(2);
   const TOPIC_CLEANUP_PERIOD: StdDuration = StdDuration::from_secs(60); // timer for cleaning up inactive topics
-  const SPDP_PUBLISH_PERIOD: StdDuration = StdDuration::from_secs(10);
   const CHECK_PARTICIPANT_MESSAGES: StdDuration = StdDuration::from_secs(1);
   #[cfg(feature = "security")]
   const CACHED_SECURE_DISCOVERY_MESSAGE_RESEND_PERIOD: StdDuration = StdDuration::from_secs(1);
@@ -318,6 +320,7 @@ impl Discovery {
     security_plugins_opt: Option<SecurityPluginsHandle>,
     waker: LoopWaker,
     discovery_samples: ReadyReceiver<Token>,
+    spdp_publish_period: StdDuration,
   ) -> CreateResult<Self> {
     // helper macro to handle initialization failures.
     macro_rules! try_construct {
@@ -693,6 +696,7 @@ impl Discovery {
       dcps_participant_volatile_message_secure,
       #[cfg(feature = "security")]
       spdp_quick_response_sent: std::collections::HashSet::new(),
+      spdp_publish_period,
     })
   }
 
@@ -862,7 +866,7 @@ impl Discovery {
                   // quick response does not.
                   if reschedule {
                     self.discovery_timer.borrow_mut().set_timeout(
-                      Self::SPDP_PUBLISH_PERIOD,
+                      self.spdp_publish_period,
                       DiscoveryTimerEvent::SendParticipantInfo { reschedule: true },
                     );
                   }
@@ -1019,7 +1023,7 @@ impl Discovery {
             // returns a permission other than `Allow`, which skips
             // `process_discovered_participant_data` above — and with it the normal
             // "quick SPDP response" optimization. Without that, the remote would
-            // only learn about us on our next *periodic* SPDP (SPDP_PUBLISH_PERIOD),
+            // only learn about us on our next *periodic* SPDP (spdp_publish_period),
             // delaying the authentication handshake by up to a full period. Send an
             // unsolicited one-shot quick SPDP response now (at most once per remote).
             // We only re-announce our own public SPDP data, so this discloses nothing
@@ -1475,7 +1479,7 @@ impl Discovery {
     let data = SpdpDiscoveredParticipantData::from_local_participant(
       local_dp,
       &self.security_opt,
-      5.0 * Duration::from(Self::SPDP_PUBLISH_PERIOD),
+      5.0 * Duration::from(self.spdp_publish_period),
     );
 
     #[cfg(feature = "security")]
