@@ -380,6 +380,21 @@ impl Spinner {
               }
               Some(GraphEvent::EntityUndeclared(guid_entity(EntityKind::Publisher, guid)))
             }
+            // A participant lost by lease timeout takes its readers and writers
+            // with it, but RustDDS reports only the participant: forget its
+            // endpoints here, else the match counts stay stale, and a rematch
+            // after it comes back (e.g. after a network outage) goes unnoticed.
+            DomainParticipantStatusEvent::ParticipantLost {id, ..} => {
+              for readers
+              in self.writers_to_remote_readers.lock().unwrap().values_mut() {
+                readers.retain(|g| g.prefix != id);
+              }
+              for writers
+              in self.readers_to_remote_writers.lock().unwrap().values_mut() {
+                writers.retain(|g| g.prefix != id);
+              }
+              None
+            }
 
             _ => None,
           };
@@ -940,10 +955,8 @@ impl Node {
       .unwrap()
       .get(&subscription_guid)
       .map(BTreeSet::len)
-      .unwrap_or_else(|| {
-        error!("get_publisher_count: Subscriber {subscription_guid:?} not known to node.");
-        0
-      })
+      // The map has an entry only once something was matched.
+      .unwrap_or(0)
   }
 
   pub(crate) fn get_subscription_count(&self, publisher_guid: GUID) -> usize {
@@ -953,10 +966,8 @@ impl Node {
       .unwrap()
       .get(&publisher_guid)
       .map(BTreeSet::len)
-      .unwrap_or_else(|| {
-        error!("get_subscription_count: Publisher {publisher_guid:?} not known to node.");
-        0
-      })
+      // The map has an entry only once something was matched.
+      .unwrap_or(0)
   }
 
   /// Number of publishers currently discovered on `topic` (a fully-qualified
