@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Installs what cross-building for a Raspberry Pi needs, idempotently and quietly (one
+# line when it installs something): the Rust targets aarch64-unknown-linux-gnu (64-bit
+# Raspberry Pi OS / Ubuntu) and armv7-unknown-linux-gnueabihf (32-bit Raspberry Pi OS),
+# Debian's cross gcc + libc for both (the linkers named in .cargo/config.toml), and
+# qemu-user, so `cargo test --target ...` runs the tests of pure crates (the cargo runner
+# in .cargo/config.toml). Source it (`. launch_scripts/setup_cross.sh`) or run it.
+set -euo pipefail
+
+_log() { echo "[setup_cross] $*" >&2; }
+
+# Rust targets (rustup downloads the standard library for each once).
+EEZYBOT_CROSS_TARGETS=${EEZYBOT_CROSS_TARGETS:-aarch64-unknown-linux-gnu armv7-unknown-linux-gnueabihf}
+_installed=$(rustup target list --installed)
+_missing=()
+for t in $EEZYBOT_CROSS_TARGETS; do
+  grep -qx "$t" <<<"$_installed" || _missing+=("$t")
+done
+if [ ${#_missing[@]} -gt 0 ]; then
+  _log "installing Rust targets: ${_missing[*]}"
+  _out=$(rustup target add "${_missing[@]}" 2>&1) || { echo "$_out" >&2; exit 1; }
+fi
+
+# Debian packages: cross linkers and C libraries, qemu-user (provides qemu-aarch64 and
+# qemu-arm, the cargo runners).
+EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu libc6-dev-arm64-cross gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user}
+_missing=()
+for p in $EEZYBOT_CROSS_APT_PACKAGES; do
+  dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
+done
+if [ ${#_missing[@]} -gt 0 ]; then
+  _log "installing Debian packages: ${_missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  _out=$( { apt-get update -qq && apt-get install -y -qq --no-install-recommends "${_missing[@]}"; } 2>&1) \
+    || { echo "$_out" >&2; exit 1; }
+fi
+unset _installed _missing _out
