@@ -1,0 +1,127 @@
+#!/usr/bin/env bash
+# Cross-builds the Raspberry Pi half of the graph (serial_node and virtual_arduino) on this
+# PC, so the Pi needs no Rust toolchain:
+#
+#   launch_scripts/cross_build.sh [aarch64|armv7|all]     (default all)
+#
+#   aarch64: aarch64-unknown-linux-gnu, 64-bit Raspberry Pi OS / Ubuntu (Pi 3, 4, 5, Zero 2 W)
+#   armv7:   armv7-unknown-linux-gnueabihf, 32-bit Raspberry Pi OS (Pi 2, 3, 4, Zero 2 W)
+#
+# Installs what it needs (launch_scripts/setup_cross.sh), builds with the `pi` profile of
+# Cargo.toml (stripped, LTO), checks that the binaries start (under qemu-user), and writes
+# per target a bundle dist/eezybot-pi-ARCH/ and its tarball dist/eezybot-pi-ARCH.tar.gz:
+# bin/, launch_scripts/{lib.sh,pi.sh}, deploy/ (systemd unit, udev rule, install.sh),
+# README.txt and raspberry_pi.md. Copy the tarball to the Pi, unpack it and follow
+# README.txt (docs/raspberry_pi.md).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+
+_say() { echo "[cross_build] $*" >&2; }
+
+case "${1:-all}" in
+  aarch64) arches=(aarch64) ;;
+  armv7) arches=(armv7) ;;
+  all) arches=(aarch64 armv7) ;;
+  -h|--help) sed -n '2,15s/^# \{0,1\}//p' "$0"; exit 0 ;;
+  *) _say "unknown target '$1': aarch64, armv7 or all"; exit 2 ;;
+esac
+[ $# -le 1 ] || { _say "one argument at most: aarch64, armv7 or all"; exit 2; }
+
+triple() {
+  case "$1" in
+    aarch64) echo aarch64-unknown-linux-gnu ;;
+    armv7) echo armv7-unknown-linux-gnueabihf ;;
+  esac
+}
+# The binutils prefix of the cross toolchain.
+tools() {
+  case "$1" in
+    aarch64) echo aarch64-linux-gnu ;;
+    armv7) echo arm-linux-gnueabihf ;;
+  esac
+}
+# The cargo runner of .cargo/config.toml, for the start-up check.
+qemu() {
+  case "$1" in
+    aarch64) echo "qemu-aarch64 -L /usr/aarch64-linux-gnu" ;;
+    armv7) echo "qemu-arm -L /usr/arm-linux-gnueabihf" ;;
+  esac
+}
+
+. launch_scripts/setup_cross.sh
+
+bins=(serial_node virtual_arduino)
+version=$(git describe --always --dirty 2>/dev/null || echo unknown)
+declare -A need_glibc
+mkdir -p dist
+for arch in "${arches[@]}"; do
+  t=$(triple "$arch")
+  _say "building ${bins[*]} for $t (profile pi; the first build takes several minutes)"
+  cargo build -q --profile pi --target "$t" -p serial_node --bins
+  out="target/$t/pi"
+
+  # The binaries start on the target's CPU and name no file of this build tree.
+  if ! help=$($(qemu "$arch") "$out/serial_node" --help 2>&1) || ! grep -q "^serial_node" <<<"$help"; then
+    _say "$out/serial_node --help under qemu: $help"; exit 1
+  fi
+  code=0; $(qemu "$arch") "$out/virtual_arduino" 2>/dev/null || code=$?
+  [ "$code" = 2 ] || { _say "$out/virtual_arduino under qemu exited $code, not 2 (usage)"; exit 1; }
+  for b in "${bins[@]}"; do
+    if grep -qF "$root/" "$out/$b"; then
+      _say "$out/$b names a path in $root:"; grep -aoF "$root/" "$out/$b" | sort -u >&2; exit 1
+    fi
+  done
+
+  # The newest glibc symbol version the binaries use: the oldest OS they run on.
+  glibc=$(for b in "${bins[@]}"; do "$(tools "$arch")-objdump" -T "$out/$b"; done \
+    | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -1)
+  need_glibc[$arch]=$glibc
+
+  name="eezybot-pi-$arch"
+  bundle="dist/$name"
+  rm -rf "$bundle" "$bundle.tar.gz"
+  mkdir -p "$bundle/bin" "$bundle/launch_scripts"
+  for b in "${bins[@]}"; do install -m 0755 "$out/$b" "$bundle/bin/$b"; done
+  install -m 0644 launch_scripts/lib.sh "$bundle/launch_scripts/lib.sh"
+  install -m 0755 launch_scripts/pi.sh "$bundle/launch_scripts/pi.sh"
+  cp -r deploy "$bundle/deploy"
+  install -m 0644 docs/raspberry_pi.md "$bundle/raspberry_pi.md"
+  cat >"$bundle/README.txt" <<EOF
+EezyBot teleop: the Raspberry Pi half (serial_node), prebuilt for $t
+(version $version). No Rust toolchain is needed on the Pi; the binaries need glibc
+$glibc or later (\`ldd --version\`: Raspberry Pi OS bookworm, Ubuntu 22.04 and later).
+
+  bin/serial_node        the ROS 2 node that drives the Arduino over USB serial
+  bin/virtual_arduino    a virtual Arduino behind a pseudo-terminal (tests without a board)
+  launch_scripts/pi.sh   starts serial_node (SERIAL_PORT, ROS_DOMAIN_ID; Ctrl-C stops it)
+  deploy/                systemd unit, udev rule (/dev/eezybot), env file, install.sh
+
+Try it by hand (as a user in the dialout group):
+
+  ROS_DOMAIN_ID=0 launch_scripts/pi.sh                  # Arduino on /dev/eezybot or /dev/ttyACM0
+  SERIAL_PORT=mock launch_scripts/pi.sh                 # the built-in virtual Arduino
+
+Install as a service that starts at boot (to /opt/eezybot; user eezybot, group dialout):
+
+  sudo deploy/install.sh                # again after an update; --uninstall removes it
+  sudoedit /etc/default/eezybot         # ROS_DOMAIN_ID, SERIAL_PORT, EEZYBOT_ROS_ARGS
+  sudo systemctl restart eezybot-serial
+  journalctl -u eezybot-serial -f
+
+The PC runs launch_scripts/pc.sh in the same ROS_DOMAIN_ID, on a network that passes
+UDP multicast. Firewall ports, Wi-Fi and troubleshooting: raspberry_pi.md (here and
+in docs/ of the source tree).
+EOF
+  tar -C dist --owner=0 --group=0 -czf "$bundle.tar.gz" "$name"
+done
+
+_say "stripped binaries:"
+for arch in "${arches[@]}"; do
+  t=$(triple "$arch")
+  for b in "${bins[@]}"; do
+    printf '  %-30s %-16s %6s KiB\n' "$t" "$b" $(( $(stat -c %s "target/$t/pi/$b") / 1024 )) >&2
+  done
+  printf '  %-47s %6s KiB  (needs glibc >= %s)\n' "dist/eezybot-pi-$arch.tar.gz" \
+    $(( $(stat -c %s "dist/eezybot-pi-$arch.tar.gz") / 1024 )) "${need_glibc[$arch]}" >&2
+done
