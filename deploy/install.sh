@@ -7,7 +7,7 @@
 #   sudo deploy/install.sh --uninstall   stop and remove it (keeps /etc/default/eezybot)
 #
 # What it does:
-#   /opt/eezybot/                          bin/, launch_scripts/, deploy/, README.txt
+#   /opt/eezybot/                          bin/, launch_scripts/, deploy/, README.txt, docs
 #   user and group eezybot (system user, no login), member of dialout
 #   /etc/udev/rules.d/99-eezybot.rules     /dev/eezybot for the Arduino; reloads udev
 #   /etc/default/eezybot                   from deploy/eezybot.env.example, only if absent
@@ -84,7 +84,9 @@ install_bundle() {
     rm -rf "$PREFIX.new" "$PREFIX.old"
     mkdir -p "$PREFIX.new"
     cp -r "$bundle/bin" "$bundle/launch_scripts" "$bundle/deploy" "$PREFIX.new/"
-    [ ! -e "$bundle/README.txt" ] || cp "$bundle/README.txt" "$PREFIX.new/"
+    for f in README.txt raspberry_pi.md; do
+      [ ! -e "$bundle/$f" ] || cp "$bundle/$f" "$PREFIX.new/"
+    done
     chown -R root:root "$PREFIX.new"
     chmod -R u=rwX,go=rX "$PREFIX.new"
     [ ! -e "$PREFIX" ] || mv "$PREFIX" "$PREFIX.old"
