@@ -451,6 +451,24 @@ impl RtpsReaderProxy {
           return;
         }
 
+        // A durable (non-VOLATILE) reader that acknowledges less than it did
+        // before has lost our samples: it dropped us (e.g. our participant's lease
+        // expired on its side during a network outage while its lease did not
+        // expire on ours) and matched us again with a new, empty writer proxy. It
+        // needs our history again from that base; ignoring its NACKs would leave it
+        // without it for good (a rediscovered Fast DDS participant never learns our
+        // endpoints again). Fast DDS' writers handle a regressed ack the same way.
+        if new_all_acked_before < self.all_acked_before && self.is_durable() {
+          debug!(
+            "Reader {:x?} acknowledges only before {:?} (was {:?}): resending from there",
+            self.remote_reader_guid, new_all_acked_before, self.all_acked_before
+          );
+          let resend = SequenceNumberRange::new(new_all_acked_before, last_available);
+          self.unsent_changes.extend(resend);
+          self.all_acked_before = new_all_acked_before;
+          return;
+        }
+
         // RTPS ack state is monotonic for a matched reader. Other implementations
         // (e.g. FastDDS) may send preemptive or reordered ACKNACK on discovery with
         // a lower readerSNState.base — ignore rather than regress all_acked_before.
@@ -497,6 +515,15 @@ impl RtpsReaderProxy {
         error!("NACKFRAG not implemented");
       }
     }
+  }
+
+  // The reader asked for samples written before it matched (durability other
+  // than VOLATILE).
+  fn is_durable(&self) -> bool {
+    !matches!(
+      self.qos.durability(),
+      None | Some(crate::dds::qos::policy::Durability::Volatile)
+    )
   }
 
   pub fn insert_pending_gap(&mut self, seq_num: SequenceNumber) {
