@@ -39,11 +39,11 @@ pub struct UDPSender {
   // (see src/rtps/nonblocking_transmit_design.md)
   control_queues: RefCell<HashMap<SocketId, ControlQueue>>,
 
-  // Sockets whose last send failed, with that error's OS code. While a network
-  // is down (e.g. "Network is unreachable" during a Wi-Fi outage), every send
-  // fails: the error is logged once, and again only after a send succeeded or
-  // the error changed.
-  failing: RefCell<HashMap<SocketId, Option<i32>>>,
+  // Destinations whose last send failed, with that error's OS code. While a
+  // network is down (e.g. "Network is unreachable" during a Wi-Fi outage), every
+  // send to it fails: the error is logged once, and again only after a send to
+  // that address succeeded or the error changed.
+  failing: RefCell<HashMap<IpAddr, Option<i32>>>,
 }
 
 impl UDPSender {
@@ -228,8 +228,8 @@ impl UDPSender {
     }
     match socket.send_to(buffer, addr) {
       Ok(bytes_sent) => {
-        if self.failing.borrow_mut().remove(&id).is_some() {
-          info!("raw_send: {id:?} sends again (to {addr})");
+        if self.failing.borrow_mut().remove(&addr.ip()).is_some() {
+          info!("raw_send: sending to {} works again", addr.ip());
         }
         if bytes_sent != buffer.len() {
           error!(
@@ -242,12 +242,14 @@ impl UDPSender {
       Err(e) if e.kind() == io::ErrorKind::WouldBlock => SendOutcome::WouldBlock,
       Err(e) => {
         let code = e.raw_os_error();
-        if self.failing.borrow_mut().insert(id, code) == Some(code) {
+        if self.failing.borrow_mut().insert(addr.ip(), code) == Some(code) {
           debug!("raw_send: {id:?} to {addr} : {e:?} len={}", buffer.len());
         } else {
           warn!(
-            "raw_send: {id:?} to {addr} : {e:?} len={} (not repeated until a send succeeds)",
-            buffer.len()
+            "raw_send: {id:?} to {addr} : {e:?} len={} (not repeated until sending to {} works \
+             again)",
+            buffer.len(),
+            addr.ip()
           );
         }
         SendOutcome::Dropped
