@@ -1,5 +1,6 @@
 //! ROS 2 plumbing shared by every EezyBot node, so no node repeats it:
 //!
+//! * [`burst`]: a burst of commands (DDS repairing an outage) applied as its newest;
 //! * [`args`]: the `--ros-args` command line (`-r`, `-p`, `--params-file`, `--log-level`);
 //! * [`names`]: absolute name expansion and remapping (ros2-client makes `rt//x` of
 //!   relative root names; we never hand it one);
@@ -7,18 +8,21 @@
 //! * [`qos`]: the QoS of each topic of `shared/INTERFACES.md`;
 //! * [`logging`]: the `log` crate on stderr and `/rosout`;
 //! * [`diagnostics`]: `diagnostics` publishing;
+//! * [`peers`]: the remote ends of a node's topics, and when they are lost and regained;
 //! * [`node`]: [`RosNode`] ties them together around a ros2-client node, honouring
 //!   `ROS_DOMAIN_ID`; [`shutdown_signal`] for SIGINT/SIGTERM.
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod args;
+pub mod burst;
 pub mod diagnostics;
 mod error;
 pub mod logging;
 pub mod names;
 pub mod node;
 pub mod params;
+pub mod peers;
 pub mod qos;
 
 pub use error::PlumbingError;

@@ -16,6 +16,8 @@ use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::burst;
+use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::future::Future;
 use std::path::Path;
@@ -73,6 +75,28 @@ pub enum Input {
     Unreadable(core::Source, String),
 }
 
+impl Input {
+    /// A target that moves the arm.
+    pub fn is_target(&self) -> bool {
+        matches!(
+            self,
+            Input::XyzTarget(_) | Input::GripperTarget(..) | Input::JointTarget(_)
+        )
+    }
+}
+
+/// Of the inputs that arrived together, the ones to act on, in order: an
+/// `xyz_target` followed by a newer one is superseded, and so is a `gripper_target`
+/// (latest wins); `joint_target`s (which may name only some joints), e-stops and
+/// unreadable samples are all kept. Returns them and how many were superseded.
+pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
+    burst::latest_wins(batch, |i| match i {
+        Input::XyzTarget(_) => Some(0),
+        Input::GripperTarget(..) => Some(1),
+        _ => None,
+    })
+}
+
 /// Where the loop's results go.
 pub trait Outputs {
     /// Publish on `joint_states`.
@@ -81,23 +105,40 @@ pub trait Outputs {
     fn servo_angles(&self, msg: JointState);
     /// Publish a `diagnostics` report with this status.
     fn diagnostics(&self, status: DiagnosticStatus);
-    /// How many subscriptions `joint_states` has matched now.
-    fn joint_states_subscribers(&self) -> usize;
+    /// The peer counts of the watched topics, in [`watched_topics`]' order:
+    /// `servo_angles` subscribers, `joint_states` subscribers, `xyz_target` publishers.
+    fn peer_counts(&self) -> [usize; 3];
 }
 
-/// How often to look for new `joint_states` subscribers.
+/// The topics whose peers compute_ik watches (resolved names), in
+/// [`Outputs::peer_counts`]' order.
+pub fn watched_topics(
+    servo_angles: &str,
+    joint_states: &str,
+    xyz_target: &str,
+) -> Vec<(String, Peer)> {
+    vec![
+        (servo_angles.to_string(), Peer::Subscriber),
+        (joint_states.to_string(), Peer::Subscriber),
+        (xyz_target.to_string(), Peer::Publisher),
+    ]
+}
+
+/// How often to look at the peer counts (and for new `joint_states` subscribers).
 const SUBSCRIBER_POLL: Duration = Duration::from_millis(250);
 
 /// Most frequent diagnostics sent at once on a rejection; the periodic report covers the rest.
 const MIN_IMMEDIATE_DIAG_GAP: Duration = Duration::from_millis(100);
 
-/// The event loop: runs until `shutdown` resolves or `inputs` ends.
+/// The event loop: runs until `shutdown` resolves or `inputs` ends. `peers` watches
+/// the topics of [`watched_topics`].
 pub async fn run(
     mut core: IkCore,
     inputs: impl Stream<Item = Input>,
     outputs: &impl Outputs,
     params: Params,
     diag_name: String,
+    mut peers: PeerWatch,
     shutdown: impl Future<Output = ()>,
 ) {
     let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
@@ -113,14 +154,37 @@ pub async fn run(
     );
     let mut subscribers = 0;
     let mut greet_polls = 0u8;
+    let report = |core: &IkCore, peers: &PeerWatch| {
+        let mut s = core.diagnostic_status(&diag_name);
+        peers.annotate(&mut s, Instant::now());
+        outputs.diagnostics(s);
+    };
+    // an xyz_target that arrived late (repaired after a network outage), held back
+    // for burst::HOLD_LATE in case a newer one follows
+    let mut held: Option<(PointStamped, tokio::time::Instant)> = None;
+    let mut lateness = burst::Lateness::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
+        let mut batch = Vec::new();
+        let hold_until = held.as_ref().map(|h| h.1);
         tokio::select! {
             _ = &mut shutdown => break,
-            _ = ticker.tick() => outputs.diagnostics(core.diagnostic_status(&diag_name)),
+            _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
+                if let Some((m, _)) = held.take() {
+                    log::debug!("applying a late target: nothing newer followed it");
+                    batch.push(Input::XyzTarget(m));
+                }
+            }
+            _ = ticker.tick() => report(&core, &peers),
             _ = subscriber_poll.tick() => {
-                let now = outputs.joint_states_subscribers();
+                let counts = outputs.peer_counts();
+                let changes = peers.update(&counts, Instant::now());
+                changes.iter().for_each(|c| c.log());
+                if !changes.is_empty() {
+                    report(&core, &peers);
+                }
+                let now = counts[1];
                 if now > subscribers {
                     // the new reader may match our writer a little after we match it:
                     // send the pose over the next second, not only once
@@ -142,33 +206,66 @@ pub async fn run(
                 ticker = tokio::time::interval(period(&params));
             }
             input = inputs.next() => {
-                let Some(input) = input else { break };
-                let result = match input {
-                    Input::XyzTarget(m) => core.handle_xyz_target(&m),
-                    Input::GripperTarget(v, stamp) => core.handle_gripper_target(v, stamp),
-                    Input::JointTarget(m) => core.handle_joint_target(&m),
-                    Input::Estop(engaged) => {
-                        if engaged != core.estop() {
-                            if engaged { log::warn!("emergency stop engaged: targets refused until estop is false") }
-                            else { log::info!("emergency stop released") }
-                            core.set_estop(engaged);
-                            outputs.diagnostics(core.diagnostic_status(&diag_name));
+                let Some(first) = input else { break };
+                // a burst (DDS repairing what a network outage held back) is applied
+                // as its newest target; a lone target goes at once
+                let arrived = burst::take_burst(first, &mut inputs, Input::is_target).await;
+                let (arrived, superseded) = coalesce(arrived);
+                if superseded > 0 {
+                    log::debug!("{superseded} targets superseded by newer ones that arrived with them");
+                }
+                for input in arrived {
+                    if let Input::XyzTarget(m) = &input {
+                        let (stamp, now) = (m.header.stamp.to_nanos() as f64 * 1e-9, Time::now().to_nanos() as f64 * 1e-9);
+                        let newer_than_held = held.take().is_some();
+                        if newer_than_held {
+                            log::debug!("a late target superseded by a newer one");
                         }
-                        continue;
-                    }
-                    Input::Unreadable(source, e) => Err(core.reject_unreadable(source, e)),
-                };
-                match result {
-                    Ok(Output { joint_states, servo_angles }) => {
-                        outputs.servo_angles(servo_angles);
-                        outputs.joint_states(joint_states);
-                    }
-                    Err(rejection) => {
-                        log::warn!("{rejection}");
-                        if last_immediate.elapsed() >= MIN_IMMEDIATE_DIAG_GAP {
-                            last_immediate = Instant::now();
-                            outputs.diagnostics(core.diagnostic_status(&diag_name));
+                        if lateness.is_late(stamp, now, Instant::now()) {
+                            if let Input::XyzTarget(m) = input {
+                                held = Some((m, tokio::time::Instant::now() + burst::HOLD_LATE));
+                            }
+                            continue;
                         }
+                    }
+                    batch.push(input);
+                }
+            }
+        }
+        for input in batch {
+            let result = match input {
+                Input::XyzTarget(m) => core.handle_xyz_target(&m),
+                Input::GripperTarget(v, stamp) => core.handle_gripper_target(v, stamp),
+                Input::JointTarget(m) => core.handle_joint_target(&m),
+                Input::Estop(engaged) => {
+                    if engaged != core.estop() {
+                        if engaged {
+                            log::warn!(
+                                "emergency stop engaged: targets refused until estop is false"
+                            )
+                        } else {
+                            log::info!("emergency stop released")
+                        }
+                        core.set_estop(engaged);
+                        report(&core, &peers);
+                    }
+                    continue;
+                }
+                Input::Unreadable(source, e) => Err(core.reject_unreadable(source, e)),
+            };
+            match result {
+                Ok(Output {
+                    joint_states,
+                    servo_angles,
+                }) => {
+                    outputs.servo_angles(servo_angles);
+                    outputs.joint_states(joint_states);
+                }
+                Err(rejection) => {
+                    log::warn!("{rejection}");
+                    if last_immediate.elapsed() >= MIN_IMMEDIATE_DIAG_GAP {
+                        last_immediate = Instant::now();
+                        report(&core, &peers);
                     }
                 }
             }

@@ -9,13 +9,15 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64};
 use eezybot_msgs::Time;
 use futures::StreamExt;
-use ros2_client::Publisher;
+use ros2_client::{Publisher, Subscription};
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
+use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{qos, RosNode};
 use std::process::ExitCode;
 
 struct RosOutputs<'a> {
     node: &'a ros2_client::Node,
+    xyz: &'a Subscription<PointStamped>,
     joint_states: Publisher<JointState>,
     servo_angles: Publisher<JointState>,
     diagnostics: DiagnosticsPublisher,
@@ -35,8 +37,12 @@ impl Outputs for RosOutputs<'_> {
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
     }
-    fn joint_states_subscribers(&self) -> usize {
-        self.joint_states.get_subscription_count(self.node)
+    fn peer_counts(&self) -> [usize; 3] {
+        [
+            self.servo_angles.get_subscription_count(self.node),
+            self.joint_states.get_subscription_count(self.node),
+            self.xyz.get_publisher_count(self.node),
+        ]
     }
 }
 
@@ -63,8 +69,14 @@ async fn main_async() -> anyhow::Result<()> {
     let joint_states = node.publisher("joint_states", qos::COMMANDS)?;
     let servo_angles = node.publisher("servo_angles", qos::COMMANDS)?;
     let diagnostics = node.diagnostics()?;
+    let peers = PeerWatch::new(&compute_ik::watched_topics(
+        &node.resolver().resolve("servo_angles")?,
+        &node.resolver().resolve("joint_states")?,
+        &node.resolver().resolve("xyz_target")?,
+    ));
     let outputs = RosOutputs {
         node: node.node(),
+        xyz: &xyz,
         joint_states,
         servo_angles,
         diagnostics,
@@ -116,7 +128,7 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolver().resolve("servo_angles")?
     );
     let shutdown = ros_plumbing::shutdown_logged();
-    compute_ik::run(core, inputs, &outputs, params, diag_name, shutdown).await;
+    compute_ik::run(core, inputs, &outputs, params, diag_name, peers, shutdown).await;
     drop(outputs);
     drop((xyz, gripper, joints, estop));
     node.shutdown().await;

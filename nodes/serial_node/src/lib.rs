@@ -18,6 +18,8 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::burst;
+use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use servo_protocol::DeviceState;
 use std::collections::VecDeque;
@@ -99,6 +101,28 @@ pub trait Outputs {
     fn servo_state(&self, msg: JointState);
     /// Publish a `diagnostics` report.
     fn diagnostics(&self, status: DiagnosticStatus);
+    /// The peer counts of the watched topics ([`watched_topics`]): `servo_angles`
+    /// publishers, `servo_state` subscribers.
+    fn peer_counts(&self) -> Vec<usize>;
+}
+
+/// The topics whose peers serial_node watches, in [`Outputs::peer_counts`]' order.
+pub fn watched_topics(servo_angles: &str, servo_state: &str) -> Vec<(String, Peer)> {
+    vec![
+        (servo_angles.to_string(), Peer::Publisher),
+        (servo_state.to_string(), Peer::Subscriber),
+    ]
+}
+
+/// How often the peer counts are looked at.
+const PEER_POLL: Duration = Duration::from_millis(250);
+
+/// Of the inputs that arrived together, the ones to act on, in order: a
+/// `servo_angles` sample followed by a newer one is superseded (latest wins), so a
+/// burst moves the arm to the newest command only, never through stale ones.
+/// Returns the inputs kept and how many were superseded.
+pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
+    burst::latest_wins(batch, |i| matches!(i, Input::ServoAngles(..)).then_some(()))
 }
 
 /// What the node knows about the link, for diagnostics.
@@ -115,10 +139,15 @@ pub struct LinkStatus {
     reconnects: u64,
     last_rtt: Option<Duration>,
     rejected_inputs: u64,
+    superseded_inputs: u64,
     last_rejection: Option<String>,
     estop: bool,
     /// ticks and state of the last servo_state published, to skip repeats
     last_published: Option<([u16; servo_protocol::SERVOS], DeviceState)>,
+}
+
+fn time_s(t: Time) -> f64 {
+    t.to_nanos() as f64 * 1e-9
 }
 
 fn percentile(v: &VecDeque<f64>, p: f64) -> Option<f64> {
@@ -287,6 +316,7 @@ impl LinkStatus {
             ),
             ("clamped_by_device", self.clamped.to_string()),
             ("inputs_rejected", self.rejected_inputs.to_string()),
+            ("inputs_superseded", self.superseded_inputs.to_string()),
             ("estop", self.estop.to_string()),
         ];
         if let Some((a, b)) = self.connected {
@@ -309,7 +339,8 @@ impl LinkStatus {
     }
 }
 
-/// The loop: runs until `shutdown` resolves or `inputs` ends.
+/// The loop: runs until `shutdown` resolves or `inputs` ends. `peers` watches the
+/// topics of [`watched_topics`].
 #[allow(clippy::too_many_arguments)]
 pub async fn run(
     link: &Link,
@@ -319,6 +350,7 @@ pub async fn run(
     params: Params,
     diag_name: String,
     port_name: String,
+    mut peers: PeerWatch,
     shutdown: impl Future<Output = ()>,
 ) {
     let mut cal =
@@ -327,12 +359,42 @@ pub async fn run(
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
     let mut status = LinkStatus::default();
+    let mut peer_poll = tokio::time::interval(PEER_POLL);
+    peer_poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let report = |status: &LinkStatus, peers: &PeerWatch| {
+        let mut s = status.diagnostic_status(&diag_name, &port_name, &link.send_stats());
+        peers.annotate(&mut s, Instant::now());
+        outputs.diagnostics(s);
+    };
+    // a command that arrived late (repaired after a network outage), held back for
+    // burst::HOLD_LATE in case a newer one follows: (ticks, stamp, received, until)
+    let mut held: Option<(
+        [u16; servo_protocol::SERVOS],
+        Time,
+        Instant,
+        tokio::time::Instant,
+    )> = None;
+    let mut lateness = burst::Lateness::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
+        let hold_until = held.map(|h| h.3);
         tokio::select! {
             _ = &mut shutdown => break,
-            _ = ticker.tick() => outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name, &link.send_stats())),
+            _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
+                if let Some((ticks, stamp, received, _)) = held.take() {
+                    log::debug!("applying a late command: nothing newer followed it");
+                    link.command(ticks, stamp, received);
+                }
+            }
+            _ = ticker.tick() => report(&status, &peers),
+            _ = peer_poll.tick() => {
+                let changes = peers.update(&outputs.peer_counts(), Instant::now());
+                changes.iter().for_each(|c| c.log());
+                if !changes.is_empty() {
+                    report(&status, &peers);
+                }
+            }
             Ok(()) = param_changes.changed() => {
                 match load_calibration(&params.string("arm_config").unwrap_or_default()) {
                     Ok(c) => cal = c,
@@ -346,12 +408,33 @@ pub async fn run(
                 }
             }
             input = inputs.next() => {
-                let Some(input) = input else { break };
+                let Some(first) = input else { break };
+                // a burst (DDS repairing what a network outage held back) moves the
+                // arm to its newest command only; a lone command goes at once
+                let batch = burst::take_burst(first, &mut inputs, |i| matches!(i, Input::ServoAngles(..))).await;
+                let (batch, superseded) = coalesce(batch);
+                if superseded > 0 {
+                    log::debug!("{superseded} servo_angles superseded by a newer one that arrived with them");
+                    status.superseded_inputs += superseded as u64;
+                }
+                for input in batch {
                 match input {
                     Input::ServoAngles(msg, received) => match angles_to_ticks(&cal, &msg) {
                         Ok(ticks) => {
-                            link.command(ticks, msg.header.stamp, received);
                             status.last_rejection = None;
+                            let stamp = msg.header.stamp;
+                            let late = lateness.is_late(time_s(stamp), time_s(Time::now()), received);
+                            if late {
+                                if held.is_some() {
+                                    status.superseded_inputs += 1;
+                                }
+                                held = Some((ticks, stamp, received, tokio::time::Instant::now() + burst::HOLD_LATE));
+                            } else {
+                                if held.take().is_some() {
+                                    status.superseded_inputs += 1;
+                                }
+                                link.command(ticks, stamp, received);
+                            }
                         }
                         Err(r) => {
                             log::warn!("servo_angles rejected: {r}");
@@ -359,7 +442,7 @@ pub async fn run(
                             let first = status.last_rejection.is_none();
                             status.last_rejection = Some(r.to_string());
                             if first {
-                                outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name, &link.send_stats()));
+                                report(&status, &peers);
                             }
                         }
                     },
@@ -368,8 +451,11 @@ pub async fn run(
                             if engaged { log::warn!("emergency stop engaged: the device holds, commands are dropped") }
                             else { log::info!("emergency stop released: waiting for a new command") }
                             status.estop = engaged;
+                            if engaged {
+                                held = None;
+                            }
                             link.set_estop(engaged);
-                            outputs.diagnostics(status.diagnostic_status(&diag_name, &port_name, &link.send_stats()));
+                            report(&status, &peers);
                         }
                     }
                     Input::Unreadable(e) => {
@@ -377,6 +463,7 @@ pub async fn run(
                         status.last_rejection = Some(format!("unreadable sample: {e}"));
                         log::warn!("unreadable sample ignored: {e}");
                     }
+                }
                 }
             }
         }

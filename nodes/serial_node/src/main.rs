@@ -4,8 +4,9 @@ use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Bool;
 use futures::StreamExt;
-use ros2_client::Publisher;
+use ros2_client::{Publisher, Subscription};
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
+use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{qos, RosNode};
 use serial_node::link::{self, Link, LinkConfig};
 use serial_node::{Input, Outputs};
@@ -13,12 +14,14 @@ use servo_protocol::WatchdogAction;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-struct RosOutputs {
+struct RosOutputs<'a> {
+    node: &'a ros2_client::Node,
+    angles: &'a Subscription<JointState>,
     servo_state: Publisher<JointState>,
     diagnostics: DiagnosticsPublisher,
 }
 
-impl Outputs for RosOutputs {
+impl Outputs for RosOutputs<'_> {
     fn servo_state(&self, msg: JointState) {
         if let Err(e) = self.servo_state.publish(msg) {
             log::warn!("could not publish servo_state: {e:?}");
@@ -26,6 +29,12 @@ impl Outputs for RosOutputs {
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
+    }
+    fn peer_counts(&self) -> Vec<usize> {
+        vec![
+            self.angles.get_publisher_count(self.node),
+            self.servo_state.get_subscription_count(self.node),
+        ]
     }
 }
 
@@ -58,9 +67,17 @@ async fn main_async() -> anyhow::Result<()> {
 
     let angles = node.subscription::<JointState>("servo_angles", qos::COMMANDS)?;
     let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let servo_state = node.publisher("servo_state", qos::COMMANDS)?;
+    let diagnostics = node.diagnostics()?;
+    let peers = PeerWatch::new(&serial_node::watched_topics(
+        &node.resolver().resolve("servo_angles")?,
+        &node.resolver().resolve("servo_state")?,
+    ));
     let outputs = RosOutputs {
-        servo_state: node.publisher("servo_state", qos::COMMANDS)?,
-        diagnostics: node.diagnostics()?,
+        node: node.node(),
+        angles: &angles,
+        servo_state,
+        diagnostics,
     };
     let inputs = futures::stream::select(
         angles.async_stream().map(|r| match r {
@@ -96,7 +113,7 @@ async fn main_async() -> anyhow::Result<()> {
     let diag_name = format!("{}: servo link", node.resolver().node_name());
     let shutdown = ros_plumbing::shutdown_logged();
     serial_node::run(
-        &link, inputs, rx, &outputs, params, diag_name, port, shutdown,
+        &link, inputs, rx, &outputs, params, diag_name, port, peers, shutdown,
     )
     .await;
     link.shutdown();

@@ -1,0 +1,194 @@
+//! Commands that arrive together are a burst: after a network outage, DDS repairs
+//! what the outage held back, in datagrams a fraction of a millisecond apart and
+//! in rounds some milliseconds apart. A node that moves an arm applies only the
+//! newest command of a burst, never the stale ones on the way. [`take_burst`]
+//! collects what arrived together; the node decides which of its inputs supersede
+//! which ([`latest_wins`]); [`Lateness`] recognises a command that arrives late
+//! (its stamp is old), which the node holds back for [`HOLD_LATE`] in case a newer
+//! one follows.
+
+use futures::{FutureExt, Stream, StreamExt};
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+/// A burst has ended after this long without another input.
+pub const QUIET: Duration = Duration::from_millis(3);
+/// The longest wait for a burst to end.
+pub const MAX_WAIT: Duration = Duration::from_millis(50);
+
+/// `first` and every input that is ready with it. If more than one of them
+/// `is_command`, more are coming (a burst): wait until `QUIET` passes without one
+/// (at most `MAX_WAIT`). A lone input returns at once, with no added latency.
+pub async fn take_burst<T, S>(first: T, inputs: &mut S, is_command: impl Fn(&T) -> bool) -> Vec<T>
+where
+    S: Stream<Item = T> + Unpin,
+{
+    let mut batch = vec![first];
+    drain_ready(&mut batch, inputs);
+    let until = tokio::time::Instant::now() + MAX_WAIT;
+    while batch.iter().filter(|i| is_command(i)).count() > 1 && tokio::time::Instant::now() < until
+    {
+        match tokio::time::timeout(QUIET, inputs.next()).await {
+            Ok(Some(more)) => {
+                batch.push(more);
+                drain_ready(&mut batch, inputs);
+            }
+            _ => break,
+        }
+    }
+    batch
+}
+
+fn drain_ready<T, S: Stream<Item = T> + Unpin>(batch: &mut Vec<T>, inputs: &mut S) {
+    while let Some(Some(more)) = inputs.next().now_or_never() {
+        batch.push(more);
+    }
+}
+
+/// Keep, in order, the inputs that no later input of the same `kind` supersedes
+/// (`kind` None: never superseded, e.g. an e-stop). Returns them and how many were
+/// dropped.
+///
+/// # Examples
+/// ```
+/// use ros_plumbing::burst::latest_wins;
+/// let (kept, dropped) = latest_wins(vec![1, 10, 2, 3, 20], |i| (*i < 10).then_some("small"));
+/// assert_eq!((kept, dropped), (vec![10, 3, 20], 2));
+/// ```
+pub fn latest_wins<T, K: PartialEq>(
+    batch: Vec<T>,
+    kind: impl Fn(&T) -> Option<K>,
+) -> (Vec<T>, usize) {
+    let kinds: Vec<Option<K>> = batch.iter().map(&kind).collect();
+    let mut dropped = 0;
+    let kept = batch
+        .into_iter()
+        .enumerate()
+        .filter(|(n, _)| {
+            let superseded = kinds[*n]
+                .as_ref()
+                .is_some_and(|k| kinds[n + 1..].iter().any(|later| later.as_ref() == Some(k)));
+            dropped += usize::from(superseded);
+            !superseded
+        })
+        .map(|(_, i)| i)
+        .collect();
+    (kept, dropped)
+}
+
+/// How long a late command is held back: a newer one arriving meanwhile replaces it.
+/// Longer than the gap between two DDS repair rounds (about 10 ms).
+pub const HOLD_LATE: Duration = Duration::from_millis(30);
+
+/// A command whose stamp is this much older than usual arrives late.
+pub const LATE_BY: Duration = Duration::from_millis(250);
+
+/// How long the usual delay (receive time minus stamp) is remembered.
+const WINDOW: Duration = Duration::from_secs(10);
+
+/// Recognises commands that arrive late, from their stamps. The usual delay
+/// (receive wall time minus stamp) is the smallest seen in the last 10 s, so a
+/// constant offset between the clocks of the operator's machine and this one does
+/// not matter; a command delayed [`LATE_BY`] more than that is late. A zero stamp
+/// (ROS' "now") is never late.
+#[derive(Debug, Default)]
+pub struct Lateness {
+    delays: VecDeque<(Instant, f64)>,
+}
+
+impl Lateness {
+    /// Whether a command stamped `stamp_s` (seconds) and received at wall time
+    /// `received_s` (seconds) at `now` is late; remembers its delay.
+    pub fn is_late(&mut self, stamp_s: f64, received_s: f64, now: Instant) -> bool {
+        if stamp_s == 0.0 || !stamp_s.is_finite() {
+            return false;
+        }
+        let delay = received_s - stamp_s;
+        while self
+            .delays
+            .front()
+            .is_some_and(|(t, _)| now.duration_since(*t) > WINDOW)
+        {
+            self.delays.pop_front();
+        }
+        let usual = self
+            .delays
+            .iter()
+            .map(|(_, d)| *d)
+            .fold(f64::INFINITY, f64::min);
+        // keep the window short: only delays that could become the minimum matter
+        while self.delays.back().is_some_and(|(_, d)| *d >= delay) {
+            self.delays.pop_back();
+        }
+        self.delays.push_back((now, delay));
+        usual.is_finite() && delay > usual + LATE_BY.as_secs_f64()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use futures::stream;
+
+    #[tokio::test]
+    async fn a_lone_input_returns_at_once() {
+        let mut s = stream::pending::<u32>();
+        let t = tokio::time::Instant::now();
+        assert_eq!(take_burst(1, &mut s, |_| true).await, vec![1]);
+        assert!(t.elapsed() < QUIET);
+    }
+
+    #[tokio::test]
+    async fn a_burst_is_collected_until_it_is_quiet() {
+        // two ready now, one more 1 ms later (another datagram of the repair), then silence
+        let later = stream::once(async {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+            4
+        });
+        let mut s = Box::pin(
+            stream::iter(vec![2, 3])
+                .chain(later)
+                .chain(stream::pending()),
+        );
+        assert_eq!(take_burst(1, &mut s, |_| true).await, vec![1, 2, 3, 4]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_never_ending_burst_is_cut_at_the_maximum_wait() {
+        let mut s = Box::pin(
+            stream::iter(vec![101]).chain(stream::unfold(0u32, |n| async move {
+                tokio::time::sleep(Duration::from_millis(1)).await;
+                Some((n, n + 1))
+            })),
+        );
+        let batch = take_burst(100, &mut s, |_| true).await;
+        assert!(batch.len() >= 40 && batch.len() <= 52, "{}", batch.len());
+    }
+
+    #[test]
+    fn late_commands_are_recognised_whatever_the_clock_offset() {
+        let t0 = Instant::now();
+        let mut l = Lateness::default();
+        let offset = 1234.5; // the operator's clock is ahead
+                             // live commands, received 2 ms after their stamp
+        for i in 0..50 {
+            let stamp = 100.0 + offset + i as f64 * 0.02;
+            assert!(!l.is_late(
+                stamp,
+                stamp - offset + 0.002,
+                t0 + Duration::from_millis(20 * i)
+            ));
+        }
+        // after a 3 s outage, a repaired command from before it, then a live one
+        let now = t0 + Duration::from_secs(4);
+        assert!(l.is_late(101.0 + offset, 104.0, now));
+        assert!(!l.is_late(104.0 + offset - 0.003, 104.0, now));
+        assert!(!l.is_late(0.0, 104.0, now), "a zero stamp means now");
+    }
+
+    #[test]
+    fn unkinded_inputs_are_never_dropped() {
+        let (kept, dropped) = latest_wins(vec![1, 2, 3], |_| None::<u8>);
+        assert_eq!((kept, dropped), (vec![1, 2, 3], 0));
+    }
+}
