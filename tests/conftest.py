@@ -16,6 +16,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import twohost  # noqa: E402  (after the path insert)
 
 OUTPUT = Path(os.environ.get("EEZYBOT_TEST_OUTPUT", REPO / "test-output"))
 
@@ -76,21 +77,25 @@ class Observer:
     MATCH_TIMEOUT = 8.0
     RESTARTS = 2
 
-    def __init__(self, domain_id, name="observer"):
+    def __init__(self, domain_id, name="observer", netns=None):
         self.nodes = []  # NodeProcess objects that wait_* may restart
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node(name, context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        self.netns = netns  # a network namespace (twohost.py) to live in, or None
+        with twohost.netns(netns):
+            self.context = rclpy.Context()
+            rclpy.init(context=self.context, domain_id=domain_id)
+            self.node = rclpy.create_node(name, context=self.context)
+            self.executor = SingleThreadedExecutor(context=self.context)
+            self.executor.add_node(self.node)
 
     def sub(self, topic, msg_type, qos=COMMANDS):
         got = []
-        self.node.create_subscription(msg_type, topic, lambda m: got.append((time.monotonic(), m)), qos)
+        with twohost.netns(self.netns):
+            self.node.create_subscription(msg_type, topic, lambda m: got.append((time.monotonic(), m)), qos)
         return got
 
     def pub(self, topic, msg_type, qos=COMMANDS):
-        return self.node.create_publisher(msg_type, topic, qos)
+        with twohost.netns(self.netns):
+            return self.node.create_publisher(msg_type, topic, qos)
 
     def spin_for(self, seconds):
         end = time.monotonic() + seconds
@@ -142,14 +147,16 @@ def observer(domain):
 
 
 class NodeProcess:
-    """One of our binaries, running with its own ROS_DOMAIN_ID."""
+    """One of our binaries (or a launch script, given by path), running with its own
+    ROS_DOMAIN_ID, optionally in a network namespace."""
 
-    def __init__(self, name, args, domain_id, env=None):
+    def __init__(self, name, args, domain_id, env=None, netns=None):
         OUTPUT.mkdir(parents=True, exist_ok=True)
-        self.name = name
-        self.log_path = OUTPUT / f"{name}-{os.getpid()}-{time.monotonic_ns()}.log"
+        self.name = Path(name).name
+        self.log_path = OUTPUT / f"{self.name}-{os.getpid()}-{time.monotonic_ns()}.log"
         self.log = open(self.log_path, "w")
-        self.argv = [bin_path(name), *args]
+        exe = str(name) if "/" in str(name) else bin_path(name)
+        self.argv = [*(["ip", "netns", "exec", netns] if netns else []), exe, *args]
         self.env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), **(env or {})}
         self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env)
 

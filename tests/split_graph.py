@@ -1,0 +1,238 @@
+"""The graph split across two hosts, as our users run it: launch_scripts/pc.sh in
+namespace `pc` (gui_bridge, compute_ik, state_publisher), launch_scripts/pi.sh in `pi`
+(serial_node, driving the virtual Arduino behind a pty or the firmware in simavr), and a
+real rclpy observer in `pc` that sends targets and reads `servo_state` and
+`diagnostics`. Used by test_two_hosts.py, tests/soak/outages.py and the end-to-end
+benchmark.
+
+Targets are stamped with the wall clock; serial_node copies a command's stamp into the
+`servo_state` that acknowledges it, so every reply says which target it answers and
+how long the round trip took (one machine, one clock).
+"""
+import math
+import os
+import re
+import subprocess
+import time
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped
+from sensor_msgs.msg import JointState
+
+from conftest import REPO, NodeProcess, Observer, bin_path
+from interop.servo_link import SimulatedUno
+
+FIRMWARE = REPO / "firmware" / "servo_control"
+UNREACHABLE = re.compile(r"unreachable", re.IGNORECASE)
+
+
+def stamp_of(t):
+    m = PointStamped()
+    m.header.frame_id = "base_link"
+    m.header.stamp.sec = int(t)
+    m.header.stamp.nanosec = int((t - int(t)) * 1e9)
+    return m
+
+
+def seconds(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+class VirtualArduinoPty:
+    """The virtual_arduino binary serving a pty (in the root namespace: a pty is a file)."""
+
+    def __init__(self, workdir):
+        self.path = Path(workdir) / "arduino"
+        self.log = open(Path(workdir) / "virtual_arduino.log", "w")
+        self.proc = subprocess.Popen([bin_path("virtual_arduino"), str(self.path)], stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 10
+        while not self.path.exists():
+            if time.monotonic() > deadline or self.proc.poll() is not None:
+                raise RuntimeError("virtual_arduino did not create its pty")
+            time.sleep(0.01)
+
+    def stop(self):
+        self.proc.terminate()
+        try:
+            return self.proc.wait(10)
+        finally:
+            self.log.close()
+
+
+class SplitGraph:
+    """pc.sh in hosts.pc, pi.sh in hosts.pi, an rclpy observer in hosts.pc."""
+
+    def __init__(self, hosts, domain, workdir, device="virtual", ros_args=(), target_hz=20.0):
+        self.hosts, self.domain = hosts, domain
+        self.ros_args = list(ros_args)
+        self.target_period = 1.0 / target_hz
+        self.procs = []
+        self.device = device
+        workdir = Path(workdir)
+        if device == "simavr":
+            self.uno = SimulatedUno(workdir, FIRMWARE)
+            port = str(self.uno.tty_path)
+        elif device == "virtual":
+            self.uno = VirtualArduinoPty(workdir)
+            port = str(self.uno.path)
+        else:
+            self.uno, port = None, "mock"
+        env = {"EEZYBOT_BIN_DIR": str(Path(bin_path("serial_node")).parent), "GUI_BIND": "127.0.0.1:8080"}
+        self.pc = NodeProcess(str(REPO / "launch_scripts" / "pc.sh"), self.ros_args, domain, env=env, netns=hosts.pc)
+        self.pi = NodeProcess(str(REPO / "launch_scripts" / "pi.sh"), self.ros_args, domain,
+                              env={**env, "SERIAL_PORT": port}, netns=hosts.pi)
+        self.procs = [self.pc, self.pi]
+        ns = self._namespace()
+        self.o = Observer(domain, name="operator", netns=hosts.pc)
+        self.states = self.o.sub(f"{ns}/servo_state", JointState)
+        self.diags = self.o.sub(f"{ns}/diagnostics", DiagnosticArray)
+        self.xyz = self.o.pub(f"{ns}/xyz_target", PointStamped)
+        self.sent = []  # (wall time, stamp seconds)
+        self._next = time.monotonic()
+        self._i = 0
+
+    def _namespace(self):
+        for a in self.ros_args:
+            if a.startswith("__ns:="):
+                return a[len("__ns:="):].rstrip("/")
+        return ""
+
+    # ---- driving
+    def pump(self, seconds_, send=True):
+        """Spin the observer for `seconds_`, sending a new target every period."""
+        end = time.monotonic() + seconds_
+        while True:
+            now = time.monotonic()
+            if now >= end:
+                return
+            if send and now >= self._next:
+                self._next = max(self._next + self.target_period, now - self.target_period)
+                self.send_target()
+            self.o.executor.spin_once(timeout_sec=max(0.0, min(0.005, self._next - now, end - now)))
+
+    def send_target(self):
+        self._i += 1
+        t = time.time()
+        m = stamp_of(t)
+        m.point.x = 0.2 + 0.03 * math.sin(self._i * 0.05)
+        m.point.y = 0.05 * math.cos(self._i * 0.03)
+        m.point.z = 0.15
+        self.xyz.publish(m)
+        self.sent.append((t, seconds(m.header.stamp)))
+
+    def pump_until(self, predicate, timeout, send=True):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            self.pump(0.05, send)
+        return predicate()
+
+    def replies_after(self, t_wall):
+        """servo_state replies received after wall time t (arrival wall time, stamp)."""
+        return [(a, s) for a, s in self._replies() if a >= t_wall]
+
+    def _replies(self):
+        # Observer stamps arrivals with time.monotonic(); convert to wall time
+        offset = time.time() - time.monotonic()
+        return [(mono + offset, seconds(m.header.stamp)) for mono, m in self.states]
+
+    def wait_flowing(self, timeout=30):
+        """Until a target sent now comes back as servo_state."""
+        t0 = time.time()
+        ok = self.pump_until(lambda: any(s >= t0 for _, s in self.replies_after(t0)), timeout)
+        if not ok:
+            raise AssertionError(f"no servo_state for a target within {timeout} s; observer matched "
+                                 f"xyz_target subscribers {self.xyz.get_subscription_count()}, servo_state publishers "
+                                 f"{self.o.node.count_publishers(self._namespace() + '/servo_state')}; compute_ik "
+                                 f"{self.diag_values('compute_ik')}; serial_node {self.diag_values('serial_node')}\n"
+                                 f"{self.logs_tail()}")
+
+    def diag_values(self, node_prefix):
+        """The latest diagnostics entry of a node: (level, message, {key: value})."""
+        for _, arr in reversed(self.diags):
+            for s in arr.status:
+                if s.name.startswith(node_prefix):
+                    return s.level, s.message, {kv.key: kv.value for kv in s.values}
+        return None, None, {}
+
+    def unreachable_lines(self):
+        return {p.name: len(UNREACHABLE.findall(p.log_path.read_text())) for p in self.procs}
+
+    def logs_tail(self, n=15):
+        out = []
+        for p in self.procs:
+            lines = p.log_path.read_text().splitlines()
+            out.append(f"--- {p.name} (last {n} lines)\n" + "\n".join(lines[-n:]))
+        return "\n".join(out)
+
+    # ---- one outage
+    def outage(self, length, side, resume_timeout=30.0, settle=3.0):
+        """Pull the cable at `side` for `length` s while targets keep coming, then plug it
+        back. Returns what happened."""
+        self.wait_flowing()
+        ns = self._namespace()
+        before = {
+            "serial": self.diag_values("serial_node")[2],
+            "ik": self.diag_values("compute_ik")[2],
+            "unreachable": self.unreachable_lines(),
+        }
+        self.hosts.cut(side)
+        t_cut = time.time()
+        ik_lost_seen = False
+        end = time.monotonic() + length
+        while time.monotonic() < end:
+            self.pump(0.1)
+            level, msg, _ = self.diag_values("compute_ik")
+            ik_lost_seen |= bool(msg and "lost" in msg)
+        last_before = self.sent[-1][1]
+        self.hosts.restore(side)
+        t_restore = time.time()
+        resumed = self.pump_until(lambda: any(s >= t_restore for _, s in self.replies_after(t_restore)), resume_timeout)
+        t_resumed = time.time()
+        first_new = min((a for a, s in self.replies_after(t_restore) if s >= t_restore), default=None)
+        self.pump(settle)
+        after = self.replies_after(t_restore)
+        stamps = [s for _, s in after]
+        during = {s for w, s in self.sent if t_cut <= w < t_restore}
+        result = {
+            "length_s": length,
+            "side": side,
+            "resumed": resumed,
+            "resume_s": (first_new - t_restore) if first_new is not None else None,
+            "wait_s": t_resumed - t_restore,
+            # commands applied after the link returned although a newer one had been
+            # sent before it returned: targets sent during the outage, but the last one
+            "stale": sum(1 for s in stamps if s in during and s != last_before),
+            "out_of_order": sum(1 for a, b in zip(stamps, stamps[1:]) if b < a),
+            "replies_during_outage": sum(1 for a, _ in self._replies() if t_cut + 0.5 < a < t_restore),
+            "ik_reported_lost": ik_lost_seen,
+        }
+        serial = self.diag_values("serial_node")[2]
+        ik = self.diag_values("compute_ik")[2]
+
+        def delta(now, then, key):
+            try:
+                return int(now.get(key, 0)) - int(then.get(key, 0))
+            except ValueError:
+                return None
+
+        result["serial_angles_lost"] = delta(serial, before["serial"], f"{ns}/servo_angles publishers lost")
+        result["serial_angles_regained"] = delta(serial, before["serial"], f"{ns}/servo_angles publishers regained")
+        result["ik_angles_lost"] = delta(ik, before["ik"], f"{ns}/servo_angles subscribers lost")
+        result["ik_angles_regained"] = delta(ik, before["ik"], f"{ns}/servo_angles subscribers regained")
+        now_unreach = self.unreachable_lines()
+        result["unreachable_lines"] = {k: now_unreach[k] - before["unreachable"].get(k, 0) for k in now_unreach}
+        return result
+
+    def close(self):
+        codes = {}
+        for p in self.procs:
+            codes[p.name] = p.stop()
+        try:
+            self.o.close()
+        finally:
+            if self.uno is not None:
+                codes["device"] = self.uno.stop()
+        return codes
