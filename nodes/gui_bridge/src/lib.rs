@@ -14,10 +14,11 @@ use crate::teleop::{Command, Event, Teleop};
 use crate::web::{ClientRequest, FromClient};
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{ArmJoints, ACTUATED_JOINTS};
-use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use serde_json::json;
 use std::collections::{BTreeMap, VecDeque};
@@ -84,6 +85,30 @@ pub trait Outputs {
     fn joint_target(&self, positions: &[(String, f64)], stamp: Time);
     /// Publish on `estop`.
     fn estop(&self, engaged: bool);
+    /// Publish a `diagnostics` report with this status.
+    fn diagnostics(&self, status: DiagnosticStatus);
+}
+
+/// The topics whose peers the web panel watches (resolved names): `xyz_target`
+/// subscribers (compute_ik) and `servo_state` publishers (serial_node, usually on
+/// another machine).
+pub fn watched_topics(xyz_target: &str, servo_state: &str) -> Vec<(String, Peer)> {
+    vec![
+        (xyz_target.to_string(), Peer::Subscriber),
+        (servo_state.to_string(), Peer::Publisher),
+    ]
+}
+
+/// How the web panel reports itself on `diagnostics`.
+pub struct Reporting<F: Fn() -> Vec<usize>> {
+    /// The entry's name (`gui_bridge: operator panel`).
+    pub name: String,
+    /// Where the panel is served.
+    pub url: String,
+    /// The watched topics' peers.
+    pub peers: PeerWatch,
+    /// Their counts now, in [`watched_topics`]' order.
+    pub counts: F,
 }
 
 /// Health of the other nodes, from their `diagnostics`.
@@ -207,15 +232,33 @@ fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
 
 /// The loop between browsers and ROS; runs until `shutdown` resolves.
 #[allow(clippy::too_many_arguments)]
-pub async fn run(
+pub async fn run<F: Fn() -> Vec<usize>>(
     teleop: std::sync::Arc<std::sync::Mutex<Teleop>>,
     inputs: impl Stream<Item = Input>,
     mut requests: mpsc::UnboundedReceiver<FromClient>,
     to_browsers: broadcast::Sender<String>,
     outputs: &impl Outputs,
     params: Params,
+    mut reporting: Reporting<F>,
     shutdown: impl Future<Output = ()>,
 ) {
+    let mut sent = 0u64;
+    let mut diag_tick = tokio::time::interval(Duration::from_secs(1));
+    let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
+    let report = |peers: &PeerWatch, sent: u64| {
+        let mut s = ros_plumbing::diagnostics::status(
+            DiagnosticStatus::OK,
+            &reporting.name,
+            "",
+            &format!("web panel on {}", reporting.url),
+            &[
+                ("url", reporting.url.clone()),
+                ("targets_sent", sent.to_string()),
+            ],
+        );
+        peers.annotate(&mut s, Instant::now());
+        outputs.diagnostics(s);
+    };
     let mut health = NodeHealth::default();
     let mut latency = Latency::default();
     let mut model: Option<RobotModel> = None;
@@ -231,6 +274,14 @@ pub async fn run(
         tokio::select! {
             _ = &mut shutdown => break,
             _ = status_tick.tick() => send(health.json()),
+            _ = diag_tick.tick() => report(&reporting.peers, sent),
+            _ = peer_poll.tick() => {
+                let changes = reporting.peers.update(&(reporting.counts)(), Instant::now());
+                changes.iter().for_each(|c| c.log());
+                if !changes.is_empty() {
+                    report(&reporting.peers, sent);
+                }
+            }
             Ok(()) = param_changes.changed() => {
                 if let Ok(mut t) = teleop.lock() {
                     t.set_rate(params.f64("rate").unwrap_or(50.0));
@@ -242,6 +293,7 @@ pub async fn run(
                     let stamp = Time::now();
                     match &c {
                         Command::Target(xyz) => {
+                            sent += 1;
                             outputs.xyz_target(*xyz, stamp);
                             latency.sent(stamp);
                             send(json!({"t": "sent", "topic": "xyz_target", "xyz": xyz, "stamp_ns": stamp.to_nanos()}));

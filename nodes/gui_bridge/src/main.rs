@@ -8,7 +8,7 @@
 //! ```
 
 use anyhow::{anyhow, bail, Context as _};
-use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use eezybot_msgs::geometry_msgs::{Point, PointStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64, Header, String as StringMsg};
@@ -18,6 +18,8 @@ use gui_bridge::teleop::{format_waypoint, parse_waypoints, Teleop, Waypoint, WAY
 use gui_bridge::web::WebState;
 use gui_bridge::{Input, Outputs};
 use ros2_client::{Publisher, Subscription};
+use ros_plumbing::diagnostics::DiagnosticsPublisher;
+use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{qos, RosNode};
 use std::io::Write as _;
 use std::process::ExitCode;
@@ -29,6 +31,7 @@ struct RosOutputs {
     gripper: Publisher<Float64>,
     joints: Publisher<JointState>,
     estop: Publisher<Bool>,
+    diagnostics: DiagnosticsPublisher,
     frame: String,
 }
 
@@ -73,6 +76,9 @@ impl Outputs for RosOutputs {
         if let Err(e) = self.estop.publish(Bool { data: engaged }) {
             log::warn!("could not publish estop: {e:?}");
         }
+    }
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.publish(vec![status]);
     }
 }
 
@@ -228,6 +234,7 @@ async fn main_async() -> anyhow::Result<()> {
         gripper: node.publisher("gripper_target", qos::COMMANDS)?,
         joints: node.publisher("joint_target", qos::COMMANDS)?,
         estop: node.publisher("estop", qos::ESTOP)?,
+        diagnostics: node.diagnostics()?,
         frame: params
             .string("base_frame")
             .unwrap_or_else(|| "base_link".into()),
@@ -412,6 +419,20 @@ async fn web(
             .filter_map(|r| async move { r.ok().map(|(m, _)| Input::Estop(m.data)) })
             .boxed(),
     ]);
+    let reporting = gui_bridge::Reporting {
+        name: format!("{}: operator panel", node.resolver().node_name()),
+        url: format!("http://{bind}/"),
+        peers: PeerWatch::new(&gui_bridge::watched_topics(
+            &node.resolver().resolve("xyz_target")?,
+            &node.resolver().resolve("servo_state")?,
+        )),
+        counts: || {
+            vec![
+                outputs.xyz.get_subscription_count(node.node()),
+                servo_state.get_publisher_count(node.node()),
+            ]
+        },
+    };
     gui_bridge::run(
         teleop,
         inputs,
@@ -419,6 +440,7 @@ async fn web(
         to_browsers,
         outputs,
         params,
+        reporting,
         shutdown,
     )
     .await;

@@ -15,6 +15,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::collections::{BTreeMap, VecDeque};
 use std::future::Future;
@@ -101,6 +102,8 @@ pub trait Outputs {
     fn robot_description(&self, urdf: String);
     /// Publish a `diagnostics` report.
     fn diagnostics(&self, status: DiagnosticStatus);
+    /// The number of `joint_states` publishers matched now.
+    fn joint_states_publishers(&self) -> usize;
 }
 
 /// One event for the loop.
@@ -144,8 +147,11 @@ pub async fn run(
     outputs: &impl Outputs,
     params: Params,
     diag_name: String,
+    joint_states_topic: String,
     shutdown: impl Future<Output = ()>,
 ) {
+    let mut peers = PeerWatch::new(&[(joint_states_topic, Peer::Publisher)]);
+    let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
     let prefix = |p: &Params| p.string("frame_prefix").unwrap_or_default();
     let mut core = TfCore::new(description.model, &prefix(&params));
     outputs.robot_description(description.text);
@@ -174,7 +180,12 @@ pub async fn run(
             _ = ticker.tick() => {
                 let mut extra = latency.percentiles();
                 extra.push(("unreadable_samples", unreadable.to_string()));
-                outputs.diagnostics(core.diagnostic_status(&diag_name, &extra));
+                let mut status = core.diagnostic_status(&diag_name, &extra);
+                peers.annotate(&mut status, Instant::now());
+                outputs.diagnostics(status);
+            }
+            _ = peer_poll.tick() => {
+                peers.update(&[outputs.joint_states_publishers()], Instant::now()).iter().for_each(|c| c.log());
             }
             _ = async { if let Some(t) = flush_at { tokio::time::sleep_until(t).await } }, if flush_at.is_some() => {
                 outputs.tf(TFMessage { transforms: std::mem::take(&mut pending).into_values().collect() });

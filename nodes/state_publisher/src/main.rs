@@ -6,21 +6,23 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::String as StringMsg;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use futures::StreamExt;
-use ros2_client::Publisher;
+use ros2_client::{Publisher, Subscription};
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::{qos, RosNode};
 use state_publisher::{load_urdf, urdf_origin, Input, Outputs};
 use std::process::ExitCode;
 use std::time::Instant;
 
-struct RosOutputs {
+struct RosOutputs<'a> {
+    node: &'a ros2_client::Node,
+    joint_states: &'a Subscription<JointState>,
     tf: Publisher<TFMessage>,
     tf_static: Publisher<TFMessage>,
     robot_description: Publisher<StringMsg>,
     diagnostics: DiagnosticsPublisher,
 }
 
-impl Outputs for RosOutputs {
+impl Outputs for RosOutputs<'_> {
     fn tf(&self, msg: TFMessage) {
         if let Err(e) = self.tf.publish(msg) {
             log::warn!("could not publish tf: {e:?}");
@@ -39,6 +41,9 @@ impl Outputs for RosOutputs {
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
     }
+    fn joint_states_publishers(&self) -> usize {
+        self.joint_states.get_publisher_count(self.node)
+    }
 }
 
 async fn main_async() -> anyhow::Result<()> {
@@ -53,11 +58,17 @@ async fn main_async() -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)
         .context("urdf")?;
     let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
+    let tf = node.publisher("tf", qos::TF)?;
+    let tf_static = node.publisher("tf_static", qos::TF_STATIC)?;
+    let robot_description = node.publisher("robot_description", qos::ROBOT_DESCRIPTION)?;
+    let diagnostics = node.diagnostics()?;
     let outputs = RosOutputs {
-        tf: node.publisher("tf", qos::TF)?,
-        tf_static: node.publisher("tf_static", qos::TF_STATIC)?,
-        robot_description: node.publisher("robot_description", qos::ROBOT_DESCRIPTION)?,
-        diagnostics: node.diagnostics()?,
+        node: node.node(),
+        joint_states: &joint_states,
+        tf,
+        tf_static,
+        robot_description,
+        diagnostics,
     };
     let inputs = joint_states.async_stream().map(|r| match r {
         Ok((m, _)) => Input::JointStates(m, Instant::now()),
@@ -75,7 +86,17 @@ async fn main_async() -> anyhow::Result<()> {
     );
     let diag_name = format!("{}: robot state", node.resolver().node_name());
     let shutdown = ros_plumbing::shutdown_logged();
-    state_publisher::run(description, inputs, &outputs, params, diag_name, shutdown).await;
+    let topic = node.resolver().resolve("joint_states")?;
+    state_publisher::run(
+        description,
+        inputs,
+        &outputs,
+        params,
+        diag_name,
+        topic,
+        shutdown,
+    )
+    .await;
     drop(outputs);
     drop(joint_states);
     node.shutdown().await;
