@@ -11,7 +11,9 @@ use log::{debug, error, trace, warn};
 
 use crate::{
   dds::{ddsdata::DDSData, with_key::datawriter::WriteOptions},
-  structure::{cache_change::CacheChange, guid::GUID, sequence_number::SequenceNumber},
+  structure::{
+    cache_change::CacheChange, guid::GUID, sequence_number::SequenceNumber, time::Timestamp,
+  },
 };
 
 /// Result of an admission attempt into the [`WriterSendBuffer`].
@@ -268,6 +270,15 @@ impl WriterSendBuffer {
     may_block: bool,
   ) -> SequenceNumber {
     let seq = inner.last_seq.plus_1();
+    // Every sample carries a source timestamp (INFO_TS on the wire, also in
+    // repairs): the write time, unless the writer gave one. Without it, a Fast DDS
+    // reader orders the samples of different writers in its history by equal
+    // (zero) timestamps, so a repaired sample that arrives after newer ones of the
+    // same writer is inserted behind them, is never found again and never
+    // delivered: built-in SEDP samples sent out of order at start-up were lost,
+    // and their endpoints never discovered. Taken under the lock, so timestamps
+    // follow sequence numbers.
+    let write_options = write_options.stamp_if_unset(Timestamp::now());
     let cc = CacheChange::new(shared.writer_guid, seq, write_options, data);
     inner.changes.insert(seq, cc);
     inner.last_seq = seq;
@@ -626,6 +637,41 @@ mod tests {
     // Durable path keeps everything for potential late-joiner delivery / repair
     // despite tiny max_retain.
     assert_eq!(buf.retained_len(), 10);
+  }
+
+  // Every stored sample has a source timestamp, so that it goes out with an
+  // INFO_TS, repairs included: the write time when the writer gave none (DDS
+  // spec 2.2.2.4.2.11), in sequence-number order; a given timestamp is kept.
+  // Readers (Fast DDS) order the samples of different writers by it.
+  #[test]
+  fn samples_are_stamped_with_their_write_time() {
+    let buf = WriterSendBuffer::new(
+      GUID::GUID_UNKNOWN,
+      "t".to_string(),
+      /* reliable_writer */ true,
+      /* is_builtin */ true,
+      /* volatile */ false,
+      /* window_limit */ 1000,
+      /* backlog_limit */ 1000,
+      100,
+    );
+    let given = Timestamp::now() - crate::Duration::from_secs(100);
+    let before = Timestamp::now();
+    for _ in 0..5 {
+      assert!(admit_now(&buf, WriteOptions::default()));
+    }
+    assert!(admit_now(&buf, WriteOptions::from(Some(given))));
+    let stamps: Vec<Timestamp> = (1..=6)
+      .map(|sn| {
+        buf
+          .get_by_sn(SequenceNumber::new(sn))
+          .and_then(|cc| cc.write_options.source_timestamp())
+          .expect("every sample has a source timestamp")
+      })
+      .collect();
+    assert!(stamps[0] >= before);
+    assert!(stamps[..5].windows(2).all(|w| w[0] <= w[1]));
+    assert_eq!(stamps[5], given);
   }
 
   // A VOLATILE reliable writer with no matched reliable reader trims KeepLast on

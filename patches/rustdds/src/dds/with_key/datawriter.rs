@@ -130,6 +130,13 @@ impl WriteOptions {
     self.source_timestamp
   }
 
+  // The DDS spec (2.2.2.4.2.11 write) takes the source timestamp from the clock
+  // when the application gives none: fill it in with `now` if it is unset.
+  pub(crate) fn stamp_if_unset(mut self, now: Timestamp) -> Self {
+    self.source_timestamp.get_or_insert(now);
+    self
+  }
+
   pub fn to_single_reader(&self) -> Option<GUID> {
     self.to_single_reader
   }
