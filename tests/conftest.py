@@ -6,7 +6,6 @@ import signal
 import subprocess
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import pytest
@@ -73,12 +72,10 @@ def other_domain(domain):
 class Observer:
     """A real rclpy node in its own context and domain."""
 
-    # How long to wait for discovery before restarting our nodes (see wait_matched).
-    MATCH_TIMEOUT = 8.0
-    RESTARTS = 2
+    # How long discovery may take before a test fails (it takes 0.2-1.5 s here).
+    MATCH_TIMEOUT = 10.0
 
     def __init__(self, domain_id, name="observer", netns=None):
-        self.nodes = []  # NodeProcess objects that wait_* may restart
         self.netns = netns  # a network namespace (twohost.py) to live in, or None
         with twohost.netns(netns):
             self.context = rclpy.Context()
@@ -111,18 +108,10 @@ class Observer:
         return predicate()
 
     def _wait_discovery(self, predicate, what):
-        """Wait for a match. A known RustDDS <-> Fast DDS race (about 1 start in 20) leaves
-        Fast DDS never learning a RustDDS participant's subscriptions; it does not heal by
-        itself, so the nodes of this test are restarted (at most RESTARTS times)."""
-        for attempt in range(self.RESTARTS + 1):
-            if self.spin_until(predicate, self.MATCH_TIMEOUT):
-                return
-            if attempt < self.RESTARTS and self.nodes:
-                warnings.warn(f"{what}: not discovered in {self.MATCH_TIMEOUT} s, restarting {[n.name for n in self.nodes]} "
-                              "(RustDDS/Fast DDS discovery race)")
-                for n in self.nodes:
-                    n.restart()
-        raise AssertionError(f"{what} (after {self.RESTARTS} restarts)")
+        """Discovery between our nodes (RustDDS) and rclpy (Fast DDS) is not retried or
+        worked around: a node that is not discovered in time fails the test."""
+        if not self.spin_until(predicate, self.MATCH_TIMEOUT):
+            raise AssertionError(f"{what} within {self.MATCH_TIMEOUT} s (discovery failed)")
 
     def wait_matched(self, publisher):
         """Our publisher is matched by the node's subscription."""
@@ -160,13 +149,6 @@ class NodeProcess:
         self.env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), **(env or {})}
         self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env)
 
-    def restart(self):
-        """Stop (SIGINT, must exit 0) and start again with the same arguments."""
-        code = self.stop()
-        assert code == 0, f"{self.name} exited with {code} when restarted"
-        self.log = open(self.log_path, "a")
-        self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env)
-
     def stop(self, sig=signal.SIGINT, timeout=10):
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
@@ -192,8 +174,6 @@ def launch(domain, observer):
     def start(name, *args, domain_id=None, env=None):
         p = NodeProcess(name, list(args), domain if domain_id is None else domain_id, env)
         procs.append(p)
-        if domain_id is None or domain_id == domain:
-            observer.nodes.append(p)
         return p
 
     yield start
