@@ -158,7 +158,9 @@ class SplitGraph:
         return None, None, {}
 
     def unreachable_lines(self):
-        return {p.name: len(UNREACHABLE.findall(p.log_path.read_text())) for p in self.procs}
+        """Log lines about an unreachable network, per launch script."""
+        return {p.name: sum(1 for line in p.log_path.read_text().splitlines() if UNREACHABLE.search(line))
+                for p in self.procs}
 
     def logs_tail(self, n=15):
         out = []
@@ -194,7 +196,9 @@ class SplitGraph:
         first_new = min((a for a, s in self.replies_after(t_restore) if s >= t_restore), default=None)
         self.pump(settle)
         after = self.replies_after(t_restore)
-        stamps = [s for _, s in after]
+        # replies that answer a target (servo_state from a heartbeat is stamped "now")
+        targets = {s for _, s in self.sent}
+        stamps = [s for _, s in after if s in targets]
         during = {s for w, s in self.sent if t_cut <= w < t_restore}
         result = {
             "length_s": length,

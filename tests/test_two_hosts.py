@@ -1,0 +1,203 @@
+"""The graph split across two hosts, as our users run it: launch_scripts/pc.sh in a
+network namespace `pc` (gui_bridge, compute_ik, state_publisher) and launch_scripts/pi.sh
+in `pi` (serial_node), joined by a veth, or by the userspace link emulator linkem.py
+for an impaired Wi-Fi link. A real rclpy operator lives in `pc`.
+
+One trial of each kind here; tests/soak/outages.py runs 20 of each and
+tests/soak/starts.py hundreds of starts (results in BENCHMARKS.md)."""
+import math
+import statistics
+import time
+
+import pytest
+from geometry_msgs.msg import PointStamped
+from sensor_msgs.msg import JointState
+
+import twohost
+from conftest import Observer
+from split_graph import SplitGraph, seconds, stamp_of
+from startup import run_in_subprocess
+
+pytestmark = pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")
+
+# ROBOT.md, written out again so the test does not trust the code under test.
+H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
+
+
+def ik(x, y, z):
+    """Closed-form IK of ROBOT.md: (base, shoulder, elbow)."""
+    base = math.atan2(y, x)
+    r, h = math.hypot(x, y) - TOOL_DX, z - H
+    s2 = r * r + h * h
+    cos_e = (s2 - L2 * L2 - L3 * L3) / (2 * L2 * L3)
+    sin_e = -math.sqrt(((L2 + L3) ** 2 - s2) * (s2 - (L2 - L3) ** 2)) / (2 * L2 * L3)
+    elbow = math.atan2(sin_e, cos_e)
+    shoulder = math.atan2(h, r) - math.atan2(L3 * sin_e, L2 + L3 * cos_e)
+    return base, shoulder, elbow
+
+
+def servo_deg(x, y, z):
+    """ROBOT.md's default servo mapping of the arm joints (base, main arm, forearm)."""
+    base, shoulder, elbow = ik(x, y, z)
+    d = math.degrees
+    return [90 - 2 * d(base), 180 - d(shoulder), 90 + d(shoulder + elbow)]
+
+
+@pytest.fixture
+def hosts():
+    h = twohost.TwoHosts(tag="t")
+    yield h
+    h.close()
+
+
+def close_graph(g):
+    codes = g.close()
+    assert all(c == 0 for c in codes.values()), f"exit codes {codes}"
+
+
+def test_a_target_from_the_pc_comes_back_from_the_firmware_on_the_pi(hosts, domain, tmp_path):
+    """rclpy in `pc` -> compute_ik (pc) -> serial_node (pi) -> the firmware in simavr ->
+    servo_state back in `pc`, with ROBOT.md's servo angles (within the firmware's
+    0.5 us pulse resolution, 0.05 deg)."""
+    g = SplitGraph(hosts, domain, tmp_path, device="simavr")
+    try:
+        g.wait_flowing()
+        goal = (0.2, 0.05, 0.15)
+        m = stamp_of(time.time())
+        m.point.x, m.point.y, m.point.z = goal
+        g.xyz.publish(m)
+        want = seconds(m.header.stamp)
+        assert g.pump_until(lambda: any(seconds(s.header.stamp) == want for _, s in g.states), 15, send=False), \
+            f"no servo_state for the target\n{g.logs_tail()}"
+        reply = [s for _, s in g.states if seconds(s.header.stamp) == want][-1]
+        assert reply.name[:3] == ["base_servo", "shoulder_servo", "elbow_servo"]
+        got = [math.degrees(a) for a in reply.position[:3]]
+        assert got == pytest.approx(servo_deg(*goal), abs=0.1)
+    finally:
+        close_graph(g)
+
+
+def test_domain_and_namespace_stay_apart_across_the_link(hosts, domain, other_domain, tmp_path):
+    """A graph under /arm2 in one domain: its topics are all under /arm2, and a
+    participant in another domain, on either host, neither sees it nor moves it."""
+    g = SplitGraph(hosts, domain, tmp_path, device="mock", ros_args=["-r", "__ns:=/arm2"])
+    strangers = [Observer(other_domain, name="stranger", netns=ns) for ns in (hosts.pc, hosts.pi)]
+    try:
+        g.wait_flowing()
+        names = {n for n, _ in g.o.node.get_topic_names_and_types()}
+        ours = {"xyz_target", "servo_angles", "servo_state", "joint_states", "tf", "robot_description"}
+        assert {f"/arm2/{t}" for t in ours} <= names
+        assert not {f"/{t}" for t in ours} & names, f"topics outside the namespace: {sorted(names)}"
+
+        stranger_xyz = strangers[0].pub("/arm2/xyz_target", PointStamped)
+        for s in strangers:
+            s.sub("/arm2/servo_state", JointState)
+        sent = []
+        end = time.monotonic() + 3
+        while time.monotonic() < end:
+            m = stamp_of(time.time())
+            m.point.x, m.point.y, m.point.z = 0.18, -0.04, 0.2
+            stranger_xyz.publish(m)
+            sent.append(seconds(m.header.stamp))
+            for s in strangers:
+                s.spin_for(0.05)
+            g.pump(0.05, send=False)
+        for s in strangers:
+            seen = {n for n, _ in s.node.get_topic_names_and_types()}
+            foreign = {n for n in seen if n.startswith("/arm2/")} - {"/arm2/xyz_target", "/arm2/servo_state"}
+            assert not foreign, f"another domain sees {sorted(foreign)}"
+            assert s.node.count_publishers("/arm2/servo_state") == 0
+            nodes = set(s.node.get_node_names())
+            assert not nodes & {"compute_ik", "serial_node", "state_publisher", "gui_bridge"}, nodes
+        assert stranger_xyz.get_subscription_count() == 0
+        assert not {s for _, s in g.replies_after(0)} & set(sent), "a target from another domain moved the arm"
+    finally:
+        for s in strangers:
+            s.close()
+        close_graph(g)
+
+
+@pytest.fixture(scope="module")
+def split_graph(tmp_path_factory):
+    """One graph for every outage trial (pc.sh + pi.sh with the virtual Arduino behind a
+    pty), in a domain and namespaces of its own."""
+    from conftest import DomainLease
+
+    lease = DomainLease()
+    hosts = twohost.TwoHosts(tag="o")
+    g = SplitGraph(hosts, lease.id, tmp_path_factory.mktemp("outages"), device="virtual")
+    yield g
+    try:
+        close_graph(g)
+    finally:
+        hosts.close()
+        lease.release()
+
+
+LEASE_S = 5  # our participants' lease (1 s announcements): longer outages lose peers
+
+
+@pytest.mark.parametrize("length", [3, 12, 25, 60])
+@pytest.mark.parametrize("side", ["pc", "pi"])
+def test_the_graph_resumes_after_a_link_outage(split_graph, length, side):
+    """Pull the cable at one end for `length` s while the operator keeps sending, plug it
+    back (multicast route re-added, as a DHCP client does): the newest target is
+    applied, no stale command from the outage is, peers lost for longer than the lease
+    are reported lost and regained, and an unreachable network is logged once."""
+    r = split_graph.outage(length, side)
+    print(f"\noutage {length} s at {side}: resumed after {r['resume_s']} s, stale {r['stale']}, "
+          f"lost/regained {r['serial_angles_lost']}/{r['serial_angles_regained']}, "
+          f"unreachable log lines {r['unreachable_lines']}")
+    assert r["resumed"], f"no servo_state for a new target after the link returned: {r}\n{split_graph.logs_tail()}"
+    assert r["stale"] == 0, f"commands from the outage applied after it: {r}"
+    assert r["out_of_order"] == 0, r
+    if length > LEASE_S + 2:
+        assert r["serial_angles_lost"] >= 1 and r["serial_angles_regained"] >= 1, \
+            f"serial_node did not report its servo_angles publisher lost and regained: {r}"
+        assert r["ik_angles_lost"] >= 1 and r["ik_angles_regained"] >= 1, \
+            f"compute_ik did not report its servo_angles subscriber lost and regained: {r}"
+    # one WARN per node and failing destination when the network goes away, not ~20/s
+    nodes = {"pc.sh": 3, "pi.sh": 1}
+    assert all(n <= 2 * nodes[script] for script, n in r["unreachable_lines"].items()), r["unreachable_lines"]
+
+
+def test_streaming_over_an_impaired_link(domain, tmp_path):
+    """20 +/- 5 ms delay and 1 % loss each way (linkem): streaming at 20 Hz continues,
+    the newest target wins, and the round trip is reported."""
+    with twohost.TwoHosts(tag="i", impaired=dict(delay_ms=20, jitter_ms=5, loss=0.01)) as hosts:
+        g = SplitGraph(hosts, domain, tmp_path, device="virtual", target_hz=20)
+        try:
+            g.wait_flowing(timeout=60)
+            t0 = time.time()
+            g.pump(20)
+            last = g.sent[-1][1]
+            g.pump(2, send=False)
+            replies = g.replies_after(t0)
+        finally:
+            close_graph(g)
+    sent = [s for _, s in g.sent if s >= t0]
+    # replies to targets (servo_state from a heartbeat is stamped "now")
+    replies = [(a, s) for a, s in replies if s in set(sent)]
+    answered = {s for _, s in replies}
+    rtt = sorted(a - s for a, s in replies)
+    link = {d: {k: hosts.stats[d][k] for k in ("forwarded", "dropped")} for d in ("a_to_b", "b_to_a")} if hosts.stats else {}
+    print(f"\nimpaired link: {len(sent)} targets, {len(answered)} answered, round trip "
+          f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
+          f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
+    assert len(answered) >= 0.9 * len(sent), "streaming stalled on the impaired link"
+    assert max(s for _, s in replies) == last, "the newest target was not the last one applied"
+    stamps = [s for _, s in replies]
+    assert stamps == sorted(stamps), "an older target was applied after a newer one"
+
+
+@pytest.mark.parametrize("order", ["together", "rclpy_first", "nodes_first"])
+@pytest.mark.parametrize("split", [False, True], ids=["one_host", "two_hosts"])
+def test_start_up_discovery(order, split, domain):
+    """Our four nodes and a user's rclpy process start together (or in either order):
+    rclpy's node list has every node and every endpoint is matched, with no restart.
+    tests/soak/starts.py runs this hundreds of times."""
+    r = run_in_subprocess(domain, order=order, split=split)
+    print(f"\n{order} {'two hosts' if split else 'one host'}: node list after {r['node_list_s']} s, "
+          f"endpoints after {r['endpoints_s']} s")
+    assert not r["missing_nodes"], f"not in rclpy's node list after 20 s: {r['missing_nodes']}"
+    assert not r["missing_endpoints"], f"not discovered after 20 s: {r['missing_endpoints']}"
