@@ -1,0 +1,210 @@
+"""launch_scripts/run_graph.sh, pc.sh and pi.sh as a user runs them: ROS domain and ROS
+arguments for every node, what runs where, the serial port choice (never the virtual
+Arduino behind the user's back on a Pi), prebuilt binaries, and Ctrl-C / SIGTERM
+stopping every child with exit code 0."""
+import os
+import shutil
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped
+from sensor_msgs.msg import JointState
+
+from conftest import OUTPUT, REPO, bin_path
+
+SCRIPTS = REPO / "launch_scripts"
+BIN_DIR = str(Path(bin_path("compute_ik")).parent)
+
+
+def descendants(pid):
+    """Every process below `pid` (from /proc/*/task/*/children)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        for task in Path(f"/proc/{p}/task").glob("*"):
+            try:
+                kids = [int(c) for c in (task / "children").read_text().split()]
+            except OSError:
+                continue
+            out += kids
+            todo += kids
+    return out
+
+
+def alive(pid):
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+class Script:
+    def __init__(self, name, *args, env=None):
+        OUTPUT.mkdir(parents=True, exist_ok=True)
+        self.log_path = OUTPUT / f"{name}-{os.getpid()}-{time.monotonic_ns()}.log"
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen([str(SCRIPTS / name), *args], stdout=self.log, stderr=subprocess.STDOUT,
+                                     env={**os.environ, "EEZYBOT_BIN_DIR": BIN_DIR, "GUI_BIND": "127.0.0.1:0",
+                                          **(env or {})}, start_new_session=True)
+
+    def output(self):
+        self.log.flush()
+        return self.log_path.read_text()
+
+    def wait_output(self, text, timeout=20):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and text not in self.output():
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        return text in self.output()
+
+    def children(self, n, timeout=20):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            kids = descendants(self.proc.pid)
+            if len(kids) >= n:
+                return kids
+            time.sleep(0.1)
+        raise AssertionError(f"{len(descendants(self.proc.pid))} children, expected {n}:\n{self.output()}")
+
+    def stop(self, sig=signal.SIGINT, timeout=20):
+        self.proc.send_signal(sig)
+        try:
+            return self.proc.wait(timeout)
+        finally:
+            if self.proc.poll() is None:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            self.log.close()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl_c", "sigterm"])
+def test_run_graph_runs_every_node_with_the_ros_arguments_and_stops_them_all(sig, domain, observer):
+    """`run_graph.sh -r __ns:=/arm2` in a domain: every node runs there under /arm2 with
+    the built-in virtual Arduino (no board here), a target gets an answer, and Ctrl-C or
+    SIGTERM stops every node (no orphan) with exit code 0."""
+    s = Script("run_graph.sh", "-r", "__ns:=/arm2", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": ""})
+    try:
+        kids = s.children(4)
+        xyz = observer.pub("/arm2/xyz_target", PointStamped)
+        state = observer.sub("/arm2/servo_state", JointState)
+        observer.wait_matched(xyz)
+        observer.wait_publisher("/arm2/servo_state")
+        assert observer.spin_until(lambda: {"compute_ik", "state_publisher", "serial_node", "gui_bridge"}
+                                   <= set(observer.node.get_node_names()), 15), observer.node.get_node_names()
+        assert {ns for n, ns in observer.node.get_node_names_and_namespaces() if n == "compute_ik"} == {"/arm2"}
+        m = PointStamped()
+        m.header.frame_id = "base_link"
+        m.header.stamp.sec = 77
+        m.point.x, m.point.y, m.point.z = 0.2, 0.0, 0.15
+        xyz.publish(m)
+        assert observer.spin_until(lambda: any(x.header.stamp.sec == 77 for _, x in state), 10)
+        out = s.output()
+        assert f"ROS domain {domain}" in out and "virtual Arduino" in out
+        for node in ("compute_ik", "state_publisher", "gui_bridge", "serial_node"):
+            assert node in out
+    finally:
+        code = s.stop(sig)
+    assert code == 0, s.output()
+    time.sleep(0.5)
+    assert not [k for k in kids if alive(k)], f"orphans left: {[k for k in kids if alive(k)]}"
+
+
+def test_pc_and_pi_scripts_split_the_graph(domain, observer):
+    """pc.sh runs gui_bridge, compute_ik and state_publisher; pi.sh runs serial_node
+    (SERIAL_PORT=mock: the virtual Arduino, because we asked); together they answer a
+    target. Each says what runs where."""
+    pc = Script("pc.sh", env={"ROS_DOMAIN_ID": str(domain)})
+    pi = Script("pi.sh", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock"})
+    try:
+        assert len(pc.children(3)) == 3
+        assert len(pi.children(1)) == 1
+        xyz = observer.pub("/xyz_target", PointStamped)
+        state = observer.sub("/servo_state", JointState)
+        observer.wait_matched(xyz)
+        observer.wait_publisher("/servo_state")
+        m = PointStamped()
+        m.header.frame_id = "base_link"
+        m.header.stamp.sec = 78
+        m.point.x, m.point.y, m.point.z = 0.2, 0.05, 0.15
+        xyz.publish(m)
+        assert observer.spin_until(lambda: any(x.header.stamp.sec == 78 for _, x in state), 10)
+        assert "running here (operator PC): compute_ik, state_publisher, gui_bridge" in pc.output()
+        assert "expected on the Pi" in pc.output()
+        assert "serial_node with the built-in virtual Arduino" in pi.output()
+    finally:
+        codes = (pc.stop(), pi.stop())
+    assert codes == (0, 0), pc.output() + pi.output()
+
+
+def test_pi_script_never_falls_back_to_the_virtual_arduino(domain, observer):
+    """No board (no /dev/eezybot, no /dev/ttyACM0) and no SERIAL_PORT: pi.sh warns and
+    serial_node waits for /dev/eezybot; it does not quietly drive a virtual arm."""
+    if Path("/dev/eezybot").exists() or Path("/dev/ttyACM0").exists():
+        pytest.skip("a serial device is plugged in here")
+    pi = Script("pi.sh", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": ""})
+    diags = observer.sub("/diagnostics", DiagnosticArray)
+    try:
+        pi.children(1)
+        assert pi.wait_output("WARNING: no Arduino")
+        observer.wait_publisher("/diagnostics")
+
+        def serial():
+            for _, a in reversed(diags):
+                for st in a.status:
+                    if st.name.startswith("serial_node"):
+                        return {kv.key: kv.value for kv in st.values}
+            return None
+
+        assert observer.spin_until(lambda: serial() is not None, 10)
+        values = serial()
+        assert values["port"] == "/dev/eezybot"
+        assert values["connection"] != "connected"
+        assert "virtual" not in pi.output().split("WARNING")[1].split("\n")[0]
+    finally:
+        code = pi.stop()
+    assert code == 0
+
+
+def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
+    """A copy of the Pi bundle layout (bin/ next to launch_scripts/), on a PATH with no
+    cargo: pi.sh runs the bundled serial_node."""
+    bundle = tmp_path / "eezybot-pi"
+    (bundle / "bin").mkdir(parents=True)
+    shutil.copytree(SCRIPTS, bundle / "launch_scripts")
+    shutil.copy(bin_path("serial_node"), bundle / "bin" / "serial_node")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock", "PATH": "/usr/bin:/bin"}
+    env.pop("EEZYBOT_BIN_DIR", None)
+    proc = subprocess.Popen([str(bundle / "launch_scripts" / "pi.sh")], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, env=env, text=True, start_new_session=True)
+    try:
+        end = time.monotonic() + 20
+        while time.monotonic() < end and not descendants(proc.pid):
+            time.sleep(0.1)
+        kids = descendants(proc.pid)
+        assert kids, "pi.sh started nothing"
+        exe = os.readlink(f"/proc/{kids[0]}/exe")
+        assert exe == str(bundle / "bin" / "serial_node")
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, out
+    assert "cargo" not in out and str(bundle / "bin") in out
+
+
+def test_a_node_that_dies_stops_the_others(domain):
+    """When one node exits (here serial_node: an unusable port argument), the script
+    stops the rest and exits with that node's code."""
+    s = Script("run_graph.sh", "-p", "baud:=-1", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock"})
+    try:
+        code = s.proc.wait(30)
+    finally:
+        if s.proc.poll() is None:
+            s.stop()
+    assert code != 0
+    assert "serial_node exited" in s.output() or "exited (code" in s.output(), s.output()
