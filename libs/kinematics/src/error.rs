@@ -107,6 +107,70 @@ pub enum KinematicsError {
         /// upper bound (deg)
         max_deg: f64,
     },
+    /// A link named for a chain is not in the robot model.
+    #[error("link `{link}` is not in the robot model")]
+    UnknownLink {
+        /// the missing link
+        link: String,
+    },
+    /// The tip link of a chain does not hang below its base link.
+    #[error("link `{tip}` is not below `{base}`: no serial chain between them")]
+    NotAChain {
+        /// the chain's base link
+        base: String,
+        /// the chain's tip link
+        tip: String,
+    },
+    /// A joint named for a chain is not usable as asked.
+    #[error("joint `{joint}`: {why}")]
+    BadChainJoint {
+        /// the joint
+        joint: String,
+        /// what is wrong with it
+        why: &'static str,
+    },
+    /// Lower above upper, or NaN, in limits or a constraint.
+    #[error("`{name}` has limits {lower} … {upper}: lower must not exceed upper, and neither may be NaN")]
+    InvalidLimits {
+        /// the joint or constraint
+        name: String,
+        /// lower bound
+        lower: f64,
+        /// upper bound
+        upper: f64,
+    },
+    /// A vector has the wrong number of entries.
+    #[error("{what} has {got} entries, the chain needs {expected}")]
+    DimensionMismatch {
+        /// which input
+        what: &'static str,
+        /// entries needed
+        expected: usize,
+        /// entries given
+        got: usize,
+    },
+    /// An entry of a joint vector or of a target is NaN or infinite.
+    #[error("{what}[{index}] is {value}, not a finite number")]
+    NonFiniteValue {
+        /// which input
+        what: &'static str,
+        /// position in it
+        index: usize,
+        /// the offending value
+        value: f64,
+    },
+    /// A numerical IK solver did not reach the target within its tolerances and budget.
+    #[error("IK did not converge: best residual {position_error_m:.3e} m, {orientation_error_rad:.3e} rad after {iterations} iterations in {attempts} attempt(s)")]
+    IkNotConverged {
+        /// position residual of the best attempt (m)
+        position_error_m: f64,
+        /// orientation residual of the best attempt (rad)
+        orientation_error_rad: f64,
+        /// iterations over all attempts
+        iterations: usize,
+        /// attempts (the seed plus random restarts)
+        attempts: usize,
+    },
 }
 
 impl KinematicsError {
@@ -121,6 +185,13 @@ impl KinematicsError {
             KinematicsError::OutOfLimits { joint, .. } => format!("out_of_limits:{joint}"),
             KinematicsError::GripperOutOfRange { .. } => "gripper_out_of_range".into(),
             KinematicsError::ServoOutOfRange { servo, .. } => format!("servo_out_of_range:{servo}"),
+            KinematicsError::UnknownLink { .. } => "unknown_link".into(),
+            KinematicsError::NotAChain { .. } => "not_a_chain".into(),
+            KinematicsError::BadChainJoint { joint, .. } => format!("bad_chain_joint:{joint}"),
+            KinematicsError::InvalidLimits { name, .. } => format!("invalid_limits:{name}"),
+            KinematicsError::DimensionMismatch { what, .. } => format!("dimension_mismatch:{what}"),
+            KinematicsError::NonFiniteValue { what, .. } => format!("non_finite:{what}"),
+            KinematicsError::IkNotConverged { .. } => "ik_not_converged".into(),
         }
     }
 }

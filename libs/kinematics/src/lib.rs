@@ -23,8 +23,12 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
+pub mod assess;
+pub mod chain;
 mod config;
 mod error;
+pub mod ik;
+pub mod rng;
 mod servo;
 pub mod urdf;
 
@@ -232,6 +236,58 @@ impl Arm {
         };
         self.limits.check(&q)?;
         Ok(q)
+    }
+}
+
+impl Arm {
+    /// The serial chain `base_link` → `tool0` of the EezyBot URDF for the numerical
+    /// solvers: variables `base_joint`, `shoulder_joint`, `elbow_joint` with this arm's
+    /// limits (not the URDF's, which are rounded to 1e-6 rad), the coupling
+    /// `forearm_elevation` φ = shoulder + elbow within its limits as a linear constraint,
+    /// and every passive joint of [`PassiveJoints`] declared, so
+    /// [`chain::SerialChain::joint_positions`] gives them all.
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::{Arm, ArmJoints, urdf::RobotModel};
+    /// let model = RobotModel::load(std::path::Path::new(concat!(
+    ///     env!("CARGO_MANIFEST_DIR"), "/../../urdf/eezybot.urdf"))).unwrap();
+    /// let arm = Arm::default();
+    /// let chain = arm.serial_chain(&model).unwrap();
+    /// let q = ArmJoints { base_rad: 0.3, shoulder_rad: 1.2, elbow_rad: -1.4 };
+    /// let tip = chain.forward(&[q.base_rad, q.shoulder_rad, q.elbow_rad]).unwrap();
+    /// assert!((tip.translation.vector - arm.forward(&q)).norm() < 1e-12);
+    /// ```
+    pub fn serial_chain(
+        &self,
+        model: &urdf::RobotModel,
+    ) -> Result<chain::SerialChain, KinematicsError> {
+        let l = &self.limits;
+        let (alpha, elbow) = (ACTUATED_JOINTS[1], ACTUATED_JOINTS[2]);
+        let terms: [&[(&str, f64)]; 6] = [
+            &[(alpha, -1.0), (elbow, -1.0)], // wrist = −φ
+            &[(alpha, 1.0), (elbow, 1.0)],   // crank = φ
+            &[(elbow, -1.0)],                // drive link = α − φ = −elbow
+            &[(alpha, 1.0)],                 // level link = α
+            &[(alpha, -1.0)],                // triangle = −α
+            &[(alpha, 1.0), (elbow, 1.0)],   // upper link = φ
+        ];
+        let mut b = chain::ChainBuilder::new(model, "base_link", "tool0")
+            .limits(ACTUATED_JOINTS[0], l.base_rad.0, l.base_rad.1)
+            .limits(alpha, l.shoulder_rad.0, l.shoulder_rad.1)
+            .limits(elbow, l.elbow_rad.0, l.elbow_rad.1)
+            .constraint(
+                Joint::ForearmElevation.name(),
+                &[(alpha, 1.0), (elbow, 1.0)],
+                l.forearm_elevation_rad.0,
+                l.forearm_elevation_rad.1,
+            )
+            // the URDF's limits of the passive joints restate the coupling, rounded
+            .dependent_joint_limits(false);
+        for (name, t) in PassiveJoints::NAMES.iter().zip(terms) {
+            b = b.passive(name, t, 0.0);
+        }
+        b.build()
     }
 }
 
