@@ -161,18 +161,18 @@ pub async fn run(
     };
     // an xyz_target that arrived late (repaired after a network outage), held back
     // for burst::HOLD_LATE in case a newer one follows
-    let mut held: Option<(PointStamped, tokio::time::Instant)> = None;
+    let mut held = burst::Held::<PointStamped>::default();
     let mut lateness = burst::Lateness::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
         let mut batch = Vec::new();
-        let hold_until = held.as_ref().map(|h| h.1);
+        let hold_until = held.deadline();
         tokio::select! {
             _ = &mut shutdown => break,
             _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
-                if let Some((m, _)) = held.take() {
-                    log::debug!("applying a late target: nothing newer followed it");
+                if let Some(m) = held.take_due(tokio::time::Instant::now()) {
+                    log::debug!("applying the newest late target");
                     batch.push(Input::XyzTarget(m));
                 }
             }
@@ -217,15 +217,16 @@ pub async fn run(
                 for input in arrived {
                     if let Input::XyzTarget(m) = &input {
                         let (stamp, now) = (m.header.stamp.to_nanos() as f64 * 1e-9, Time::now().to_nanos() as f64 * 1e-9);
-                        let newer_than_held = held.take().is_some();
-                        if newer_than_held {
-                            log::debug!("a late target superseded by a newer one");
-                        }
                         if lateness.is_late(stamp, now, Instant::now()) {
                             if let Input::XyzTarget(m) = input {
-                                held = Some((m, tokio::time::Instant::now() + burst::HOLD_LATE));
+                                if held.hold(m, tokio::time::Instant::now()) {
+                                    log::debug!("a late target superseded by a newer one");
+                                }
                             }
                             continue;
+                        }
+                        if held.discard() {
+                            log::debug!("a late target superseded by a newer one");
                         }
                     }
                     batch.push(input);

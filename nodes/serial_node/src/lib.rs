@@ -366,24 +366,19 @@ pub async fn run(
         peers.annotate(&mut s, Instant::now());
         outputs.diagnostics(s);
     };
-    // a command that arrived late (repaired after a network outage), held back for
-    // burst::HOLD_LATE in case a newer one follows: (ticks, stamp, received, until)
-    let mut held: Option<(
-        [u16; servo_protocol::SERVOS],
-        Time,
-        Instant,
-        tokio::time::Instant,
-    )> = None;
+    // a command that arrived late (repaired after a network outage), held back in
+    // case a newer one follows: (ticks, stamp, received)
+    let mut held = burst::Held::<([u16; servo_protocol::SERVOS], Time, Instant)>::default();
     let mut lateness = burst::Lateness::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        let hold_until = held.map(|h| h.3);
+        let hold_until = held.deadline();
         tokio::select! {
             _ = &mut shutdown => break,
             _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
-                if let Some((ticks, stamp, received, _)) = held.take() {
-                    log::debug!("applying a late command: nothing newer followed it");
+                if let Some((ticks, stamp, received)) = held.take_due(tokio::time::Instant::now()) {
+                    log::debug!("applying the newest late command");
                     link.command(ticks, stamp, received);
                 }
             }
@@ -424,17 +419,14 @@ pub async fn run(
                             status.last_rejection = None;
                             let stamp = msg.header.stamp;
                             let late = lateness.is_late(time_s(stamp), time_s(Time::now()), received);
-                            if late {
-                                if held.is_some() {
-                                    status.superseded_inputs += 1;
-                                }
-                                held = Some((ticks, stamp, received, tokio::time::Instant::now() + burst::HOLD_LATE));
+                            let superseded = if late {
+                                held.hold((ticks, stamp, received), tokio::time::Instant::now())
                             } else {
-                                if held.take().is_some() {
-                                    status.superseded_inputs += 1;
-                                }
+                                let superseded = held.discard();
                                 link.command(ticks, stamp, received);
-                            }
+                                superseded
+                            };
+                            status.superseded_inputs += u64::from(superseded);
                         }
                         Err(r) => {
                             log::warn!("servo_angles rejected: {r}");
@@ -452,7 +444,7 @@ pub async fn run(
                             else { log::info!("emergency stop released: waiting for a new command") }
                             status.estop = engaged;
                             if engaged {
-                                held = None;
+                                held.discard();
                             }
                             link.set_estop(engaged);
                             report(&status, &peers);
