@@ -222,7 +222,7 @@ impl Default for IkOptions {
             max_step: 0.5,
             singular_value_cutoff: 1e-9,
             damping: Damping::default(),
-            stall_iterations: 12,
+            stall_iterations: 6,
             singular_threshold: 1e-2,
             limit_margin: 1e-3,
             random_seed: 0x5EED,

@@ -115,9 +115,20 @@ fn solver(algorithm: IkAlgorithm, budget: Duration) -> IkSolver {
     let mut s = IkSolver::new(algorithm);
     s.options.max_attempts = usize::MAX;
     s.options.time_budget = Some(budget);
+    // IK_BENCH_TUNE="stall,max_iterations,max_step" overrides, for tuning experiments
+    if let Ok(t) = std::env::var("IK_BENCH_TUNE") {
+        let v: Vec<f64> = t
+            .split(',')
+            .map(|x| x.parse().expect("IK_BENCH_TUNE numbers"))
+            .collect();
+        s.options.stall_iterations = v[0] as usize;
+        s.options.max_iterations = v[1] as usize;
+        s.options.max_step = v[2];
+    }
     s
 }
 
+#[allow(clippy::too_many_arguments)]
 fn run_ours(
     chain: &SerialChain,
     s: &IkSolver,
@@ -125,9 +136,11 @@ fn run_ours(
     seeds: Option<&[Vec<f64>]>,
     first: &[f64],
     rng: &mut SplitMix64,
+    truth: &[Vec<f64>],
 ) -> Stats {
     let mut st = Stats::default();
     let mut previous = first.to_vec();
+    let diagnose = std::env::var_os("IK_BENCH_DIAGNOSE").is_some();
     for (i, goal) in goals.iter().enumerate() {
         let seed = seeds.map_or(&previous, |s| &s[i]);
         let target = Target::pose(*goal);
@@ -143,13 +156,20 @@ fn run_ours(
                 }
                 previous = sol.joints;
             }
-            Err(eezybot_kinematics::KinematicsError::IkNotConverged {
-                iterations,
-                attempts,
-                ..
-            }) => {
+            Err(
+                e @ eezybot_kinematics::KinematicsError::IkNotConverged {
+                    iterations,
+                    attempts,
+                    ..
+                },
+            ) => {
                 st.iterations += iterations;
                 st.attempts += attempts;
+                if diagnose {
+                    // how the generating joints look: singular? at a limit?
+                    let r = s.solve(chain, &target, &truth[i]).map(|s| s.report);
+                    eprintln!("pose {i}: {e}\n  truth {:?}\n  {r:?}", truth[i]);
+                }
             }
             Err(e) => panic!("{e}"),
         }
@@ -218,13 +238,14 @@ fn main() {
 
     let walk = trajectory(&chain, a.poses, a.step_rad, &mut rng);
     let walk_goals: Vec<Isometry3<f64>> = walk.iter().map(|(_, g)| *g).collect();
+    let walk_truth: Vec<Vec<f64>> = walk.iter().map(|(x, _)| x.clone()).collect();
     let walk_start = walk[0].0.clone();
-    let cold_goals: Vec<Isometry3<f64>> = (0..a.poses)
-        .map(|_| {
-            chain
-                .forward(&chain.random_configuration(&mut rng))
-                .unwrap()
-        })
+    let cold_truth: Vec<Vec<f64>> = (0..a.poses)
+        .map(|_| chain.random_configuration(&mut rng))
+        .collect();
+    let cold_goals: Vec<Isometry3<f64>> = cold_truth
+        .iter()
+        .map(|x| chain.forward(x).unwrap())
         .collect();
     let cold_seeds: Vec<Vec<f64>> = (0..a.poses)
         .map(|_| chain.random_configuration(&mut rng))
@@ -251,7 +272,15 @@ fn main() {
         ("pseudo-inverse (capped step)", IkAlgorithm::PseudoInverse),
     ] {
         let s = solver(alg, a.budget);
-        let mut warm = run_ours(&chain, &s, &walk_goals, None, &walk_start, &mut rng);
+        let mut warm = run_ours(
+            &chain,
+            &s,
+            &walk_goals,
+            None,
+            &walk_start,
+            &mut rng,
+            &walk_truth,
+        );
         println!("{}", warm.line(&format!("{name}, warm")));
         let mut cold = run_ours(
             &chain,
@@ -260,6 +289,7 @@ fn main() {
             Some(&cold_seeds),
             &walk_start,
             &mut rng,
+            &cold_truth,
         );
         println!("{}", cold.line(&format!("{name}, cold")));
     }
