@@ -910,19 +910,22 @@ impl SerialChain {
     /// against the constraints (projected onto them after 32 misses).
     pub fn random_configuration(&self, rng: &mut SplitMix64) -> Vec<f64> {
         let mut x = vec![0.0; self.dof()];
-        for attempt in 0..32 {
-            self.random_box(rng, &mut x);
-            if self.within_limits(&x, 0.0) {
-                return x;
-            }
-            if attempt == 31 {
-                self.project(&mut x);
-            }
-        }
+        self.random_into(rng, &mut x);
         x
     }
 
-    pub(crate) fn random_box(&self, rng: &mut SplitMix64, x: &mut [f64]) {
+    /// [`SerialChain::random_configuration`] into `x` (no allocation).
+    pub(crate) fn random_into(&self, rng: &mut SplitMix64, x: &mut [f64]) {
+        for _ in 0..32 {
+            self.random_box(rng, x);
+            if self.within_limits(x, 0.0) {
+                return;
+            }
+        }
+        self.project(x);
+    }
+
+    fn random_box(&self, rng: &mut SplitMix64, x: &mut [f64]) {
         for (xi, v) in x.iter_mut().zip(&self.variables) {
             let (lo, hi) = match (v.lower.is_finite(), v.upper.is_finite()) {
                 (true, true) => (v.lower, v.upper),

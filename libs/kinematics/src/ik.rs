@@ -411,7 +411,7 @@ impl IkSolver {
             if attempts >= o.max_attempts || out_of_time {
                 break;
             }
-            chain.random_box(rng, &mut x);
+            chain.random_into(rng, &mut x);
         }
         let (position_error_m, orientation_error_rad) = best
             .map(|(_, e)| (e.position_m, e.orientation_rad))

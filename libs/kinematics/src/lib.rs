@@ -67,6 +67,30 @@ impl ArmJoints {
         self.shoulder_rad + self.elbow_rad
     }
 
+    /// The variables of [`Arm::serial_chain`]: `[base, shoulder, elbow]`.
+    pub fn to_chain(&self) -> [f64; 3] {
+        [self.base_rad, self.shoulder_rad, self.elbow_rad]
+    }
+
+    /// From the variables of [`Arm::serial_chain`] (`None` unless exactly three).
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::ArmJoints;
+    /// let q = ArmJoints::HOME;
+    /// assert_eq!(ArmJoints::from_chain(&q.to_chain()), Some(q));
+    /// ```
+    pub fn from_chain(x: &[f64]) -> Option<ArmJoints> {
+        match x {
+            [base_rad, shoulder_rad, elbow_rad] => Some(ArmJoints {
+                base_rad: *base_rad,
+                shoulder_rad: *shoulder_rad,
+                elbow_rad: *elbow_rad,
+            }),
+            _ => None,
+        }
+    }
+
     /// The value of an actuated arm joint.
     pub fn get(&self, joint: Joint) -> Option<f64> {
         match joint {
