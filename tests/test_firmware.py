@@ -47,11 +47,18 @@ def test_handshake_reports_versions(uno):
     uno.send(frame(HELLO, 1, bytes([1])))
     f, _ = uno.wait_for(lambda f: f[0] == HELLO_ACK)
     version, major, minor, servos, watchdog_ms = struct.unpack("<BBBBH", f[2])
-    assert (version, servos, watchdog_ms) == (1, 4, 500)
+    assert (version, servos, watchdog_ms) == (2, 4, 500)
     assert (major, minor) == (1, 0)
 
 
-def test_no_pulses_before_the_first_command(uno):
+# config.h's hold pose: ROBOT.md's home pose, claw closed (PROTOCOL.md, STATE)
+HOLD_TICKS = [2944, 2944, 2944, 2325]
+
+
+def test_no_pulses_before_the_first_command_and_the_hold_pose_reported(uno):
+    uno.send(frame(HEARTBEAT, 1))
+    st = state_reply(uno, 1)
+    assert st["state"] == "idle" and st["ticks"] == HOLD_TICKS
     uno.receive(0.2)
     edges, _ = uno.events()
     assert all(level == 0 for _, _, level in edges)
@@ -142,3 +149,23 @@ def test_estop_holds_and_ignores_commands(uno):
     assert st["state"] == "estop" and st["ticks"] == [3000] * 4
     uno.send(frame(ESTOP, 4, b"\x00"))
     assert state_reply(uno, 4)["state"] == "running"
+
+
+def test_a_detaching_estop_stops_the_pulses_until_a_new_command(uno):
+    """ESTOP 2 stops the pulses at once; after the release nothing goes out (idle,
+    reporting the last command as the pose to start from) until a new command."""
+    uno.send(set_pulses(1, [3000] * 4))
+    state_reply(uno, 1)
+    uno.send(frame(ESTOP, 2, b"\x02"))
+    assert state_reply(uno, 2)["state"] == "estop"
+    stopped_at = last_rx_cycle(uno)
+    uno.send(frame(ESTOP, 3, b"\x00"))
+    st = state_reply(uno, 3)
+    assert st["state"] == "idle" and st["ticks"] == [3000] * 4
+    uno.receive(0.1)
+    edges, _ = uno.events()
+    # the pulse under way when ESTOP arrived may finish: none starts 3 ms after it
+    assert not [c for c, _, level in edges if level == 1 and c > stopped_at + 3 * CYCLES_PER_MS]
+    uno.send(set_pulses(4, [3100] * 4))
+    assert state_reply(uno, 4)["state"] == "running"
+    assert medians(uno, last_rx_cycle(uno)) == pytest.approx([1550] * 4, abs=1.0)

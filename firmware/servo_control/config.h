@@ -4,7 +4,7 @@
 
 #define FIRMWARE_MAJOR 1
 #define FIRMWARE_MINOR 0
-#define PROTOCOL_VERSION 1
+#define PROTOCOL_VERSION 2
 
 #define SERVO_COUNT 4
 #define SERIAL_BAUD 115200UL
@@ -13,6 +13,12 @@
 // these, whatever the host sends: 544..2400 us is the Servo library's full range.
 static const uint16_t SERVO_MIN_TICKS[SERVO_COUNT] = {1088, 1088, 1088, 1088};
 static const uint16_t SERVO_MAX_TICKS[SERVO_COUNT] = {4800, 4800, 4800, 4800};
+
+// The pose the arm is assumed to be in at power-up (no pulses go out until the first
+// command), reported to the host so that its first command ramps from here: ROBOT.md's
+// home pose (base 0 deg, main arm vertical, forearm horizontal: arm servos at 90 deg,
+// 1472 us) with the claw closed (60 deg, 1163 us). Must lie within the limits above.
+static const uint16_t HOLD_TICKS[SERVO_COUNT] = {2944, 2944, 2944, 2325};
 
 // Refresh period of every servo, as the Servo library: 20 ms.
 #define REFRESH_TICKS 40000U

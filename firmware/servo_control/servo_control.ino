@@ -5,7 +5,9 @@
 // 11 (gripper) with its own Timer1 pulse driver (servo_pwm.cpp: the Servo library's
 // timing, 544-2400 us every 20 ms). Malformed frames are ignored and counted; every
 // command is clamped to the limits in config.h; on silence longer than the watchdog
-// timeout it holds (or stops) the pulses and says so.
+// timeout it holds (or stops) the pulses and says so; the e-stop holds (or stops) them
+// and ignores commands until released. No pulses go out before the first command; until
+// then it reports its hold pose (config.h), where the host's first command starts.
 //
 // Builds in the Arduino IDE (board: Arduino Uno) and with `make` (avr-gcc + Debian's
 // arduino-core-avr).
@@ -25,7 +27,9 @@ enum DeviceState {
 
 static Decoder decoder;
 static uint8_t state = STATE_IDLE;
-static uint16_t applied[SERVO_COUNT];  // clamped command, ticks (0 = no pulses)
+// clamped command, ticks (0 = no pulses on that channel); the hold pose before the first
+static uint16_t applied[SERVO_COUNT];
+static bool output = false;  // pulses going out
 static uint8_t clamped = 0;
 static uint8_t last_seq = 0;
 static uint8_t tx_seq = 0;
@@ -56,12 +60,14 @@ static void send_state() {
   p[1] = state;
   p[2] = clamped;
   p[3] = decoder.errors;
-  for (uint8_t i = 0; i < SERVO_COUNT; i++) put_u16(p + 4 + 2 * i, servo_pwm_get(i));
+  // the commanded widths; without pulses, the pose the next command starts from
+  for (uint8_t i = 0; i < SERVO_COUNT; i++) put_u16(p + 4 + 2 * i, applied[i]);
   send(MSG_STATE, p, sizeof(p));
 }
 
 // Output what `applied` says, or nothing when detached / idle.
 static void output_pulses(bool on) {
+  output = on;
   for (uint8_t i = 0; i < SERVO_COUNT; i++) servo_pwm_set(i, on ? applied[i] : 0);
 }
 
@@ -93,12 +99,12 @@ static void handle(const Frame *f) {
     case MSG_HEARTBEAT:
       break;
     case MSG_ESTOP:
-      if (f->payload[0] == 1) {
-        state = STATE_ESTOP;  // hold the pulses, ignore commands
+      if (f->payload[0] == 1 || f->payload[0] == 2) {
+        state = STATE_ESTOP;  // ignore commands; 1: hold the pulses, 2: stop them
+        if (f->payload[0] == 2) output_pulses(false);
       } else if (f->payload[0] == 0 && state == STATE_ESTOP) {
-        bool any = false;
-        for (uint8_t i = 0; i < SERVO_COUNT; i++) any |= applied[i] != 0;
-        state = any ? STATE_RUNNING : STATE_IDLE;
+        // held pulses go on; stopped ones wait for a new command
+        state = output ? STATE_RUNNING : STATE_IDLE;
       }
       break;
     case MSG_CONFIG: {
@@ -117,6 +123,7 @@ static void handle(const Frame *f) {
 void setup() {
   Serial.begin(SERIAL_BAUD);
   proto_decoder_init(&decoder);
+  for (uint8_t i = 0; i < SERVO_COUNT; i++) applied[i] = HOLD_TICKS[i];
   servo_pwm_begin();  // no pulses until the first command
   last_rx_ms = millis();
 }

@@ -6,7 +6,8 @@
 //! `Read + Write` byte stream on the real clock, like a serial port.
 
 use crate::frame::{
-    decode, encode, DeviceState, Frame, Message, WatchdogAction, PROTOCOL_VERSION, SERVOS,
+    decode, encode, DeviceState, Frame, Message, StopAction, WatchdogAction, PROTOCOL_VERSION,
+    SERVOS,
 };
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
@@ -24,11 +25,18 @@ const fn ticks_per_s(deg_per_s: f64) -> f64 {
     deg_per_s * (4800.0 - 1088.0) / 180.0
 }
 
+/// The firmware's hold pose (`config.h` `HOLD_TICKS`): ROBOT.md's home pose (base 0°,
+/// main arm vertical, forearm horizontal: every arm servo at 90°, 1472 µs) with the claw
+/// closed (60°, 1163 µs). The device reports it until the first command.
+pub const HOLD_TICKS: [u16; SERVOS] = [2944, 2944, 2944, 2325];
+
 /// What the device is configured with (the firmware's `config.h`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DeviceConfig {
     /// Per channel (min, max) ticks; commands are clamped into them.
     pub limits: [(u16, u16); SERVOS],
+    /// The pose it assumes the arm is in at power-up, reported until the first command.
+    pub hold: [u16; SERVOS],
     /// Watchdog timeout at power-up (ms).
     pub watchdog_ms: u16,
     /// Watchdog action at power-up.
@@ -41,6 +49,7 @@ impl Default for DeviceConfig {
     fn default() -> Self {
         DeviceConfig {
             limits: [(1088, 4800); SERVOS],
+            hold: HOLD_TICKS,
             watchdog_ms: 500,
             watchdog_action: WatchdogAction::Hold,
             speed_ticks_per_s: [
@@ -60,8 +69,11 @@ pub struct Device {
     watchdog_ms: u16,
     watchdog_action: WatchdogAction,
     state: DeviceState,
-    /// Commanded pulses after clamping (0 = none).
+    /// Commanded pulses after clamping (0 = none on that channel); the hold pose
+    /// before the first command.
     applied: [u16; SERVOS],
+    /// Whether pulses go out.
+    output: bool,
     /// Modelled horn positions (ticks).
     horn: [f64; SERVOS],
     clamped: bool,
@@ -76,16 +88,17 @@ pub struct Device {
 }
 
 impl Device {
-    /// A device just powered up (idle: no pulses until the first command).
+    /// A device just powered up (idle: no pulses until the first command; the arm is
+    /// assumed to be in the hold pose).
     pub fn new(config: DeviceConfig) -> Device {
-        let mid = |(lo, hi): (u16, u16)| f64::from(lo + (hi - lo) / 2);
         Device {
             watchdog_ms: config.watchdog_ms,
             watchdog_action: config.watchdog_action,
-            horn: config.limits.map(mid),
+            horn: config.hold.map(f64::from),
             config,
             state: DeviceState::Idle,
-            applied: [0; SERVOS],
+            applied: config.hold,
+            output: false,
             clamped: false,
             rx_errors: 0,
             last_seq: 0,
@@ -105,9 +118,10 @@ impl Device {
 
     /// Pulses on the pins (ticks, 0 = none).
     pub fn pulses(&self) -> [u16; SERVOS] {
-        match self.state {
-            DeviceState::WatchdogDetached | DeviceState::Idle => [0; SERVOS],
-            _ => self.applied,
+        if self.output {
+            self.applied
+        } else {
+            [0; SERVOS]
         }
     }
 
@@ -130,10 +144,12 @@ impl Device {
     }
 
     fn state_msg(&self) -> Message {
-        // What the servos are at: the modelled horn while pulses go out, 0 when none.
-        let ticks = match self.state {
-            DeviceState::Idle | DeviceState::WatchdogDetached => [0; SERVOS],
-            _ => self.horn.map(|h| h.round() as u16),
+        // Where the servos are: the modelled horn while pulses go out; without pulses,
+        // the pose the next command starts from (the last command, or the hold pose).
+        let ticks = if self.output {
+            self.horn.map(|h| h.round() as u16)
+        } else {
+            self.applied
         };
         Message::State {
             ack_seq: self.last_seq,
@@ -190,9 +206,7 @@ impl Device {
                             (*t).clamp(lo, hi)
                         };
                     }
-                    if self.state == DeviceState::Idle
-                        || self.state == DeviceState::WatchdogDetached
-                    {
+                    if !self.output {
                         // pulses start where the horn is assumed to be: at the target
                         for i in 0..SERVOS {
                             if self.applied[i] != 0 {
@@ -201,20 +215,29 @@ impl Device {
                         }
                     }
                     self.clamped = clamped;
+                    self.output = true;
                     self.state = DeviceState::Running;
                 }
             }
             Message::Heartbeat => self.last_rx = now,
             Message::Estop { engaged } => {
                 self.last_rx = now;
-                if engaged {
-                    self.state = DeviceState::Estop;
-                } else if self.state == DeviceState::Estop {
-                    self.state = if self.applied.iter().any(|t| *t != 0) {
-                        DeviceState::Running
-                    } else {
-                        DeviceState::Idle
-                    };
+                match engaged {
+                    Some(action) => {
+                        self.state = DeviceState::Estop;
+                        if action == StopAction::Detach {
+                            self.output = false;
+                        }
+                    }
+                    // released: holding pulses go on, stopped ones wait for a command
+                    None if self.state == DeviceState::Estop => {
+                        self.state = if self.output {
+                            DeviceState::Running
+                        } else {
+                            DeviceState::Idle
+                        };
+                    }
+                    None => {}
                 }
             }
             Message::Config {
@@ -239,10 +262,7 @@ impl Device {
     pub fn tick(&mut self, now: Duration) {
         let dt = now.saturating_sub(self.last_tick).as_secs_f64();
         self.last_tick = now;
-        if matches!(
-            self.state,
-            DeviceState::Running | DeviceState::WatchdogHold | DeviceState::Estop
-        ) {
+        if self.output {
             for i in 0..SERVOS {
                 if self.applied[i] != 0 {
                     let target = f64::from(self.applied[i]);
@@ -261,7 +281,10 @@ impl Device {
         {
             self.state = match self.watchdog_action {
                 WatchdogAction::Hold => DeviceState::WatchdogHold,
-                WatchdogAction::Detach => DeviceState::WatchdogDetached,
+                WatchdogAction::Detach => {
+                    self.output = false;
+                    DeviceState::WatchdogDetached
+                }
             };
             let msg = self.state_msg();
             self.reply(msg);
@@ -323,6 +346,11 @@ impl VirtualArduino {
             s.plugged = plugged;
         }
         cv.notify_all();
+    }
+
+    /// Whether the cable is plugged in.
+    pub fn is_plugged(&self) -> bool {
+        self.shared.0.lock().map(|s| s.plugged).unwrap_or(false)
     }
 
     /// Let the device's clock run (watchdog, motion) and collect its output.
@@ -503,13 +531,58 @@ mod tests {
     fn estop_ignores_commands_until_released() {
         let mut d = Device::new(DeviceConfig::default());
         send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
-        send(&mut d, 2, Message::Estop { engaged: true }, ms(1));
+        send(
+            &mut d,
+            2,
+            Message::Estop {
+                engaged: Some(StopAction::Hold),
+            },
+            ms(1),
+        );
         send(&mut d, 3, Message::SetPulses { ticks: [4000; 4] }, ms(2));
         assert_eq!(d.pulses(), [3000; 4]);
         assert_eq!(d.state(), DeviceState::Estop);
-        send(&mut d, 4, Message::Estop { engaged: false }, ms(3));
+        send(&mut d, 4, Message::Estop { engaged: None }, ms(3));
         assert_eq!(d.state(), DeviceState::Running);
         assert_eq!(d.pulses(), [3000; 4]);
+    }
+
+    #[test]
+    fn a_detaching_estop_stops_the_pulses_and_a_release_waits_for_a_command() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
+        send(
+            &mut d,
+            2,
+            Message::Estop {
+                engaged: Some(StopAction::Detach),
+            },
+            ms(1),
+        );
+        assert_eq!((d.state(), d.pulses()), (DeviceState::Estop, [0; 4]));
+        send(&mut d, 3, Message::Estop { engaged: None }, ms(2));
+        assert_eq!((d.state(), d.pulses()), (DeviceState::Idle, [0; 4]));
+        // it reports the pose a command starts from: the last one
+        assert!(matches!(
+            states(&mut d).last(),
+            Some(Message::State {
+                ticks: [3000, 3000, 3000, 3000],
+                ..
+            })
+        ));
+        send(&mut d, 4, Message::SetPulses { ticks: [3010; 4] }, ms(3));
+        assert_eq!((d.state(), d.pulses()), (DeviceState::Running, [3010; 4]));
+    }
+
+    #[test]
+    fn before_the_first_command_it_reports_its_hold_pose() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::Heartbeat, ms(0));
+        assert_eq!(d.pulses(), [0; 4]);
+        assert!(matches!(
+            states(&mut d).as_slice(),
+            [Message::State { state: DeviceState::Idle, ticks, .. }] if *ticks == HOLD_TICKS
+        ));
     }
 
     #[test]

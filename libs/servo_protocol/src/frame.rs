@@ -7,7 +7,7 @@
 /// Start marker of every frame.
 pub const SYNC: u8 = 0xA5;
 /// Protocol version this code speaks.
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Number of servo channels.
 pub const SERVOS: usize = 4;
 /// Pulse widths are counted in Timer1 ticks of 0.5 µs (16 MHz / 8).
@@ -65,19 +65,23 @@ impl MsgType {
     }
 }
 
-/// What the device does on silence longer than its watchdog timeout.
+/// What the device does when it stops following commands (watchdog, e-stop).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum WatchdogAction {
-    /// Keep sending the last pulses.
+pub enum StopAction {
+    /// Keep sending the last pulses: the servos hold their position.
     Hold,
-    /// Stop the pulses (servos go limp).
+    /// Stop the pulses: the servos go limp.
     Detach,
 }
+
+/// What the device does on silence longer than its watchdog timeout.
+pub type WatchdogAction = StopAction;
 
 /// The device's state, as reported in [`Message::State`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DeviceState {
-    /// Powered up, no command yet: no pulses.
+    /// No pulses and no command to follow: powered up (the pose it reports is its
+    /// hold pose) or e-stop released after a detaching e-stop (the last command).
     Idle,
     /// Following commands.
     Running,
@@ -85,7 +89,8 @@ pub enum DeviceState {
     WatchdogHold,
     /// Watchdog fired: pulses stopped.
     WatchdogDetached,
-    /// Emergency stop: holding, commands ignored.
+    /// Emergency stop: holding (or, engaged with [`StopAction::Detach`], no
+    /// pulses); commands ignored.
     Estop,
 }
 
@@ -159,13 +164,16 @@ pub enum Message {
         clamped: bool,
         /// frames the device dropped (bad CRC, bad length, unknown type), wrapping
         rx_errors: u8,
-        /// pulse widths being output, ticks (0 = none)
+        /// where the servos are, ticks: the widths being output; with no pulses (idle,
+        /// detached) the pose the device starts from: the last command, or its hold
+        /// pose before the first one (0 = none known)
         ticks: [u16; SERVOS],
     },
-    /// host → device: engage (true) or release (false) the emergency stop.
+    /// host → device: engage the emergency stop, holding the pulses or stopping them
+    /// (`Some`), or release it (`None`).
     Estop {
-        /// engaged?
-        engaged: bool,
+        /// engaged, and how; `None`: released
+        engaged: Option<StopAction>,
     },
     /// host → device: watchdog settings.
     Config {
@@ -260,7 +268,11 @@ pub fn encode(frame: &Frame) -> Vec<u8> {
             payload.extend_from_slice(&[ack_seq, state.to_byte(), u8::from(clamped), rx_errors]);
             ticks.iter().for_each(|t| put_u16(&mut payload, *t));
         }
-        Message::Estop { engaged } => payload.push(u8::from(engaged)),
+        Message::Estop { engaged } => payload.push(match engaged {
+            None => 0,
+            Some(StopAction::Hold) => 1,
+            Some(StopAction::Detach) => 2,
+        }),
         Message::Config {
             watchdog_ms,
             action,
@@ -430,7 +442,13 @@ pub fn decode(buf: &mut Vec<u8>) -> Result<Option<Frame>, DecodeError> {
             }
         }
         MsgType::Estop => match p[0] {
-            0 | 1 => Message::Estop { engaged: p[0] == 1 },
+            0 => Message::Estop { engaged: None },
+            1 => Message::Estop {
+                engaged: Some(StopAction::Hold),
+            },
+            2 => Message::Estop {
+                engaged: Some(StopAction::Detach),
+            },
             _ => return reject(buf, DecodeError::BadValue("estop flag")),
         },
         MsgType::Config => {

@@ -7,15 +7,18 @@
 //! * [`FrameReader`]: owns the receive buffer of any `Read` (a serial port, a pty, the
 //!   virtual device);
 //! * [`device`]: the device side as the firmware implements it, with the servos'
-//!   motion modelled: the virtual Arduino.
+//!   motion modelled: the virtual Arduino;
+//! * [`host`]: the host side as a pure state machine (handshake, latest-wins
+//!   commands with a velocity guard, heartbeats, e-stop, reconnection).
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod device;
 mod frame;
+pub mod host;
 
 pub use frame::{
-    crc8, decode, encode, DecodeError, DeviceState, Frame, Message, MsgType, WatchdogAction,
-    MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SERVOS, SYNC, TICKS_PER_US,
+    crc8, decode, encode, DecodeError, DeviceState, Frame, Message, MsgType, StopAction,
+    WatchdogAction, MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SERVOS, SYNC, TICKS_PER_US,
 };
 
 use std::io::{self, Read};

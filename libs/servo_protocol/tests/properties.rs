@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)]
 
 use proptest::prelude::*;
-use servo_protocol::{decode, encode, DeviceState, Frame, Message, WatchdogAction};
+use servo_protocol::{decode, encode, DeviceState, Frame, Message, StopAction, WatchdogAction};
 
 fn message() -> impl Strategy<Value = Message> {
     let ticks = prop::array::uniform4(any::<u16>());
@@ -46,7 +46,12 @@ fn message() -> impl Strategy<Value = Message> {
                 ticks
             }
         ),
-        any::<bool>().prop_map(|engaged| Message::Estop { engaged }),
+        prop_oneof![
+            Just(None),
+            Just(Some(StopAction::Hold)),
+            Just(Some(StopAction::Detach))
+        ]
+        .prop_map(|engaged| Message::Estop { engaged }),
         (any::<u16>(), any::<bool>()).prop_map(|(watchdog_ms, d)| Message::Config {
             watchdog_ms,
             action: if d {

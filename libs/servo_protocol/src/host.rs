@@ -1,0 +1,938 @@
+//! The host side of the servo link as a pure state machine: what to send next is a
+//! function of time and state ([`HostLink::next`]); the bytes that come back, the
+//! port opening or breaking, a new command and the e-stop are inputs. No threads, no
+//! ports: a thin I/O shell (`serial_node`'s link thread) opens the port, writes what
+//! [`HostLink::next`] says, and feeds back what it reads.
+//!
+//! The link is latest-wins: a new command replaces the one being sent, at most one
+//! SET_PULSES goes out per send period, and each servo's pulse moves by at most its
+//! velocity limit per second (the last guard against anything that publishes servo
+//! angles directly), starting from where the device says the servos are. The e-stop
+//! lives here only: while engaged, commands are dropped; after its release nothing
+//! moves until a new command, which ramps from where the arm is.
+//!
+//! # Examples
+//! ```
+//! use servo_protocol::host::{HostConfig, HostLink, LinkEvent, Next};
+//! use servo_protocol::device::Device;
+//! use servo_protocol::{decode, Message};
+//! use std::time::{Duration, Instant};
+//!
+//! let t0 = Instant::now();
+//! let mut link = HostLink::<u32>::new(HostConfig::default(), t0);
+//! let mut device = Device::new(Default::default());
+//! assert_eq!(link.next(t0), Next::Open);
+//! link.opened(t0);
+//! link.command([3000; 4], 7, t0); // tagged 7, e.g. the command's stamp
+//! // drive the link against the device model until the command is answered
+//! let mut now = t0;
+//! let mut answered = None;
+//! while answered.is_none() && now < t0 + Duration::from_secs(2) {
+//!     match link.next(now) {
+//!         Next::Send(frame) => device.receive(&servo_protocol::encode(&frame), now - t0),
+//!         Next::Wait(until) => now = until,
+//!         other => panic!("{other:?}"),
+//!     }
+//!     let mut out = device.take_output();
+//!     while let Ok(Some(f)) = decode(&mut out) {
+//!         link.received(f, now);
+//!     }
+//!     for e in link.take_events() {
+//!         if let LinkEvent::State { answered: Some((tag, _)), ticks, .. } = e {
+//!             answered = Some((tag, ticks));
+//!         }
+//!     }
+//! }
+//! assert_eq!(answered.map(|a| a.0), Some(7));
+//! ```
+
+use crate::frame::{DeviceState, Frame, Message, StopAction, WatchdogAction, PROTOCOL_VERSION};
+use crate::SERVOS;
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+/// Link settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HostConfig {
+    /// Least time between two SET_PULSES frames (the servo refresh period, 20 ms).
+    pub send_period: Duration,
+    /// Send a HEARTBEAT when nothing was sent for this long.
+    pub heartbeat_period: Duration,
+    /// HELLO is repeated this often until HELLO_ACK comes.
+    pub hello_period: Duration,
+    /// No HELLO_ACK within this: the port is closed and opened again (a Uno's
+    /// bootloader takes ~1.5 s after the port opens).
+    pub handshake_timeout: Duration,
+    /// Device watchdog timeout, sent in CONFIG.
+    pub watchdog_ms: u16,
+    /// Device watchdog action, sent in CONFIG.
+    pub watchdog_action: WatchdogAction,
+    /// What an engaged e-stop makes the device do: hold the pulses or stop them.
+    pub estop_action: StopAction,
+    /// Each servo's velocity limit, ticks per second (`f64::INFINITY`: none).
+    pub max_ticks_per_s: [f64; SERVOS],
+    /// First wait before opening the port again; doubles on each failure.
+    pub retry_min: Duration,
+    /// Longest wait between two attempts.
+    pub retry_max: Duration,
+}
+
+impl Default for HostConfig {
+    fn default() -> Self {
+        HostConfig {
+            send_period: Duration::from_millis(20),
+            heartbeat_period: Duration::from_millis(100),
+            hello_period: Duration::from_millis(250),
+            handshake_timeout: Duration::from_secs(4),
+            watchdog_ms: 500,
+            watchdog_action: WatchdogAction::Hold,
+            estop_action: StopAction::Hold,
+            max_ticks_per_s: [f64::INFINITY; SERVOS],
+            retry_min: Duration::from_millis(100),
+            retry_max: Duration::from_millis(500),
+        }
+    }
+}
+
+/// What the shell must do now.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Next {
+    /// Open the port, then call [`HostLink::opened`] or [`HostLink::open_failed`].
+    Open,
+    /// Write this frame (on failure, call [`HostLink::lost`]).
+    Send(Frame),
+    /// Close the port (the handshake failed), then ask again.
+    Close {
+        /// why
+        reason: String,
+    },
+    /// Nothing until this instant, a frame from the device, or a new input.
+    Wait(Instant),
+}
+
+/// What the link reports. `T` is the tag handed in with each command (its stamp).
+#[derive(Clone, Debug, PartialEq)]
+pub enum LinkEvent<T> {
+    /// The port is open and the device answered the handshake.
+    Connected {
+        /// firmware version
+        firmware: (u8, u8),
+    },
+    /// The port could not be opened, or was lost.
+    Disconnected {
+        /// why
+        reason: String,
+        /// until the next attempt
+        retry_in: Duration,
+    },
+    /// The device speaks another protocol version.
+    VersionMismatch {
+        /// the device's version
+        device: u8,
+    },
+    /// A STATE reply.
+    State {
+        /// the frame it answers
+        ack_seq: u8,
+        /// device state
+        state: DeviceState,
+        /// the last command was clamped by the device
+        clamped: bool,
+        /// the device's count of dropped frames
+        rx_errors: u8,
+        /// where the servos are (see [`Message::State`])
+        ticks: [u16; SERVOS],
+        /// if it answers a SET_PULSES of ours: that command's tag and the round trip
+        answered: Option<(T, Duration)>,
+    },
+    /// A frame the device should not send (device-to-host only), or bytes that were
+    /// not a frame.
+    Garbage {
+        /// why
+        error: String,
+    },
+    /// A command handed in during an engaged e-stop: dropped.
+    DroppedInEstop,
+}
+
+/// Counters of the sending side, for diagnostics.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SendStats {
+    /// SET_PULSES frames sent.
+    pub sent: u64,
+    /// Of those, frames limited by the velocity guard (a command that asked for a
+    /// faster move).
+    pub ramped: u64,
+    /// The last (up to) 1000 delays from a command's arrival to its first frame, µs.
+    pub latency_us: VecDeque<f64>,
+}
+
+#[derive(Clone, Debug)]
+enum Phase {
+    Closed {
+        retry_at: Instant,
+        backoff: Duration,
+    },
+    Handshake {
+        deadline: Instant,
+        next_hello: Instant,
+    },
+    Connected {
+        config_sent: bool,
+    },
+}
+
+#[derive(Clone, Debug)]
+struct Command<T> {
+    ticks: [u16; SERVOS],
+    tag: T,
+    received: Instant,
+    /// its first frame has gone out (latency recorded)
+    started: bool,
+}
+
+/// The host side of the link. See the [module](self).
+#[derive(Clone, Debug)]
+pub struct HostLink<T> {
+    config: HostConfig,
+    phase: Phase,
+    seq: u8,
+    estop: bool,
+    /// the device's e-stop as far as we know this session (None: not told yet)
+    device_estop: Option<bool>,
+    /// the newest command, until its pulses have been sent
+    command: Option<Command<T>>,
+    /// the newest command ever handed in (sent again after a reconnection)
+    newest: Option<([u16; SERVOS], T)>,
+    /// the pulses last sent this session, or else the pose the device reported
+    at: Option<[u16; SERVOS]>,
+    last_pulses_sent: Option<Instant>,
+    last_sent: Instant,
+    in_flight: VecDeque<(u8, T, Instant)>,
+    connected_once: bool,
+    events: Vec<LinkEvent<T>>,
+    stats: SendStats,
+}
+
+impl<T: Clone> HostLink<T> {
+    /// A link whose port is not open yet.
+    pub fn new(config: HostConfig, now: Instant) -> Self {
+        HostLink {
+            config,
+            phase: Phase::Closed {
+                retry_at: now,
+                backoff: config.retry_min,
+            },
+            seq: 0,
+            estop: false,
+            device_estop: None,
+            command: None,
+            newest: None,
+            at: None,
+            last_pulses_sent: None,
+            last_sent: now,
+            in_flight: VecDeque::new(),
+            connected_once: false,
+            events: Vec::new(),
+            stats: SendStats::default(),
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &HostConfig {
+        &self.config
+    }
+
+    /// Change the servos' velocity limits (ticks per second), from the next frame on.
+    pub fn set_velocity_limits(&mut self, max_ticks_per_s: [f64; SERVOS]) {
+        self.config.max_ticks_per_s = max_ticks_per_s;
+    }
+
+    /// Whether a port is open (handshake under way, or connected).
+    pub fn is_open(&self) -> bool {
+        !matches!(self.phase, Phase::Closed { .. })
+    }
+
+    /// Whether the handshake has succeeded on the open port.
+    pub fn is_connected(&self) -> bool {
+        matches!(self.phase, Phase::Connected { .. })
+    }
+
+    /// Whether the e-stop is engaged.
+    pub fn estop(&self) -> bool {
+        self.estop
+    }
+
+    /// The counters of the sending side.
+    pub fn stats(&self) -> &SendStats {
+        &self.stats
+    }
+
+    /// The events since the last call.
+    pub fn take_events(&mut self) -> Vec<LinkEvent<T>> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// The newest command, tagged (e.g. with its stamp), handed in at `now`. It
+    /// replaces any command not yet fully sent; during an e-stop it is dropped.
+    pub fn command(&mut self, ticks: [u16; SERVOS], tag: T, now: Instant) {
+        if self.estop {
+            self.events.push(LinkEvent::DroppedInEstop);
+            return;
+        }
+        self.newest = Some((ticks, tag.clone()));
+        self.command = Some(Command {
+            ticks,
+            tag,
+            received: now,
+            started: false,
+        });
+    }
+
+    /// Engage or release the e-stop. Engaging drops the command being sent; after a
+    /// release the servos move only on a new command.
+    pub fn set_estop(&mut self, engaged: bool) {
+        if engaged {
+            self.command = None;
+        }
+        self.estop = engaged;
+    }
+
+    /// The port opened: start the handshake.
+    pub fn opened(&mut self, now: Instant) {
+        self.phase = Phase::Handshake {
+            deadline: now + self.config.handshake_timeout,
+            next_hello: now,
+        };
+        self.at = None;
+        self.last_pulses_sent = None;
+        self.device_estop = None;
+        self.in_flight.clear();
+    }
+
+    /// The port could not be opened: try again later.
+    pub fn open_failed(&mut self, reason: String, now: Instant) {
+        let backoff = match self.phase {
+            Phase::Closed { backoff, .. } => backoff,
+            _ => self.config.retry_min,
+        };
+        self.close(reason, now, backoff);
+    }
+
+    /// The port broke (read or write error, device gone): close and try again soon.
+    pub fn lost(&mut self, reason: String, now: Instant) {
+        let backoff = self.config.retry_min;
+        self.close(reason, now, backoff);
+    }
+
+    fn close(&mut self, reason: String, now: Instant, retry_in: Duration) {
+        self.events
+            .push(LinkEvent::Disconnected { reason, retry_in });
+        self.phase = Phase::Closed {
+            retry_at: now + retry_in,
+            backoff: (retry_in * 2).min(self.config.retry_max),
+        };
+        self.at = None;
+        self.in_flight.clear();
+    }
+
+    /// Bytes from the device that were not a frame.
+    pub fn garbage(&mut self, error: String) {
+        self.events.push(LinkEvent::Garbage { error });
+    }
+
+    /// A frame from the device.
+    pub fn received(&mut self, frame: Frame, now: Instant) {
+        match frame.msg {
+            Message::HelloAck {
+                version,
+                firmware_major,
+                firmware_minor,
+                ..
+            } => {
+                if !matches!(self.phase, Phase::Handshake { .. }) {
+                    return; // a late answer to a repeated HELLO
+                }
+                if version != PROTOCOL_VERSION {
+                    self.events
+                        .push(LinkEvent::VersionMismatch { device: version });
+                    let reason =
+                        format!("device speaks protocol {version}, this node {PROTOCOL_VERSION}");
+                    // a firmware upgrade is needed: no point in trying every 100 ms
+                    self.close(reason, now, self.config.retry_max);
+                    return;
+                }
+                self.phase = Phase::Connected { config_sent: false };
+                if self.connected_once && !self.estop {
+                    // the newest command goes out again, ramping from where the device is
+                    if let Some((ticks, tag)) = self.newest.clone() {
+                        self.command = Some(Command {
+                            ticks,
+                            tag,
+                            received: now,
+                            started: true,
+                        });
+                    }
+                }
+                self.connected_once = true;
+                self.events.push(LinkEvent::Connected {
+                    firmware: (firmware_major, firmware_minor),
+                });
+            }
+            Message::State {
+                ack_seq,
+                state,
+                clamped,
+                rx_errors,
+                ticks,
+            } => {
+                if !self.is_connected() {
+                    return;
+                }
+                // the pose the device reports is where the next pulses start, until we
+                // have sent pulses of our own this session
+                if self.last_pulses_sent.is_none() {
+                    self.at = Some(ticks);
+                }
+                // the device's e-stop differs from ours (reset, or engaged before a
+                // reconnection): tell it again
+                let device_estop = state == DeviceState::Estop;
+                if self.device_estop.is_some() && device_estop != self.estop {
+                    self.device_estop = Some(device_estop);
+                }
+                let answered = self
+                    .in_flight
+                    .iter()
+                    .position(|(s, _, _)| *s == ack_seq)
+                    .and_then(|i| self.in_flight.remove(i))
+                    .map(|(_, tag, at)| (tag, now.saturating_duration_since(at)));
+                self.events.push(LinkEvent::State {
+                    ack_seq,
+                    state,
+                    clamped,
+                    rx_errors,
+                    ticks,
+                    answered,
+                });
+            }
+            other => self.events.push(LinkEvent::Garbage {
+                error: format!("unexpected {:?} from the device", other.msg_type()),
+            }),
+        }
+    }
+
+    fn frame(&mut self, msg: Message, now: Instant) -> Next {
+        self.seq = self.seq.wrapping_add(1);
+        self.last_sent = now;
+        Next::Send(Frame { seq: self.seq, msg })
+    }
+
+    /// What to do at `now`. A [`Next::Send`] counts as sent: if writing it fails,
+    /// call [`HostLink::lost`].
+    pub fn next(&mut self, now: Instant) -> Next {
+        match self.phase.clone() {
+            Phase::Closed { retry_at, .. } => {
+                if now >= retry_at {
+                    Next::Open
+                } else {
+                    Next::Wait(retry_at)
+                }
+            }
+            Phase::Handshake {
+                deadline,
+                next_hello,
+            } => {
+                if now >= deadline {
+                    let reason = format!(
+                        "no answer to HELLO within {:.1} s (is the servo_control firmware on the board?)",
+                        self.config.handshake_timeout.as_secs_f64()
+                    );
+                    let backoff = self.config.retry_min;
+                    self.close(reason.clone(), now, backoff);
+                    Next::Close { reason }
+                } else if now >= next_hello {
+                    self.phase = Phase::Handshake {
+                        deadline,
+                        next_hello: now + self.config.hello_period,
+                    };
+                    self.frame(
+                        Message::Hello {
+                            version: PROTOCOL_VERSION,
+                        },
+                        now,
+                    )
+                } else {
+                    Next::Wait(next_hello.min(deadline))
+                }
+            }
+            Phase::Connected { config_sent } => {
+                if !config_sent {
+                    self.phase = Phase::Connected { config_sent: true };
+                    return self.frame(
+                        Message::Config {
+                            watchdog_ms: self.config.watchdog_ms,
+                            action: self.config.watchdog_action,
+                        },
+                        now,
+                    );
+                }
+                // a device starts released: tell it only when it matters
+                let told = self.device_estop.unwrap_or(false);
+                if told != self.estop || (self.device_estop.is_none() && self.estop) {
+                    self.device_estop = Some(self.estop);
+                    let engaged = self.estop.then_some(self.config.estop_action);
+                    return self.frame(Message::Estop { engaged }, now);
+                }
+                self.device_estop = Some(self.estop);
+                let pulses_due = self
+                    .last_pulses_sent
+                    .map_or(now, |t| t + self.config.send_period);
+                if self.command.is_some() && !self.estop {
+                    if self.at.is_none() {
+                        // where the servos are is not known yet: ask
+                        if now
+                            >= self.last_sent
+                                + self.config.heartbeat_period.min(self.config.send_period)
+                        {
+                            return self.frame(Message::Heartbeat, now);
+                        }
+                    } else if now >= pulses_due {
+                        return self.send_pulses(now);
+                    }
+                }
+                let heartbeat_due = self.last_sent + self.config.heartbeat_period;
+                if now >= heartbeat_due {
+                    return self.frame(Message::Heartbeat, now);
+                }
+                let mut wake = heartbeat_due;
+                if self.command.is_some() && !self.estop {
+                    wake = wake.min(if self.at.is_some() {
+                        pulses_due
+                    } else {
+                        self.last_sent + self.config.send_period
+                    });
+                }
+                Next::Wait(wake)
+            }
+        }
+    }
+
+    /// The next SET_PULSES toward the command: each servo at most its velocity limit
+    /// times the time since the last pulses (at most one send period) away from where
+    /// it is.
+    fn send_pulses(&mut self, now: Instant) -> Next {
+        let (Some(command), Some(at)) = (self.command.clone(), self.at) else {
+            return Next::Wait(now + self.config.send_period);
+        };
+        let dt = self
+            .last_pulses_sent
+            .map_or(self.config.send_period, |t| {
+                now.saturating_duration_since(t)
+            })
+            .min(self.config.send_period)
+            .as_secs_f64();
+        let mut ticks = [0u16; SERVOS];
+        let mut limited = false;
+        for i in 0..SERVOS {
+            let (from, to) = (at[i], command.ticks[i]);
+            let max_step = self.config.max_ticks_per_s[i] * dt;
+            ticks[i] = if to == 0 || from == 0 || f64::from(from.abs_diff(to)) <= max_step {
+                to
+            } else {
+                limited = true;
+                let step = max_step.floor().max(1.0) as u16;
+                if to > from {
+                    from.saturating_add(step).min(to)
+                } else {
+                    from.saturating_sub(step).max(to)
+                }
+            };
+        }
+        if !command.started {
+            if self.stats.latency_us.len() == 1000 {
+                self.stats.latency_us.pop_front();
+            }
+            self.stats.latency_us.push_back(
+                now.saturating_duration_since(command.received)
+                    .as_secs_f64()
+                    * 1e6,
+            );
+        }
+        self.stats.sent += 1;
+        self.stats.ramped += u64::from(limited);
+        self.at = Some(ticks);
+        self.last_pulses_sent = Some(now);
+        let reached = ticks == command.ticks;
+        self.command = if reached {
+            None
+        } else {
+            Some(Command {
+                started: true,
+                ..command.clone()
+            })
+        };
+        let next = self.frame(Message::SetPulses { ticks }, now);
+        if let Next::Send(f) = &next {
+            if self.in_flight.len() == 32 {
+                self.in_flight.pop_front();
+            }
+            self.in_flight.push_back((f.seq, command.tag, now));
+        }
+        next
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::{Device, DeviceConfig, HOLD_TICKS};
+    use crate::{decode, encode};
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    /// The link against the device model on a fake clock: every frame the link sends
+    /// reaches the device at once, its replies come straight back.
+    struct Rig {
+        t0: Instant,
+        now: Instant,
+        link: HostLink<u32>,
+        device: Device,
+        plugged: bool,
+        sent: Vec<(Duration, Message)>,
+        events: Vec<(Duration, LinkEvent<u32>)>,
+    }
+
+    impl Rig {
+        fn new(config: HostConfig) -> Rig {
+            let t0 = Instant::now();
+            Rig {
+                t0,
+                now: t0,
+                link: HostLink::new(config, t0),
+                device: Device::new(DeviceConfig::default()),
+                plugged: true,
+                sent: vec![],
+                events: vec![],
+            }
+        }
+
+        fn t(&self) -> Duration {
+            self.now - self.t0
+        }
+
+        /// Run the shell's loop until `until` (ms since start).
+        fn run_until(&mut self, until_ms: u64) {
+            let until = self.t0 + ms(until_ms);
+            while self.now < until {
+                match self.link.next(self.now) {
+                    Next::Open => {
+                        if self.plugged {
+                            self.link.opened(self.now)
+                        } else {
+                            self.link.open_failed("no such device".into(), self.now)
+                        }
+                    }
+                    Next::Close { .. } => {}
+                    Next::Send(f) => {
+                        self.sent.push((self.t(), f.msg));
+                        if self.plugged {
+                            self.device.receive(&encode(&f), self.t());
+                        } else {
+                            self.link.lost("write: unplugged".into(), self.now);
+                        }
+                    }
+                    Next::Wait(t) => {
+                        // the device may speak up meanwhile (watchdog): 1 ms steps
+                        self.now = t
+                            .min(self.now + ms(1))
+                            .max(self.now + Duration::from_micros(100));
+                        self.device.tick(self.t());
+                    }
+                }
+                let mut out = self.device.take_output();
+                while let Ok(Some(f)) = decode(&mut out) {
+                    self.link.received(f, self.now);
+                }
+                let t = self.t();
+                self.events
+                    .extend(self.link.take_events().into_iter().map(|e| (t, e)));
+            }
+        }
+
+        fn pulses_sent(&self) -> Vec<(Duration, [u16; SERVOS])> {
+            self.sent
+                .iter()
+                .filter_map(|(t, m)| match m {
+                    Message::SetPulses { ticks } => Some((*t, *ticks)),
+                    _ => None,
+                })
+                .collect()
+        }
+    }
+
+    #[test]
+    fn handshake_config_then_the_command_within_one_send_period() {
+        let mut r = Rig::new(HostConfig::default());
+        r.link.command([3000; 4], 1, r.now);
+        r.run_until(50);
+        let kinds: Vec<_> = r.sent.iter().map(|(_, m)| m.msg_type()).collect();
+        use crate::MsgType::*;
+        assert_eq!(&kinds[..3], &[Hello, Config, SetPulses], "{kinds:?}");
+        assert_eq!(r.device.pulses(), [3000; 4]);
+        assert!(r
+            .events
+            .iter()
+            .any(|(_, e)| matches!(e, LinkEvent::Connected { firmware: (1, 0) })));
+        assert!(r.events.iter().any(|(_, e)| matches!(
+            e,
+            LinkEvent::State {
+                answered: Some((1, _)),
+                ..
+            }
+        )));
+    }
+
+    #[test]
+    fn latest_wins_at_most_one_frame_per_send_period_and_heartbeats_when_idle() {
+        let mut r = Rig::new(HostConfig::default());
+        r.run_until(10);
+        for k in 0..100u16 {
+            // a command every 2 ms for 200 ms
+            r.link.command([2000 + k; 4], u32::from(k), r.now);
+            let next = r.t().as_millis() as u64 + 2;
+            r.run_until(next);
+        }
+        r.run_until(600);
+        let pulses = r.pulses_sent();
+        assert!(
+            pulses.windows(2).all(|w| w[1].0 - w[0].0 >= ms(20)),
+            "{pulses:?}"
+        );
+        assert!((9..=12).contains(&pulses.len()), "{}", pulses.len());
+        assert_eq!(
+            pulses.last().unwrap().1,
+            [2099; 4],
+            "the newest command is the last sent"
+        );
+        // idle afterwards: heartbeats every 100 ms keep the device's watchdog fed
+        let hb: Vec<_> = r
+            .sent
+            .iter()
+            .filter(|(t, m)| *t > ms(300) && *m == Message::Heartbeat)
+            .collect();
+        assert!(
+            hb.len() >= 2 && r.device.state() == DeviceState::Running,
+            "{hb:?}"
+        );
+    }
+
+    #[test]
+    fn a_jump_is_ramped_at_the_velocity_limit_from_the_devices_hold_pose() {
+        let config = HostConfig {
+            max_ticks_per_s: [1000.0; SERVOS],
+            ..HostConfig::default()
+        };
+        let mut r = Rig::new(config);
+        r.link.command([3944, 2944, 1944, 2325], 1, r.now);
+        r.run_until(1500);
+        let pulses = r.pulses_sent();
+        // starts one step from the hold pose, never more than 20 ticks (1000/s × 20 ms) a frame
+        let first = pulses[0].1;
+        for i in 0..SERVOS {
+            assert!(first[i].abs_diff(HOLD_TICKS[i]) <= 20, "{first:?}");
+        }
+        for w in pulses.windows(2) {
+            let dt = (w[1].0 - w[0].0).as_secs_f64().min(0.02);
+            for i in 0..SERVOS {
+                assert!(
+                    f64::from(w[1].1[i].abs_diff(w[0].1[i])) <= 1000.0 * dt + 1.0,
+                    "{w:?}"
+                );
+            }
+        }
+        assert_eq!(pulses.last().unwrap().1, [3944, 2944, 1944, 2325]);
+        // 1000 ticks at 1000 ticks/s: about a second, 50 frames
+        assert!((49..=52).contains(&pulses.len()), "{}", pulses.len());
+        assert!(r.link.stats().ramped >= 48);
+    }
+
+    #[test]
+    fn estop_lives_here_commands_are_dropped_and_after_release_nothing_moves() {
+        let mut r = Rig::new(HostConfig::default());
+        r.link.command([3000; 4], 1, r.now);
+        r.run_until(100);
+        r.link.set_estop(true);
+        r.run_until(110);
+        assert!(matches!(
+            r.sent.last(),
+            Some((
+                _,
+                Message::Estop {
+                    engaged: Some(StopAction::Hold)
+                }
+            ))
+        ));
+        assert_eq!(r.device.state(), DeviceState::Estop);
+        let n = r.pulses_sent().len();
+        r.link.command([4000; 4], 2, r.now);
+        r.run_until(300);
+        assert_eq!(
+            r.pulses_sent().len(),
+            n,
+            "a command during the e-stop went out"
+        );
+        assert!(r
+            .events
+            .iter()
+            .any(|(_, e)| *e == LinkEvent::DroppedInEstop));
+        r.link.set_estop(false);
+        r.run_until(600);
+        assert!(r
+            .sent
+            .iter()
+            .any(|(_, m)| *m == Message::Estop { engaged: None }));
+        assert_eq!(
+            r.pulses_sent().len(),
+            n,
+            "something moved after the release without a command"
+        );
+        assert_eq!(r.device.pulses(), [3000; 4]);
+        r.link.command([3100; 4], 3, r.now);
+        r.run_until(700);
+        assert_eq!(r.device.pulses(), [3100; 4]);
+    }
+
+    #[test]
+    fn a_detaching_estop_stops_the_pulses_and_the_next_command_ramps_from_the_last() {
+        let config = HostConfig {
+            estop_action: StopAction::Detach,
+            max_ticks_per_s: [500.0; SERVOS],
+            ..HostConfig::default()
+        };
+        let mut r = Rig::new(config);
+        r.link.command(HOLD_TICKS, 1, r.now);
+        r.run_until(100);
+        r.link.set_estop(true);
+        r.run_until(120);
+        assert_eq!(r.device.pulses(), [0; 4]);
+        r.link.set_estop(false);
+        r.run_until(200);
+        assert_eq!(r.device.state(), DeviceState::Idle);
+        let n = r.pulses_sent().len();
+        r.link.command([3944, 2944, 2944, 2325], 2, r.now);
+        r.run_until(260);
+        let first = r.pulses_sent()[n].1;
+        assert!(
+            first[0].abs_diff(2944) <= 10,
+            "{first:?}: must start where the arm was"
+        );
+    }
+
+    #[test]
+    fn unplug_and_replug_reconnects_and_resends_the_newest_ramping_from_where_the_device_is() {
+        let config = HostConfig {
+            max_ticks_per_s: [2000.0; SERVOS],
+            ..HostConfig::default()
+        };
+        let mut r = Rig::new(config);
+        r.link.command([3000; 4], 1, r.now);
+        r.run_until(200);
+        // unplugged: writes fail, opening fails with back-off up to 500 ms
+        r.plugged = false;
+        r.run_until(1200);
+        assert!(!r.link.is_connected());
+        let attempts = r
+            .events
+            .iter()
+            .filter(|(_, e)| matches!(e, LinkEvent::Disconnected { .. }))
+            .count();
+        assert!((3..=6).contains(&attempts), "{attempts}");
+        // meanwhile a new command; then the board is plugged back, reset: hold pose
+        r.link.command([3400; 4], 2, r.now);
+        r.device = Device::new(DeviceConfig::default());
+        r.plugged = true;
+        let replug = r.t();
+        r.run_until(2500);
+        let (connected_at, _) = r
+            .events
+            .iter()
+            .rev()
+            .find(|(_, e)| matches!(e, LinkEvent::Connected { .. }))
+            .unwrap();
+        assert!(
+            *connected_at - replug < ms(600),
+            "reconnect took {:?}",
+            *connected_at - replug
+        );
+        let after: Vec<_> = r
+            .pulses_sent()
+            .into_iter()
+            .filter(|(t, _)| *t > replug)
+            .collect();
+        // the first pulses start from the hold pose the device reported, not from 3000
+        assert!(
+            after[0]
+                .1
+                .iter()
+                .zip(HOLD_TICKS)
+                .all(|(a, h)| a.abs_diff(h) <= 40),
+            "{:?}",
+            after[0]
+        );
+        assert_eq!(after.last().unwrap().1, [3400; 4]);
+    }
+
+    #[test]
+    fn a_silent_device_is_given_up_and_retried() {
+        let mut r = Rig::new(HostConfig::default());
+        r.device = Device::new(DeviceConfig::default());
+        // a device that never answers: every frame lost
+        let mut now = r.t0;
+        let mut closes = 0;
+        while now < r.t0 + ms(9000) {
+            match r.link.next(now) {
+                Next::Open => r.link.opened(now),
+                Next::Close { reason } => {
+                    closes += 1;
+                    assert!(reason.contains("no answer to HELLO"));
+                }
+                Next::Send(f) => assert!(matches!(f.msg, Message::Hello { .. })),
+                Next::Wait(t) => now = t,
+            }
+        }
+        assert_eq!(closes, 2);
+    }
+
+    #[test]
+    fn another_protocol_version_is_reported_and_not_driven() {
+        let mut r = Rig::new(HostConfig::default());
+        assert_eq!(r.link.next(r.now), Next::Open);
+        r.link.opened(r.now);
+        assert!(matches!(
+            r.link.next(r.now),
+            Next::Send(Frame {
+                msg: Message::Hello { .. },
+                ..
+            })
+        ));
+        r.link.received(
+            Frame {
+                seq: 1,
+                msg: Message::HelloAck {
+                    version: 1,
+                    firmware_major: 1,
+                    firmware_minor: 0,
+                    servos: 4,
+                    watchdog_ms: 500,
+                },
+            },
+            r.now,
+        );
+        assert!(!r.link.is_connected());
+        let ev = r.link.take_events();
+        assert_eq!(ev[0], LinkEvent::VersionMismatch { device: 1 });
+        assert!(matches!(r.link.next(r.now), Next::Wait(_)));
+    }
+}
