@@ -44,13 +44,15 @@ class SerialRig:
         observer.wait_publisher("/diagnostics")
 
     def diag(self):
-        if not self.diags:
-            return None, {}
-        s = [x for x in self.diags[-1][1].status if x.name.startswith("serial_node")][0]
-        return s, {kv.key: kv.value for kv in s.values}
+        """serial_node's latest diagnostics entry (other nodes publish there too)."""
+        for _, arr in reversed(self.diags):
+            for s in arr.status:
+                if s.name.startswith("serial_node"):
+                    return s, {kv.key: kv.value for kv in s.values}
+        return None, {}
 
     def wait_diag(self, pred, timeout=10):
-        return self.o.spin_until(lambda: self.diags and pred(*self.diag()), timeout)
+        return self.o.spin_until(lambda: self.diag()[0] is not None and pred(*self.diag()), timeout)
 
 
 def test_mock_arduino_acknowledges_with_the_command_stamp(launch, observer):
@@ -63,10 +65,15 @@ def test_mock_arduino_acknowledges_with_the_command_stamp(launch, observer):
     assert rig.wait_diag(lambda s, v: int(v["frames_sent"]) >= 1 and int(v["frames_acknowledged"]) >= 1 and v["last_rtt_ms"])
 
 
+# the firmware's hold pose (config.h): the device reports it before the first command,
+# so a first command at it needs no ramp
+HOLD_DEG = [90, 90, 90, 60]
+
+
 def test_bad_servo_angles_are_refused_and_nothing_is_sent(launch, observer):
     rig = SerialRig(launch, observer)
     assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
-    rig.angles.publish(angles([90, 90, 90, 90]))
+    rig.angles.publish(angles(HOLD_DEG))
     assert rig.wait_diag(lambda s, v: v["frames_sent"] == "1")
     bad = [
         (angles([90, 90, 90, 30]), "outside its range"),        # gripper below 60 deg
@@ -105,19 +112,22 @@ def test_latest_wins_at_1khz(launch, observer):
 def test_estop_drops_commands_until_released(launch, observer):
     rig = SerialRig(launch, observer)
     assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
-    rig.angles.publish(angles([90, 90, 90, 90]))
+    rig.angles.publish(angles(HOLD_DEG))
     assert rig.wait_diag(lambda s, v: v["frames_sent"] == "1")
     rig.estop.publish(Bool(data=True))
     assert rig.wait_diag(lambda s, v: v["device_state"] == "e-stop")
-    rig.angles.publish(angles([100, 90, 90, 90]))
+    rig.angles.publish(angles([100, 90, 90, 60]))
     observer.spin_for(0.5)
     assert rig.diag()[1]["frames_sent"] == "1"
+    assert rig.diag()[1]["inputs_dropped_in_estop"] == "1"
     rig.estop.publish(Bool(data=False))
     assert rig.wait_diag(lambda s, v: v["device_state"] == "running")
     observer.spin_for(0.3)
     assert rig.diag()[1]["frames_sent"] == "1", "a command from during the e-stop was sent"
-    rig.angles.publish(angles([110, 90, 90, 90]))
-    assert rig.wait_diag(lambda s, v: v["frames_sent"] == "2")
+    # a new command ramps (10 deg at the base servo's 300 deg/s: two frames)
+    rig.angles.publish(angles([110, 90, 90, 60], sec=5))
+    assert observer.spin_until(lambda: rig.state and round(math.degrees(rig.state[-1][1].position[0]), 1) == 110.0, 5)
+    assert int(rig.diag()[1]["frames_sent"]) >= 2
 
 
 def start_virtual_arduino(link):
@@ -179,7 +189,7 @@ def test_garbage_from_the_device_is_counted_and_ignored(launch, observer, tmp_pa
                 for msg_type, s, _ in decoder.feed(data):
                     seq += 1
                     if msg_type == HELLO:
-                        reply = frame(HELLO_ACK, seq, struct.pack("<BBBBH", 1, 9, 9, 4, 500))
+                        reply = frame(HELLO_ACK, seq, struct.pack("<BBBBH", 2, 9, 9, 4, 500))
                     else:
                         reply = frame(STATE, seq, struct.pack("<BBBB4H", s, 1, 0, 0, 3000, 3000, 3000, 3000))
                     broken = bytearray(reply)
@@ -216,6 +226,9 @@ def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_p
             xyz.publish(m)
             assert observer.spin_until(lambda: any(s.header.stamp.sec == 300 + i for _, s in rig.state), 10)
             deg = [math.degrees(a) for a in [s for _, s in sa if s.header.stamp.sec == 300 + i][0].position]
+            # serial_node ramps to it within the servos' speed limit: wait until it is there
+            assert observer.spin_until(lambda: [round(math.degrees(a), 1) for a in rig.state[-1][1].position]
+                                       == [round(d, 1) for d in deg], 5), (rig.state[-1][1].position, deg)
             acked_at = uno.events()[1][-1][0]
             observer.spin_for(0.25)
             edges, _ = uno.events()

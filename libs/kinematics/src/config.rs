@@ -1,6 +1,6 @@
 //! The arm configuration file (`config/arm.yaml`): geometry, limits, servo calibration.
 
-use crate::{Arm, JointLimits, ServoCalibrations};
+use crate::{Arm, JointLimits, MotionLimits, ServoCalibrations};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -120,6 +120,8 @@ pub struct ArmConfig {
     pub limits_deg: JointLimitsDeg,
     /// Servo calibration.
     pub servos: ServoCalibrations,
+    /// Servo speed and acceleration limits.
+    pub motion: MotionLimits,
 }
 
 impl ArmConfig {
@@ -136,6 +138,16 @@ impl ArmConfig {
         })?;
         config.validate(origin)?;
         Ok(config)
+    }
+
+    /// The file at `path`, or the shipped configuration when `path` is empty (the
+    /// nodes' `arm_config` parameter).
+    pub fn load_or_shipped(path: &str) -> Result<ArmConfig, ConfigError> {
+        if path.is_empty() {
+            Self::shipped()
+        } else {
+            Self::load(Path::new(path))
+        }
     }
 
     /// Read, parse and validate a file.
@@ -198,6 +210,7 @@ impl ArmConfig {
             ));
         }
         self.servos.validate(origin)?;
+        self.motion.validate(origin)?;
         Ok(())
     }
 

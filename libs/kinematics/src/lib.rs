@@ -28,12 +28,14 @@ pub mod chain;
 mod config;
 mod error;
 pub mod ik;
+mod motion;
 pub mod rng;
 mod servo;
 pub mod urdf;
 
 pub use config::{ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LimitDeg};
 pub use error::{Joint, KinematicsError};
+pub use motion::{MotionLimits, ServoMotionLimits};
 pub use servo::{ServoAngles, ServoCalibration, ServoCalibrations, ServoId};
 
 use nalgebra::Vector3;

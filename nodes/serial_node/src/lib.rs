@@ -56,13 +56,19 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                     _ => Err("must be `hold` or `detach`".into()),
                 })
                 .read_only(),
+            ParamSpec::new("estop_action", ParameterValue::String("hold".into()), "`hold` (the servos keep their position) or `detach` (the pulses stop, servos go limp) on e-stop")
+                .validator(|v| match v {
+                    ParameterValue::String(s) if s == "hold" || s == "detach" => Ok(()),
+                    _ => Err("must be `hold` or `detach`".into()),
+                })
+                .read_only(),
             ParamSpec::new("heartbeat_period", ParameterValue::Double(0.1), "seconds of silence before a HEARTBEAT")
                 .range(ParamRange::Double { min: 0.01, max: 10.0 })
                 .read_only(),
             ParamSpec::new(
                 "arm_config",
                 ParameterValue::String(String::new()),
-                "servo calibration (pulse ranges) YAML; empty = the shipped config/arm.yaml",
+                "servo calibration (pulse ranges) and motion limits (the velocity guard) YAML; empty = the shipped config/arm.yaml",
             )
             .validator(|v| match v {
                 ParameterValue::String(p) => load_calibration(p).map(|_| ()),
@@ -74,14 +80,15 @@ pub fn spec() -> ros_plumbing::NodeSpec {
     }
 }
 
+/// The arm configuration (calibration, motion limits) from the `arm_config` file
+/// (empty: the shipped one).
+pub fn load_arm_config(path: &str) -> Result<eezybot_kinematics::ArmConfig, String> {
+    eezybot_kinematics::ArmConfig::load_or_shipped(path).map_err(|e| e.to_string())
+}
+
 /// The servo calibration from the `arm_config` file (empty: the shipped one).
 pub fn load_calibration(path: &str) -> Result<ServoCalibrations, String> {
-    let config = if path.is_empty() {
-        eezybot_kinematics::ArmConfig::shipped()
-    } else {
-        eezybot_kinematics::ArmConfig::load(std::path::Path::new(path))
-    };
-    config.map(|c| c.servos).map_err(|e| e.to_string())
+    load_arm_config(path).map(|c| c.servos)
 }
 
 /// One event for the loop.
@@ -140,6 +147,9 @@ pub struct LinkStatus {
     last_rtt: Option<Duration>,
     rejected_inputs: u64,
     superseded_inputs: u64,
+    dropped_in_estop: u64,
+    /// when the newest servo_angles was handed to the link
+    last_command: Option<Instant>,
     last_rejection: Option<String>,
     estop: bool,
     /// ticks and state of the last servo_state published, to skip repeats
@@ -197,6 +207,10 @@ impl LinkStatus {
             LinkEvent::Garbage { error } => {
                 self.garbage += 1;
                 log::debug!("ignored bytes from the device: {error}");
+                None
+            }
+            LinkEvent::DroppedInEstop => {
+                self.dropped_in_estop += 1;
                 None
             }
             LinkEvent::State {
@@ -317,6 +331,14 @@ impl LinkStatus {
             ("clamped_by_device", self.clamped.to_string()),
             ("inputs_rejected", self.rejected_inputs.to_string()),
             ("inputs_superseded", self.superseded_inputs.to_string()),
+            ("inputs_dropped_in_estop", self.dropped_in_estop.to_string()),
+            ("frames_ramped_by_velocity_limit", sent.ramped.to_string()),
+            (
+                "last_servo_angles_s_ago",
+                self.last_command
+                    .map(|t| format!("{:.3}", t.elapsed().as_secs_f64()))
+                    .unwrap_or_default(),
+            ),
             ("estop", self.estop.to_string()),
         ];
         if let Some((a, b)) = self.connected {
@@ -353,8 +375,10 @@ pub async fn run(
     mut peers: PeerWatch,
     shutdown: impl Future<Output = ()>,
 ) {
-    let mut cal =
-        load_calibration(&params.string("arm_config").unwrap_or_default()).unwrap_or_default();
+    let config =
+        load_arm_config(&params.string("arm_config").unwrap_or_default()).unwrap_or_default();
+    let mut cal = config.servos;
+    link.set_velocity_limits(config.motion.ticks_per_s(&cal));
     let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
@@ -391,9 +415,12 @@ pub async fn run(
                 }
             }
             Ok(()) = param_changes.changed() => {
-                match load_calibration(&params.string("arm_config").unwrap_or_default()) {
-                    Ok(c) => cal = c,
-                    Err(e) => log::error!("keeping the previous calibration: {e}"),
+                match load_arm_config(&params.string("arm_config").unwrap_or_default()) {
+                    Ok(c) => {
+                        cal = c.servos;
+                        link.set_velocity_limits(c.motion.ticks_per_s(&cal));
+                    }
+                    Err(e) => log::error!("keeping the previous calibration and motion limits: {e}"),
                 }
                 ticker = tokio::time::interval(period(&params));
             }
@@ -419,6 +446,7 @@ pub async fn run(
                             status.last_rejection = None;
                             let stamp = msg.header.stamp;
                             let late = lateness.is_late(time_s(stamp), time_s(Time::now()), received);
+                            status.last_command = Some(received);
                             let superseded = if late {
                                 held.hold((ticks, stamp, received), tokio::time::Instant::now())
                             } else {

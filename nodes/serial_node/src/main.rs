@@ -8,9 +8,10 @@ use ros2_client::{Publisher, Subscription};
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{qos, RosNode};
-use serial_node::link::{self, Link, LinkConfig};
+use serial_node::link::{self, Link};
 use serial_node::{Input, Outputs};
-use servo_protocol::WatchdogAction;
+use servo_protocol::host::HostConfig;
+use servo_protocol::StopAction;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -47,15 +48,20 @@ async fn main_async() -> anyhow::Result<()> {
     let params = node.params().clone();
     let port = params.string("port").unwrap_or_default();
     let baud = params.i64("baud").unwrap_or(115_200);
-    let config = LinkConfig {
+    let stop_action = |name: &str| {
+        if params.string(name).as_deref() == Some("detach") {
+            StopAction::Detach
+        } else {
+            StopAction::Hold
+        }
+    };
+    let config = HostConfig {
         send_period: Duration::from_secs_f64(1.0 / params.f64("send_rate").unwrap_or(50.0)),
         heartbeat_period: Duration::from_secs_f64(params.f64("heartbeat_period").unwrap_or(0.1)),
         watchdog_ms: u16::try_from(params.i64("watchdog_ms").unwrap_or(500)).unwrap_or(u16::MAX),
-        watchdog_action: if params.string("watchdog_action").as_deref() == Some("detach") {
-            WatchdogAction::Detach
-        } else {
-            WatchdogAction::Hold
-        },
+        watchdog_action: stop_action("watchdog_action"),
+        estop_action: stop_action("estop_action"),
+        ..HostConfig::default()
     };
     let opener = if port == "mock" {
         link::mock_opener(link::virtual_arduino())

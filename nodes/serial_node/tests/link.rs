@@ -1,0 +1,238 @@
+//! The whole link (its threads, the port shell and the state machine) against the
+//! in-process virtual Arduino: commands, the velocity guard, the e-stop, and pulling
+//! the cable out and plugging it back in (the device's plug/unplug hooks).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use eezybot_msgs::Time;
+use serial_node::link::{self, Link, LinkEvent};
+use servo_protocol::device::{DeviceConfig, VirtualArduino, HOLD_TICKS};
+use servo_protocol::host::HostConfig;
+use servo_protocol::{DeviceState, StopAction};
+use std::time::{Duration, Instant};
+use tokio::sync::mpsc::{unbounded_channel, UnboundedReceiver};
+
+fn stamp(n: i32) -> Time {
+    Time::from_nanos(i64::from(n) * 1_000_000_000)
+}
+
+struct Rig {
+    device: VirtualArduino,
+    link: Option<Link>,
+    events: UnboundedReceiver<LinkEvent>,
+    seen: Vec<(Instant, LinkEvent)>,
+}
+
+impl Rig {
+    fn new(config: HostConfig) -> Rig {
+        let device = VirtualArduino::new(DeviceConfig::default());
+        let (tx, events) = unbounded_channel();
+        let link = Link::start(link::mock_opener(device.clone()), config, tx).unwrap();
+        Rig {
+            device,
+            link: Some(link),
+            events,
+            seen: vec![],
+        }
+    }
+
+    fn link(&self) -> &Link {
+        self.link.as_ref().unwrap()
+    }
+
+    /// Collect events until `pred` holds for one of them, or `timeout`.
+    fn wait_for(
+        &mut self,
+        timeout: Duration,
+        pred: impl Fn(&LinkEvent) -> bool,
+    ) -> Option<LinkEvent> {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            while let Ok(e) = self.events.try_recv() {
+                self.seen.push((Instant::now(), e.clone()));
+                if pred(&e) {
+                    return Some(e);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        None
+    }
+
+    fn device_state(&self) -> (DeviceState, [u16; 4]) {
+        let d = self.device.device().unwrap();
+        (d.state(), d.pulses())
+    }
+
+    fn settle(&mut self, t: Duration) {
+        self.wait_for(t, |_| false);
+    }
+}
+
+impl Drop for Rig {
+    fn drop(&mut self) {
+        if let Some(l) = self.link.take() {
+            l.shutdown();
+        }
+    }
+}
+
+fn connected(e: &LinkEvent) -> bool {
+    matches!(e, LinkEvent::Connected { .. })
+}
+
+fn answers(n: i32) -> impl Fn(&LinkEvent) -> bool {
+    move |e| matches!(e, LinkEvent::State { answered: Some((s, _)), .. } if *s == stamp(n))
+}
+
+#[test]
+fn a_command_is_acknowledged_with_its_stamp() {
+    let mut r = Rig::new(HostConfig::default());
+    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
+    r.link().command([3000; 4], stamp(7), Instant::now());
+    let e = r.wait_for(Duration::from_secs(2), answers(7));
+    assert!(e.is_some(), "{:?}", r.seen);
+    assert_eq!(r.device_state(), (DeviceState::Running, [3000; 4]));
+    assert_eq!(r.link().send_stats().sent, 1);
+}
+
+#[test]
+fn a_jump_is_ramped_within_the_velocity_limit() {
+    // 2000 ticks/s: 1000 ticks (500 µs, ~48°) take half a second
+    let mut r = Rig::new(HostConfig {
+        max_ticks_per_s: [2000.0; 4],
+        ..HostConfig::default()
+    });
+    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
+    let t0 = Instant::now();
+    r.link().command([3944, 2944, 2944, 2325], stamp(1), t0);
+    let mut last = HOLD_TICKS;
+    let mut last_t = t0;
+    while Instant::now() < t0 + Duration::from_secs(2) {
+        let (_, pulses) = r.device_state();
+        if pulses != [0; 4] && pulses != last {
+            // never faster than the limit (one frame's step of slack for thread timing)
+            let dt = last_t.elapsed().as_secs_f64();
+            assert!(
+                f64::from(pulses[0].abs_diff(last[0])) <= 2000.0 * dt + 2000.0 * 0.02 + 1.0,
+                "{pulses:?} after {dt}"
+            );
+            last = pulses;
+            last_t = Instant::now();
+        }
+        if pulses[0] == 3944 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let took = t0.elapsed().as_secs_f64();
+    assert_eq!(r.device_state().1, [3944, 2944, 2944, 2325]);
+    assert!(took > 0.45 && took < 1.0, "{took}");
+    assert!(r.link().send_stats().ramped >= 20);
+}
+
+#[test]
+fn estop_holds_drops_commands_and_after_release_waits_for_a_new_one() {
+    let mut r = Rig::new(HostConfig::default());
+    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
+    r.link().command([3000; 4], stamp(1), Instant::now());
+    assert!(r.wait_for(Duration::from_secs(2), answers(1)).is_some());
+    r.link().set_estop(true);
+    assert!(r
+        .wait_for(Duration::from_secs(1), |e| matches!(
+            e,
+            LinkEvent::State {
+                state: DeviceState::Estop,
+                ..
+            }
+        ))
+        .is_some());
+    r.link().command([4000; 4], stamp(2), Instant::now());
+    r.settle(Duration::from_millis(200));
+    assert_eq!(r.device_state(), (DeviceState::Estop, [3000; 4]));
+    assert!(r.seen.iter().any(|(_, e)| *e == LinkEvent::DroppedInEstop));
+    r.link().set_estop(false);
+    r.settle(Duration::from_millis(300));
+    assert_eq!(
+        r.device_state(),
+        (DeviceState::Running, [3000; 4]),
+        "moved after the release"
+    );
+    r.link().command([3100; 4], stamp(3), Instant::now());
+    assert!(r.wait_for(Duration::from_secs(1), answers(3)).is_some());
+    assert_eq!(r.device_state().1, [3100; 4]);
+}
+
+#[test]
+fn a_detaching_estop_stops_the_pulses() {
+    let mut r = Rig::new(HostConfig {
+        estop_action: StopAction::Detach,
+        ..HostConfig::default()
+    });
+    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
+    r.link().command([3000; 4], stamp(1), Instant::now());
+    assert!(r.wait_for(Duration::from_secs(2), answers(1)).is_some());
+    r.link().set_estop(true);
+    r.settle(Duration::from_millis(100));
+    assert_eq!(r.device_state(), (DeviceState::Estop, [0; 4]));
+}
+
+#[test]
+fn unplug_and_replug_twenty_times_while_streaming() {
+    let mut r = Rig::new(HostConfig {
+        max_ticks_per_s: [6000.0; 4],
+        ..HostConfig::default()
+    });
+    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
+    let mut reconnect_ms = vec![];
+    let mut n = 0;
+    for cycle in 0..20 {
+        // streaming before, while and after the cable is out
+        for _ in 0..5 {
+            n += 1;
+            r.link()
+                .command([2944 + 10 * (n % 50) as u16; 4], stamp(n), Instant::now());
+            r.settle(Duration::from_millis(20));
+        }
+        r.device.set_plugged(false);
+        assert!(
+            r.wait_for(Duration::from_secs(1), |e| matches!(
+                e,
+                LinkEvent::Disconnected { .. }
+            ))
+            .is_some(),
+            "cycle {cycle}: the unplug went unnoticed"
+        );
+        for _ in 0..3 {
+            n += 1;
+            r.link()
+                .command([3300 + (n % 7) as u16; 4], stamp(n), Instant::now());
+            r.settle(Duration::from_millis(50));
+        }
+        let newest = n;
+        let replugged = Instant::now();
+        r.device.set_plugged(true); // a fresh power-up: the device is in its hold pose
+        assert!(
+            r.wait_for(Duration::from_secs(3), connected).is_some(),
+            "cycle {cycle}: no reconnection"
+        );
+        reconnect_ms.push(replugged.elapsed().as_secs_f64() * 1e3);
+        // the newest command is applied, ramped from the hold pose the device reported
+        assert!(
+            r.wait_for(Duration::from_secs(2), answers(newest))
+                .is_some(),
+            "cycle {cycle}"
+        );
+        r.settle(Duration::from_millis(250));
+        assert_eq!(
+            r.device_state().1,
+            [3300 + (newest % 7) as u16; 4],
+            "cycle {cycle}"
+        );
+    }
+    reconnect_ms.sort_by(f64::total_cmp);
+    println!(
+        "reconnect after replug: p50 {:.0} ms, max {:.0} ms",
+        reconnect_ms[10], reconnect_ms[19]
+    );
+    assert!(reconnect_ms[19] < 3000.0);
+}
