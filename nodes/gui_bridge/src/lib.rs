@@ -7,11 +7,12 @@
 //! [`teleop::Teleop`]; [`run`] is the loop between the browsers and ROS.
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
+pub mod access;
 pub mod teleop;
 pub mod web;
 
 use crate::teleop::{Command, Event, Teleop};
-use crate::web::{ClientRequest, FromClient};
+use crate::web::{ClientRequest, FromClient, Requests, WebStats};
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{ArmJoints, ACTUATED_JOINTS};
 use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
@@ -23,8 +24,10 @@ use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use serde_json::json;
 use std::collections::{BTreeMap, VecDeque};
 use std::future::Future;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::{broadcast, mpsc};
+use tokio::sync::broadcast;
 
 /// The node's description and parameters.
 pub fn spec() -> ros_plumbing::NodeSpec {
@@ -34,6 +37,16 @@ pub fn spec() -> ros_plumbing::NodeSpec {
         usage: "[--once X Y Z [--gripper G] | --play WAYPOINTS.csv | --record OUT.csv] [--timeout S]",
         params: vec![
             ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
+            ParamSpec::new(
+                "token",
+                ParameterValue::String(String::new()),
+                "access token of the web page (16-256 of A-Z a-z 0-9 - . _ ~); empty = none on a loopback bind, generated and printed otherwise; reads (generated) or (hidden) once running",
+            )
+            .read_only()
+            .validator(|v| match v {
+                ParameterValue::String(t) => access::check_token_parameter(t),
+                _ => Ok(()),
+            }),
             ParamSpec::new("rate", ParameterValue::Double(50.0), "most messages a second on each target topic (latest wins)")
                 .range(ParamRange::Double { min: 1.0, max: 500.0 }),
             ParamSpec::new(
@@ -109,7 +122,12 @@ pub struct Reporting<F: Fn() -> Vec<usize>> {
     pub peers: PeerWatch,
     /// Their counts now, in [`watched_topics`]' order.
     pub counts: F,
+    /// The web side's counters (clients, refusals, limits hit).
+    pub web: Arc<WebStats>,
 }
+
+/// How long a refused client keeps the panel's diagnostics at WARN.
+pub const REFUSAL_WARN_FOR: Duration = Duration::from_secs(60);
 
 /// Health of the other nodes, from their `diagnostics`.
 #[derive(Default)]
@@ -230,12 +248,111 @@ fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
         .collect()
 }
 
+/// Apply one browser request and answer it (a full reply queue drops the answer: the
+/// loop never waits for a client).
+fn serve_request(teleop: &std::sync::Mutex<Teleop>, from: FromClient, stats: &WebStats) {
+    let FromClient { request, reply } = from;
+    let event = match request {
+        ClientRequest::Check { xyz } => {
+            let answer = match teleop.lock().map(|t| t.check(xyz)) {
+                Ok(Ok(q)) => {
+                    json!({"t": "check", "xyz": xyz, "reachable": true, "joints": joints_json(&q)})
+                }
+                Ok(Err(e)) => {
+                    json!({"t": "check", "xyz": xyz, "reachable": false, "reason": e.to_string()})
+                }
+                Err(_) => return,
+            };
+            answer_client(&reply, answer, stats);
+            return;
+        }
+        ClientRequest::Target { xyz } => Event::SetTarget { xyz },
+        ClientRequest::Jog { d } => Event::Jog { dxyz: d },
+        ClientRequest::Gripper { v } => Event::Gripper { opening: v },
+        ClientRequest::Joints { q } => Event::Joints {
+            positions: q.into_iter().collect(),
+        },
+        ClientRequest::Estop { on } => Event::Estop { engaged: on },
+    };
+    let result = teleop.lock().map(|mut t| t.handle_event(event));
+    let answer = match result {
+        Ok(Ok(f)) => {
+            json!({"t": "ack", "target": f.target, "joints": joints_json(&f.joints), "reachable": true})
+        }
+        Ok(Err(refusal)) => {
+            json!({"t": "refused", "reason": refusal.to_string(), "reachable": false})
+        }
+        Err(_) => return,
+    };
+    answer_client(&reply, answer, stats);
+}
+
+fn answer_client(
+    reply: &tokio::sync::mpsc::Sender<String>,
+    answer: serde_json::Value,
+    stats: &WebStats,
+) {
+    if let Err(tokio::sync::mpsc::error::TrySendError::Full(_)) = reply.try_send(answer.to_string())
+    {
+        stats.dropped_replies.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Publish what the operator state has due now; tell the browsers.
+fn publish_due(
+    teleop: &std::sync::Mutex<Teleop>,
+    outputs: &impl Outputs,
+    sent: &mut u64,
+    latency: &mut Latency,
+    to_browsers: &broadcast::Sender<String>,
+) {
+    let send = |v: serde_json::Value| {
+        let _ = to_browsers.send(v.to_string());
+    };
+    let commands = teleop
+        .lock()
+        .map(|mut t| t.take_due(Instant::now()))
+        .unwrap_or_default();
+    for c in commands {
+        let stamp = Time::now();
+        match &c {
+            Command::Target(xyz) => {
+                *sent += 1;
+                outputs.xyz_target(*xyz, stamp);
+                latency.sent(stamp);
+                send(
+                    json!({"t": "sent", "topic": "xyz_target", "xyz": xyz, "stamp_ns": stamp.to_nanos()}),
+                );
+            }
+            Command::Gripper(g) => {
+                outputs.gripper_target(*g);
+                send(json!({"t": "sent", "topic": "gripper_target", "value": g}));
+            }
+            Command::Joints(q) => {
+                outputs.joint_target(q, stamp);
+                latency.sent(stamp);
+                send(
+                    json!({"t": "sent", "topic": "joint_target", "q": q, "stamp_ns": stamp.to_nanos()}),
+                );
+            }
+            Command::Estop(on) => {
+                outputs.estop(*on);
+                send(json!({"t": "sent", "topic": "estop", "on": on}));
+            }
+        }
+    }
+}
+
 /// The loop between browsers and ROS; runs until `shutdown` resolves.
+///
+/// Its work in order of priority: shutdown, e-stop requests, targets due, the periodic
+/// reports, ROS inputs, then other browser requests; so a browser flooding requests
+/// delays neither an e-stop nor the targets nor the live view.
 #[allow(clippy::too_many_arguments)]
 pub async fn run<F: Fn() -> Vec<usize>>(
     teleop: std::sync::Arc<std::sync::Mutex<Teleop>>,
     inputs: impl Stream<Item = Input>,
-    mut requests: mpsc::UnboundedReceiver<FromClient>,
+    mut requests: Requests,
     to_browsers: broadcast::Sender<String>,
     outputs: &impl Outputs,
     params: Params,
@@ -246,16 +363,35 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     let mut diag_tick = tokio::time::interval(Duration::from_secs(1));
     let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
     let report = |peers: &PeerWatch, sent: u64| {
-        let mut s = ros_plumbing::diagnostics::status(
-            DiagnosticStatus::OK,
-            &reporting.name,
-            "",
-            &format!("web panel on {}", reporting.url),
-            &[
-                ("url", reporting.url.clone()),
-                ("targets_sent", sent.to_string()),
-            ],
-        );
+        let mut values = vec![
+            ("url", reporting.url.clone()),
+            ("targets_sent", sent.to_string()),
+        ];
+        values.extend(reporting.web.values());
+        let recent = reporting
+            .web
+            .last_refusal()
+            .filter(|(at, _)| at.elapsed() < REFUSAL_WARN_FOR);
+        if let Some((_, last)) = reporting.web.last_refusal() {
+            values.push(("last_refusal", last));
+        }
+        let (level, message) = match recent {
+            Some((at, last)) => (
+                DiagnosticStatus::WARN,
+                format!(
+                    "web panel on {}; refused a client {:.0} s ago ({} refusals in all): {last}",
+                    reporting.url,
+                    at.elapsed().as_secs_f64(),
+                    reporting.web.refused_total()
+                ),
+            ),
+            None => (
+                DiagnosticStatus::OK,
+                format!("web panel on {}", reporting.url),
+            ),
+        };
+        let mut s =
+            ros_plumbing::diagnostics::status(level, &reporting.name, "", &message, &values);
         peers.annotate(&mut s, Instant::now());
         outputs.diagnostics(s);
     };
@@ -270,9 +406,22 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        let due = teleop.lock().ok().and_then(|t| t.next_due(Instant::now()));
+        let now = Instant::now();
+        let due = teleop.lock().ok().and_then(|t| t.next_due(now));
+        if due.is_some_and(|d| d <= now) {
+            // Due now: publish before anything else. (A sleep until a past instant ends
+            // only when the timer next runs, which a loop kept busy by requests would put
+            // off for as long as they keep coming.)
+            publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers);
+            continue;
+        }
         tokio::select! {
+            biased;
             _ = &mut shutdown => break,
+            Some(from) = requests.estops.recv() => serve_request(&teleop, from, &reporting.web),
+            _ = async { if let Some(d) = due { tokio::time::sleep_until(d.into()).await } }, if due.is_some() => {
+                publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers);
+            }
             _ = status_tick.tick() => send(health.json()),
             _ = diag_tick.tick() => report(&reporting.peers, sent),
             _ = peer_poll.tick() => {
@@ -286,58 +435,6 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                 if let Ok(mut t) = teleop.lock() {
                     t.set_rate(params.f64("rate").unwrap_or(50.0));
                 }
-            }
-            _ = async { if let Some(d) = due { tokio::time::sleep_until(d.into()).await } }, if due.is_some() => {
-                let commands = teleop.lock().map(|mut t| t.take_due(Instant::now())).unwrap_or_default();
-                for c in commands {
-                    let stamp = Time::now();
-                    match &c {
-                        Command::Target(xyz) => {
-                            sent += 1;
-                            outputs.xyz_target(*xyz, stamp);
-                            latency.sent(stamp);
-                            send(json!({"t": "sent", "topic": "xyz_target", "xyz": xyz, "stamp_ns": stamp.to_nanos()}));
-                        }
-                        Command::Gripper(g) => {
-                            outputs.gripper_target(*g);
-                            send(json!({"t": "sent", "topic": "gripper_target", "value": g}));
-                        }
-                        Command::Joints(q) => {
-                            outputs.joint_target(q, stamp);
-                            latency.sent(stamp);
-                            send(json!({"t": "sent", "topic": "joint_target", "q": q, "stamp_ns": stamp.to_nanos()}));
-                        }
-                        Command::Estop(on) => {
-                            outputs.estop(*on);
-                            send(json!({"t": "sent", "topic": "estop", "on": on}));
-                        }
-                    }
-                }
-            }
-            Some(FromClient { request, reply }) = requests.recv() => {
-                let event = match request {
-                    ClientRequest::Check { xyz } => {
-                        let answer = match teleop.lock().map(|t| t.check(xyz)) {
-                            Ok(Ok(q)) => json!({"t": "check", "xyz": xyz, "reachable": true, "joints": joints_json(&q)}),
-                            Ok(Err(e)) => json!({"t": "check", "xyz": xyz, "reachable": false, "reason": e.to_string()}),
-                            Err(_) => continue,
-                        };
-                        let _ = reply.send(answer.to_string());
-                        continue;
-                    }
-                    ClientRequest::Target { xyz } => Event::SetTarget { xyz },
-                    ClientRequest::Jog { d } => Event::Jog { dxyz: d },
-                    ClientRequest::Gripper { v } => Event::Gripper { opening: v },
-                    ClientRequest::Joints { q } => Event::Joints { positions: q.into_iter().collect() },
-                    ClientRequest::Estop { on } => Event::Estop { engaged: on },
-                };
-                let result = teleop.lock().map(|mut t| t.handle_event(event));
-                let answer = match result {
-                    Ok(Ok(f)) => json!({"t": "ack", "target": f.target, "joints": joints_json(&f.joints), "reachable": true}),
-                    Ok(Err(refusal)) => json!({"t": "refused", "reason": refusal.to_string(), "reachable": false}),
-                    Err(_) => continue,
-                };
-                let _ = reply.send(answer.to_string());
             }
             input = inputs.next() => {
                 let Some(input) = input else { break };
@@ -373,6 +470,12 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                     }
                     Input::Estop(on) => send(json!({"t": "estop", "on": on})),
                 }
+            }
+            Some(from) = requests.others.recv() => {
+                serve_request(&teleop, from, &reporting.web);
+                // one request at a time, then let the other tasks run (on this node's
+                // one thread: another client's handler with an e-stop in hand)
+                tokio::task::yield_now().await;
             }
         }
     }

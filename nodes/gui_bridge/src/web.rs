@@ -1,13 +1,29 @@
 //! The web side: serves the page and a WebSocket; JSON messages in both directions.
+//!
+//! Every request passes the [access policy](crate::access) first. Each client is
+//! bounded: messages up to [`Limits::max_message_bytes`] (a bigger one closes that
+//! client with code 1009 and the reason), a bounded queue of replies (the bridge loop
+//! drops a reply rather than wait for a slow client), and one request in flight to the
+//! bridge loop at a time (a flooding client waits for the loop, so it neither queues
+//! memory nor gets ahead of other clients). E-stop requests travel on their own channel,
+//! which the loop serves before anything else, so no flood delays another client's e-stop.
 
-use axum::extract::ws::{Message as WsMessage, WebSocket, WebSocketUpgrade};
-use axum::extract::State;
-use axum::http::header;
-use axum::response::{Html, IntoResponse};
+use crate::access::{self, AccessPolicy, Refusal, RequestFacts};
+use axum::extract::ws::{CloseFrame, Message as WsMessage, WebSocket, WebSocketUpgrade};
+use axum::extract::{ConnectInfo, Request, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::middleware::Next;
+use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
+use axum::Extension;
 use axum::Router;
 use serde::Deserialize;
-use tokio::sync::{broadcast, mpsc};
+use std::collections::HashSet;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::{broadcast, mpsc, Semaphore};
 
 /// The page: one file, no build step, no request to any other host.
 pub const INDEX_HTML: &str = include_str!("../web/index.html");
@@ -53,69 +69,452 @@ pub enum ClientRequest {
 pub struct FromClient {
     /// The request.
     pub request: ClientRequest,
-    /// Replies for that browser only.
-    pub reply: mpsc::UnboundedSender<String>,
+    /// Replies for that browser only (bounded: answer with `try_send`, never wait).
+    pub reply: mpsc::Sender<String>,
 }
 
-/// What every WebSocket handler shares.
+/// How much one client may hold of the node's resources.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest WebSocket message (and frame) accepted, bytes.
+    pub max_message_bytes: usize,
+    /// Replies queued for one client before further ones are dropped.
+    pub reply_queue: usize,
+    /// Requests queued to the bridge loop from all clients (each client has at most
+    /// one in flight).
+    pub request_queue: usize,
+    /// E-stop requests queued to the bridge loop.
+    pub estop_queue: usize,
+    /// Clients connected at once.
+    pub max_clients: usize,
+    /// Largest amount of outgoing data buffered for one client, bytes.
+    pub max_write_buffer_bytes: usize,
+    /// A client that does not take a message within this time is dropped.
+    pub send_timeout: Duration,
+}
+
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            max_message_bytes: 64 * 1024,
+            reply_queue: 32,
+            request_queue: 64,
+            estop_queue: 16,
+            max_clients: 32,
+            max_write_buffer_bytes: 1024 * 1024,
+            send_timeout: Duration::from_secs(10),
+        }
+    }
+}
+
+/// The bridge loop's ends of the request channels.
+#[derive(Debug)]
+pub struct Requests {
+    /// E-stop engage/release: served first.
+    pub estops: mpsc::Receiver<FromClient>,
+    /// Everything else.
+    pub others: mpsc::Receiver<FromClient>,
+}
+
+/// The web server's ends of the request channels.
+#[derive(Clone, Debug)]
+pub struct RequestSenders {
+    estops: mpsc::Sender<FromClient>,
+    others: mpsc::Sender<FromClient>,
+}
+
+impl RequestSenders {
+    /// Queue a request for the bridge loop (e-stops on their own channel), waiting
+    /// while its queue is full. `Err` gives it back when the loop has stopped.
+    pub async fn send(&self, from: FromClient) -> Result<(), FromClient> {
+        self.channel(&from.request)
+            .send(from)
+            .await
+            .map_err(|e| e.0)
+    }
+
+    /// Queue a request without waiting. `Err` gives it back when the queue is full or
+    /// the loop has stopped.
+    pub fn try_send(&self, from: FromClient) -> Result<(), FromClient> {
+        self.channel(&from.request)
+            .try_send(from)
+            .map_err(|e| match e {
+                mpsc::error::TrySendError::Full(f) | mpsc::error::TrySendError::Closed(f) => f,
+            })
+    }
+
+    fn channel(&self, request: &ClientRequest) -> &mpsc::Sender<FromClient> {
+        if matches!(request, ClientRequest::Estop { .. }) {
+            &self.estops
+        } else {
+            &self.others
+        }
+    }
+}
+
+/// Bounded request channels between the clients and the bridge loop.
+pub fn request_channels(limits: &Limits) -> (RequestSenders, Requests) {
+    let (estop_tx, estops) = mpsc::channel(limits.estop_queue.max(1));
+    let (tx, others) = mpsc::channel(limits.request_queue.max(1));
+    (
+        RequestSenders {
+            estops: estop_tx,
+            others: tx,
+        },
+        Requests { estops, others },
+    )
+}
+
+/// Counters of the web side, for `diagnostics`.
+#[derive(Debug, Default)]
+pub struct WebStats {
+    /// Clients connected now.
+    pub clients: AtomicU64,
+    /// Requests refused for their `Origin`.
+    pub refused_origin: AtomicU64,
+    /// Requests refused for their `Host`.
+    pub refused_host: AtomicU64,
+    /// Requests refused for a missing or wrong token.
+    pub refused_token: AtomicU64,
+    /// WebSocket upgrades refused because [`Limits::max_clients`] were connected.
+    pub refused_busy: AtomicU64,
+    /// Clients closed for a message over [`Limits::max_message_bytes`].
+    pub oversized: AtomicU64,
+    /// Messages that were not a request.
+    pub bad_requests: AtomicU64,
+    /// Replies dropped because a client's queue was full.
+    pub dropped_replies: AtomicU64,
+    /// Clients dropped because they did not take their messages.
+    pub stalled: AtomicU64,
+    last_refusal: Mutex<Option<(Instant, String)>>,
+    logged: Mutex<HashSet<(IpAddr, &'static str)>>,
+}
+
+/// Refused clients whose refusal is logged; past this many, refusals are only counted.
+const MAX_LOGGED_REFUSALS: usize = 1024;
+
+impl WebStats {
+    /// Count a refusal; log it the first time this address is refused for this kind of
+    /// reason (a page retrying every second logs one line, not one a second).
+    pub fn refused(&self, who: Option<SocketAddr>, what: &str, refusal: &Refusal) {
+        let counter = match refusal.kind() {
+            "origin" => &self.refused_origin,
+            "host" => &self.refused_host,
+            _ => &self.refused_token,
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+        self.note(who, refusal.kind(), format!("{what}: {refusal}"));
+    }
+
+    /// Count an upgrade refused for want of room.
+    pub fn refused_busy(&self, who: Option<SocketAddr>, max: usize) {
+        self.refused_busy.fetch_add(1, Ordering::Relaxed);
+        self.note(
+            who,
+            "busy",
+            format!("WebSocket: {max} clients are connected already"),
+        );
+    }
+
+    fn note(&self, who: Option<SocketAddr>, kind: &'static str, reason: String) {
+        let ip = who.map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |a| a.ip());
+        let from = who.map_or_else(|| "unknown address".to_string(), |a| a.ip().to_string());
+        let first = self.logged.lock().is_ok_and(|mut logged| {
+            logged.len() < MAX_LOGGED_REFUSALS && logged.insert((ip, kind))
+        });
+        if first {
+            log::warn!("web panel refused {from}: {reason} (further refusals of {from} for this reason are counted in diagnostics, not logged)");
+        }
+        if let Ok(mut last) = self.last_refusal.lock() {
+            *last = Some((Instant::now(), format!("{from}: {reason}")));
+        }
+    }
+
+    /// The latest refusal and when.
+    pub fn last_refusal(&self) -> Option<(Instant, String)> {
+        self.last_refusal.lock().ok().and_then(|l| l.clone())
+    }
+
+    /// All refusals so far.
+    pub fn refused_total(&self) -> u64 {
+        [
+            &self.refused_origin,
+            &self.refused_host,
+            &self.refused_token,
+            &self.refused_busy,
+        ]
+        .iter()
+        .map(|c| c.load(Ordering::Relaxed))
+        .sum()
+    }
+
+    /// The counters as `diagnostics` key/values.
+    pub fn values(&self) -> Vec<(&'static str, String)> {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed).to_string();
+        vec![
+            ("clients", get(&self.clients)),
+            ("refused_origin", get(&self.refused_origin)),
+            ("refused_host", get(&self.refused_host)),
+            ("refused_token", get(&self.refused_token)),
+            ("refused_busy", get(&self.refused_busy)),
+            ("closed_oversized", get(&self.oversized)),
+            ("closed_stalled", get(&self.stalled)),
+            ("bad_requests", get(&self.bad_requests)),
+            ("dropped_replies", get(&self.dropped_replies)),
+        ]
+    }
+}
+
+/// What every request handler shares.
 #[derive(Clone)]
 pub struct WebState {
     /// Messages for every browser.
     pub broadcast: broadcast::Sender<String>,
     /// Requests to the bridge loop.
-    pub requests: mpsc::UnboundedSender<FromClient>,
+    pub requests: RequestSenders,
     /// Builds the snapshot a new browser gets first.
-    pub hello: std::sync::Arc<dyn Fn() -> String + Send + Sync>,
+    pub hello: Arc<dyn Fn() -> String + Send + Sync>,
+    /// Who may connect.
+    pub access: Arc<AccessPolicy>,
+    /// Per-client limits.
+    pub limits: Limits,
+    /// Counters.
+    pub stats: Arc<WebStats>,
+    /// Room for [`Limits::max_clients`] clients.
+    pub slots: Arc<Semaphore>,
 }
 
-/// The router: `/` the page, `/ws` the WebSocket.
+impl WebState {
+    /// The state for a server with these parts; `slots` sized from `limits`.
+    pub fn new(
+        broadcast: broadcast::Sender<String>,
+        requests: RequestSenders,
+        hello: Arc<dyn Fn() -> String + Send + Sync>,
+        access: AccessPolicy,
+        limits: Limits,
+    ) -> WebState {
+        WebState {
+            broadcast,
+            requests,
+            hello,
+            access: Arc::new(access),
+            slots: Arc::new(Semaphore::new(limits.max_clients)),
+            limits,
+            stats: Arc::new(WebStats::default()),
+        }
+    }
+}
+
+/// The router: `/` the page, `/ws` the WebSocket, both behind the access policy.
+/// Serve it with `into_make_service_with_connect_info::<SocketAddr>()` so refusals
+/// name the client's address.
 pub fn router(state: WebState) -> Router {
     Router::new()
-        .route(
-            "/",
-            get(|| async { ([(header::CACHE_CONTROL, "no-store")], Html(INDEX_HTML)) }),
-        )
+        .route("/", get(page))
         .route("/ws", get(ws_handler))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .with_state(state)
 }
 
-async fn ws_handler(ws: WebSocketUpgrade, State(state): State<WebState>) -> impl IntoResponse {
-    ws.on_upgrade(move |socket| client(socket, state))
+async fn page() -> impl IntoResponse {
+    (
+        [
+            (header::CACHE_CONTROL, "no-store"),
+            // no other site may frame the panel (clickjacking the e-stop's release)
+            (header::X_FRAME_OPTIONS, "DENY"),
+            (header::CONTENT_SECURITY_POLICY, "frame-ancestors 'none'"),
+            // the URL may carry the token: never send it on as a referrer
+            (header::REFERRER_POLICY, "no-referrer"),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
+        Html(INDEX_HTML),
+    )
 }
 
-async fn client(mut socket: WebSocket, state: WebState) {
+/// What a request says, from its headers and URL.
+fn facts<'a>(headers: &'a HeaderMap, query: Option<&'a str>, cookie: &str) -> RequestFacts<'a> {
+    let text = |name: header::HeaderName| headers.get(name).and_then(|v| v.to_str().ok());
+    RequestFacts {
+        host: text(header::HOST),
+        origin: text(header::ORIGIN),
+        forwarded_proto: headers
+            .get("x-forwarded-proto")
+            .and_then(|v| v.to_str().ok()),
+        query_token: access::query_token(query),
+        header_token: text(header::AUTHORIZATION).and_then(access::authorization_token),
+        cookie_token: headers
+            .get_all(header::COOKIE)
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .find_map(|c| access::cookie_value(c, cookie)),
+    }
+}
+
+/// Applies the access policy to every request.
+async fn guard(State(state): State<WebState>, request: Request, next: Next) -> Response {
+    let who = request
+        .extensions()
+        .get::<ConnectInfo<SocketAddr>>()
+        .map(|c| c.0);
+    let decision = state.access.check(&facts(
+        request.headers(),
+        request.uri().query(),
+        state.access.cookie_name(),
+    ));
+    match decision {
+        Ok(admission) => {
+            let mut response = next.run(request).await;
+            if let Some(cookie) = state.access.set_cookie(&admission) {
+                if let Ok(v) = HeaderValue::from_str(&cookie) {
+                    response.headers_mut().append(header::SET_COOKIE, v);
+                }
+            }
+            response
+        }
+        Err(refusal) => {
+            let what = format!("{} {}", request.method(), request.uri().path());
+            state.stats.refused(who, &what, &refusal);
+            let status = StatusCode::from_u16(refusal.status()).unwrap_or(StatusCode::FORBIDDEN);
+            let mut response = (
+                status,
+                [(header::CACHE_CONTROL, "no-store")],
+                format!("{status}: {refusal}\n"),
+            )
+                .into_response();
+            if status == StatusCode::UNAUTHORIZED {
+                response.headers_mut().insert(
+                    header::WWW_AUTHENTICATE,
+                    HeaderValue::from_static("token realm=\"eezybot panel\""),
+                );
+            }
+            response
+        }
+    }
+}
+
+async fn ws_handler(
+    ws: WebSocketUpgrade,
+    State(state): State<WebState>,
+    connect_info: Option<Extension<ConnectInfo<SocketAddr>>>,
+) -> Response {
+    let who = connect_info.map(|c| c.0 .0);
+    let Ok(slot) = state.slots.clone().try_acquire_owned() else {
+        state.stats.refused_busy(who, state.limits.max_clients);
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "503: {} clients are connected already\n",
+                state.limits.max_clients
+            ),
+        )
+            .into_response();
+    };
+    let l = state.limits;
+    ws.max_message_size(l.max_message_bytes)
+        .max_frame_size(l.max_message_bytes)
+        .max_write_buffer_size(l.max_write_buffer_bytes)
+        .on_upgrade(move |socket| async move {
+            state.stats.clients.fetch_add(1, Ordering::Relaxed);
+            client(socket, &state, who).await;
+            state.stats.clients.fetch_sub(1, Ordering::Relaxed);
+            drop(slot);
+        })
+}
+
+/// Is this receive error a message over the size limit?
+fn is_too_big(e: axum::Error) -> bool {
+    matches!(
+        e.into_inner().downcast_ref::<tungstenite::Error>(),
+        Some(tungstenite::Error::Capacity(_))
+    )
+}
+
+/// A client's send: gives up (None) on a closed socket or after the send timeout.
+async fn send(socket: &mut WebSocket, msg: WsMessage, state: &WebState) -> Option<()> {
+    match tokio::time::timeout(state.limits.send_timeout, socket.send(msg)).await {
+        Ok(Ok(())) => Some(()),
+        Ok(Err(_)) => None,
+        Err(_) => {
+            state.stats.stalled.fetch_add(1, Ordering::Relaxed);
+            None
+        }
+    }
+}
+
+fn shorten(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        Some((i, _)) => format!("{}…", &text[..i]),
+        None => text.to_string(),
+    }
+}
+
+async fn client(mut socket: WebSocket, state: &WebState, who: Option<SocketAddr>) {
+    let from = who.map_or_else(|| "a client".to_string(), |a| a.to_string());
     let mut all = state.broadcast.subscribe();
-    let (reply_tx, mut replies) = mpsc::unbounded_channel::<String>();
-    if socket
-        .send(WsMessage::Text((state.hello)().into()))
+    let (reply_tx, mut replies) = mpsc::channel::<String>(state.limits.reply_queue.max(1));
+    let mut bad = 0u64;
+    if send(&mut socket, WsMessage::Text((state.hello)().into()), state)
         .await
-        .is_err()
+        .is_none()
     {
         return;
     }
     loop {
         tokio::select! {
             incoming = socket.recv() => {
-                let Some(Ok(msg)) = incoming else { break };
-                let WsMessage::Text(text) = msg else { continue };
+                let text = match incoming {
+                    None | Some(Ok(WsMessage::Close(_))) => break,
+                    Some(Ok(WsMessage::Text(text))) => text,
+                    Some(Ok(WsMessage::Binary(_))) => {
+                        bad += 1;
+                        state.stats.bad_requests.fetch_add(1, Ordering::Relaxed);
+                        let refused = serde_json::json!({"t": "refused", "reason": "bad request: binary messages are not understood"});
+                        if send(&mut socket, WsMessage::Text(refused.to_string().into()), state).await.is_none() { break }
+                        continue;
+                    }
+                    Some(Ok(_)) => continue, // ping/pong: answered by the library
+                    Some(Err(e)) => {
+                        if is_too_big(e) {
+                            state.stats.oversized.fetch_add(1, Ordering::Relaxed);
+                            let reason = format!("message larger than {} bytes", state.limits.max_message_bytes);
+                            log::warn!("web panel closed {from}: {reason}");
+                            let close = CloseFrame { code: 1009, reason: reason.into() };
+                            let _ = send(&mut socket, WsMessage::Close(Some(close)), state).await;
+                        }
+                        break;
+                    }
+                };
                 match serde_json::from_str::<ClientRequest>(&text) {
                     Ok(request) => {
-                        let _ = state.requests.send(FromClient { request, reply: reply_tx.clone() });
+                        // waits while the loop is busy: this client's next message stays
+                        // unread (TCP holds it), other clients take their turns
+                        if state.requests.send(FromClient { request, reply: reply_tx.clone() }).await.is_err() {
+                            break;
+                        }
                     }
                     Err(e) => {
-                        log::warn!("bad request from a browser ignored: {e}");
-                        let _ = reply_tx.send(serde_json::json!({"t": "refused", "reason": format!("bad request: {e}")}).to_string());
+                        bad += 1;
+                        state.stats.bad_requests.fetch_add(1, Ordering::Relaxed);
+                        let reason = shorten(&e.to_string(), 200);
+                        if bad == 1 {
+                            log::warn!("bad request from {from} ignored: {reason} (further ones from this client are counted, not logged)");
+                        }
+                        let refused = serde_json::json!({"t": "refused", "reason": format!("bad request: {reason}")});
+                        if send(&mut socket, WsMessage::Text(refused.to_string().into()), state).await.is_none() { break }
                     }
                 }
             }
             Some(text) = replies.recv() => {
-                if socket.send(WsMessage::Text(text.into())).await.is_err() { break }
+                if send(&mut socket, WsMessage::Text(text.into()), state).await.is_none() { break }
             }
             out = all.recv() => match out {
-                Ok(text) => if socket.send(WsMessage::Text(text.into())).await.is_err() { break },
+                Ok(text) => if send(&mut socket, WsMessage::Text(text.into()), state).await.is_none() { break },
                 Err(broadcast::error::RecvError::Lagged(_)) => continue,
                 Err(broadcast::error::RecvError::Closed) => break,
             },
         }
+    }
+    if bad > 1 {
+        log::warn!("{from} sent {bad} bad requests in all");
     }
 }

@@ -1,0 +1,791 @@
+//! Who may use the web panel: the access policy for its page and its WebSocket, as pure
+//! functions over what a request says (`Host`, `Origin`, a token) and how the server is
+//! configured (bind address, token). No I/O: a server hands in a request's
+//! [`RequestFacts`] and acts on the answer, so the web panel and any later server that
+//! lets clients publish (the Foxglove bridge) follow the same rules.
+//!
+//! The rules, in the order they are checked:
+//! 1. **Origin.** A browser names the page a request comes from in `Origin`; it must be
+//!    the panel's own: `http://` + the request's `Host` (`https://` behind a TLS proxy
+//!    that says `X-Forwarded-Proto: https`), comparing scheme, host (case-insensitive)
+//!    and port (80/443 when omitted). A request without `Origin` comes from a program,
+//!    not from a web page (browsers always send it on WebSocket upgrades), so no page
+//!    can drive the arm through it; it passes this rule (Jupyter does the same) but not
+//!    the token rule. `Origin: null` (sandboxed frames, `file://` pages) is refused.
+//! 2. **Host, without a token.** A panel without a token answers only to a loopback
+//!    name (`127.x.x.x`, `[::1]`, `localhost`): a page of another site whose name was
+//!    made to resolve to 127.0.0.1 (DNS rebinding) sends its own name as `Host` and its
+//!    own origin, which rule 1 alone would let through.
+//! 3. **Token.** When the panel has a token (always when `bind` is not a loopback
+//!    address), every request must present it: `?token=` in the URL, an
+//!    `Authorization: token …`/`Bearer …` header, or the cookie the server sets on the
+//!    first page load that presented it. The first of these present decides; it is
+//!    compared in constant time.
+
+use std::fmt;
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
+
+/// Bytes of a generated token (48 hex characters, 192 bits, as Jupyter's).
+pub const GENERATED_TOKEN_BYTES: usize = 24;
+/// Shortest token accepted from the `token` parameter.
+pub const MIN_TOKEN_LEN: usize = 16;
+/// Longest token accepted from the `token` parameter.
+pub const MAX_TOKEN_LEN: usize = 256;
+/// What the `token` parameter reads (`ros2 param get`) when the token was generated.
+pub const SHOWN_GENERATED: &str = "(generated)";
+/// What the `token` parameter reads when the token was set at start.
+pub const SHOWN_HIDDEN: &str = "(hidden)";
+/// Lifetime of the cookie that carries the token after the first page load (30 days).
+pub const COOKIE_MAX_AGE_S: u64 = 30 * 24 * 3600;
+
+/// The secret that opens a panel. `Debug` does not show it; [`Token::reveal`] does, for
+/// the one start line meant for the operator and for the cookie.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Token(String);
+
+impl fmt::Debug for Token {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Token(…)")
+    }
+}
+
+impl Token {
+    /// A token given by the operator: 16 … 256 characters that need no escaping in a
+    /// URL or a cookie (`A-Z a-z 0-9 - . _ ~`).
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::access::Token;
+    /// assert!(Token::new("correct-horse-battery-staple").is_ok());
+    /// assert!(Token::new("short").is_err());
+    /// assert!(Token::new("has spaces in it, and commas").is_err());
+    /// ```
+    pub fn new(text: &str) -> Result<Token, AccessError> {
+        let len = text.chars().count();
+        if !(MIN_TOKEN_LEN..=MAX_TOKEN_LEN).contains(&len) {
+            return Err(AccessError::BadToken {
+                why: format!(
+                    "it has {len} characters, not {MIN_TOKEN_LEN} … {MAX_TOKEN_LEN} (make one with `openssl rand -hex 24`)"
+                ),
+            });
+        }
+        if let Some(c) = text.chars().find(|c| !is_token_char(*c)) {
+            return Err(AccessError::BadToken {
+                why: format!(
+                    "it contains {:?}; use only A-Z a-z 0-9 - . _ ~ so that it fits a URL unescaped",
+                    c
+                ),
+            });
+        }
+        Ok(Token(text.to_string()))
+    }
+
+    /// A token from random bytes (hex).
+    pub fn from_random(bytes: &[u8; GENERATED_TOKEN_BYTES]) -> Token {
+        Token(bytes.iter().map(|b| format!("{b:02x}")).collect())
+    }
+
+    /// The secret itself.
+    pub fn reveal(&self) -> &str {
+        &self.0
+    }
+
+    /// Is `presented` this token? Constant time in the token's content (the length is
+    /// not secret: a generated token always has 48 characters).
+    pub fn matches(&self, presented: &str) -> bool {
+        let (a, b) = (self.0.as_bytes(), presented.as_bytes());
+        if a.len() != b.len() {
+            return false;
+        }
+        let diff = a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y));
+        std::hint::black_box(diff) == 0
+    }
+}
+
+fn is_token_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || matches!(c, '-' | '.' | '_' | '~')
+}
+
+/// Where a panel's token came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TokenSource {
+    /// No token: the panel is bound to a loopback address and none was set.
+    None,
+    /// Generated at start (bind is not loopback and none was set).
+    Generated,
+    /// Set by the `token` parameter.
+    Parameter,
+}
+
+impl TokenSource {
+    /// What the `token` parameter should read from now on, so that `ros2 param get`
+    /// never shows the secret (None: leave it as it is).
+    pub fn shown_as(self) -> Option<&'static str> {
+        match self {
+            TokenSource::None => None,
+            TokenSource::Generated => Some(SHOWN_GENERATED),
+            TokenSource::Parameter => Some(SHOWN_HIDDEN),
+        }
+    }
+}
+
+/// A configuration the panel cannot start with.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum AccessError {
+    /// The `token` parameter is not a usable token (the message never contains it).
+    #[error("the `token` parameter is not usable: {why}")]
+    BadToken {
+        /// why
+        why: String,
+    },
+    /// The `token` parameter is the placeholder a hidden token reads as.
+    #[error("the `token` parameter is `(hidden)`, which is what `ros2 param get` shows for a token set at start: pass the token itself, or leave it empty to generate one")]
+    HiddenPlaceholder,
+    /// No random numbers for a token.
+    #[error("cannot generate an access token: {0}")]
+    NoRandomness(String),
+}
+
+/// Accepts what the `token` parameter may hold: empty, a placeholder, or a token.
+pub fn check_token_parameter(text: &str) -> Result<(), String> {
+    if text.is_empty() || text == SHOWN_GENERATED || text == SHOWN_HIDDEN {
+        return Ok(());
+    }
+    Token::new(text).map(|_| ()).map_err(|e| e.to_string())
+}
+
+/// The panel's token from the `token` parameter and whether `bind` is a loopback
+/// address: the parameter's token if set; else a generated one (from `random`) when
+/// `bind` is not loopback; else none. An empty parameter and `(generated)` (what a
+/// generated token reads as) both mean "generate if needed".
+///
+/// # Examples
+/// ```
+/// use gui_bridge::access::{resolve_token, TokenSource};
+/// let fixed = || Ok([7u8; 24]);
+/// assert_eq!(resolve_token("", true, fixed).unwrap().1, TokenSource::None);
+/// assert_eq!(resolve_token("", false, fixed).unwrap().1, TokenSource::Generated);
+/// assert_eq!(resolve_token("0123456789abcdefXYZ", true, fixed).unwrap().1, TokenSource::Parameter);
+/// ```
+pub fn resolve_token(
+    parameter: &str,
+    bind_is_loopback: bool,
+    random: impl FnOnce() -> Result<[u8; GENERATED_TOKEN_BYTES], String>,
+) -> Result<(Option<Token>, TokenSource), AccessError> {
+    match parameter {
+        SHOWN_HIDDEN => Err(AccessError::HiddenPlaceholder),
+        "" | SHOWN_GENERATED if bind_is_loopback => Ok((None, TokenSource::None)),
+        "" | SHOWN_GENERATED => {
+            let bytes = random().map_err(AccessError::NoRandomness)?;
+            Ok((Some(Token::from_random(&bytes)), TokenSource::Generated))
+        }
+        text => Ok((Some(Token::new(text)?), TokenSource::Parameter)),
+    }
+}
+
+/// What a request says about itself (header values as received; `None` = absent).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RequestFacts<'a> {
+    /// `Host`
+    pub host: Option<&'a str>,
+    /// `Origin`
+    pub origin: Option<&'a str>,
+    /// `X-Forwarded-Proto` (set by a TLS reverse proxy)
+    pub forwarded_proto: Option<&'a str>,
+    /// `token` from the URL's query
+    pub query_token: Option<&'a str>,
+    /// from `Authorization: token …` or `Authorization: Bearer …`
+    pub header_token: Option<&'a str>,
+    /// from the panel's cookie
+    pub cookie_token: Option<&'a str>,
+}
+
+/// How an admitted request proved itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Credential {
+    /// The panel has no token.
+    NotNeeded,
+    /// `?token=` in the URL.
+    Query,
+    /// The `Authorization` header.
+    Header,
+    /// The cookie.
+    Cookie,
+}
+
+/// A request the policy lets in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Admission {
+    /// How it proved itself.
+    pub by: Credential,
+}
+
+impl Admission {
+    /// Should the answer set the cookie (the token came with the URL or a header), so
+    /// that a reload and the page's WebSocket need no token in the URL?
+    pub fn set_cookie(&self) -> bool {
+        matches!(self.by, Credential::Query | Credential::Header)
+    }
+}
+
+/// Why a request is refused. The texts are the short reasons sent with the HTTP answer
+/// and logged; none contains a token.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Refusal {
+    /// No `Host` header (HTTP/1.1 requires one).
+    #[error("no Host header")]
+    NoHost,
+    /// `Host` is not a loopback name on a panel without a token.
+    #[error("Host `{host}` is not a loopback name and this panel has no access token (a page of another site that made its name resolve to this machine looks like this); open the panel as http://127.0.0.1:PORT/ or http://localhost:PORT/, or give gui_bridge a token")]
+    HostNotLoopback {
+        /// the Host header, shortened
+        host: String,
+    },
+    /// `Origin` is another page's.
+    #[error("Origin `{origin}` is not this panel's own origin {expected}: another web page may not drive the arm")]
+    ForeignOrigin {
+        /// the Origin header, shortened
+        origin: String,
+        /// what it should have been
+        expected: String,
+    },
+    /// No token presented to a panel that has one.
+    #[error("this panel needs its access token: open the URL with ?token=… that gui_bridge printed when it started")]
+    NoToken,
+    /// A wrong token.
+    #[error("wrong access token: open the URL with ?token=… that gui_bridge printed when it started (a generated token changes each time gui_bridge starts)")]
+    WrongToken,
+}
+
+impl Refusal {
+    /// The HTTP status to answer with: 401 when a token is missing, 400 without `Host`,
+    /// 403 otherwise.
+    pub fn status(&self) -> u16 {
+        match self {
+            Refusal::NoToken => 401,
+            Refusal::NoHost => 400,
+            _ => 403,
+        }
+    }
+
+    /// A short name of the reason, for counters (`origin`, `host`, `token`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Refusal::ForeignOrigin { .. } => "origin",
+            Refusal::NoHost | Refusal::HostNotLoopback { .. } => "host",
+            Refusal::NoToken | Refusal::WrongToken => "token",
+        }
+    }
+}
+
+/// The access policy of one server: its token (if any) and the name of its cookie.
+#[derive(Clone, Debug)]
+pub struct AccessPolicy {
+    token: Option<Token>,
+    cookie_name: String,
+}
+
+impl AccessPolicy {
+    /// The policy of a server listening on `port` with this token. The cookie's name
+    /// carries the port because cookies are shared by every port of a host (two panels
+    /// on one machine keep their own).
+    pub fn new(token: Option<Token>, port: u16) -> AccessPolicy {
+        AccessPolicy {
+            token,
+            cookie_name: format!("eezybot_panel_{port}"),
+        }
+    }
+
+    /// Does every request need the token?
+    pub fn token_required(&self) -> bool {
+        self.token.is_some()
+    }
+
+    /// The cookie that carries the token.
+    pub fn cookie_name(&self) -> &str {
+        &self.cookie_name
+    }
+
+    /// The `Set-Cookie` value for an admitted request that presented the token in the
+    /// URL or a header (None: nothing to set).
+    pub fn set_cookie(&self, admission: &Admission) -> Option<String> {
+        let token = self.token.as_ref()?;
+        admission.set_cookie().then(|| {
+            format!(
+                "{}={}; Path=/; HttpOnly; SameSite=Strict; Max-Age={COOKIE_MAX_AGE_S}",
+                self.cookie_name,
+                token.reveal()
+            )
+        })
+    }
+
+    /// Let this request in, or say why not (rules in the [module docs](self)).
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::access::{AccessPolicy, RequestFacts, Refusal};
+    /// let open = AccessPolicy::new(None, 8080);
+    /// let page = RequestFacts { host: Some("127.0.0.1:8080"), origin: Some("http://127.0.0.1:8080"), ..Default::default() };
+    /// assert!(open.check(&page).is_ok());
+    /// let evil = RequestFacts { origin: Some("http://evil.example"), ..page };
+    /// assert!(matches!(open.check(&evil), Err(Refusal::ForeignOrigin { .. })));
+    /// ```
+    pub fn check(&self, req: &RequestFacts<'_>) -> Result<Admission, Refusal> {
+        let host = req.host.map(str::trim).filter(|h| !h.is_empty());
+        if let Some(origin) = req.origin {
+            let scheme = match req.forwarded_proto.map(forwarded_scheme) {
+                Some(Some(s)) => s,
+                _ => "http",
+            };
+            let Some(host) = host else {
+                return Err(Refusal::NoHost);
+            };
+            let expected = Authority::parse(host, scheme);
+            let actual = parse_origin(origin);
+            if expected.is_none() || actual.is_none() || actual != expected {
+                return Err(Refusal::ForeignOrigin {
+                    origin: shorten(origin),
+                    expected: format!("{scheme}://{}", shorten(host)),
+                });
+            }
+        }
+        let Some(token) = &self.token else {
+            let host = host.ok_or(Refusal::NoHost)?;
+            return match Authority::parse(host, "http") {
+                Some(a) if is_loopback_name(&a.host) => Ok(Admission {
+                    by: Credential::NotNeeded,
+                }),
+                _ => Err(Refusal::HostNotLoopback {
+                    host: shorten(host),
+                }),
+            };
+        };
+        let (presented, by) = [
+            (req.query_token, Credential::Query),
+            (req.header_token, Credential::Header),
+            (req.cookie_token, Credential::Cookie),
+        ]
+        .into_iter()
+        .find_map(|(t, by)| t.map(|t| (t, by)))
+        .ok_or(Refusal::NoToken)?;
+        if token.matches(presented) {
+            Ok(Admission { by })
+        } else {
+            Err(Refusal::WrongToken)
+        }
+    }
+}
+
+/// `https` or `http` from an `X-Forwarded-Proto` value (its first entry).
+fn forwarded_scheme(value: &str) -> Option<&'static str> {
+    let first = value.split(',').next()?.trim();
+    if first.eq_ignore_ascii_case("https") {
+        Some("https")
+    } else if first.eq_ignore_ascii_case("http") {
+        Some("http")
+    } else {
+        None
+    }
+}
+
+/// At most 100 characters of a header value, control characters replaced, for
+/// messages and logs (the value is the client's, not ours).
+fn shorten(s: &str) -> String {
+    let mut out: String = s
+        .chars()
+        .take(100)
+        .map(|c| if c.is_control() { '?' } else { c })
+        .collect();
+    if s.chars().count() > 100 {
+        out.push('…');
+    }
+    out
+}
+
+/// Scheme, host and port of an origin, normalised for comparison.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct Authority {
+    scheme: &'static str,
+    /// lower case; IPv6 without brackets; no trailing dot
+    host: String,
+    port: u16,
+}
+
+impl Authority {
+    /// `host[:port]` (as in `Host`) under `scheme`, whose default port applies.
+    fn parse(authority: &str, scheme: &'static str) -> Option<Authority> {
+        let default_port = match scheme {
+            "https" => 443,
+            _ => 80,
+        };
+        let (host, port) = if let Some(rest) = authority.strip_prefix('[') {
+            let (h, after) = rest.split_once(']')?;
+            h.parse::<Ipv6Addr>().ok()?;
+            let port = match after {
+                "" => None,
+                p => Some(p.strip_prefix(':')?),
+            };
+            (h, port)
+        } else {
+            match authority.split_once(':') {
+                Some((h, p)) => (h, Some(p)),
+                None => (authority, None),
+            }
+        };
+        let port = match port {
+            None => default_port,
+            Some(p) if !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()) => p.parse().ok()?,
+            Some(_) => return None,
+        };
+        let host = host.strip_suffix('.').unwrap_or(host).to_ascii_lowercase();
+        let valid = !host.is_empty()
+            && host
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'.' | b'_' | b':'));
+        valid.then_some(Authority { scheme, host, port })
+    }
+}
+
+/// An `Origin` header (`scheme://host[:port]`); `None` for `null`, other schemes and
+/// anything malformed.
+fn parse_origin(origin: &str) -> Option<Authority> {
+    let (scheme, rest) = origin.trim().split_once("://")?;
+    let scheme = if scheme.eq_ignore_ascii_case("http") {
+        "http"
+    } else if scheme.eq_ignore_ascii_case("https") {
+        "https"
+    } else {
+        return None;
+    };
+    let rest = rest.strip_suffix('/').unwrap_or(rest);
+    if rest.contains(['/', '?', '#', '@']) {
+        return None;
+    }
+    Authority::parse(rest, scheme)
+}
+
+/// `localhost`, `*.localhost`, or a loopback IP address.
+fn is_loopback_name(host: &str) -> bool {
+    if host == "localhost" || host.ends_with(".localhost") {
+        return true;
+    }
+    match host.parse::<IpAddr>() {
+        Ok(IpAddr::V4(a)) => a.is_loopback(),
+        Ok(IpAddr::V6(a)) => {
+            a.is_loopback()
+                || a.to_ipv4_mapped()
+                    .is_some_and(|v4: Ipv4Addr| v4.is_loopback())
+        }
+        Err(_) => false,
+    }
+}
+
+/// `token` from a URL query (`a=1&token=…`), as sent (a valid token needs no escaping).
+pub fn query_token(query: Option<&str>) -> Option<&str> {
+    query?.split('&').find_map(|kv| kv.strip_prefix("token="))
+}
+
+/// The token of an `Authorization: token …` or `Authorization: Bearer …` header.
+pub fn authorization_token(value: &str) -> Option<&str> {
+    let (scheme, rest) = value.trim().split_once(' ')?;
+    (scheme.eq_ignore_ascii_case("token") || scheme.eq_ignore_ascii_case("bearer"))
+        .then(|| rest.trim())
+}
+
+/// The value of cookie `name` in a `Cookie` header (`a=1; name=value`).
+pub fn cookie_value<'a>(header: &'a str, name: &str) -> Option<&'a str> {
+    header.split(';').find_map(|kv| {
+        let (k, v) = kv.trim().split_once('=')?;
+        (k == name).then_some(v)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TOKEN: &str = "0123456789abcdef0123";
+
+    fn open() -> AccessPolicy {
+        AccessPolicy::new(None, 8080)
+    }
+
+    fn locked() -> AccessPolicy {
+        AccessPolicy::new(Some(Token::new(TOKEN).unwrap()), 8080)
+    }
+
+    fn req<'a>(host: &'a str, origin: Option<&'a str>) -> RequestFacts<'a> {
+        RequestFacts {
+            host: Some(host),
+            origin,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn same_origin_passes_and_another_origin_is_refused() {
+        let p = open();
+        for (host, origin) in [
+            ("127.0.0.1:8080", "http://127.0.0.1:8080"),
+            ("LOCALHOST:8080", "http://localhost:8080"),
+            ("localhost:8080", "http://LocalHost:8080/"),
+            ("[::1]:8080", "http://[::1]:8080"),
+            ("localhost", "http://localhost:80"),
+            ("localhost:80", "http://localhost"),
+            ("localhost.", "http://localhost"),
+        ] {
+            assert!(p.check(&req(host, Some(origin))).is_ok(), "{host} {origin}");
+        }
+        for (host, origin) in [
+            ("127.0.0.1:8080", "http://evil.example"),
+            ("127.0.0.1:8080", "http://127.0.0.1:8081"),
+            ("127.0.0.1:8080", "https://127.0.0.1:8080"),
+            ("127.0.0.1:8080", "http://127.0.0.1"),
+            ("127.0.0.1", "https://127.0.0.1"),
+            ("127.0.0.1:8080", "null"),
+            ("127.0.0.1:8080", "file://"),
+            ("127.0.0.1:8080", "chrome-extension://abcdef"),
+            ("127.0.0.1:8080", "http://127.0.0.1:8080.evil.example"),
+            ("127.0.0.1:8080", "http://user@127.0.0.1:8080"),
+            ("127.0.0.1:8080", "http://127.0.0.1:8080/page"),
+            ("127.0.0.1:8080", ""),
+            ("127.0.0.1:8080", "http://127.0.0.1:+8080"),
+            ("127.0.0.1:8080", "http://127.0.0.1:99999"),
+            ("[::1]:8080", "http://[::1]x:8080"),
+        ] {
+            let r = p.check(&req(host, Some(origin)));
+            assert!(
+                matches!(r, Err(Refusal::ForeignOrigin { .. })),
+                "{host} {origin}: {r:?}"
+            );
+            assert_eq!(r.unwrap_err().status(), 403);
+        }
+    }
+
+    #[test]
+    fn a_tls_proxy_may_say_the_page_was_https() {
+        let p = locked();
+        let facts = RequestFacts {
+            host: Some("panel.example"),
+            origin: Some("https://panel.example"),
+            forwarded_proto: Some("https"),
+            query_token: Some(TOKEN),
+            ..Default::default()
+        };
+        assert!(p.check(&facts).is_ok());
+        // without the proxy's word the page's own origin is http://Host
+        let plain = RequestFacts {
+            forwarded_proto: None,
+            ..facts
+        };
+        assert!(matches!(
+            p.check(&plain),
+            Err(Refusal::ForeignOrigin { .. })
+        ));
+        let junk = RequestFacts {
+            forwarded_proto: Some("gopher"),
+            ..facts
+        };
+        assert!(p.check(&junk).is_err());
+    }
+
+    #[test]
+    fn no_origin_is_a_program_and_passes_the_origin_rule() {
+        assert!(open().check(&req("127.0.0.1:8080", None)).is_ok());
+        assert_eq!(
+            locked().check(&req("127.0.0.1:8080", None)),
+            Err(Refusal::NoToken)
+        );
+    }
+
+    #[test]
+    fn without_a_token_only_loopback_names_are_answered() {
+        let p = open();
+        for host in [
+            "127.0.0.1:8080",
+            "127.0.0.2:8080",
+            "localhost:8080",
+            "panel.localhost:8080",
+            "[::1]:8080",
+            "[::ffff:127.0.0.1]:8080",
+        ] {
+            assert!(p.check(&req(host, None)).is_ok(), "{host}");
+        }
+        // DNS rebinding: the attacker's name, its own origin
+        for (host, origin) in [
+            ("evil.example:8080", Some("http://evil.example:8080")),
+            ("192.168.1.5:8080", None),
+            ("localhost.evil.example:8080", None),
+            ("0.0.0.0:8080", None),
+        ] {
+            let r = p.check(&req(host, origin));
+            assert!(
+                matches!(r, Err(Refusal::HostNotLoopback { .. })),
+                "{host}: {r:?}"
+            );
+        }
+        assert_eq!(p.check(&RequestFacts::default()), Err(Refusal::NoHost));
+        assert_eq!(Refusal::NoHost.status(), 400);
+    }
+
+    #[test]
+    fn with_a_token_every_request_presents_it() {
+        let p = locked();
+        let base = req("192.168.1.5:8080", Some("http://192.168.1.5:8080"));
+        assert_eq!(p.check(&base), Err(Refusal::NoToken));
+        assert_eq!(Refusal::NoToken.status(), 401);
+        let q = RequestFacts {
+            query_token: Some(TOKEN),
+            ..base
+        };
+        assert_eq!(
+            p.check(&q),
+            Ok(Admission {
+                by: Credential::Query
+            })
+        );
+        let h = RequestFacts {
+            header_token: Some(TOKEN),
+            ..base
+        };
+        assert_eq!(p.check(&h).unwrap().by, Credential::Header);
+        let c = RequestFacts {
+            cookie_token: Some(TOKEN),
+            ..base
+        };
+        assert_eq!(p.check(&c).unwrap().by, Credential::Cookie);
+        assert!(!p.check(&c).unwrap().set_cookie());
+        assert!(p.check(&q).unwrap().set_cookie());
+        for wrong in ["", "0123456789abcdef012", "0123456789abcdef0124", "x"] {
+            let w = RequestFacts {
+                query_token: Some(wrong),
+                ..base
+            };
+            assert_eq!(p.check(&w), Err(Refusal::WrongToken), "{wrong:?}");
+            assert_eq!(Refusal::WrongToken.status(), 403);
+        }
+        // the first credential present decides: a new URL token beats a stale cookie
+        let both = RequestFacts {
+            query_token: Some(TOKEN),
+            cookie_token: Some("stale-token-of-a-previous-run"),
+            ..base
+        };
+        assert!(p.check(&both).is_ok());
+        let stale = RequestFacts {
+            query_token: Some("stale-token-of-a-previous-run"),
+            cookie_token: Some(TOKEN),
+            ..base
+        };
+        assert_eq!(p.check(&stale), Err(Refusal::WrongToken));
+        // any Host (a LAN address, a name) is fine once the token is right
+        let named = RequestFacts {
+            host: Some("arm-pc.lan:8080"),
+            origin: None,
+            query_token: Some(TOKEN),
+            ..Default::default()
+        };
+        assert!(p.check(&named).is_ok());
+        // the token does not excuse another origin
+        let evil = RequestFacts {
+            origin: Some("http://evil.example"),
+            ..q
+        };
+        assert!(matches!(p.check(&evil), Err(Refusal::ForeignOrigin { .. })));
+    }
+
+    #[test]
+    fn cookie_is_set_once_and_names_the_port() {
+        let p = locked();
+        let by_query = Admission {
+            by: Credential::Query,
+        };
+        let cookie = p.set_cookie(&by_query).unwrap();
+        assert!(cookie.starts_with(&format!("eezybot_panel_8080={TOKEN};")));
+        assert!(cookie.contains("HttpOnly") && cookie.contains("SameSite=Strict"));
+        assert_eq!(
+            p.set_cookie(&Admission {
+                by: Credential::Cookie
+            }),
+            None
+        );
+        assert_eq!(open().set_cookie(&by_query), None);
+    }
+
+    #[test]
+    fn token_parameter_resolution() {
+        let no_random = || Err::<[u8; GENERATED_TOKEN_BYTES], _>("no entropy".to_string());
+        let r = resolve_token("", true, no_random).unwrap();
+        assert_eq!((r.0, r.1), (None, TokenSource::None));
+        let (t, s) = resolve_token("", false, || Ok([0xab; GENERATED_TOKEN_BYTES])).unwrap();
+        assert_eq!(s, TokenSource::Generated);
+        assert_eq!(t.unwrap().reveal(), "ab".repeat(GENERATED_TOKEN_BYTES));
+        let (_, s) =
+            resolve_token(SHOWN_GENERATED, false, || Ok([1; GENERATED_TOKEN_BYTES])).unwrap();
+        assert_eq!(s, TokenSource::Generated);
+        assert_eq!(
+            resolve_token("", false, no_random).unwrap_err(),
+            AccessError::NoRandomness("no entropy".into())
+        );
+        let (t, s) = resolve_token(TOKEN, true, no_random).unwrap();
+        assert_eq!((t.unwrap().reveal(), s), (TOKEN, TokenSource::Parameter));
+        assert_eq!(
+            resolve_token(SHOWN_HIDDEN, false, no_random).unwrap_err(),
+            AccessError::HiddenPlaceholder
+        );
+        let e = resolve_token("hunter2", false, no_random).unwrap_err();
+        assert!(e.to_string().contains("7 characters"), "{e}");
+        assert!(
+            !e.to_string().contains("hunter2"),
+            "an error must not show the token"
+        );
+        assert_eq!(TokenSource::Generated.shown_as(), Some(SHOWN_GENERATED));
+        assert_eq!(TokenSource::Parameter.shown_as(), Some(SHOWN_HIDDEN));
+        assert_eq!(TokenSource::None.shown_as(), None);
+        for ok in ["", SHOWN_GENERATED, SHOWN_HIDDEN, TOKEN] {
+            assert!(check_token_parameter(ok).is_ok(), "{ok}");
+        }
+        assert!(check_token_parameter("with space 0123456789").is_err());
+    }
+
+    #[test]
+    fn tokens_compare_exactly_and_never_print() {
+        let t = Token::new(TOKEN).unwrap();
+        assert!(t.matches(TOKEN));
+        assert!(!t.matches(&TOKEN.to_uppercase()));
+        assert!(!t.matches(&format!("{TOKEN}0")));
+        assert_eq!(format!("{t:?}"), "Token(…)");
+        assert!(!format!("{:?}", locked()).contains(TOKEN));
+    }
+
+    #[test]
+    fn credentials_are_found_where_clients_put_them() {
+        assert_eq!(query_token(Some("token=abc")), Some("abc"));
+        assert_eq!(query_token(Some("x=1&token=abc&y=2")), Some("abc"));
+        assert_eq!(query_token(Some("mytoken=abc")), None);
+        assert_eq!(query_token(None), None);
+        assert_eq!(authorization_token("token abc"), Some("abc"));
+        assert_eq!(authorization_token("Bearer abc "), Some("abc"));
+        assert_eq!(authorization_token("Basic YWJj"), None);
+        assert_eq!(
+            cookie_value("a=1; eezybot_panel_8080=abc; b=2", "eezybot_panel_8080"),
+            Some("abc")
+        );
+        assert_eq!(
+            cookie_value("eezybot_panel_8081=abc", "eezybot_panel_8080"),
+            None
+        );
+    }
+
+    #[test]
+    fn refusal_texts_are_short_and_safe() {
+        let long = format!("http://{}\u{7}.example", "a".repeat(500));
+        let r = open()
+            .check(&req("127.0.0.1:8080", Some(&long)))
+            .unwrap_err();
+        let text = r.to_string();
+        assert!(text.len() < 400 && !text.contains('\u{7}'), "{text}");
+        assert_eq!(r.kind(), "origin");
+    }
+}

@@ -1,0 +1,161 @@
+//! The bridge loop under load: e-stops before queued requests; a client that does not
+//! read its replies loses replies, never stalls the loop.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::Time;
+use gui_bridge::teleop::Teleop;
+use gui_bridge::web::{request_channels, ClientRequest, FromClient, Limits, WebStats};
+use gui_bridge::{Outputs, Reporting};
+use ros_plumbing::peers::PeerWatch;
+use ros_plumbing::Params;
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use tokio::sync::{broadcast, mpsc, oneshot};
+
+/// Records e-stops with the number of replies the loop had given by then.
+struct Fake {
+    replies: mpsc::Sender<String>,
+    capacity: usize,
+    estops: RefCell<Vec<(bool, usize)>>,
+    done: RefCell<Option<oneshot::Sender<()>>>,
+}
+
+impl Outputs for Fake {
+    fn xyz_target(&self, _: [f64; 3], _: Time) {}
+    fn gripper_target(&self, _: f64) {}
+    fn joint_target(&self, _: &[(String, f64)], _: Time) {}
+    fn estop(&self, engaged: bool) {
+        let answered = self.capacity - self.replies.capacity();
+        self.estops.borrow_mut().push((engaged, answered));
+        if let Some(done) = self.done.borrow_mut().take() {
+            let _ = done.send(());
+        }
+    }
+    fn diagnostics(&self, _: DiagnosticStatus) {}
+}
+
+fn teleop() -> Arc<Mutex<Teleop>> {
+    let arm = gui_bridge::load_arm("").unwrap();
+    Arc::new(Mutex::new(Teleop::new(arm, 50.0)))
+}
+
+fn reporting(web: Arc<WebStats>) -> Reporting<impl Fn() -> Vec<usize>> {
+    Reporting {
+        name: "gui_bridge: operator panel".into(),
+        url: "http://127.0.0.1:8080/".into(),
+        peers: PeerWatch::new(&[]),
+        counts: Vec::new,
+        web,
+    }
+}
+
+#[tokio::test]
+async fn an_estop_is_served_before_a_thousand_queued_requests() {
+    let limits = Limits {
+        request_queue: 1000,
+        ..Limits::default()
+    };
+    let (senders, requests) = request_channels(&limits);
+    let (to_clients, _) = broadcast::channel(16);
+    let (reply, mut replies) = mpsc::channel(1000);
+    let (done_tx, done_rx) = oneshot::channel();
+    let fake = Fake {
+        replies: reply.clone(),
+        capacity: 1000,
+        estops: RefCell::new(vec![]),
+        done: RefCell::new(Some(done_tx)),
+    };
+    for i in 0..1000 {
+        let request = ClientRequest::Check {
+            xyz: [0.2, 0.0, 0.1 + i as f64 * 1e-5],
+        };
+        senders
+            .try_send(FromClient {
+                request,
+                reply: reply.clone(),
+            })
+            .unwrap();
+    }
+    senders
+        .try_send(FromClient {
+            request: ClientRequest::Estop { on: true },
+            reply: reply.clone(),
+        })
+        .unwrap();
+    let stats = Arc::new(WebStats::default());
+    gui_bridge::run(
+        teleop(),
+        futures::stream::pending(),
+        requests,
+        to_clients,
+        &fake,
+        Params::new(BTreeMap::new()),
+        reporting(stats),
+        async {
+            let _ = done_rx.await;
+        },
+    )
+    .await;
+    let (engaged, answered) = fake.estops.borrow()[0];
+    assert!(engaged);
+    assert!(
+        answered <= 1,
+        "{answered} requests were answered before the e-stop went out"
+    );
+    // the e-stop's own acknowledgement is the first reply
+    assert!(replies.recv().await.unwrap().contains("\"ack\""));
+}
+
+#[tokio::test]
+async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
+    let limits = Limits {
+        request_queue: 100,
+        ..Limits::default()
+    };
+    let (senders, requests) = request_channels(&limits);
+    let (to_clients, _) = broadcast::channel(16);
+    let (reply, _replies) = mpsc::channel(4); // never read
+    let (probe, _probe_rx) = mpsc::channel(1);
+    let fake = Fake {
+        replies: probe,
+        capacity: 1,
+        estops: RefCell::new(vec![]),
+        done: RefCell::new(None),
+    };
+    for _ in 0..100 {
+        senders
+            .try_send(FromClient {
+                request: ClientRequest::Check {
+                    xyz: [0.2, 0.0, 0.15],
+                },
+                reply: reply.clone(),
+            })
+            .unwrap();
+    }
+    let stats = Arc::new(WebStats::default());
+    let through = {
+        let stats = stats.clone();
+        async move {
+            while stats.dropped_replies.load(Ordering::Relaxed) < 96 {
+                tokio::task::yield_now().await;
+            }
+        }
+    };
+    let run = gui_bridge::run(
+        teleop(),
+        futures::stream::pending(),
+        requests,
+        to_clients,
+        &fake,
+        Params::new(BTreeMap::new()),
+        reporting(stats.clone()),
+        through,
+    );
+    tokio::time::timeout(std::time::Duration::from_secs(10), run)
+        .await
+        .expect("the loop stalled on a client that reads nothing");
+    assert_eq!(stats.dropped_replies.load(Ordering::Relaxed), 96);
+}
