@@ -1,17 +1,27 @@
 """gui_bridge: the web panel in headless Chromium (Playwright with Debian's chromium),
-observed by real rclpy; and the command-line driver (once, play, record)."""
+observed by real rclpy; its access rules and per-client limits; and the command-line
+driver (once, play, record)."""
+import base64
+import http.server
+import json
 import math
 import os
+import re
 import signal
 import socket
 import statistics
+import struct
 import subprocess
+import sys
+import threading
 import time
+from pathlib import Path
 
 import pytest
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
+from diagnostic_msgs.msg import DiagnosticArray
 
 from conftest import LATCHED, OUTPUT, REPO, bin_path
 
@@ -284,3 +294,421 @@ def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):
     bad.write_text("0.2,0,0.15,,0\n0.2,zero,0.15,,0\n")
     r = run_cli(domain, "--play", str(bad))
     assert r.returncode != 0 and "line 2" in r.stderr
+
+
+# ---------------------------------------------------------------------------------------
+# Access rules and per-client limits (issue 9, item 6)
+
+
+class RawWs:
+    """A WebSocket client from the standard library, for what a browser will not do: any
+    Origin and Host header, no Origin at all, floods and oversized messages."""
+
+    def __init__(self, port, path="/ws", headers=None, timeout=5.0):
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+        self.buf = b""
+        sent = {"Host": f"127.0.0.1:{port}", "Upgrade": "websocket", "Connection": "Upgrade",
+                "Sec-WebSocket-Key": base64.b64encode(os.urandom(16)).decode(), "Sec-WebSocket-Version": "13",
+                **(headers or {})}
+        head = f"GET {path} HTTP/1.1\r\n" + "".join(f"{k}: {v}\r\n" for k, v in sent.items() if v is not None) + "\r\n"
+        self.sock.sendall(head.encode())
+        status, *lines = self._until(b"\r\n\r\n").decode("latin-1").split("\r\n")
+        self.status = int(status.split()[1])
+        self.headers = {k.strip().lower(): v.strip() for k, v in (x.split(":", 1) for x in lines if ":" in x)}
+        self.body = ""
+        if self.status != 101:
+            self.body = self._exact(int(self.headers.get("content-length", "0"))).decode()
+            self.sock.close()
+
+    def _until(self, end):
+        while end not in self.buf:
+            chunk = self.sock.recv(65536)
+            if not chunk:
+                raise ConnectionError("closed by the server")
+            self.buf += chunk
+        head, self.buf = self.buf.split(end, 1)
+        return head
+
+    def _exact(self, n):
+        while len(self.buf) < n:
+            chunk = self.sock.recv(65536)
+            if not chunk:
+                raise ConnectionError("closed by the server")
+            self.buf += chunk
+        out, self.buf = self.buf[:n], self.buf[n:]
+        return out
+
+    @staticmethod
+    def frame(payload, opcode=0x1):
+        n, mask = len(payload), os.urandom(4)
+        head = bytes([0x80 | opcode])
+        if n < 126:
+            head += bytes([0x80 | n])
+        elif n < 65536:
+            head += bytes([0x80 | 126]) + struct.pack(">H", n)
+        else:
+            head += bytes([0x80 | 127]) + struct.pack(">Q", n)
+        masked = (int.from_bytes(payload, "big") ^ int.from_bytes((mask * (n // 4 + 1))[:n], "big")).to_bytes(n, "big") if n else b""
+        return head + mask + masked
+
+    def send(self, msg):
+        self.sock.sendall(self.frame(json.dumps(msg).encode() if not isinstance(msg, bytes) else msg))
+
+    def recv(self):
+        """(opcode, payload) of the next frame."""
+        b0, b1 = self._exact(2)
+        n = b1 & 0x7F
+        if n == 126:
+            n = struct.unpack(">H", self._exact(2))[0]
+        elif n == 127:
+            n = struct.unpack(">Q", self._exact(8))[0]
+        return b0 & 0x0F, self._exact(n)
+
+    def recv_json(self, pred=lambda m: True, timeout=5.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            op, payload = self.recv()
+            if op == 0x8:
+                raise ConnectionError(f"closed: {payload!r}")
+            if op == 0x1:
+                m = json.loads(payload)
+                if pred(m):
+                    return m
+        raise TimeoutError("no such message")
+
+    def drain_in_background(self):
+        """Read and drop everything (as a browser would read it) until closed."""
+        def run():
+            try:
+                while self.recv()[0] != 0x8:
+                    pass
+            except OSError:
+                pass
+        self.sock.settimeout(None)
+        threading.Thread(target=run, daemon=True).start()
+
+    def close(self):
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+
+
+def http_get(port, path="/", headers=None):
+    """(status, headers, body) of a plain GET to the panel."""
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+        sent = {"Host": f"127.0.0.1:{port}", "Connection": "close", **(headers or {})}
+        s.sendall((f"GET {path} HTTP/1.1\r\n" + "".join(f"{k}: {v}\r\n" for k, v in sent.items()) + "\r\n").encode())
+        data = b""
+        while chunk := s.recv(65536):
+            data += chunk
+    head, _, body = data.partition(b"\r\n\r\n")
+    status, *lines = head.decode("latin-1").split("\r\n")
+    hdrs = {}
+    for k, v in (x.split(":", 1) for x in lines if ":" in x):
+        hdrs.setdefault(k.strip().lower(), []).append(v.strip())
+    return int(status.split()[1]), hdrs, body.decode(errors="replace")
+
+
+def start_panel(launch, observer, *ros_args, bind_host="127.0.0.1"):
+    """gui_bridge serving on a free port; (process, port)."""
+    port = free_port()
+    proc = launch("gui_bridge", "--ros-args", "-p", f"bind:={bind_host}:{port}", *ros_args)
+    deadline = time.monotonic() + 15
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+            break
+        except OSError:
+            assert proc.proc.poll() is None, proc.output()
+            assert time.monotonic() < deadline, "the web server did not come up"
+            time.sleep(0.05)
+    observer.wait_publisher("/xyz_target")
+    return proc, port
+
+
+def panel_status(diags):
+    """gui_bridge's latest diagnostics entry: (level, message, values)."""
+    for _, arr in reversed(diags):
+        for s in arr.status:
+            if s.name.startswith("gui_bridge"):
+                level = s.level[0] if isinstance(s.level, bytes) else s.level
+                return level, s.message, {kv.key: kv.value for kv in s.values}
+    return None
+
+
+def rss_kib(pid):
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    raise RuntimeError("no VmRSS")
+
+
+def test_websocket_from_another_origin_is_refused_and_moves_nothing(launch, observer, browser):
+    xyz = observer.sub("/xyz_target", PointStamped)
+    diags = observer.sub("/diagnostics", DiagnosticArray)
+    proc, port = start_panel(launch, observer)
+    target = {"t": "target", "xyz": [0.2, 0.0, 0.15]}
+
+    # the measured attack of the issue: a client claiming another site's origin
+    for _ in range(5):
+        evil = RawWs(port, headers={"Origin": "http://evil.example"})
+        assert evil.status == 403, (evil.status, evil.body)
+        assert "Origin `http://evil.example` is not this panel's own origin" in evil.body, evil.body
+    # DNS rebinding: the attacker's name resolving to 127.0.0.1, its page's own origin
+    rebound = RawWs(port, headers={"Host": f"evil.example:{port}", "Origin": f"http://evil.example:{port}"})
+    assert rebound.status == 403 and "not a loopback name" in rebound.body, rebound.body
+    # the same attack from a real page of another origin in Chromium: a page of another
+    # web server on this machine (Chromium keeps pages of public sites from loopback
+    # addresses unless the user allows it, so those need that permission or DNS rebinding)
+    class EvilPage(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(b"<!DOCTYPE html><title>another site</title>")
+
+        def log_message(self, *args):
+            pass
+    evil_server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), EvilPage)
+    threading.Thread(target=evil_server.serve_forever, daemon=True).start()
+    page = browser.new_page()
+    console = []
+    page.on("console", lambda m: console.append(m.text))
+    page.goto(f"http://127.0.0.1:{evil_server.server_address[1]}/")
+    outcome = page.evaluate("""(port) => new Promise((done) => {
+        const ws = new WebSocket(`ws://127.0.0.1:${port}/ws`);
+        ws.onopen = () => { ws.send(JSON.stringify({t: "target", xyz: [0.2, 0, 0.15]})); done("opened"); };
+        ws.onerror = () => done("refused");
+    })""", port)
+    page.close()
+    evil_server.shutdown()
+    assert any("403" in c for c in console), console
+    assert outcome == "refused"
+    observer.spin_for(1.0)
+    assert not xyz, "a refused client moved the arm"
+
+    # the page's own origin, and a program without Origin, work
+    for headers in ({"Origin": f"http://127.0.0.1:{port}"}, {"Origin": f"http://LOCALHOST:{port}", "Host": f"localhost:{port}"}, {}):
+        ws = RawWs(port, headers=headers)
+        assert ws.status == 101, (headers, ws.status, ws.body)
+        assert ws.recv_json()["t"] == "hello"
+        ws.send(target)
+        assert ws.recv_json(lambda m: m["t"] in ("ack", "refused"))["t"] == "ack"
+        ws.close()
+    assert observer.spin_until(lambda: xyz and abs(xyz[-1][1].point.z - 0.15) < 1e-9, 5)
+
+    # one WARN line per refused address and reason, however often; counted in diagnostics
+    def counted():
+        status = panel_status(diags)
+        return status and status[0] == 1 and int(status[2]["refused_origin"]) == 6 and int(status[2]["refused_host"]) == 1
+    assert observer.spin_until(counted, 5), panel_status(diags)
+    assert "refused a client" in panel_status(diags)[1]
+    out = proc.output()
+    assert len(re.findall(r"web panel refused 127\.0\.0\.1: GET /ws: Origin", out)) == 1, out
+    assert len(re.findall(r"web panel refused 127\.0\.0\.1: GET /ws: Host", out)) == 1, out
+
+
+def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
+    from rcl_interfaces.msg import Log
+    from rcl_interfaces.srv import GetParameters
+    xyz = observer.sub("/xyz_target", PointStamped)
+    rosout = observer.sub("/rosout", Log, LATCHED)
+    proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
+    deadline = time.monotonic() + 5
+    while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/\?token=([0-9a-f]+)", proc.output())):
+        assert time.monotonic() < deadline, proc.output()
+        time.sleep(0.05)
+    token = m.group(1)
+    assert len(token) == 48
+    url = m.group(0).removeprefix("web panel: ")
+    print(proc.output())
+
+    # without the token neither the page nor the WebSocket; a wrong one neither
+    status, headers, body = http_get(port, "/")
+    assert status == 401 and "access token" in body and "<html" not in body, (status, body)
+    assert RawWs(port).status == 401
+    status, _, body = http_get(port, "/?token=" + "0" * 48)
+    assert status == 403 and "wrong access token" in body and "<html" not in body
+    bad = RawWs(port, path="/ws?token=" + "0" * 48)
+    assert bad.status == 403 and "wrong access token" in bad.body
+    # the token does not excuse another origin
+    assert RawWs(port, path=f"/ws?token={token}", headers={"Origin": "http://evil.example"}).status == 403
+    observer.spin_for(0.5)
+    assert not xyz
+
+    # with the token, in the URL or a header, from a program
+    for path, headers in ((f"/ws?token={token}", {}), ("/ws", {"Authorization": f"token {token}"})):
+        ws = RawWs(port, path=path, headers=headers)
+        assert ws.status == 101, (ws.status, ws.body)
+        ws.recv_json(lambda m: m["t"] == "hello")
+        ws.send({"t": "target", "xyz": [0.2, 0.0, 0.15]})
+        assert ws.recv_json(lambda m: m["t"] in ("ack", "refused"))["t"] == "ack"
+        ws.close()
+    assert observer.spin_until(lambda: xyz and abs(xyz[-1][1].point.z - 0.15) < 1e-9, 5)
+    status, headers, body = http_get(port, f"/?token={token}")
+    assert status == 200 and "<html" in body
+    assert any(c.startswith(f"eezybot_panel_{port}={token};") and "HttpOnly" in c for c in headers["set-cookie"])
+
+    # the browser (a tablet on the LAN) opens the printed URL: the page works, the token
+    # leaves the address bar, and a reload works from the cookie
+    context = browser.new_context()
+    page = context.new_page()
+    page.goto(url)
+    page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
+    assert "token" not in page.url
+    for z in (0.16, 0.17):
+        if z == 0.17:
+            page.reload()
+            page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
+        page.eval_on_selector("#z", "(el, v) => { el.value = v; el.dispatchEvent(new Event('input')); }", z)
+        assert observer.spin_until(lambda: xyz and abs(xyz[-1][1].point.z - z) < 1e-9, 5), z
+    context.close()
+    # a browser without the token gets the hint, not the page
+    context = browser.new_context()
+    page = context.new_page()
+    response = page.goto(f"http://127.0.0.1:{port}/")
+    assert response.status == 401 and "printed" in page.inner_text("body")
+    context.close()
+
+    # `ros2 param get /gui_bridge token` does not reveal it; nor the log or /rosout
+    client = observer.node.create_client(GetParameters, "/gui_bridge/get_parameters")
+    assert client.wait_for_service(timeout_sec=10)
+    future = client.call_async(GetParameters.Request(names=["token"]))
+    assert observer.spin_until(future.done, 10)
+    assert future.result().values[0].string_value == "(generated)"
+    observer.spin_for(0.5)
+    assert rosout and not [m for _, m in rosout if token in m.msg]
+    out = proc.output()
+    assert out.count(token) == len(re.findall(r"^web panel: http://\S+\?token=" + token + "$", out, re.M)), out
+
+
+def test_a_token_set_by_parameter_is_required_and_hidden(launch, observer, domain):
+    from rcl_interfaces.srv import GetParameters
+    token = "operator-chosen-token-0123"
+    proc, port = start_panel(launch, observer, "-p", f"token:={token}")
+    assert http_get(port, "/")[0] == 401  # a token set on a loopback bind is required too
+    assert http_get(port, f"/?token={token}")[0] == 200
+    client = observer.node.create_client(GetParameters, "/gui_bridge/get_parameters")
+    assert client.wait_for_service(timeout_sec=10)
+    future = client.call_async(GetParameters.Request(names=["token"]))
+    assert observer.spin_until(future.done, 10)
+    assert future.result().values[0].string_value == "(hidden)"
+    # a weak token does not start
+    r = run_cli(domain, "--ros-args", "-p", "bind:=0.0.0.0:0", "-p", "token:=hunter2", timeout=30)
+    assert r.returncode != 0 and "token" in r.stderr and "hunter2" not in r.stderr, r.stderr
+
+
+def test_oversized_message_closes_only_that_client_with_the_reason(launch, observer):
+    proc, port = start_panel(launch, observer)
+    big = RawWs(port)
+    big.recv_json(lambda m: m["t"] == "hello")
+    # under the cap: a bad request, answered and counted, the client stays
+    big.send(json.dumps({"t": "check", "xyz": [0.2, 0, 0.15], "pad": "x" * 60_000}).encode())
+    assert big.recv_json(lambda m: m["t"] in ("check", "refused"))
+    big.send(b"x" * 100_000)
+    while True:
+        op, payload = big.recv()
+        if op == 0x8:
+            break
+    code = struct.unpack(">H", payload[:2])[0]
+    assert code == 1009 and b"larger than 65536 bytes" in payload[2:], payload
+    other = RawWs(port)
+    other.recv_json(lambda m: m["t"] == "hello")
+    other.send({"t": "check", "xyz": [0.2, 0.0, 0.15]})
+    assert other.recv_json(lambda m: m["t"] == "check")["reachable"] is True
+    assert "message larger than 65536 bytes" in proc.output()
+
+
+FLOOD_MESSAGES = 100_000
+
+
+def flood(port, n):
+    """Run in a separate process: send n requests as fast as the server takes them
+    (targets, reachability checks, jogs), reading what comes back, then one last check
+    whose answer says that the server has been through all of them."""
+    ws = RawWs(port, timeout=120)
+    last = {"t": "check", "xyz": [0.2, 0.0, 0.123]}
+    done = threading.Event()
+
+    def read():
+        while not done.is_set():
+            op, payload = ws.recv()
+            if op == 0x8:
+                break
+            if op == 0x1 and b'"check"' in payload and json.loads(payload).get("xyz") == last["xyz"]:
+                done.set()
+    threading.Thread(target=read, daemon=True).start()
+    frames = [RawWs.frame(json.dumps(m).encode()) for m in (
+        {"t": "target", "xyz": [0.2, 0.0, 0.15]}, {"t": "check", "xyz": [0.21, 0.01, 0.14]},
+        {"t": "target", "xyz": [0.2, 0.01, 0.15]}, {"t": "jog", "d": [0.0, 0.0, 0.0]})]
+    print("flooding", flush=True)
+    t0 = time.monotonic()
+    batch = 1000
+    for i in range(0, n, batch):
+        ws.sock.sendall(b"".join(frames[j % len(frames)] for j in range(i, min(n, i + batch))))
+    sent = time.monotonic() - t0
+    time.sleep(0.05)
+    ws.send(last)
+    served = done.wait(120)
+    print(json.dumps({"sent": n, "send_s": sent, "served_s": time.monotonic() - t0 if served else None}), flush=True)
+    ws.close()
+
+
+def test_flooding_client_neither_grows_memory_nor_delays_another_clients_estop(launch, observer):
+    estop = observer.sub("/estop", Bool, LATCHED)
+    proc, port = start_panel(launch, observer)
+    pid = proc.proc.pid
+    operator = RawWs(port)
+    operator.recv_json(lambda m: m["t"] == "hello")
+    operator.drain_in_background()
+
+    def press_estop(on):
+        n = len(estop)
+        t0 = time.monotonic()
+        operator.send({"t": "estop", "on": on})
+        assert observer.spin_until(lambda: len(estop) > n and estop[-1][1].data is on, 10), f"e-stop {on} did not arrive"
+        return (estop[-1][0] - t0) * 1e3
+
+    # warm up (discovery of the latched estop topic), then the quiet baseline
+    press_estop(True)
+    press_estop(False)
+    quiet = [press_estop(on) for on in (True, False) * 5]
+    rss_before = rss_kib(pid)
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parent)}
+    flooder = subprocess.Popen([sys.executable, "-c", f"import test_gui_bridge as t; t.flood({port}, {FLOOD_MESSAGES})"],
+                               stdout=subprocess.PIPE, text=True, env=env)
+    assert flooder.stdout.readline().strip() == "flooding"
+    observer.spin_for(0.2)
+    flooded, rss_peak = [], rss_before
+    while (flooder.poll() is None or not flooded) and len(flooded) < 40:
+        flooded.append(press_estop(len(flooded) % 2 == 0))
+        rss_peak = max(rss_peak, rss_kib(pid))
+        observer.spin_for(0.1)
+    flooding_while_measured = flooder.poll() is None
+    out, _ = flooder.communicate(timeout=300)
+    result = json.loads(out.strip().splitlines()[-1])
+    observer.spin_for(1.0)
+    rss_after = rss_kib(pid)
+    # the panel still answers
+    operator.close()
+    ws = RawWs(port)
+    ws.recv_json(lambda m: m["t"] == "hello")
+    ws.send({"t": "check", "xyz": [0.2, 0.0, 0.15]})
+    assert ws.recv_json(lambda m: m["t"] == "check")["reachable"] is True
+
+    def summary(v):
+        v = sorted(v)
+        return f"p50 {statistics.median(v):.1f} ms, p90 {v[int(0.9 * len(v))]:.1f} ms, max {v[-1]:.1f} ms over {len(v)}"
+    report = (f"flood: {result['sent']} requests from one client, sent in {result['send_s']:.2f} s, "
+              f"all served after {result['served_s']:.2f} s ({result['sent'] / result['served_s']:.0f}/s)\n"
+              f"e-stop of another client -> /estop at rclpy: quiet {summary(quiet)}; during the flood {summary(flooded)}"
+              f"{'' if flooding_while_measured else ' (the flood ended before the last one)'}\n"
+              f"gui_bridge RSS: before {rss_before / 1024:.1f} MiB, peak {rss_peak / 1024:.1f} MiB, after {rss_after / 1024:.1f} MiB\n")
+    OUTPUT.mkdir(parents=True, exist_ok=True)
+    (OUTPUT / "gui_flood.txt").write_text(report)
+    print(report)
+    assert result["sent"] == FLOOD_MESSAGES and result["served_s"] is not None
+    assert len(flooded) >= 3, "the flood ended before the e-stop could be measured under it"
+    assert rss_peak - rss_before < 64 * 1024, report
