@@ -1420,7 +1420,14 @@ impl Reader {
   }
 
   // An ACKNACK without the final flag requests an immediate HEARTBEAT from the
-  // writer.
+  // writer. Its readerSNState has base 0 and no bits, as Fast DDS' own pre-emptive
+  // ACKNACK: Fast DDS answers only that form with a HEARTBEAT at once (base 0 is
+  // outside RTPS 8.3.5.5's validity rule, but it is what Fast DDS sends and expects,
+  // Cyclone DDS accepts it, and RustDDS' writer treats it as acknowledging nothing).
+  // With base 1 Fast DDS took it as a plain acknowledgement and waited for its
+  // periodic HEARTBEAT (3 s): a sample it published before we had matched it
+  // arrived that late, or never if the publisher went away first (`ros2 topic pub
+  // --once`).
   fn send_preemptive_acknack_to(&self, writer_proxy: &mut RtpsWriterProxy) {
     let flags = BitFlags::<ACKNACK_Flags>::from_flag(ACKNACK_Flags::Endianness);
     let acknack_count = writer_proxy.next_ack_nack_sequence_number();
@@ -1434,7 +1441,7 @@ impl Reader {
       AckNack {
         reader_id: self.entity_id(),
         writer_id: remote_writer_guid.entity_id,
-        reader_sn_state: SequenceNumberSet::new_empty(SequenceNumber::new(1)),
+        reader_sn_state: SequenceNumberSet::new_empty(SequenceNumber::new(0)),
         count: acknack_count,
       },
       InfoDestination {
