@@ -47,7 +47,6 @@ def main():
     lease = DomainLease()
     node = NodeProcess("compute_ik", [], lease.id)
     obs = Observer(lease.id, "bench")
-    obs.nodes.append(node)
     received = {}
     obs.node.create_subscription(
         JointState, "/servo_angles",

@@ -48,7 +48,6 @@ def main():
             time.sleep(0.01)
     node = NodeProcess("serial_node", ["--ros-args", "-p", f"port:={port}", "-p", "diagnostics_period:=0.5"], lease.id)
     obs = Observer(lease.id, "bench")
-    obs.nodes.append(node)
     diags = obs.sub("/diagnostics", DiagnosticArray)
     published = {}
     ages = []

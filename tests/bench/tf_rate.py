@@ -33,7 +33,6 @@ def main():
     lease = DomainLease()
     node = NodeProcess("state_publisher", ["--ros-args", "-p", "diagnostics_period:=0.5"], lease.id)
     obs = Observer(lease.id, "bench")
-    obs.nodes.append(node)
     tf = TfListener(lease.id)
     diags = obs.sub("/diagnostics", DiagnosticArray)
     pub = obs.pub("/joint_states", JointState)
