@@ -1,7 +1,8 @@
 // Servo pulses on Timer1, as the Arduino Servo library makes them: one pulse after
 // the other on pins 8, 9, 10, 11 (PB0..PB3), each servo refreshed every 20 ms,
-// widths in 0.5 us ticks. Edges are scheduled from the compare times, not from
-// when the interrupt ran, so widths do not drift with interrupt latency.
+// widths in 0.5 us ticks. Every edge falls on its scheduled timer tick (the interrupt
+// comes 20 us early and waits for it), so widths do not vary with interrupt latency;
+// channel 0's width is read 100 us before its pulse, the others' at the previous edge.
 #pragma once
 #include <stdint.h>
 
