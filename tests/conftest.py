@@ -116,6 +116,9 @@ class Observer:
     def wait_matched(self, publisher):
         """Our publisher is matched by the node's subscription."""
         self._wait_discovery(lambda: publisher.get_subscription_count() > 0, f"nobody subscribes {publisher.topic_name}")
+        # the node's reader may match our writer a moment after ours matched it; until
+        # then a volatile reader misses what is published
+        self.spin_for(0.3)
 
     def wait_publisher(self, topic):
         """Someone publishes `topic` (so our subscription is matched from their side too)."""

@@ -32,9 +32,19 @@ def servo_deg(base, shoulder, elbow, opening):
     return [90 - 2 * d(base), 180 - d(shoulder), 90 + d(shoulder + elbow), 60 + 120 * opening]
 
 
-def target(x, y, z, frame="base_link", sec=0, nanosec=0):
+def now_stamp(offset=0.0):
+    """(sec, nanosec) of the wall clock (compute_ik refuses targets older than
+    max_target_age, 0.5 s by default)."""
+    t = time.time() + offset
+    return int(t), int((t % 1) * 1e9)
+
+
+def target(x, y, z, frame="base_link", sec=None, nanosec=0):
+    """A target stamped now (or at sec/nanosec)."""
     m = PointStamped()
     m.header.frame_id = frame
+    if sec is None:
+        sec, nanosec = now_stamp()
     m.header.stamp.sec, m.header.stamp.nanosec = sec, nanosec
     m.point.x, m.point.y, m.point.z = float(x), float(y), float(z)
     return m
@@ -63,16 +73,28 @@ class IkRig:
             observer.wait_publisher(f"{ns}/{topic}")
 
     def send_and_wait(self, publisher, msg, stamp=None, timeout=10):
-        """Publish and wait for the servo_angles and joint_states it causes."""
+        """Publish, wait for the first servo_angles and joint_states it causes (which
+        carry its stamp), then for the planned motion to end (no new step for 0.2 s):
+        returns the last joint_states and servo_angles, where the arm came to rest."""
         n_sa, n_js = len(self.servo_angles), len(self.joint_states)
         publisher.publish(msg)
         ok = self.o.spin_until(lambda: len(self.servo_angles) > n_sa and len(self.joint_states) > n_js, timeout)
         assert ok, "no servo_angles/joint_states for a valid input"
-        sa, js = self.servo_angles[-1][1], self.joint_states[-1][1]
+        sa, js = self.servo_angles[n_sa][1], self.joint_states[n_js][1]
         if stamp is not None:
             assert (sa.header.stamp.sec, sa.header.stamp.nanosec) == stamp
             assert (js.header.stamp.sec, js.header.stamp.nanosec) == stamp
-        return js, sa
+        self.wait_at_rest(timeout)
+        return self.joint_states[-1][1], self.servo_angles[-1][1]
+
+    def wait_at_rest(self, timeout=10, quiet=0.2):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            n = len(self.servo_angles)
+            self.o.spin_for(quiet)
+            if len(self.servo_angles) == n:
+                return
+        raise AssertionError("the planned motion did not end")
 
     def last_diag(self):
         status = self.diagnostics[-1][1].status[0]
@@ -110,7 +132,7 @@ def check_state(js, sa, opening):
 def test_targets_in_joint_states_and_servo_angles_out(launch, observer):
     rig = IkRig(launch, observer)
     for i, p in enumerate([(0.2, 0.05, 0.15), (0.15, -0.1, 0.2), (0.25, 0.0, 0.1), (0.19, 0.0, 0.08)]):
-        stamp = (1_700_000_000 + i, 123_456_789 + i)
+        stamp = now_stamp()
         js, sa = rig.send_and_wait(rig.xyz, target(*p, sec=stamp[0], nanosec=stamp[1]), stamp)
         assert set(js.name) == {"base_joint", "shoulder_joint", "elbow_joint", "gripper_joint", *PASSIVE, "gripper_mimic_joint"}
         base, shoulder, elbow = check_state(js, sa, 0.0)
@@ -156,6 +178,8 @@ def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
     publishers = {"xyz": rig.xyz, "gripper": rig.gripper, "joints": rig.joints}
     for i, (topic, msg, code, text) in enumerate(BAD_INPUTS, start=1):
         n_sa = len(rig.servo_angles)
+        if hasattr(msg, "header"):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = now_stamp()  # not refused as old
         publishers[topic].publish(msg)
         assert observer.spin_until(lambda: rig.rejected_count() >= i, 10), f"no diagnostics for {code}"
         status, values = rig.last_diag()
@@ -324,3 +348,53 @@ def test_bad_command_lines_exit_nonzero_with_a_reason(args, env, message, domain
     r = subprocess.run([bin_path("compute_ik"), *args], capture_output=True, text=True, env=run_env, timeout=20)
     assert r.returncode != 0
     assert message in r.stderr, r.stderr
+
+
+def test_a_jump_is_streamed_as_a_motion_within_the_servo_limits(launch, observer):
+    """A 30 deg base move (60 deg of its servo through the 2:1 gear) is a stream of
+    steps 20 ms apart, each servo within config/arm.yaml's motion limits (300 deg/s,
+    1200 deg/s^2), joint_states following it; the first step carries the target's
+    stamp, the later ones when they were planned."""
+    rig = IkRig(launch, observer)
+    n = len(rig.servo_angles)
+    stamp = now_stamp()
+    msg = joint_target(["base_joint"], [math.radians(30)])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    rig.send_and_wait(rig.joints, msg, stamp)
+    steps = [m for _, m in rig.servo_angles[n:]]
+    assert len(steps) > 15, f"{len(steps)} steps"
+    base = [math.degrees(m.position[0]) for m in steps]
+    v = [(b - a) / 0.02 for a, b in zip([90.0] + base, base)]
+    acc = [(b - a) / 0.02 for a, b in zip([0.0] + v, v)]
+    assert max(abs(x) for x in v) <= 300 + 1e-6
+    assert max(abs(x) for x in acc) <= 1200 + 1e-3
+    assert base[-1] == pytest.approx(30.0, abs=1e-9)
+    later = [(m.header.stamp.sec, m.header.stamp.nanosec) for m in steps[1:]]
+    assert all(s != stamp for s in later) and later == sorted(later)
+    # joint_states follow the same motion
+    js = [joints_of(m)["base_joint"] for _, m in rig.joint_states[-len(steps):]]
+    assert js[-1] == pytest.approx(math.radians(30), abs=1e-12)
+
+
+def test_targets_older_than_max_target_age_are_refused(launch, observer):
+    rig = IkRig(launch, observer, "--ros-args", "-p", "max_target_age:=0.5")
+    n = len(rig.servo_angles)
+    rig.xyz.publish(target(0.2, 0.0, 0.15, sec=now_stamp(-2.0)[0], nanosec=now_stamp(-2.0)[1]))
+    assert observer.spin_until(lambda: rig.diagnostics and rig.last_diag()[1].get("last_rejection_code") == "too_old", 10)
+    assert "older than max_target_age" in rig.last_diag()[1]["last_rejection"]
+    assert rig.last_diag()[1]["too_old"] == "1"
+    observer.spin_for(0.3)
+    assert len(rig.servo_angles) == n
+    # a zero stamp means now
+    rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15, sec=0, nanosec=0))
+
+
+def test_a_straight_line_leaving_the_workspace_is_refused_before_the_move(launch, observer):
+    rig = IkRig(launch, observer, "--ros-args", "-p", "motion:=line")
+    rig.send_and_wait(rig.xyz, target(0.08, 0.075, 0.15))
+    n = len(rig.servo_angles)
+    rig.xyz.publish(target(0.08, -0.075, 0.15))  # through r < 0.102 m around the base axis
+    assert observer.spin_until(lambda: rig.last_diag()[1].get("last_rejection_code") == "line_leaves_workspace", 10)
+    assert "% along the line" in rig.last_diag()[1]["last_rejection"]
+    observer.spin_for(0.3)
+    assert len(rig.servo_angles) == n

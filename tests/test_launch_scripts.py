@@ -17,6 +17,11 @@ from sensor_msgs.msg import JointState
 from conftest import OUTPUT, REPO, bin_path
 
 SCRIPTS = REPO / "launch_scripts"
+
+
+def now_stamp():
+    t = time.time()
+    return int(t), int((t % 1) * 1e9)
 BIN_DIR = str(Path(bin_path("compute_ik")).parent)
 
 
@@ -100,10 +105,10 @@ def test_run_graph_runs_every_node_with_the_ros_arguments_and_stops_them_all(sig
         assert {ns for n, ns in observer.node.get_node_names_and_namespaces() if n == "compute_ik"} == {"/arm2"}
         m = PointStamped()
         m.header.frame_id = "base_link"
-        m.header.stamp.sec = 77
+        m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
         m.point.x, m.point.y, m.point.z = 0.2, 0.0, 0.15
         xyz.publish(m)
-        assert observer.spin_until(lambda: any(x.header.stamp.sec == 77 for _, x in state), 10)
+        assert observer.spin_until(lambda: any((x.header.stamp.sec, x.header.stamp.nanosec) == (m.header.stamp.sec, m.header.stamp.nanosec) for _, x in state), 10)
         out = s.output()
         assert f"ROS domain {domain}" in out and "virtual Arduino" in out
         for node in ("compute_ik", "state_publisher", "gui_bridge", "serial_node"):
@@ -130,10 +135,10 @@ def test_pc_and_pi_scripts_split_the_graph(domain, observer):
         observer.wait_publisher("/servo_state")
         m = PointStamped()
         m.header.frame_id = "base_link"
-        m.header.stamp.sec = 78
+        m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
         m.point.x, m.point.y, m.point.z = 0.2, 0.05, 0.15
         xyz.publish(m)
-        assert observer.spin_until(lambda: any(x.header.stamp.sec == 78 for _, x in state), 10)
+        assert observer.spin_until(lambda: any((x.header.stamp.sec, x.header.stamp.nanosec) == (m.header.stamp.sec, m.header.stamp.nanosec) for _, x in state), 10)
         assert "running here (operator PC): compute_ik, state_publisher, gui_bridge" in pc.output()
         assert "expected on the Pi" in pc.output()
         assert "serial_node with the built-in virtual Arduino" in pi.output()

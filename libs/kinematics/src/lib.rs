@@ -161,6 +161,43 @@ impl JointLimits {
         }
         Ok(())
     }
+
+    /// The nearest joints within every limit row, keeping the shoulder: base and
+    /// shoulder clamped into their ranges, the elbow into its own range intersected
+    /// with what the forearm elevation allows at that shoulder angle.
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::{ArmConfig, ArmJoints};
+    /// let limits = ArmConfig::default().arm().limits;
+    /// let q = limits.clamp(&ArmJoints { base_rad: 1.0, shoulder_rad: 2.0, elbow_rad: -0.5 });
+    /// assert!(limits.check(&q).is_ok());
+    /// assert_eq!(q.shoulder_rad, 2.0);
+    /// ```
+    pub fn clamp(&self, q: &ArmJoints) -> ArmJoints {
+        let base_rad = q.base_rad.clamp(self.base_rad.0, self.base_rad.1);
+        let shoulder_rad = q
+            .shoulder_rad
+            .clamp(self.shoulder_rad.0, self.shoulder_rad.1);
+        let lo = self
+            .elbow_rad
+            .0
+            .max(self.forearm_elevation_rad.0 - shoulder_rad);
+        let hi = self
+            .elbow_rad
+            .1
+            .min(self.forearm_elevation_rad.1 - shoulder_rad);
+        let elbow_rad = if lo <= hi {
+            q.elbow_rad.clamp(lo, hi)
+        } else {
+            (lo + hi) / 2.0
+        };
+        ArmJoints {
+            base_rad,
+            shoulder_rad,
+            elbow_rad,
+        }
+    }
 }
 
 /// The arm: geometry and limits. Cheap to copy; all methods are pure.

@@ -176,6 +176,26 @@ impl ServoCalibrations {
         Ok(ServoAngles { rad })
     }
 
+    /// Servo angles (rad) for an arm state, each clamped into its servo's range (for
+    /// a state that may lie a hair outside them; [`Self::servo_angles`] refuses).
+    pub fn clamped_servo_angles(&self, state: &ArmState) -> [f64; 4] {
+        let q = &state.joints;
+        let inputs = [
+            q.base_rad.to_degrees(),
+            q.shoulder_rad.to_degrees(),
+            q.forearm_elevation_rad().to_degrees(),
+            state.gripper_opening.clamp(0.0, 1.0),
+        ];
+        let mut rad = [0.0; 4];
+        for (i, servo) in ServoId::ALL.into_iter().enumerate() {
+            let c = self.get(servo);
+            rad[i] = (c.offset_deg + c.gain * inputs[i])
+                .clamp(c.min_deg, c.max_deg)
+                .to_radians();
+        }
+        rad
+    }
+
     /// Check the ranges: inside 0–180°, ordered, non-zero gain, pulses 400–2600 µs.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
         for servo in ServoId::ALL {

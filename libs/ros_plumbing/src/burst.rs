@@ -2,8 +2,8 @@
 //! what the outage held back, in datagrams a fraction of a millisecond apart and
 //! in rounds some milliseconds apart. A node that moves an arm applies only the
 //! newest command of a burst, never the stale ones on the way. [`take_burst`]
-//! collects what arrived together; the node decides which of its inputs supersede
-//! which ([`latest_wins`]); [`Lateness`] recognises a command that arrives late
+//! takes what arrived together (never waiting); the node decides which of its inputs
+//! supersede which ([`latest_wins`]); [`Lateness`] recognises a command that arrives late
 //! (its stamp is old), which the node holds back ([`Held`]) for at most [`HOLD_LATE`]
 //! in case a newer one follows.
 
@@ -11,38 +11,19 @@ use futures::{FutureExt, Stream, StreamExt};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-/// A burst has ended after this long without another input.
-pub const QUIET: Duration = Duration::from_millis(3);
-/// The longest wait for a burst to end.
-pub const MAX_WAIT: Duration = Duration::from_millis(50);
-
-/// `first` and every input that is ready with it. If more than one of them
-/// `is_command`, more are coming (a burst): wait until `QUIET` passes without one
-/// (at most `MAX_WAIT`). A lone input returns at once, with no added latency.
-pub async fn take_burst<T, S>(first: T, inputs: &mut S, is_command: impl Fn(&T) -> bool) -> Vec<T>
+/// `first` and every input that is ready with it (arrived together: a burst). Never
+/// waits: a lone input, or a live stream at any rate, goes at once. A burst that DDS
+/// repairs in several rounds is handled by [`Lateness`] and [`Held`]: its commands
+/// are late, and each round's newest replaces the one held.
+pub fn take_burst<T, S>(first: T, inputs: &mut S) -> Vec<T>
 where
     S: Stream<Item = T> + Unpin,
 {
     let mut batch = vec![first];
-    drain_ready(&mut batch, inputs);
-    let until = tokio::time::Instant::now() + MAX_WAIT;
-    while batch.iter().filter(|i| is_command(i)).count() > 1 && tokio::time::Instant::now() < until
-    {
-        match tokio::time::timeout(QUIET, inputs.next()).await {
-            Ok(Some(more)) => {
-                batch.push(more);
-                drain_ready(&mut batch, inputs);
-            }
-            _ => break,
-        }
-    }
-    batch
-}
-
-fn drain_ready<T, S: Stream<Item = T> + Unpin>(batch: &mut Vec<T>, inputs: &mut S) {
     while let Some(Some(more)) = inputs.next().now_or_never() {
         batch.push(more);
     }
+    batch
 }
 
 /// Keep, in order, the inputs that no later input of the same `kind` supersedes
@@ -177,16 +158,8 @@ mod tests {
     use futures::stream;
 
     #[tokio::test]
-    async fn a_lone_input_returns_at_once() {
-        let mut s = stream::pending::<u32>();
-        let t = tokio::time::Instant::now();
-        assert_eq!(take_burst(1, &mut s, |_| true).await, vec![1]);
-        assert!(t.elapsed() < QUIET);
-    }
-
-    #[tokio::test]
-    async fn a_burst_is_collected_until_it_is_quiet() {
-        // two ready now, one more 1 ms later (another datagram of the repair), then silence
+    async fn what_is_ready_comes_together_and_nothing_waits() {
+        // two ready now, one more 1 ms later: not waited for
         let later = stream::once(async {
             tokio::time::sleep(Duration::from_millis(1)).await;
             4
@@ -196,19 +169,11 @@ mod tests {
                 .chain(later)
                 .chain(stream::pending()),
         );
-        assert_eq!(take_burst(1, &mut s, |_| true).await, vec![1, 2, 3, 4]);
-    }
-
-    #[tokio::test(start_paused = true)]
-    async fn a_never_ending_burst_is_cut_at_the_maximum_wait() {
-        let mut s = Box::pin(
-            stream::iter(vec![101]).chain(stream::unfold(0u32, |n| async move {
-                tokio::time::sleep(Duration::from_millis(1)).await;
-                Some((n, n + 1))
-            })),
-        );
-        let batch = take_burst(100, &mut s, |_| true).await;
-        assert!(batch.len() >= 40 && batch.len() <= 52, "{}", batch.len());
+        let t = tokio::time::Instant::now();
+        assert_eq!(take_burst(1, &mut s), vec![1, 2, 3]);
+        assert!(t.elapsed() < Duration::from_millis(1));
+        let mut lone = stream::pending::<u32>();
+        assert_eq!(take_burst(5, &mut lone), vec![5]);
     }
 
     #[test]

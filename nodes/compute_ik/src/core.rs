@@ -2,9 +2,10 @@
 //! out, or a rejection with its reason. A rejected input never changes the state.
 
 use eezybot_kinematics::{
-    Arm, ArmConfig, ArmJoints, ArmState, Joint, KinematicsError, ServoCalibrations, ServoId,
-    ACTUATED_JOINTS,
+    Arm, ArmConfig, ArmJoints, ArmState, Joint, KinematicsError, MotionLimits, ServoCalibrations,
+    ServoId, ACTUATED_JOINTS,
 };
+use eezybot_motion::{straight_line, AxisLimits, LineError, Planner};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -69,6 +70,18 @@ pub enum Reason {
     NoJoints,
     /// The emergency stop is engaged.
     EmergencyStop,
+    /// The target's stamp is older than `max_target_age`.
+    TooOld {
+        /// how old (s)
+        age_s: f64,
+        /// the limit (s)
+        max_s: f64,
+    },
+    /// A straight-line move would leave the workspace (or jump at a singularity).
+    Line {
+        /// why, and where along the line
+        why: String,
+    },
     /// The sample could not be deserialized.
     Unreadable {
         /// what the middleware said
@@ -87,6 +100,8 @@ impl Reason {
             Reason::LengthMismatch { .. } => "length_mismatch".into(),
             Reason::NoJoints => "no_joints".into(),
             Reason::EmergencyStop => "estop".into(),
+            Reason::TooOld { .. } => "too_old".into(),
+            Reason::Line { .. } => "line_leaves_workspace".into(),
             Reason::Unreadable { .. } => "unreadable".into(),
         }
     }
@@ -115,6 +130,11 @@ impl fmt::Display for Reason {
                 f,
                 "emergency stop engaged: no motion until `estop` is false"
             ),
+            Reason::TooOld { age_s, max_s } => write!(
+                f,
+                "target stamped {age_s:.3} s ago, older than max_target_age {max_s:.3} s (delayed, or the publisher's clock differs)"
+            ),
+            Reason::Line { why } => write!(f, "{why}"),
             Reason::Unreadable { error } => write!(f, "unreadable sample: {error}"),
         }
     }
@@ -143,7 +163,8 @@ impl fmt::Display for Rejection {
     }
 }
 
-/// What an accepted input produces.
+/// One step of the arm's motion: what an accepted input produces first (stamped with
+/// the input's stamp), then every planner step (stamped when it is planned).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
     /// Every non-fixed URDF joint.
@@ -161,16 +182,86 @@ pub struct Counters {
     pub accepted: u64,
     /// Inputs refused.
     pub rejected: u64,
+    /// Of those, refused for being older than `max_target_age`.
+    pub too_old: u64,
+    /// Targets dropped unused because a newer one of the same kind arrived with them
+    /// (latest wins).
+    pub superseded: u64,
+    /// Planner steps published after the first of a move.
+    pub steps: u64,
 }
+
+/// How xyz targets are moved to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotionMode {
+    /// Every actuator within its limits, together: a straight line in joint space.
+    Joint,
+    /// The tool on a straight line; refused before the move if any point of the line
+    /// is out of the workspace.
+    Line,
+}
+
+impl MotionMode {
+    /// The parameter's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            MotionMode::Joint => "joint",
+            MotionMode::Line => "line",
+        }
+    }
+
+    /// From the parameter's value.
+    pub fn parse(s: &str) -> Option<MotionMode> {
+        match s {
+            "joint" => Some(MotionMode::Joint),
+            "line" => Some(MotionMode::Line),
+            _ => None,
+        }
+    }
+}
+
+/// How the core moves the arm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionSettings {
+    /// Time between two planned steps (s).
+    pub period_s: f64,
+    /// How xyz targets are moved to.
+    pub mode: MotionMode,
+    /// Targets stamped longer ago are refused (s); 0 = no limit.
+    pub max_target_age_s: f64,
+    /// Spacing of the points at which a straight line is checked (m).
+    pub line_step_m: f64,
+}
+
+impl Default for MotionSettings {
+    fn default() -> Self {
+        MotionSettings {
+            period_s: 0.02,
+            mode: MotionMode::Joint,
+            max_target_age_s: 0.5,
+            line_step_m: 0.002,
+        }
+    }
+}
+
+/// Largest change of any joint between two points of a straight line checked every
+/// `line_step_m`: more means the line passes a singularity.
+const LINE_MAX_JOINT_STEP_RAD: f64 = 0.1;
 
 /// The IK node's state.
 #[derive(Clone, Debug)]
 pub struct IkCore {
     arm: Arm,
     calibration: ServoCalibrations,
+    limits: MotionLimits,
     gripper_open_rad: f64,
     base_frame: String,
+    /// the commanded state: where the planner is
     state: ArmState,
+    /// where the current motion ends
+    goal: ArmState,
+    planner: Planner,
+    motion: MotionSettings,
     estop: bool,
     counters: Counters,
     last_rejection: Option<Rejection>,
@@ -178,14 +269,27 @@ pub struct IkCore {
 }
 
 impl IkCore {
-    /// A core for this configuration, starting at the home pose with the claw closed.
+    /// A core for this configuration, at rest in the home pose with the claw closed,
+    /// with the default [`MotionSettings`].
     pub fn new(config: &ArmConfig, base_frame: &str) -> IkCore {
+        let motion = MotionSettings::default();
+        let state = ArmState::default();
+        let planner = Planner::new(
+            axis_limits(&config.motion, &config.servos),
+            &actuators(&state),
+            motion.period_s,
+        )
+        .unwrap_or_else(|_| unreachable!("validated limits and a finite home pose"));
         IkCore {
             arm: config.arm(),
             calibration: config.servos,
+            limits: config.motion,
             gripper_open_rad: config.geometry.gripper_open_rad,
             base_frame: base_frame.to_string(),
-            state: ArmState::default(),
+            state,
+            goal: state,
+            planner,
+            motion,
             estop: false,
             counters: Counters::default(),
             last_rejection: None,
@@ -193,11 +297,46 @@ impl IkCore {
         }
     }
 
-    /// Swap in a new configuration (kept state is re-checked on the next input).
+    /// Swap in a new configuration (kept state is re-checked on the next input; the
+    /// motion under way continues within the new limits).
     pub fn set_config(&mut self, config: &ArmConfig) {
         self.arm = config.arm();
         self.calibration = config.servos;
+        self.limits = config.motion;
         self.gripper_open_rad = config.geometry.gripper_open_rad;
+        let _ = self
+            .planner
+            .set_limits(axis_limits(&config.motion, &config.servos));
+    }
+
+    /// Change how the arm is moved. A new step period applies from the next target.
+    pub fn set_motion(&mut self, motion: MotionSettings) {
+        if motion.period_s != self.motion.period_s {
+            if let Ok(p) = Planner::new(
+                axis_limits(&self.limits, &self.calibration),
+                &actuators(&self.state),
+                motion.period_s,
+            ) {
+                self.planner = p;
+                self.goal = self.state;
+            }
+        }
+        self.motion = motion;
+    }
+
+    /// How the arm is moved.
+    pub fn motion(&self) -> MotionSettings {
+        self.motion
+    }
+
+    /// Whether the arm is moving toward a goal.
+    pub fn is_moving(&self) -> bool {
+        self.planner.is_moving()
+    }
+
+    /// Where the current motion ends (the last accepted target).
+    pub fn goal(&self) -> &ArmState {
+        &self.goal
     }
 
     /// Change the frame targets must be given in.
@@ -205,7 +344,7 @@ impl IkCore {
         self.base_frame = base_frame.to_string();
     }
 
-    /// The last good state.
+    /// The commanded state: where the arm is on its way to the goal.
     pub fn state(&self) -> &ArmState {
         &self.state
     }
@@ -215,13 +354,24 @@ impl IkCore {
         self.counters
     }
 
+    /// Count targets dropped because newer ones arrived with them.
+    pub fn count_superseded(&mut self, n: u64) {
+        self.counters.superseded += n;
+    }
+
     /// The most recent rejection, if any.
     pub fn last_rejection(&self) -> Option<&Rejection> {
         self.last_rejection.as_ref()
     }
 
-    /// Engage or release the emergency stop. While engaged every target is refused.
+    /// Engage or release the emergency stop. Engaging stops the motion where it is;
+    /// while engaged every target is refused; after the release the arm stays until a
+    /// new target.
     pub fn set_estop(&mut self, engaged: bool) {
+        if engaged {
+            self.planner.stop();
+            self.goal = self.state;
+        }
         self.estop = engaged;
     }
 
@@ -230,11 +380,16 @@ impl IkCore {
         self.estop
     }
 
-    /// Handle an `xyz_target`.
-    pub fn handle_xyz_target(&mut self, msg: &PointStamped) -> Result<Output, Rejection> {
+    /// Handle an `xyz_target` arriving at `now`: the first step of the move toward it.
+    pub fn handle_xyz_target(
+        &mut self,
+        msg: &PointStamped,
+        now: Time,
+    ) -> Result<Output, Rejection> {
         let stamp = msg.header.stamp;
         let result = (|| {
             self.check_estop()?;
+            self.check_age(stamp, now)?;
             let frame = msg.header.frame_id.as_str();
             if !(frame.is_empty() || frame == self.base_frame) {
                 return Err(Reason::WrongFrame {
@@ -245,13 +400,73 @@ impl IkCore {
             let target = Vector3::new(msg.point.x, msg.point.y, msg.point.z);
             let joints = self
                 .arm
-                .solve_position(&target, self.state.joints.base_rad)?;
-            Ok(ArmState {
+                .solve_position(&target, self.goal.joints.base_rad)?;
+            let goal = ArmState {
                 joints,
-                ..self.state
-            })
+                ..self.goal
+            };
+            self.calibration.servo_angles(&goal)?;
+            if self.motion.mode == MotionMode::Line {
+                self.plan_line(target, goal)?;
+            }
+            Ok(goal)
         })();
-        self.finish(Source::XyzTarget, stamp, result)
+        self.finish(Source::XyzTarget, stamp, now, result)
+    }
+
+    /// The straight line from where the arm stops to `target`, checked along its
+    /// whole length, as the planner's path (the claw moves along with it).
+    fn plan_line(&mut self, target: Vector3<f64>, goal: ArmState) -> Result<(), Reason> {
+        let stop = self.planner.stopping_position();
+        let from_state = state_of(&stop);
+        let from = self.arm.forward(&from_state.joints);
+        let arm = self.arm;
+        let mut seed = from_state.joints.base_rad;
+        let path = straight_line(
+            [from.x, from.y, from.z],
+            [target.x, target.y, target.z],
+            self.motion.line_step_m,
+            LINE_MAX_JOINT_STEP_RAD,
+            |p| {
+                let q = arm.solve_position(&Vector3::new(p[0], p[1], p[2]), seed)?;
+                seed = q.base_rad;
+                Ok::<_, KinematicsError>(vec![q.base_rad, q.shoulder_rad, q.elbow_rad])
+            },
+        )
+        .map_err(|e| match &e {
+            LineError::Unreachable { .. } | LineError::Jump { .. } | LineError::Path(_) => {
+                Reason::Line { why: e.to_string() }
+            }
+        })?;
+        let n = path.len().saturating_sub(1).max(1) as f64;
+        let (g0, g1) = (stop[3], goal.gripper_opening);
+        let points: Vec<Vec<f64>> = path
+            .points()
+            .iter()
+            .enumerate()
+            .map(|(k, q)| {
+                let joints = ArmJoints {
+                    base_rad: q[0],
+                    shoulder_rad: q[1],
+                    elbow_rad: q[2],
+                };
+                actuators(&ArmState {
+                    joints,
+                    gripper_opening: g0 + (g1 - g0) * k as f64 / n,
+                })
+                .to_vec()
+            })
+            .collect();
+        // the first point is where the arm stops, to the last bit
+        let mut points = points;
+        if let Some(first) = points.first_mut() {
+            first.copy_from_slice(&stop);
+        }
+        let path = eezybot_motion::JointPath::new(points)
+            .map_err(|e| Reason::Line { why: e.to_string() })?;
+        self.planner
+            .follow(path)
+            .map_err(|e| Reason::Line { why: e.to_string() })
     }
 
     /// Handle a `gripper_target` (0 closed … 1 open); `stamp` is when it arrived,
@@ -268,18 +483,23 @@ impl IkCore {
             }
             Ok(ArmState {
                 gripper_opening: opening,
-                ..self.state
+                ..self.goal
             })
         })();
-        self.finish(Source::GripperTarget, stamp, result)
+        self.finish(Source::GripperTarget, stamp, stamp, result)
     }
 
-    /// Handle a `joint_target`: positions (rad) for some or all actuated joints; the
-    /// others keep their values.
-    pub fn handle_joint_target(&mut self, msg: &JointState) -> Result<Output, Rejection> {
+    /// Handle a `joint_target` arriving at `now`: positions (rad) for some or all
+    /// actuated joints; the others keep the values of the current goal.
+    pub fn handle_joint_target(
+        &mut self,
+        msg: &JointState,
+        now: Time,
+    ) -> Result<Output, Rejection> {
         let stamp = msg.header.stamp;
         let result = (|| {
             self.check_estop()?;
+            self.check_age(stamp, now)?;
             if msg.name.len() != msg.position.len() {
                 return Err(Reason::LengthMismatch {
                     names: msg.name.len(),
@@ -289,8 +509,8 @@ impl IkCore {
             if msg.name.is_empty() {
                 return Err(Reason::NoJoints);
             }
-            let mut joints = self.state.joints;
-            let mut gripper_rad = self.state.gripper_opening * self.gripper_open_rad;
+            let mut joints = self.goal.joints;
+            let mut gripper_rad = self.goal.gripper_opening * self.gripper_open_rad;
             let mut seen: Vec<&str> = Vec::with_capacity(4);
             for (name, &value) in msg.name.iter().zip(&msg.position) {
                 if seen.contains(&name.as_str()) {
@@ -329,7 +549,7 @@ impl IkCore {
                 gripper_opening: gripper_rad / self.gripper_open_rad,
             })
         })();
-        self.finish(Source::JointTarget, stamp, result)
+        self.finish(Source::JointTarget, stamp, now, result)
     }
 
     /// Record a sample on `source` that could not be read at all.
@@ -358,38 +578,102 @@ impl IkCore {
         }
     }
 
-    /// Turn a candidate state into output (servo ranges checked), or record the rejection.
+    /// A target stamped longer than `max_target_age` before `now` is refused; a zero
+    /// stamp means "now", and a stamp ahead of our clock is not old.
+    fn check_age(&self, stamp: Time, now: Time) -> Result<(), Reason> {
+        let max = self.motion.max_target_age_s;
+        if max <= 0.0 || stamp == Time::ZERO {
+            return Ok(());
+        }
+        let age_s = (now.to_nanos() - stamp.to_nanos()) as f64 * 1e-9;
+        if age_s > max {
+            return Err(Reason::TooOld { age_s, max_s: max });
+        }
+        Ok(())
+    }
+
+    /// Make a validated goal the planner's (unless the line planner already took it)
+    /// and return the first step at once, stamped with the input's stamp (`now` for a
+    /// zero stamp); or record the rejection.
     fn finish(
         &mut self,
         source: Source,
         stamp: Time,
+        now: Time,
         candidate: Result<ArmState, Reason>,
     ) -> Result<Output, Rejection> {
         self.counters.received += 1;
-        let produced = candidate.and_then(|state| {
-            let servos = self.calibration.servo_angles(&state)?;
-            Ok((state, servos))
+        let stamp = if stamp == Time::ZERO { now } else { stamp };
+        let accepted = candidate.and_then(|goal| {
+            self.calibration.servo_angles(&goal)?;
+            let line = source == Source::XyzTarget && self.motion.mode == MotionMode::Line;
+            if !line {
+                self.planner
+                    .move_to(&actuators(&goal))
+                    .map_err(|e| Reason::Line { why: e.to_string() })?;
+            }
+            Ok(goal)
         });
-        match produced {
-            Ok((state, servos)) => {
-                self.state = state;
+        match accepted {
+            Ok(goal) => {
+                self.goal = goal;
                 self.counters.accepted += 1;
                 self.last_event_rejected = false;
-                Ok(Output {
-                    joint_states: self.joint_states(stamp),
-                    servo_angles: JointState {
-                        header: Header {
-                            stamp,
-                            frame_id: String::new(),
-                        },
-                        name: ServoId::ALL.iter().map(|s| s.name().to_string()).collect(),
-                        position: servos.rad.to_vec(),
-                        velocity: vec![],
-                        effort: vec![],
-                    },
-                })
+                // the first step leaves at once: a small move gets no added latency
+                self.advance();
+                Ok(self.output(stamp))
             }
-            Err(reason) => Err(self.reject(source, stamp, reason)),
+            Err(reason) => {
+                if reason.code() == "too_old" {
+                    self.counters.too_old += 1;
+                }
+                Err(self.reject(source, stamp, reason))
+            }
+        }
+    }
+
+    /// The next planned step, stamped `now`, while the arm is moving.
+    pub fn step(&mut self, now: Time) -> Option<Output> {
+        if !self.planner.is_moving() {
+            return None;
+        }
+        self.advance();
+        self.counters.steps += 1;
+        Some(self.output(now))
+    }
+
+    /// One planner step into `state`; a step that would leave the joint limits (a
+    /// re-planned motion braking past a corner of the coupled limits) is clamped.
+    fn advance(&mut self) {
+        if let Some(a) = self.planner.step() {
+            let mut next = state_of(&a);
+            if self.arm.limits.check(&next.joints).is_err() {
+                next.joints = self.arm.limits.clamp(&next.joints);
+                log::debug!("a planned step clamped into the joint limits");
+            }
+            self.state = next;
+        }
+    }
+
+    fn output(&self, stamp: Time) -> Output {
+        // the planner stays within the goal's servo ranges; a clamp keeps it so
+        let servos = self
+            .calibration
+            .servo_angles(&self.state)
+            .map(|s| s.rad)
+            .unwrap_or_else(|_| self.calibration.clamped_servo_angles(&self.state));
+        Output {
+            joint_states: self.joint_states(stamp),
+            servo_angles: JointState {
+                header: Header {
+                    stamp,
+                    frame_id: String::new(),
+                },
+                name: ServoId::ALL.iter().map(|s| s.name().to_string()).collect(),
+                position: servos.to_vec(),
+                velocity: vec![],
+                effort: vec![],
+            },
         }
     }
 
@@ -429,7 +713,22 @@ impl IkCore {
             ("received", self.counters.received.to_string()),
             ("accepted", self.counters.accepted.to_string()),
             ("rejected", self.counters.rejected.to_string()),
+            ("too_old", self.counters.too_old.to_string()),
+            ("superseded", self.counters.superseded.to_string()),
             ("estop", self.estop.to_string()),
+            (
+                "motion",
+                if self.planner.is_moving() {
+                    format!("moving ({})", self.motion.mode.name())
+                } else {
+                    "at rest".to_string()
+                },
+            ),
+            ("motion_mode", self.motion.mode.name().to_string()),
+            (
+                "max_target_age_s",
+                format!("{}", self.motion.max_target_age_s),
+            ),
             ("tool0_xyz_m", format!("{:.4} {:.4} {:.4}", p.x, p.y, p.z)),
             (
                 "joints_deg",
@@ -449,4 +748,39 @@ impl IkCore {
         }
         ros_plumbing::diagnostics::status(level, name, "eezybot_arm", &message, &values)
     }
+}
+
+/// The actuators a state sets, the planner's axes: base θ1, shoulder α, forearm
+/// elevation φ (rad) and claw opening.
+pub fn actuators(s: &ArmState) -> [f64; 4] {
+    [
+        s.joints.base_rad,
+        s.joints.shoulder_rad,
+        s.joints.forearm_elevation_rad(),
+        s.gripper_opening,
+    ]
+}
+
+/// The state whose actuators are `a` (see [`actuators`]).
+pub fn state_of(a: &[f64]) -> ArmState {
+    ArmState {
+        joints: ArmJoints {
+            base_rad: a[0],
+            shoulder_rad: a[1],
+            elbow_rad: a[2] - a[1],
+        },
+        gripper_opening: a[3],
+    }
+}
+
+/// The planner's axis limits from the servos' (`config/arm.yaml` `motion`).
+pub fn axis_limits(motion: &MotionLimits, cal: &ServoCalibrations) -> Vec<AxisLimits> {
+    motion
+        .input_limits(cal)
+        .iter()
+        .map(|&(v, a)| AxisLimits {
+            max_velocity: v,
+            max_acceleration: a,
+        })
+        .collect()
 }

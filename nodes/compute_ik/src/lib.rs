@@ -9,7 +9,7 @@
 
 pub mod core;
 
-use crate::core::{IkCore, Output};
+use crate::core::{IkCore, MotionMode, MotionSettings, Output};
 use eezybot_kinematics::ArmConfig;
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
@@ -20,7 +20,6 @@ use ros_plumbing::burst;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::future::Future;
-use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// The node's description and parameters.
@@ -47,16 +46,47 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 }),
             ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
                 .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+            ParamSpec::new(
+                "motion",
+                ParameterValue::String("joint".into()),
+                "how xyz targets are moved to: `joint` (every servo within its limits, together) or `line` (the tool on a straight line, refused if any point of it is unreachable)",
+            )
+            .validator(|v| match v {
+                ParameterValue::String(s) if MotionMode::parse(s).is_some() => Ok(()),
+                _ => Err("must be `joint` or `line`".into()),
+            }),
+            ParamSpec::new(
+                "motion_rate",
+                ParameterValue::Double(50.0),
+                "steps a second of a planned motion on joint_states and servo_angles (the servos' 50 Hz refresh)",
+            )
+            .range(ParamRange::Double { min: 1.0, max: 500.0 }),
+            ParamSpec::new(
+                "max_target_age",
+                ParameterValue::Double(0.5),
+                "targets stamped longer ago than this (s) by compute_ik's clock are refused; a zero stamp means now; 0 = no limit",
+            )
+            .range(ParamRange::Double { min: 0.0, max: 3600.0 }),
         ],
     }
 }
 
 /// Load the arm configuration named by the `arm_config` parameter.
 pub fn load_config(path: &str) -> Result<ArmConfig, eezybot_kinematics::ConfigError> {
-    if path.is_empty() {
-        ArmConfig::shipped()
-    } else {
-        ArmConfig::load(Path::new(path))
+    ArmConfig::load_or_shipped(path)
+}
+
+/// The motion settings the parameters say.
+pub fn motion_settings(params: &Params) -> MotionSettings {
+    MotionSettings {
+        period_s: 1.0 / params.f64("motion_rate").unwrap_or(50.0),
+        mode: params
+            .string("motion")
+            .as_deref()
+            .and_then(MotionMode::parse)
+            .unwrap_or(MotionMode::Joint),
+        max_target_age_s: params.f64("max_target_age").unwrap_or(0.5),
+        ..MotionSettings::default()
     }
 }
 
@@ -73,16 +103,6 @@ pub enum Input {
     Estop(bool),
     /// A sample that could not be read (malformed): where, and the error.
     Unreadable(core::Source, String),
-}
-
-impl Input {
-    /// A target that moves the arm.
-    pub fn is_target(&self) -> bool {
-        matches!(
-            self,
-            Input::XyzTarget(_) | Input::GripperTarget(..) | Input::JointTarget(_)
-        )
-    }
 }
 
 /// Of the inputs that arrived together, the ones to act on, in order: an
@@ -163,6 +183,10 @@ pub async fn run(
     // for burst::HOLD_LATE in case a newer one follows
     let mut held = burst::Held::<PointStamped>::default();
     let mut lateness = burst::Lateness::default();
+    core.set_motion(motion_settings(&params));
+    // the planned motion: one step per period while moving, the first with the input
+    let step_period = |core: &IkCore| Duration::from_secs_f64(core.motion().period_s);
+    let mut next_step: Option<tokio::time::Instant> = None;
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
@@ -170,6 +194,16 @@ pub async fn run(
         let hold_until = held.deadline();
         tokio::select! {
             _ = &mut shutdown => break,
+            _ = async { if let Some(t) = next_step { tokio::time::sleep_until(t).await } }, if next_step.is_some() => {
+                if let Some(Output { joint_states, servo_angles }) = core.step(Time::now()) {
+                    outputs.servo_angles(servo_angles);
+                    outputs.joint_states(joint_states);
+                }
+                next_step = next_step.map(|t| t + step_period(&core)).filter(|_| core.is_moving());
+                if next_step.is_none() {
+                    report(&core, &peers);
+                }
+            }
             _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
                 if let Some(m) = held.take_due(tokio::time::Instant::now()) {
                     log::debug!("applying the newest late target");
@@ -203,16 +237,18 @@ pub async fn run(
                     Err(e) => log::error!("keeping the previous arm configuration: {e}"),
                 }
                 core.set_base_frame(&params.string("base_frame").unwrap_or_else(|| "base_link".into()));
+                core.set_motion(motion_settings(&params));
                 ticker = tokio::time::interval(period(&params));
             }
             input = inputs.next() => {
                 let Some(first) = input else { break };
                 // a burst (DDS repairing what a network outage held back) is applied
                 // as its newest target; a lone target goes at once
-                let arrived = burst::take_burst(first, &mut inputs, Input::is_target).await;
+                let arrived = burst::take_burst(first, &mut inputs);
                 let (arrived, superseded) = coalesce(arrived);
                 if superseded > 0 {
                     log::debug!("{superseded} targets superseded by newer ones that arrived with them");
+                    core.count_superseded(superseded as u64);
                 }
                 for input in arrived {
                     if let Input::XyzTarget(m) = &input {
@@ -221,12 +257,14 @@ pub async fn run(
                             if let Input::XyzTarget(m) = input {
                                 if held.hold(m, tokio::time::Instant::now()) {
                                     log::debug!("a late target superseded by a newer one");
+                                    core.count_superseded(1);
                                 }
                             }
                             continue;
                         }
                         if held.discard() {
                             log::debug!("a late target superseded by a newer one");
+                            core.count_superseded(1);
                         }
                     }
                     batch.push(input);
@@ -235,9 +273,9 @@ pub async fn run(
         }
         for input in batch {
             let result = match input {
-                Input::XyzTarget(m) => core.handle_xyz_target(&m),
+                Input::XyzTarget(m) => core.handle_xyz_target(&m, Time::now()),
                 Input::GripperTarget(v, stamp) => core.handle_gripper_target(v, stamp),
-                Input::JointTarget(m) => core.handle_joint_target(&m),
+                Input::JointTarget(m) => core.handle_joint_target(&m, Time::now()),
                 Input::Estop(engaged) => {
                     if engaged != core.estop() {
                         if engaged {
@@ -248,6 +286,7 @@ pub async fn run(
                             log::info!("emergency stop released")
                         }
                         core.set_estop(engaged);
+                        next_step = None;
                         report(&core, &peers);
                     }
                     continue;
@@ -261,6 +300,10 @@ pub async fn run(
                 }) => {
                     outputs.servo_angles(servo_angles);
                     outputs.joint_states(joint_states);
+                    // the next step one period after this first one
+                    next_step = core
+                        .is_moving()
+                        .then(|| tokio::time::Instant::now() + step_period(&core));
                 }
                 Err(rejection) => {
                     log::warn!("{rejection}");

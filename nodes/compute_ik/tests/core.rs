@@ -14,21 +14,36 @@ fn core() -> IkCore {
     IkCore::new(&ArmConfig::default(), "base_link")
 }
 
+/// The test's clock: the targets' stamp, so they are not old.
+fn now() -> Time {
+    Time::from_nanos(1_700_000_000_123_456_789)
+}
+
 fn target(x: f64, y: f64, z: f64, frame: &str) -> PointStamped {
     PointStamped {
         header: Header {
-            stamp: Time::from_nanos(1_700_000_000_123_456_789),
+            stamp: now(),
             frame_id: frame.into(),
         },
         point: Point { x, y, z },
     }
 }
 
+/// Step the planned motion until the arm rests; the outputs of every step.
+fn settle(c: &mut IkCore) -> Vec<Output> {
+    let mut out = vec![];
+    while let Some(o) = c.step(now()) {
+        out.push(o);
+        assert!(out.len() < 10_000, "never settles");
+    }
+    out
+}
+
 #[test]
 fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
     let mut c = core();
     let out = c
-        .handle_xyz_target(&target(0.2, 0.05, 0.15, "base_link"))
+        .handle_xyz_target(&target(0.2, 0.05, 0.15, "base_link"), now())
         .unwrap();
     assert_eq!(
         out.joint_states.header.stamp,
@@ -45,6 +60,8 @@ fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
         ]
     );
     assert_eq!(out.joint_states.name.len(), 11);
+    // the first step leaves at once; the rest follow at the motion rate
+    let out = settle(&mut c).pop().unwrap();
     let arm = Arm::default();
     let p = arm.forward(&c.state().joints);
     assert!((p - Vector3::new(0.2, 0.05, 0.15)).norm() < 1e-12);
@@ -65,15 +82,16 @@ fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
 #[test]
 fn empty_frame_means_base_link() {
     assert!(core()
-        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""))
+        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""), now())
         .is_ok());
 }
 
 #[test]
 fn every_bad_input_is_refused_and_keeps_the_state() {
     let mut c = core();
-    c.handle_xyz_target(&target(0.2, 0.0, 0.15, "base_link"))
+    c.handle_xyz_target(&target(0.2, 0.0, 0.15, "base_link"), now())
         .unwrap();
+    settle(&mut c);
     let good = *c.state();
     let bad_joint = |names: &[&str], pos: &[f64]| JointState {
         name: names.iter().map(|s| s.to_string()).collect(),
@@ -82,23 +100,23 @@ fn every_bad_input_is_refused_and_keeps_the_state() {
     };
     let cases: Vec<(Result<Output, Rejection>, &str)> = vec![
         (
-            c.handle_xyz_target(&target(1.0, 0.0, 0.15, "base_link")),
+            c.handle_xyz_target(&target(1.0, 0.0, 0.15, "base_link"), now()),
             "too_far",
         ),
         (
-            c.handle_xyz_target(&target(f64::NAN, 0.0, 0.15, "base_link")),
+            c.handle_xyz_target(&target(f64::NAN, 0.0, 0.15, "base_link"), now()),
             "non_finite_target",
         ),
         (
-            c.handle_xyz_target(&target(0.2, f64::INFINITY, 0.15, "base_link")),
+            c.handle_xyz_target(&target(0.2, f64::INFINITY, 0.15, "base_link"), now()),
             "non_finite_target",
         ),
         (
-            c.handle_xyz_target(&target(0.2, 0.0, 0.15, "map")),
+            c.handle_xyz_target(&target(0.2, 0.0, 0.15, "map"), now()),
             "wrong_frame",
         ),
         (
-            c.handle_xyz_target(&target(-0.2, 0.0, 0.15, "base_link")),
+            c.handle_xyz_target(&target(-0.2, 0.0, 0.15, "base_link"), now()),
             "out_of_limits:base_joint",
         ),
         (
@@ -110,28 +128,34 @@ fn every_bad_input_is_refused_and_keeps_the_state() {
             "gripper_out_of_range",
         ),
         (
-            c.handle_joint_target(&bad_joint(&["wrist_joint"], &[0.0])),
+            c.handle_joint_target(&bad_joint(&["wrist_joint"], &[0.0]), now()),
             "unknown_joint",
         ),
         (
-            c.handle_joint_target(&bad_joint(&["base_joint"], &[])),
+            c.handle_joint_target(&bad_joint(&["base_joint"], &[]), now()),
             "length_mismatch",
         ),
-        (c.handle_joint_target(&bad_joint(&[], &[])), "no_joints"),
         (
-            c.handle_joint_target(&bad_joint(&["base_joint", "base_joint"], &[0.0, 0.1])),
+            c.handle_joint_target(&bad_joint(&[], &[]), now()),
+            "no_joints",
+        ),
+        (
+            c.handle_joint_target(
+                &bad_joint(&["base_joint", "base_joint"], &[0.0, 0.1]),
+                now(),
+            ),
             "duplicate_joint",
         ),
         (
-            c.handle_joint_target(&bad_joint(&["shoulder_joint"], &[f64::NAN])),
+            c.handle_joint_target(&bad_joint(&["shoulder_joint"], &[f64::NAN]), now()),
             "non_finite_joint:shoulder_joint",
         ),
         (
-            c.handle_joint_target(&bad_joint(&["shoulder_joint"], &[2.5])),
+            c.handle_joint_target(&bad_joint(&["shoulder_joint"], &[2.5]), now()),
             "out_of_limits:shoulder_joint",
         ),
         (
-            c.handle_joint_target(&bad_joint(&["gripper_joint"], &[2.0])),
+            c.handle_joint_target(&bad_joint(&["gripper_joint"], &[2.0]), now()),
             "out_of_limits:gripper_joint",
         ),
     ];
@@ -152,7 +176,10 @@ fn every_bad_input_is_refused_and_keeps_the_state() {
         Counters {
             received: 16,
             accepted: 2,
-            rejected: 14
+            rejected: 14,
+            too_old: 0,
+            superseded: 0,
+            steps: c.counters().steps,
         }
     );
 }
@@ -165,7 +192,8 @@ fn joint_mode_keeps_unnamed_joints() {
         position: vec![0.3, 0.3],
         ..JointState::default()
     };
-    let out = c.handle_joint_target(&msg).unwrap();
+    c.handle_joint_target(&msg, now()).unwrap();
+    let out = settle(&mut c).pop().unwrap();
     assert_eq!(c.state().joints.base_rad, 0.3);
     assert_eq!(c.state().joints.shoulder_rad, ArmJoints::HOME.shoulder_rad);
     assert!((c.state().gripper_opening - 0.5).abs() < 1e-12);
@@ -177,12 +205,14 @@ fn estop_refuses_everything_until_released() {
     let mut c = core();
     c.set_estop(true);
     let r = c
-        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""))
+        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""), now())
         .unwrap_err();
     assert_eq!(r.reason, Reason::EmergencyStop);
     assert_eq!(c.diagnostic_status("x").level, DiagnosticStatus::WARN);
     c.set_estop(false);
-    assert!(c.handle_xyz_target(&target(0.2, 0.0, 0.15, "")).is_ok());
+    assert!(c
+        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""), now())
+        .is_ok());
 }
 
 #[test]
@@ -195,4 +225,177 @@ fn unreadable_samples_are_counted_and_reported() {
     assert!(d.message.contains("bad CDR"), "{}", d.message);
     assert_eq!(c.counters().rejected, 1);
     assert_eq!(*c.state(), eezybot_kinematics::ArmState::default());
+}
+
+/// Servo angles (deg) of every output of a move: the first, then each step.
+fn servo_trace(first: Output, rest: Vec<Output>) -> Vec<Vec<f64>> {
+    std::iter::once(first)
+        .chain(rest)
+        .map(|o| {
+            o.servo_angles
+                .position
+                .iter()
+                .map(|r| r.to_degrees())
+                .collect()
+        })
+        .collect()
+}
+
+/// Every servo's speed and acceleration along a trace stepped every `dt`, from rest at
+/// `start`, within the shipped limits (300 deg/s, 1200 deg/s^2; the claw 500, 2000).
+fn assert_within_servo_limits(start: &[f64], trace: &[Vec<f64>], dt: f64) {
+    let limits = [
+        (300.0, 1200.0),
+        (300.0, 1200.0),
+        (300.0, 1200.0),
+        (500.0, 2000.0),
+    ];
+    let mut prev = start.to_vec();
+    let mut prev_v = [0.0; 4];
+    for (k, q) in trace.iter().enumerate() {
+        for i in 0..4 {
+            let v = (q[i] - prev[i]) / dt;
+            let a = (v - prev_v[i]) / dt;
+            assert!(
+                v.abs() <= limits[i].0 * (1.0 + 1e-9) + 1e-9,
+                "step {k} servo {i}: {v} deg/s"
+            );
+            assert!(
+                a.abs() <= limits[i].1 * (1.0 + 1e-6) + 1e-6,
+                "step {k} servo {i}: {a} deg/s^2"
+            );
+            prev_v[i] = v;
+        }
+        prev = q.clone();
+    }
+}
+
+fn home_servos() -> Vec<f64> {
+    vec![90.0, 90.0, 90.0, 60.0]
+}
+
+#[test]
+fn a_jump_is_planned_as_a_motion_within_the_servo_limits() {
+    // the measurement: a 30 deg base move was one servo_angles message
+    let mut c = core();
+    let msg = JointState {
+        name: vec!["base_joint".into()],
+        position: vec![30f64.to_radians()],
+        ..JointState::default()
+    };
+    let first = c.handle_joint_target(&msg, now()).unwrap();
+    assert!(c.is_moving());
+    let rest = settle(&mut c);
+    let trace = servo_trace(first, rest);
+    // 60 deg of the base servo at 300 deg/s, ramped in 0.25 s: ~0.45 s, ~23 steps of 20 ms
+    assert!(trace.len() > 15 && trace.len() < 40, "{}", trace.len());
+    assert_within_servo_limits(&home_servos(), &trace, 0.02);
+    assert!((trace.last().unwrap()[0] - 30.0).abs() < 1e-9);
+    // the first step leaves at once, and small: one acceleration step
+    assert!((trace[0][0] - 90.0).abs() < 1200.0 * 0.02 * 0.02 + 1e-9 && trace[0][0] < 90.0);
+}
+
+#[test]
+fn a_new_target_mid_move_replans_from_the_current_state_within_the_limits() {
+    let mut c = core();
+    let first = c
+        .handle_xyz_target(&target(0.2, 0.08, 0.15, ""), now())
+        .unwrap();
+    let mut outs = vec![];
+    for _ in 0..8 {
+        outs.push(c.step(now()).unwrap());
+    }
+    outs.push(
+        c.handle_xyz_target(&target(0.16, -0.08, 0.22, ""), now())
+            .unwrap(),
+    );
+    outs.extend(settle(&mut c));
+    let trace = servo_trace(first, outs);
+    assert_within_servo_limits(&home_servos(), &trace, 0.02);
+    let p = Arm::default().forward(&c.state().joints);
+    assert!((p - Vector3::new(0.16, -0.08, 0.22)).norm() < 1e-12);
+}
+
+#[test]
+fn estop_stops_the_motion_where_it_is() {
+    let mut c = core();
+    c.handle_xyz_target(&target(0.2, 0.08, 0.15, ""), now())
+        .unwrap();
+    for _ in 0..5 {
+        c.step(now()).unwrap();
+    }
+    let here = *c.state();
+    c.set_estop(true);
+    assert!(c.step(now()).is_none());
+    assert_eq!(*c.state(), here);
+    c.set_estop(false);
+    assert!(
+        c.step(now()).is_none(),
+        "moved after the release without a target"
+    );
+}
+
+#[test]
+fn old_targets_are_refused_and_a_zero_stamp_means_now() {
+    let mut c = core();
+    let mut old = target(0.2, 0.0, 0.15, "");
+    old.header.stamp = Time::from_nanos(now().to_nanos() - 700_000_000);
+    let r = c.handle_xyz_target(&old, now()).unwrap_err();
+    assert_eq!(r.reason.code(), "too_old");
+    assert!(r.to_string().contains("0.700 s ago"), "{r}");
+    assert_eq!(c.counters().too_old, 1);
+    assert!(!c.is_moving());
+    let mut zero = target(0.2, 0.0, 0.15, "");
+    zero.header.stamp = Time::ZERO;
+    let out = c.handle_xyz_target(&zero, now()).unwrap();
+    assert_eq!(out.joint_states.header.stamp, now());
+    // 0 turns the check off
+    c.set_motion(MotionSettings {
+        max_target_age_s: 0.0,
+        ..c.motion()
+    });
+    assert!(c.handle_xyz_target(&old, now()).is_ok());
+}
+
+#[test]
+fn a_straight_line_is_followed_or_refused_before_the_move() {
+    let mut c = core();
+    c.set_motion(MotionSettings {
+        mode: MotionMode::Line,
+        ..c.motion()
+    });
+    c.handle_xyz_target(&target(0.2, -0.1, 0.15, ""), now())
+        .unwrap();
+    settle(&mut c);
+    // from (0.2, -0.1, 0.15) to (0.2, 0.1, 0.15): the tool stays on the segment
+    let first = c
+        .handle_xyz_target(&target(0.2, 0.1, 0.15, ""), now())
+        .unwrap();
+    let arm = Arm::default();
+    let mut outs = vec![first];
+    outs.extend(settle(&mut c));
+    let on_line = |o: &Output| {
+        let q: Vec<f64> = o.joint_states.position.clone();
+        let p = arm.forward(&ArmJoints {
+            base_rad: q[0],
+            shoulder_rad: q[1],
+            elbow_rad: q[2],
+        });
+        (p.x - 0.2).abs().max((p.z - 0.15).abs())
+    };
+    let worst = outs.iter().map(on_line).fold(0.0, f64::max);
+    assert!(worst < 2e-4, "the tool left the line by {worst} m");
+    assert!(outs.len() > 10);
+    // a line that crosses the unreachable region around the base's axis (r < 0.102 m
+    // at this height): refused, nothing moves
+    c.handle_xyz_target(&target(0.08, 0.075, 0.15, ""), now())
+        .unwrap();
+    settle(&mut c);
+    let before = *c.state();
+    let r = c.handle_xyz_target(&target(0.08, -0.075, 0.15, ""), now());
+    let err = r.unwrap_err();
+    assert_eq!(err.reason.code(), "line_leaves_workspace", "{err}");
+    assert!(err.to_string().contains("% along the line"), "{err}");
+    assert!(!c.is_moving());
+    assert_eq!(*c.state(), before);
 }

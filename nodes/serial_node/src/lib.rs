@@ -433,7 +433,7 @@ pub async fn run(
                 let Some(first) = input else { break };
                 // a burst (DDS repairing what a network outage held back) moves the
                 // arm to its newest command only; a lone command goes at once
-                let batch = burst::take_burst(first, &mut inputs, |i| matches!(i, Input::ServoAngles(..))).await;
+                let batch = burst::take_burst(first, &mut inputs);
                 let (batch, superseded) = coalesce(batch);
                 if superseded > 0 {
                     log::debug!("{superseded} servo_angles superseded by a newer one that arrived with them");
