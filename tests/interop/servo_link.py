@@ -74,11 +74,14 @@ def parse_state(payload):
 class SimulatedUno:
     """The servo_control ELF in simavr (firmware/servo_control/build/servo_sim)."""
 
-    def __init__(self, workdir, firmware_dir):
+    def __init__(self, workdir, firmware_dir, boot=0):
+        """`boot` > 0: the same board reset (a new simavr process on the same pty link),
+        with its own events file."""
         self.workdir = Path(workdir)
         self.tty_path = self.workdir / "tty"
-        self.events_path = self.workdir / "events.txt"
-        self.log = open(self.workdir / "servo_sim.log", "w")
+        tag = f"-{boot}" if boot else ""
+        self.events_path = self.workdir / f"events{tag}.txt"
+        self.log = open(self.workdir / f"servo_sim{tag}.log", "w")
         sim = Path(firmware_dir) / "build" / "servo_sim"
         elf = Path(firmware_dir) / "build" / "servo_control.elf"
         self.proc = subprocess.Popen([str(sim), str(elf), "--pty-link", str(self.tty_path), "--events", str(self.events_path)],
@@ -132,6 +135,14 @@ class SimulatedUno:
             elif len(parts) == 3 and parts[0] == "r":
                 rx.append((int(parts[1]), int(parts[2])))
         return edges, rx
+
+    def toggle_cable(self, plugged):
+        """Pull the USB cable (the pty goes away, the AVR runs on) or plug it back."""
+        self.proc.send_signal(signal.SIGUSR1)
+        deadline = time.monotonic() + 5
+        while self.tty_path.exists() != plugged:
+            assert time.monotonic() < deadline, "servo_sim did not toggle its pty"
+            time.sleep(0.002)
 
     def stop(self):
         if self.fd is not None:

@@ -8,7 +8,12 @@
 // Event lines:  e CYCLE PIN LEVEL   (pin 0..3 = PB0..PB3)
 //               r CYCLE BYTE        (byte delivered to the AVR's UART, host -> AVR)
 //               t CYCLE BYTE        (byte sent by the AVR)
-// Stops on SIGINT/SIGTERM with exit code 0.
+//               w CYCLE NS          (bytes were read from the pty at CLOCK_REALTIME NS;
+//                                    their r lines follow: ties simulated to wall time)
+//               u CYCLE 0|1         (the USB cable pulled / plugged back, SIGUSR1)
+// SIGUSR1 pulls the USB cable (the pty is closed and its link removed; the AVR runs on,
+// holding its pulses as a board on its own supply does) or plugs it back (a new pty at
+// the same link). Stops on SIGINT/SIGTERM with exit code 0.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -28,6 +33,7 @@
 #include <sim_irq.h>
 
 static volatile sig_atomic_t stop;
+static volatile sig_atomic_t replug;
 static FILE *events;
 static avr_t *avr;
 static int master = -1;
@@ -37,6 +43,11 @@ static uint32_t pin_level[4] = {2, 2, 2, 2};
 static void on_signal(int sig) {
   (void)sig;
   stop = 1;
+}
+
+static void on_usr1(int sig) {
+  (void)sig;
+  replug = 1;
 }
 
 static void pin_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
@@ -73,6 +84,47 @@ static uint64_t now_ns(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+static uint64_t realtime_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+// The pseudo-terminal: the slave end is what a client opens; keep it open and raw
+// ourselves so that nothing is echoed before a client configures it.
+static int slave = -1;
+static int plug(const char *link_path) {
+  master = posix_openpt(O_RDWR | O_NOCTTY);
+  if (master < 0 || grantpt(master) || unlockpt(master)) {
+    perror("servo_sim: pty");
+    return -1;
+  }
+  const char *slave_name = ptsname(master);
+  slave = open(slave_name, O_RDWR | O_NOCTTY);
+  struct termios tio;
+  if (slave < 0 || tcgetattr(slave, &tio)) {
+    perror("servo_sim: pty slave");
+    return -1;
+  }
+  cfmakeraw(&tio);
+  tcsetattr(slave, TCSANOW, &tio);
+  fcntl(master, F_SETFL, fcntl(master, F_GETFL) | O_NONBLOCK);
+  unlink(link_path);
+  if (symlink(slave_name, link_path)) {
+    perror("servo_sim: symlink");
+    return -1;
+  }
+  fprintf(stderr, "servo_sim: UART on %s -> %s\n", link_path, slave_name);
+  return 0;
+}
+
+static void unplug(const char *link_path) {
+  unlink(link_path);
+  close(slave);
+  close(master);
+  slave = master = -1;
 }
 
 static void usage(void) {
@@ -115,28 +167,7 @@ int main(int argc, char **argv) {
   }
   setvbuf(events, NULL, _IOFBF, 1 << 16);
 
-  // The pseudo-terminal: the slave end is what a client opens; keep it open and raw
-  // ourselves so that nothing is echoed before a client configures it.
-  master = posix_openpt(O_RDWR | O_NOCTTY);
-  if (master < 0 || grantpt(master) || unlockpt(master)) {
-    perror("servo_sim: pty");
-    return 1;
-  }
-  const char *slave_name = ptsname(master);
-  int slave = open(slave_name, O_RDWR | O_NOCTTY);
-  struct termios tio;
-  if (slave < 0 || tcgetattr(slave, &tio)) {
-    perror("servo_sim: pty slave");
-    return 1;
-  }
-  cfmakeraw(&tio);
-  tcsetattr(slave, TCSANOW, &tio);
-  fcntl(master, F_SETFL, fcntl(master, F_GETFL) | O_NONBLOCK);
-  unlink(link_path);
-  if (symlink(slave_name, link_path)) {
-    perror("servo_sim: symlink");
-    return 1;
-  }
+  if (plug(link_path)) return 1;
 
   for (intptr_t pin = 0; pin < 4; pin++)
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), pin), pin_changed, (void *)pin);
@@ -147,8 +178,9 @@ int main(int argc, char **argv) {
 
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
+  signal(SIGUSR1, on_usr1);
   signal(SIGPIPE, SIG_IGN);
-  fprintf(stderr, "servo_sim: %s running, UART on %s -> %s\n", elf, link_path, slave_name);
+  fprintf(stderr, "servo_sim: %s running\n", elf);
 
   uint8_t pending[256];
   size_t npending = 0, next = 0;
@@ -164,10 +196,25 @@ int main(int argc, char **argv) {
         break;
       }
     }
-    if (next == npending) {
+    if (replug) {
+      replug = 0;
+      if (master >= 0) {
+        unplug(link_path);
+        npending = next = 0;
+        fprintf(events, "u %llu 0\n", (unsigned long long)avr->cycle);
+      } else {
+        if (plug(link_path)) {
+          exit_code = 1;
+          break;
+        }
+        fprintf(events, "u %llu 1\n", (unsigned long long)avr->cycle);
+      }
+    }
+    if (next == npending && master >= 0) {
       ssize_t n = read(master, pending, sizeof(pending));
       npending = n > 0 ? (size_t)n : 0;
       next = 0;
+      if (n > 0) fprintf(events, "w %llu %llu\n", (unsigned long long)avr->cycle, (unsigned long long)realtime_ns());
     }
     while (next < npending && !xoff) {
       fprintf(events, "r %llu %u\n", (unsigned long long)avr->cycle, pending[next]);
@@ -183,8 +230,6 @@ int main(int argc, char **argv) {
   }
   fflush(events);
   fclose(events);
-  unlink(link_path);
-  close(slave);
-  close(master);
+  if (master >= 0) unplug(link_path);
   return exit_code;
 }

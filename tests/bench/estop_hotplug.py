@@ -1,0 +1,183 @@
+#!/usr/bin/env python3
+"""E-stop latency and hot-plug reconnect time at the pins of the real firmware in simavr
+(issue 9, items 3 and 4), for BENCHMARKS.md. tests/test_estop_and_hotplug.py checks the
+behaviour; this program times it over many trials:
+
+    $EEZYBOT_PYTHON tests/bench/estop_hotplug.py [--trials 20] [--cycles 20] [--json FILE]
+
+Needs release binaries (cargo build --release --bins; EEZYBOT_BIN_DIR overrides
+target/release) and the firmware and its harness (make -C firmware/servo_control all sim).
+
+E-stop, per action (hold, detach), --trials times, each mid-move (50 Hz stream, 0.1 s into
+a move of 0.3 s):
+  to_board   time.time_ns() just before rclpy publishes `estop` -> the board has the whole
+             ESTOP frame (its last byte's cycle, tied to wall time by the harness's `w`
+             events): from here no command moves a servo.
+  to_pins    -> the pin shows it: hold, the rise of the first pulse after that (every
+             pulse from then on has the held width, checked); detach, the first 20 ms
+             servo frame with no pulse (the last pulse's rise + 20 ms).
+Hot-plug, --cycles of each kind (the cable pulled for 0.3 s mid-move, the board reset):
+  reconnect  plugged back (time.time_ns() after the pty is there again) -> the board has
+             the first SET_PULSES of the new session.
+"""
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "release"))
+
+from std_msgs.msg import Bool  # noqa: E402
+
+from conftest import DomainLease, NodeProcess, Observer  # noqa: E402
+from interop.servo_link import ESTOP  # noqa: E402
+from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, Rig, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
+
+A = [60.0, 70.0, 110.0, 60.0]
+B = [130.0, 110.0, 80.0, 140.0]
+
+
+def stats(xs):
+    xs = sorted(xs)
+    return {"n": len(xs), "p50": round(statistics.median(xs), 2),
+            "p99": round(xs[min(len(xs) - 1, int(round(0.99 * (len(xs) - 1))))], 2), "max": round(xs[-1], 2)}
+
+
+class Launcher:
+    def __init__(self, domain):
+        self.domain, self.procs = domain, []
+
+    def __call__(self, name, *args):
+        p = NodeProcess(name, list(args), self.domain)
+        self.procs.append(p)
+        return p
+
+    def stop(self):
+        return [p.stop() for p in self.procs]
+
+
+def connected(rig, reconnects=0):
+    d = rig.diag()
+    return d.get("connection") == "connected" and int(d.get("reconnects") or 0) == reconnects
+
+
+def estop_trials(domain, action, trials, tmp):
+    o = Observer(domain)
+    launch = Launcher(domain)
+    rig = Rig(launch, o, tmp, "-p", f"estop_action:={action}")
+    published = []
+    try:
+        assert rig.spin(until=lambda: connected(rig), timeout=15), "serial_node did not connect"
+        for i in range(trials):
+            rig.target = A
+            assert rig.spin(until=lambda: rig.at(A), timeout=5)
+            rig.target = B
+            rig.spin(0.1)
+            published.append(time.time_ns())
+            rig.estop.publish(Bool(data=True))
+            assert rig.spin(until=lambda: rig.diag().get("device_state") == "e-stop", timeout=5)
+            rig.spin(0.2)
+            rig.target = None
+            rig.estop.publish(Bool(data=False))
+            assert rig.spin(until=lambda: rig.diag().get("device_state") in ("running", "idle"), timeout=5)
+        rig.target = A
+        assert rig.spin(until=lambda: rig.at(A), timeout=5)
+    finally:
+        rig.stop()
+        launch.stop()
+        o.close()
+    ev = rig.events()
+    frames = ev.frames()
+    engaged = [c for t, _, p, c in frames if t == ESTOP and p[0] in (1, 2)]
+    assert len(engaged) == trials, (len(engaged), trials)
+    sends = sent_ticks(ev)
+    to_board, to_pins = [], []
+    for t_pub, c_stop in zip(published, engaged):
+        to_board.append((ev.wall_ns(c_stop) - t_pub) / 1e6)
+        applied = [t for c, t in sends if c < c_stop][-1]
+        if action == "hold":
+            first = min(next(c for c, _ in ev.pulses(pin) if c > c_stop) for pin in range(4))
+            for pin in range(4):
+                nxt = next(c for c, _ in sends if c > c_stop)
+                assert all(abs(w - applied[pin] / 2) <= 1.0 for c, w in ev.pulses(pin) if c_stop < c < nxt)
+            to_pins.append((ev.wall_ns(first) - t_pub) / 1e6)
+        else:
+            last = max([c for pin in range(4) for c, _ in ev.pulses(pin) if c < c_stop + SERVO_PERIOD_S * CYCLES_PER_S])
+            gone = last + int(SERVO_PERIOD_S * CYCLES_PER_S)
+            to_pins.append((ev.wall_ns(gone) - t_pub) / 1e6)
+    return {"to_board_ms": stats(to_board), "to_pins_ms": stats(to_pins),
+            "velocity_violations": len(velocity_violations(ev, velocity_limits_us_per_s()))}
+
+
+def hotplug_cycles(domain, kind, cycles, tmp):
+    o = Observer(domain)
+    launch = Launcher(domain)
+    rig = Rig(launch, o, tmp)
+    up = []
+    try:
+        assert rig.spin(until=lambda: connected(rig), timeout=15)
+        rig.target = A
+        assert rig.spin(until=lambda: rig.at(A), timeout=5)
+        for i in range(cycles):
+            rig.target = B if i % 2 == 0 else A
+            rig.spin(0.1)
+            if kind == "cable":
+                rig.board.toggle_cable(False)
+            else:
+                rig.board.stop()
+            assert rig.spin(until=lambda: rig.diag().get("connection") == "disconnected", timeout=5)
+            rig.spin(0.3)
+            up.append(time.time_ns())
+            rig.board.toggle_cable(True) if kind == "cable" else rig.boot()
+            assert rig.spin(until=lambda: connected(rig, i + 1), timeout=10)
+            assert rig.spin(until=lambda: rig.at(rig.target), timeout=5)
+        counters = {k: rig.diag()[k] for k in ("reconnects", "frames_sent", "frames_ramped_by_velocity_limit")}
+    finally:
+        rig.stop()
+        launch.stop()
+        o.close()
+    ms = []
+    if kind == "cable":
+        ev = rig.events()
+        plugs = [c for c, p in ev.cable if p]
+        sends = [c for c, _ in sent_ticks(ev)]
+        ms = [(ev.wall_ns(next(c for c in sends if c > cp)) - t) / 1e6 for t, cp in zip(up, plugs)]
+    else:
+        for boot, t in enumerate(up, start=1):
+            ev = rig.events(boot)
+            ms.append((ev.wall_ns(sent_ticks(ev)[0][0]) - t) / 1e6)
+    return {"reconnect_ms": stats(ms), "counters": counters}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--cycles", type=int, default=20)
+    ap.add_argument("--json")
+    args = ap.parse_args()
+    lease = DomainLease()
+    out = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "bin_dir": os.environ["EEZYBOT_BIN_DIR"]}
+    try:
+        for action in ("hold", "detach"):
+            with tempfile.TemporaryDirectory() as tmp:
+                out[f"estop_{action}"] = r = estop_trials(lease.id, action, args.trials, tmp)
+            print(f"e-stop ({action}), {args.trials} trials: publish -> board {r['to_board_ms']} ms, "
+                  f"-> pins {r['to_pins_ms']} ms; velocity-limit violations {r['velocity_violations']}")
+        for kind in ("cable", "reset"):
+            with tempfile.TemporaryDirectory() as tmp:
+                out[f"hotplug_{kind}"] = r = hotplug_cycles(lease.id, kind, args.cycles, tmp)
+            print(f"hot-plug ({kind}), {args.cycles} cycles: reconnect {r['reconnect_ms']} ms; {r['counters']}")
+    finally:
+        lease.release()
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,200 @@
+"""serial_node driving the real firmware in simavr, as issue 9's e-stop and hot-plug checks
+need it: a 50 Hz servo_angles stream from rclpy, the board's USB cable pulled and the board
+reset, and the pin edges read back against the velocity limit of config/arm.yaml.
+
+Used by tests/test_estop_and_hotplug.py (one trial of each kind, 20 hot-plug cycles) and
+tests/bench/estop_hotplug.py (the timing figures: e-stop latency, reconnect time).
+
+Clocks: simavr's cycle counter for everything on the board; its `w` events tie a cycle to
+CLOCK_REALTIME when the harness read the bytes from the pty, so a time.time_ns() taken in
+the test (just before rclpy publishes) can be compared with a board event."""
+import bisect
+import math
+import struct
+import time
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+
+from conftest import LATCHED, REPO
+from interop.servo_link import ESTOP, SET_PULSES, Decoder, SimulatedUno
+
+FIRMWARE = REPO / "firmware" / "servo_control"
+SERVOS = ["base_servo", "shoulder_servo", "elbow_servo", "gripper_servo"]
+CYCLES_PER_S = 16_000_000
+SERVO_PERIOD_S = 0.020
+# ROBOT.md's servo mapping: 544 us at 0 deg, 2400 us at 180 deg
+US_PER_DEG = (2400 - 544) / 180
+# firmware/servo_control/config.h: the pose a board reports before its first command
+HOLD_US = [1472.0, 1472.0, 1472.0, 1162.5]
+
+
+def pulse_us(deg):
+    return 544 + US_PER_DEG * deg
+
+
+def velocity_limits_us_per_s():
+    """config/arm.yaml's motion limits per servo horn, as pulse width per second."""
+    import yaml
+
+    motion = yaml.safe_load((REPO / "config" / "arm.yaml").read_text())["motion"]
+    return [motion[j]["max_velocity_deg_s"] * US_PER_DEG for j in ("base", "shoulder", "elbow", "gripper")]
+
+
+def angles(deg, sec=None):
+    m = JointState(name=list(SERVOS), position=[math.radians(d) for d in deg])
+    t = time.time() if sec is None else sec
+    m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
+    return m
+
+
+class BoardEvents:
+    """One simavr run's event file, parsed."""
+
+    def __init__(self, path):
+        self.edges, self.rx, self.walls, self.cable = [], [], [], []
+        for line in Path(path).read_text().splitlines():
+            p = line.split()
+            if p[0] == "e" and len(p) == 4:
+                self.edges.append((int(p[1]), int(p[2]), int(p[3])))
+            elif p[0] == "r" and len(p) == 3:
+                self.rx.append((int(p[1]), int(p[2])))
+            elif p[0] == "w" and len(p) == 3:
+                self.walls.append((int(p[1]), int(p[2])))
+            elif p[0] == "u" and len(p) == 3:
+                self.cable.append((int(p[1]), p[2] == "1"))
+        self._wall_cycles = [c for c, _ in self.walls]
+
+    def frames(self):
+        """Frames the AVR received: [(type, seq, payload, cycle of the last byte)]."""
+        d, out = Decoder(), []
+        for cycle, b in self.rx:
+            out += [(*f, cycle) for f in d.feed(bytes([b]))]
+        return out
+
+    def pulses(self, pin):
+        """[(rise cycle, width us)] of every complete pulse on `pin`."""
+        out, rise = [], None
+        for cycle, p, level in self.edges:
+            if p != pin:
+                continue
+            if level == 1:
+                rise = cycle
+            elif rise is not None:
+                out.append((rise, (cycle - rise) / 16))
+                rise = None
+        return out
+
+    def wall_ns(self, cycle):
+        """CLOCK_REALTIME of a board cycle: the last pty read at or before it, plus the
+        simulated time since."""
+        i = bisect.bisect_right(self._wall_cycles, cycle)
+        c, ns = self.walls[max(i - 1, 0)]
+        return ns + (cycle - c) * 1_000_000_000 // CYCLES_PER_S
+
+
+def step_allowed_us(limit_us_per_s, seconds):
+    """The most a pulse width may change over `seconds` plus one servo period (two frames
+    the host sent within one period land on one pulse), with 1.5 us for the pulse timing."""
+    return limit_us_per_s * (seconds + SERVO_PERIOD_S) + 1.5
+
+
+def velocity_violations(events, limits_us_per_s, start_us=None):
+    """Pulse-width steps faster than the velocity limit, per pin, between consecutive
+    pulses. The time between two pulses is the longer of simulated and wall time: a
+    harness starved of CPU falls behind and then hands the AVR what serial_node wrote
+    meanwhile all at once, compressing in simulated time a ramp that was on time.
+    `start_us`: where the first SET_PULSES must start from (a board that just booted
+    reports its hold pose), judged on the frame, since no pulse precedes it."""
+    bad = []
+    sends = sent_ticks(events)
+    for pin, limit in enumerate(limits_us_per_s):
+        if start_us is not None and sends:
+            first = sends[0][1][pin] / 2
+            if abs(first - start_us[pin]) > step_allowed_us(limit, 0.0):
+                bad.append((pin, "first frame", start_us[pin], first))
+        ps = events.pulses(pin)
+        for (c0, w0), (c1, w1) in zip(ps, ps[1:]):
+            dt = max((c1 - c0) / CYCLES_PER_S, (events.wall_ns(c1) - events.wall_ns(c0)) / 1e9)
+            if abs(w1 - w0) > step_allowed_us(limit, dt):
+                bad.append((pin, c1, w0, w1, round(step_allowed_us(limit, dt), 1)))
+    return bad
+
+
+def sent_ticks(events):
+    """[(cycle, ticks)] of every SET_PULSES the AVR received."""
+    return [(c, struct.unpack("<4H", p)) for t, _, p, c in events.frames() if t == SET_PULSES]
+
+
+class Rig:
+    """serial_node (launched by the test's `launch`) on a board in simavr; rclpy streams."""
+
+    def __init__(self, launch, observer, tmp_path, *params, start_board=True):
+        self.tmp, self.o, self.launch = Path(tmp_path), observer, launch
+        self.boots = []
+        if start_board:
+            self.boot()
+        self.node = launch("serial_node", "--ros-args", "-p", f"port:={self.tmp / 'tty'}",
+                           "-p", "diagnostics_period:=0.1", *params)
+        self.state = observer.sub("/servo_state", JointState)
+        self.diags = observer.sub("/diagnostics", DiagnosticArray)
+        self.angles = observer.pub("/servo_angles", JointState)
+        self.estop = observer.pub("/estop", Bool, LATCHED)
+        observer.wait_matched(self.angles)
+        observer.wait_publisher("/diagnostics")
+        self.target = None
+        self.next_send = 0.0
+
+    @property
+    def board(self):
+        return self.boots[-1]
+
+    def boot(self):
+        """Power the board up (again): a fresh simavr, the same pty link."""
+        self.boots.append(SimulatedUno(self.tmp, FIRMWARE, boot=len(self.boots)))
+
+    def events(self, boot=-1):
+        return BoardEvents(self.boots[boot].events_path)
+
+    def diag(self):
+        for _, arr in reversed(self.diags):
+            for s in arr.status:
+                if s.name.startswith("serial_node"):
+                    return {kv.key: kv.value for kv in s.values}
+        return {}
+
+    def spin(self, seconds=None, until=None, timeout=10.0):
+        """Spin rclpy, publishing the current target at 50 Hz (stamped now) when there
+        is one; until `until()` holds (returns whether it did) or for `seconds`."""
+        end = time.monotonic() + (seconds if seconds is not None else timeout)
+        while time.monotonic() < end:
+            if until is not None and until():
+                return True
+            now = time.monotonic()
+            if self.target is not None and now >= self.next_send:
+                self.angles.publish(angles(self.target))
+                self.next_send = max(self.next_send + SERVO_PERIOD_S, now - SERVO_PERIOD_S)
+            self.o.executor.spin_once(timeout_sec=max(0.0, min(0.005, self.next_send - time.monotonic())))
+        return until() if until is not None else True
+
+    def acked_deg(self):
+        """The servo angles the device last acknowledged (servo_state), rounded to 0.1 deg."""
+        return [round(math.degrees(a), 1) for a in self.state[-1][1].position] if self.state else None
+
+    def at(self, deg):
+        return self.acked_deg() == [round(d, 1) for d in deg]
+
+    def stop(self):
+        codes = [b.stop() for b in self.boots if b.proc.poll() is None]
+        return codes
+
+
+def engaged_estop_frames(events):
+    """ESTOP frames that engage (payload 1 hold, 2 detach): [(payload, cycle)]."""
+    return [(p[0], c) for t, _, p, c in events.frames() if t == ESTOP and p[0] in (1, 2)]
+
+
+def set_pulses_cycles(events):
+    return [c for t, _, _, c in events.frames() if t == SET_PULSES]
