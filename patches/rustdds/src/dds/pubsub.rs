@@ -555,6 +555,7 @@ impl InnerPublisher {
       window_limit,
       backlog_limit,
       max_retain,
+      matches!(writer_qos.history(), Some(policy::History::KeepLast { .. })),
     );
     // Doorbell: enqueue this writer's entity id and wake the participant poll.
     let doorbell = Doorbell::new(guid.entity_id, self.writer_ready.clone());

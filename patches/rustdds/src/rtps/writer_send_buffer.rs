@@ -91,6 +91,12 @@ struct Shared {
   // (TRANSIENT_LOCAL / TRANSIENT / PERSISTENT) the writer must retain samples for
   // late-joining readers, so pre-match trimming is disabled.
   volatile: bool,
+  // History is KEEP_LAST (depth = `max_retain`): the newest `depth` samples are
+  // retained, acknowledged or not (DDS v1.4 2.2.3.18). A reader that missed an
+  // evicted one gets a GAP. Without this a reliable writer kept every sample an
+  // unreachable reader had not acknowledged, and repaired all of them when it
+  // came back: five seconds of 50 Hz commands after a network outage.
+  keep_last: bool,
   topic_name: String,
 }
 
@@ -119,6 +125,7 @@ impl WriterSendBuffer {
     window_limit: usize,
     backlog_limit: usize,
     max_retain: usize,
+    keep_last: bool,
   ) -> Self {
     Self {
       shared: Arc::new(Shared {
@@ -139,6 +146,7 @@ impl WriterSendBuffer {
         reliable_writer,
         is_builtin,
         volatile,
+        keep_last,
         topic_name,
       }),
     }
@@ -178,8 +186,10 @@ impl WriterSendBuffer {
       // window to wait on; the backlog limit above is their only throttle.
       return true;
     }
-    // Number of unacknowledged samples in [acked_before, last_seq].
-    let unacked = i64::from(inner.last_seq) - i64::from(inner.acked_before) + 1;
+    // Number of unacknowledged samples in [acked_before, last_seq] still retained
+    // (KEEP_LAST evicts unacknowledged ones too: nobody waits for those).
+    let unacked =
+      i64::from(inner.last_seq) - i64::from(max(inner.acked_before, inner.first_seq)) + 1;
     unacked < inner.window_limit as i64
   }
 
@@ -299,8 +309,10 @@ impl WriterSendBuffer {
     //    durability); once a reliable reader matches, `reliable_readers_present`
     //    flips true and we retain everything again for repair.
     // Built-in (discovery) writers are always exempt to never lose discovery data.
+    //  - every KEEP_LAST writer: the newest `depth` samples, acknowledged or not.
     let trim_keep_last = !shared.is_builtin
       && (!may_block
+        || shared.keep_last
         || (shared.reliable_writer && shared.volatile && !inner.reliable_readers_present));
     if trim_keep_last {
       while inner.changes.len() > inner.max_retain {
@@ -496,6 +508,7 @@ mod tests {
       /* window_limit */ 1,
       /* backlog_limit */ 1000,
       /* max_retain */ 1,
+      /* keep_last */ false,
     );
     buf.set_acked_frontier(Some(SequenceNumber::zero()));
 
@@ -522,6 +535,7 @@ mod tests {
       /* window_limit */ 1000,
       /* backlog_limit */ 2,
       /* max_retain */ 1000,
+      /* keep_last */ false,
     );
 
     // Nothing sent yet: backlog fills after two admissions.
@@ -550,6 +564,7 @@ mod tests {
       /* window_limit */ 1000,
       /* backlog_limit */ 1,
       /* max_retain */ 1000,
+      /* keep_last */ false,
     );
     // Default WriteOptions => best_effort_may_block == false => never blocks.
     assert!(admit_now(&buf, WriteOptions::default()));
@@ -570,6 +585,7 @@ mod tests {
       1000,
       /* backlog_limit */ 1,
       /* max_retain */ 1000,
+      /* keep_last */ false,
     );
     assert!(admit_now(&buf, may_block_opts()));
     assert!(admit_now(&buf, may_block_opts()));
@@ -594,6 +610,7 @@ mod tests {
       /* window_limit */ 1000,
       /* backlog_limit */ 1000,
       max_retain,
+      /* keep_last */ false,
     );
 
     for _ in 0..100 {
@@ -629,6 +646,7 @@ mod tests {
       /* window_limit */ 1000,
       /* backlog_limit */ 1000,
       max_retain,
+      /* keep_last */ false,
     );
     // No reliable readers matched yet => admission not window-throttled.
     for _ in 0..10 {
@@ -654,6 +672,7 @@ mod tests {
       /* window_limit */ 1000,
       /* backlog_limit */ 1000,
       100,
+      /* keep_last */ false,
     );
     let given = Timestamp::now() - crate::Duration::from_secs(100);
     let before = Timestamp::now();
@@ -692,6 +711,7 @@ mod tests {
       /* window_limit */ 1000,
       /* backlog_limit */ 1000,
       max_retain,
+      /* keep_last */ false,
     );
     // No reliable reader yet: admitted freely (backlog has room) but trimmed to
     // KeepLast so the buffer cannot balloon before discovery completes.
@@ -708,5 +728,36 @@ mod tests {
       assert!(admit_now(&buf, WriteOptions::default()));
     }
     assert_eq!(buf.retained_len(), max_retain + 10);
+  }
+
+  // KEEP_LAST on a reliable writer with a matched reader that acknowledges
+  // nothing (it is unreachable): the newest `depth` samples are retained, the
+  // older ones evicted unacknowledged (the reader gets a GAP), and the evicted
+  // ones do not count against the send window.
+  #[test]
+  fn keep_last_reliable_writer_keeps_the_newest_depth_acknowledged_or_not() {
+    for volatile in [true, false] {
+      let depth = 10;
+      let buf = WriterSendBuffer::new(
+        GUID::GUID_UNKNOWN,
+        "t".to_string(),
+        /* reliable_writer */ true,
+        /* is_builtin */ false,
+        volatile,
+        /* window_limit */ 100,
+        /* backlog_limit */ 1000,
+        /* max_retain */ depth,
+        /* keep_last */ true,
+      );
+      buf.set_acked_frontier(Some(SequenceNumber::new(1)));
+      for _ in 0..250 {
+        assert!(admit_now(&buf, WriteOptions::default()));
+        buf.set_sent_frontier(buf.last_change_sequence_number());
+      }
+      assert_eq!(buf.retained_len(), depth);
+      assert_eq!(buf.first_change_sequence_number(), SequenceNumber::new(241));
+      assert!(buf.get_by_sn(SequenceNumber::new(240)).is_none());
+      assert!(buf.get_by_sn(SequenceNumber::new(250)).is_some());
+    }
   }
 }
