@@ -203,6 +203,8 @@ class SplitGraph:
         result = {
             "length_s": length,
             "side": side,
+            "t_cut": t_cut,
+            "t_restore": t_restore,
             "resumed": resumed,
             "resume_s": (first_new - t_restore) if first_new is not None else None,
             "wait_s": t_resumed - t_restore,

@@ -57,8 +57,9 @@ def close_graph(g):
 
 def test_a_target_from_the_pc_comes_back_from_the_firmware_on_the_pi(hosts, domain, tmp_path):
     """rclpy in `pc` -> compute_ik (pc) -> serial_node (pi) -> the firmware in simavr ->
-    servo_state back in `pc`, with ROBOT.md's servo angles (within the firmware's
-    0.5 us pulse resolution, 0.05 deg)."""
+    servo_state back in `pc`: the first step of the motion carries the target's stamp,
+    and the arm comes to rest at ROBOT.md's servo angles (within the firmware's 0.5 us
+    pulse resolution, 0.05 deg)."""
     g = SplitGraph(hosts, domain, tmp_path, device="simavr")
     try:
         g.wait_flowing()
@@ -69,10 +70,14 @@ def test_a_target_from_the_pc_comes_back_from_the_firmware_on_the_pi(hosts, doma
         want = seconds(m.header.stamp)
         assert g.pump_until(lambda: any(seconds(s.header.stamp) == want for _, s in g.states), 15, send=False), \
             f"no servo_state for the target\n{g.logs_tail()}"
-        reply = [s for _, s in g.states if seconds(s.header.stamp) == want][-1]
-        assert reply.name[:3] == ["base_servo", "shoulder_servo", "elbow_servo"]
-        got = [math.degrees(a) for a in reply.position[:3]]
-        assert got == pytest.approx(servo_deg(*goal), abs=0.1)
+        expected = servo_deg(*goal)
+
+        def at_rest():
+            reply = g.states[-1][1]
+            return [round(math.degrees(a) - e, 1) for a, e in zip(reply.position[:3], expected)] == [0.0] * 3
+
+        assert g.pump_until(at_rest, 10, send=False), (g.states[-1][1].position, expected)
+        assert g.states[-1][1].name[:3] == ["base_servo", "shoulder_servo", "elbow_servo"]
     finally:
         close_graph(g)
 
@@ -161,6 +166,36 @@ def test_the_graph_resumes_after_a_link_outage(split_graph, length, side):
     assert all(n <= 2 * nodes[script] for script, n in r["unreachable_lines"].items()), r["unreachable_lines"]
 
 
+def test_a_partition_while_streaming_holds_the_arm_then_resumes_ramped(hosts, domain, tmp_path):
+    """Issue 9, item 8: the link cut for 5 s at the Pi while the operator streams at 50 Hz,
+    serial_node driving the firmware in simavr. The Pi side holds the arm still (the
+    pulses stop changing within the watchdog period of the cut), and when the link heals
+    it goes on with the newest target only, ramped within the velocity limit: judged at
+    the pins."""
+    from safety_rig import BoardEvents, velocity_limits_us_per_s, velocity_violations
+
+    g = SplitGraph(hosts, domain, tmp_path, device="simavr", target_hz=50)
+    try:
+        g.wait_flowing()
+        r = g.outage(5, "pi", settle=2.0)
+    finally:
+        close_graph(g)
+    print(f"\npartition 5 s: resumed after {r['resume_s']} s, stale {r['stale']}")
+    assert r["resumed"] and r["stale"] == 0 and r["out_of_order"] == 0, r
+    ev = BoardEvents(g.uno.events_path)
+    watchdog_s = 0.5  # serial_node's watchdog_ms default: the board's limit for silence
+    t_held, t_heal = int((r["t_cut"] + watchdog_s) * 1e9), int(r["t_restore"] * 1e9)
+    moved = []
+    for pin in range(4):
+        widths = [w for c, w in ev.pulses(pin) if t_held <= ev.wall_ns(c) <= t_heal]
+        assert len(widths) > 150, f"pin {pin}: {len(widths)} pulses while the link was down"
+        assert max(widths) - min(widths) <= 1.0, f"pin {pin} moved while the link was down: {min(widths)}..{max(widths)}"
+        after = [w for c, w in ev.pulses(pin) if ev.wall_ns(c) > t_heal]
+        moved.append(abs(after[-1] - widths[-1]))
+    assert max(moved) > 5, "the arm did not go on to a new target after the link healed"
+    assert velocity_violations(ev, velocity_limits_us_per_s()) == []
+
+
 def test_streaming_over_an_impaired_link(domain, tmp_path):
     """20 +/- 5 ms delay and 1 % loss each way (linkem): streaming at 20 Hz continues,
     the newest target wins, and the round trip is reported."""
@@ -184,7 +219,14 @@ def test_streaming_over_an_impaired_link(domain, tmp_path):
     print(f"\nimpaired link: {len(sent)} targets, {len(answered)} answered, round trip "
           f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
           f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
-    assert len(answered) >= 0.9 * len(sent), "streaming stalled on the impaired link"
+    # streaming goes on: servo_state keeps coming (compute_ik's steps between targets
+    # answer too), and most targets' first steps reach the device (a first step that a
+    # newer one overtakes on the way is superseded, not lost)
+    arrivals = sorted(a for a, _ in g.replies_after(t0))
+    longest_gap = max(b - a for a, b in zip(arrivals, arrivals[1:]))
+    print(f"longest gap between servo_state replies {longest_gap * 1e3:.0f} ms")
+    assert longest_gap < 1.0, f"streaming stalled for {longest_gap:.2f} s on the impaired link"
+    assert len(answered) >= 0.8 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
     assert max(s for _, s in replies) == last, "the newest target was not the last one applied"
     stamps = [s for _, s in replies]
     assert stamps == sorted(stamps), "an older target was applied after a newer one"

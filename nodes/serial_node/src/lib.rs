@@ -402,7 +402,7 @@ pub async fn run(
             _ = &mut shutdown => break,
             _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
                 if let Some((ticks, stamp, received)) = held.take_due(tokio::time::Instant::now()) {
-                    log::debug!("applying the newest late command");
+                    log::debug!("applying the newest late servo_angles (stamped {:.3} s ago)", time_s(Time::now()) - time_s(stamp));
                     link.command(ticks, stamp, received);
                 }
             }
@@ -445,9 +445,11 @@ pub async fn run(
                         Ok(ticks) => {
                             status.last_rejection = None;
                             let stamp = msg.header.stamp;
-                            let late = lateness.is_late(time_s(stamp), time_s(Time::now()), received);
+                            let now_s = time_s(Time::now());
+                            let late = lateness.is_late(time_s(stamp), now_s, received);
                             status.last_command = Some(received);
                             let superseded = if late {
+                                log::debug!("a late servo_angles (stamped {:.3} s ago) held back for a newer one", now_s - time_s(stamp));
                                 held.hold((ticks, stamp, received), tokio::time::Instant::now())
                             } else {
                                 let superseded = held.discard();
