@@ -58,6 +58,17 @@ use crate::{
 #[cfg(not(feature = "security"))]
 use crate::no_security::SecurityPluginsHandle;
 
+
+/// The HEARTBEAT piggybacked on DATA has the final flag: it tells readers what we
+/// have, so that one that misses a sample asks for it at once, but does not make
+/// every reader acknowledge every sample (RTPS 2.5 8.4.2.3.2, 8.3.7.5: a reader
+/// must answer a HEARTBEAT without the final flag; with it, only when it misses
+/// something). Acknowledgements come from the periodic HEARTBEAT, at the fast
+/// period while a reader has not acknowledged everything. Without this, each
+/// sample cost a second datagram each way and a wake-up of both event loops: at
+/// 50 Hz an ACKNACK per command from serial_node to compute_ik.
+const PIGGYBACK_HEARTBEAT_FINAL: bool = true;
+
 #[derive(PartialEq, Eq, Clone, Copy)]
 pub enum DeliveryMode {
   Unicast,
@@ -749,8 +760,8 @@ impl Writer {
         self.next_heartbeat_count(),
         self.endianness,
         EntityId::UNKNOWN, // to all readers
-        false,             // final_flag: request ACKNACK
-        false,             // liveliness_flag
+        PIGGYBACK_HEARTBEAT_FINAL,
+        false, // liveliness_flag
       );
     }
 
@@ -2505,7 +2516,7 @@ impl<'a> Iterator for FragmentationIter<'a> {
 
             // Add HEARTBEAT message if needed
             if send_heartbeat && !writer.like_stateless {
-              let final_flag = false; // false = request that readers acknowledge with ACKNACK.
+              let final_flag = PIGGYBACK_HEARTBEAT_FINAL;
               let liveliness_flag = false; // This is not a manual liveliness assertion (DDS API call), but side-effect of
                                            // writing new data.
               let hb_msg = MessageBuilder::new()
@@ -2564,7 +2575,7 @@ impl<'a> Iterator for FragmentationIter<'a> {
 
         // Add HEARTBEAT if needed
         if send_heartbeat && !writer.like_stateless {
-          let final_flag = false; // false = request that readers acknowledge with ACKNACK.
+          let final_flag = PIGGYBACK_HEARTBEAT_FINAL;
           let liveliness_flag = false; // This is not a manual liveliness assertion (DDS API call), but side-effect of
                                        // writing new data.
           message_builder = message_builder.heartbeat_msg(
