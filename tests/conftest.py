@@ -150,7 +150,11 @@ class NodeProcess:
         exe = str(name) if "/" in str(name) else bin_path(name)
         self.argv = [*(["ip", "netns", "exec", netns] if netns else []), exe, *args]
         self.env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), **(env or {})}
-        self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env)
+        # SIGINT as a terminal delivers it, even when this harness runs in the
+        # background (a shell starts background jobs with SIGINT ignored, and a
+        # launch script cannot trap a signal ignored on entry)
+        self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env,
+                                     preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
     def stop(self, sig=signal.SIGINT, timeout=10):
         if self.proc.poll() is None:
