@@ -162,31 +162,53 @@ impl JointLimits {
         Ok(())
     }
 
-    /// The nearest joints within every limit row, keeping the shoulder: base and
-    /// shoulder clamped into their ranges, the elbow into its own range intersected
-    /// with what the forearm elevation allows at that shoulder angle.
+    /// Joints within every limit row, near `q`: base clamped into its range, the
+    /// shoulder into its range where some elbow angle satisfies the forearm elevation
+    /// too, the elbow into its own range intersected with what the forearm elevation
+    /// allows at that shoulder angle.
     ///
     /// # Examples
     /// ```
     /// use eezybot_kinematics::{ArmConfig, ArmJoints};
     /// let limits = ArmConfig::default().arm().limits;
-    /// let q = limits.clamp(&ArmJoints { base_rad: 1.0, shoulder_rad: 2.0, elbow_rad: -0.5 });
-    /// assert!(limits.check(&q).is_ok());
-    /// assert_eq!(q.shoulder_rad, 2.0);
+    /// for q in [
+    ///     ArmJoints { base_rad: 1.0, shoulder_rad: 2.0, elbow_rad: -0.5 },
+    ///     ArmJoints { base_rad: -9.0, shoulder_rad: 1.2, elbow_rad: 0.4 },
+    ///     ArmJoints { base_rad: 0.0, shoulder_rad: -1.0, elbow_rad: -3.0 },
+    /// ] {
+    ///     assert!(limits.check(&limits.clamp(&q)).is_ok());
+    /// }
+    /// let inside = ArmJoints { base_rad: 0.1, shoulder_rad: 1.0, elbow_rad: -1.2 };
+    /// assert!(limits.check(&inside).is_ok());
+    /// assert_eq!(limits.clamp(&inside), inside);
     /// ```
     pub fn clamp(&self, q: &ArmJoints) -> ArmJoints {
         let base_rad = q.base_rad.clamp(self.base_rad.0, self.base_rad.1);
-        let shoulder_rad = q
+        // shoulder angles for which an elbow angle within both elbow rows exists
+        let s_lo = self
             .shoulder_rad
-            .clamp(self.shoulder_rad.0, self.shoulder_rad.1);
+            .0
+            .max(self.forearm_elevation_rad.0 - self.elbow_rad.1);
+        let s_hi = self
+            .shoulder_rad
+            .1
+            .min(self.forearm_elevation_rad.1 - self.elbow_rad.0);
+        let shoulder_rad = if s_lo <= s_hi {
+            q.shoulder_rad.clamp(s_lo, s_hi)
+        } else {
+            q.shoulder_rad
+                .clamp(self.shoulder_rad.0, self.shoulder_rad.1)
+        };
+        // (a hair inside, so that shoulder + elbow rounds within the elevation row)
+        const INSIDE: f64 = 1e-12;
         let lo = self
             .elbow_rad
             .0
-            .max(self.forearm_elevation_rad.0 - shoulder_rad);
+            .max(self.forearm_elevation_rad.0 - shoulder_rad + INSIDE);
         let hi = self
             .elbow_rad
             .1
-            .min(self.forearm_elevation_rad.1 - shoulder_rad);
+            .min(self.forearm_elevation_rad.1 - shoulder_rad - INSIDE);
         let elbow_rad = if lo <= hi {
             q.elbow_rad.clamp(lo, hi)
         } else {
