@@ -296,6 +296,70 @@ def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):
     assert r.returncode != 0 and "line 2" in r.stderr
 
 
+def tool_of(js):
+    """tool0 of a joint_states message (ROBOT.md's FK)."""
+    H, L2, L3, DX = 0.094, 0.135, 0.147, 0.0393
+    q = dict(zip(js.name, js.position))
+    a, phi = q["shoulder_joint"], q["shoulder_joint"] + q["elbow_joint"]
+    r = L2 * math.cos(a) + L3 * math.cos(phi) + DX
+    return (r * math.cos(q["base_joint"]), r * math.sin(q["base_joint"]), H + L2 * math.sin(a) + L3 * math.sin(phi))
+
+
+def motion_param(observer):
+    from rcl_interfaces.srv import GetParameters
+
+    client = observer.node.create_client(GetParameters, "/compute_ik/get_parameters")
+    assert client.wait_for_service(timeout_sec=10)
+    future = client.call_async(GetParameters.Request(names=["motion"]))
+    assert observer.spin_until(future.done, 10)
+    return future.result().values[0].string_value
+
+
+def test_play_line_draws_straight_lines_then_puts_compute_ik_back(launch, observer, domain, tmp_path):
+    """--play --line: compute_ik's `motion` is `line` for the playback and `joint` again
+    after it; tool0 goes from waypoint to waypoint on the straight segment between them;
+    a line that leaves the workspace stops the playback with compute_ik's reason, before
+    the arm moves, and the motion is put back all the same."""
+    launch("compute_ik")
+    states = observer.sub("/joint_states", JointState)
+    observer.wait_publisher("/joint_states")
+    assert motion_param(observer) == "joint"
+    a, b = (0.2, -0.06, 0.12), (0.17, 0.07, 0.2)
+    script = tmp_path / "line.csv"
+    script.write_text(f"x,y,z,gripper,dwell\n{','.join(map(str, a))},,0.2\n{','.join(map(str, b))},,0\n")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    cli = subprocess.Popen([bin_path("gui_bridge"), "--play", str(script), "--line", "--timeout", "20"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    seen_line = False
+    while cli.poll() is None:
+        observer.spin_for(0.05)
+        seen_line = seen_line or (not states or motion_param(observer) == "line")
+    out, err = cli.communicate()
+    assert cli.returncode == 0, err
+    assert out.count("waypoint ") == 2
+    assert seen_line
+    assert motion_param(observer) == "joint"
+    # from the moment tool0 is at a, every point is on the segment a-b (within 0.1 mm: the
+    # line is sampled every 2 mm and joint-interpolated between, a chord error of
+    # micrometres; a servo step is about 0.3 mm), and it ends at b
+    tools = [tool_of(m) for _, m in states]
+    start = max(i for i, t in enumerate(tools) if math.dist(t, a) < 1e-9)
+    path = tools[start:]
+    assert len(path) > 5 and math.dist(path[-1], b) < 1e-9
+    ab = [bi - ai for ai, bi in zip(a, b)]
+    n = math.sqrt(sum(c * c for c in ab))
+    for t in path:
+        s_ = sum((ti - ai) * c for ti, ai, c in zip(t, a, ab)) / n
+        off = math.dist(t, [ai + s_ * c / n for ai, c in zip(a, ab)])
+        assert off < 1e-4 and -1e-9 <= s_ <= n + 1e-9, (t, off, s_)
+    # through the base axis: refused before any move, with the reason; motion put back
+    bad = tmp_path / "through_the_base.csv"
+    bad.write_text("0.08,0.075,0.15,,0\n0.08,-0.075,0.15,,0\n")
+    r = run_cli(domain, "--play", str(bad), "--line", "--timeout", "20", timeout=60)
+    assert r.returncode != 0 and "waypoint 2" in r.stderr and "along the line" in r.stderr, r.stderr
+    assert motion_param(observer) == "joint"
+
+
 # ---------------------------------------------------------------------------------------
 # Access rules and per-client limits (issue 9, item 6)
 

@@ -9,6 +9,7 @@
 //! * [`logging`]: the `log` crate on stderr and `/rosout`;
 //! * [`diagnostics`]: `diagnostics` publishing;
 //! * [`peers`]: the remote ends of a node's topics, and when they are lost and regained;
+//! * [`remote_params`]: another node's parameters, through its parameter services;
 //! * [`node`]: [`RosNode`] ties them together around a ros2-client node, honouring
 //!   `ROS_DOMAIN_ID`; [`shutdown_signal`] for SIGINT/SIGTERM.
 
@@ -24,6 +25,7 @@ pub mod node;
 pub mod params;
 pub mod peers;
 pub mod qos;
+pub mod remote_params;
 
 pub use error::PlumbingError;
 pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode};

@@ -253,6 +253,12 @@ impl RosNode {
         &self.node
     }
 
+    /// The ros2-client node, to create what this module does not wrap (a service
+    /// client).
+    pub fn node_mut(&mut self) -> &mut Node {
+        &mut self.node
+    }
+
     fn topic<M: RosMessage>(
         &mut self,
         topic: &str,

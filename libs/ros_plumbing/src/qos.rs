@@ -36,3 +36,6 @@ pub const TF_STATIC: QosProfile = latched(1);
 pub const ROBOT_DESCRIPTION: QosProfile = latched(1);
 /// `estop`: reliable, transient-local, keep last 1: a late joiner learns the stop.
 pub const ESTOP: QosProfile = latched(1);
+/// Service requests and replies (rmw's default for services: reliable, volatile, keep
+/// last 10).
+pub const SERVICES: QosProfile = reliable(10);

@@ -34,7 +34,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
         name: "gui_bridge",
         description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
-        usage: "[--once X Y Z [--gripper G] | --play WAYPOINTS.csv | --record OUT.csv] [--timeout S]",
+        usage: "[--once X Y Z [--gripper G] | --play WAYPOINTS.csv | --record OUT.csv] [--line] [--timeout S]",
         params: vec![
             ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
             ParamSpec::new(

@@ -3,7 +3,10 @@
 //! ```text
 //! gui_bridge                                   web page on http://127.0.0.1:8080 (parameter `bind`)
 //! gui_bridge --once 0.2 0 0.15 [--gripper 0.5] publish one target, exit when compute_ik took it
-//! gui_bridge --play waypoints.csv              play x,y,z,gripper,dwell rows
+//! gui_bridge --play waypoints.csv              play x,y,z,gripper,dwell rows: move, arrive, set
+//!                                              the claw, dwell
+//! gui_bridge --play waypoints.csv --line       the same in straight lines (compute_ik's
+//!                                              `motion` set to `line` meanwhile, then put back)
 //! gui_bridge --record taught.csv               save what the operator sends, as such rows
 //! ```
 
@@ -91,8 +94,17 @@ enum Mode {
     Record(String),
 }
 
-fn parse_mode(args: &[String]) -> anyhow::Result<(Mode, Duration)> {
+/// The command line after the ROS arguments.
+struct Cli {
+    mode: Mode,
+    timeout: Duration,
+    /// `--line`: straight Cartesian lines (compute_ik's `motion:=line`) for `--once`/`--play`
+    line: bool,
+}
+
+fn parse_mode(args: &[String]) -> anyhow::Result<Cli> {
     let mut mode = Mode::Web;
+    let mut line = false;
     let mut gripper = None;
     let mut timeout = Duration::from_secs(15);
     let mut it = args.iter();
@@ -131,13 +143,21 @@ fn parse_mode(args: &[String]) -> anyhow::Result<(Mode, Duration)> {
                 )
             }
             "--timeout" => timeout = Duration::from_secs_f64(num(it.next(), "timeout")?.max(0.1)),
+            "--line" => line = true,
             other => bail!("unexpected argument `{other}` (see --help)"),
         }
     }
     if let Mode::Once { gripper: g, .. } = &mut mode {
         *g = gripper;
     }
-    Ok((mode, timeout))
+    if line && !matches!(mode, Mode::Once { .. } | Mode::Play(_)) {
+        bail!("--line goes with --once or --play");
+    }
+    Ok(Cli {
+        mode,
+        timeout,
+        line,
+    })
 }
 
 /// Waits for the effect of one target: compute_ik's `joint_states` carrying its stamp
@@ -222,12 +242,92 @@ impl<'a> Delivery<'a> {
             }
         }
     }
+
+    /// Wait until compute_ik's `joint_states` has the arm at `xyz` (its planned motion
+    /// ends exactly on the target's joints).
+    async fn arrival(
+        &self,
+        arm: &eezybot_kinematics::Arm,
+        xyz: [f64; 3],
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        let goal = arm
+            .solve_position(&xyz.into(), 0.0)
+            .map_err(|e| anyhow!("target {xyz:?}: {e}"))?;
+        let want = [goal.base_rad, goal.shoulder_rad, goal.elbow_rad];
+        let names = &eezybot_kinematics::ACTUATED_JOINTS[..3];
+        let at_goal = |m: &JointState| {
+            names.iter().zip(want).all(|(n, w)| {
+                m.name
+                    .iter()
+                    .position(|x| x == n)
+                    .and_then(|i| m.position.get(i))
+                    .is_some_and(|p| (p - w).abs() < 1e-6)
+            })
+        };
+        let js = self.joint_states.async_stream();
+        tokio::pin!(js);
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            tokio::select! {
+                _ = tokio::time::sleep_until(deadline) => bail!("the arm did not arrive at {xyz:?} within {:.1} s", timeout.as_secs_f64()),
+                Some(Ok((m, _))) = js.next() => if at_goal(&m) { return Ok(()) },
+            }
+        }
+    }
+}
+
+/// compute_ik's `motion` set to `line` for a playback, and put back afterwards.
+struct LineMotion {
+    client: ros_plumbing::remote_params::RemoteParameters,
+    previous: ParameterValue,
+}
+
+impl LineMotion {
+    async fn engage(node: &mut RosNode, timeout: Duration) -> anyhow::Result<LineMotion> {
+        let client = ros_plumbing::remote_params::RemoteParameters::new(node, "compute_ik")?;
+        client.wait(node, timeout).await.map_err(|e| anyhow!(e))?;
+        let previous = client
+            .get("motion")
+            .await
+            .map_err(|e| anyhow!(e))?
+            .ok_or_else(|| {
+                anyhow!(
+                    "{} has no `motion` parameter (too old a compute_ik?)",
+                    client.node_name()
+                )
+            })?;
+        client
+            .set("motion", ParameterValue::String("line".into()))
+            .await
+            .map_err(|e| anyhow!(e))?;
+        log::info!("{} motion:=line for this playback", client.node_name());
+        Ok(LineMotion { client, previous })
+    }
+
+    async fn restore(self) {
+        match self.client.set("motion", self.previous.clone()).await {
+            Ok(()) => log::info!(
+                "{} motion back to {:?}",
+                self.client.node_name(),
+                self.previous
+            ),
+            Err(e) => log::error!(
+                "could not put compute_ik's motion back to {:?}: {e}",
+                self.previous
+            ),
+        }
+    }
 }
 
 async fn main_async() -> anyhow::Result<()> {
     let spec = gui_bridge::spec();
     let mut node = RosNode::start(&spec)?;
-    let (mode, timeout) = parse_mode(node.user_args())?;
+    let Cli {
+        mode,
+        timeout,
+        line,
+    } = parse_mode(node.user_args())?;
     let params = node.params().clone();
     let arm = gui_bridge::load_arm(&params.string("arm_config").unwrap_or_default())
         .map_err(anyhow::Error::msg)?;
@@ -244,16 +344,32 @@ async fn main_async() -> anyhow::Result<()> {
     let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
     let diagnostics = node.subscription::<DiagnosticArray>("diagnostics", qos::DIAGNOSTICS)?;
     let shutdown = ros_plumbing::shutdown_logged();
+    let line_motion = if line {
+        Some(LineMotion::engage(&mut node, timeout).await?)
+    } else {
+        None
+    };
     let result = match mode {
         Mode::Once { xyz, gripper } => {
-            let mut d =
-                Delivery::connect(&node, &joint_states, &diagnostics, &outputs, timeout).await?;
-            d.send(&outputs, &arm, xyz, timeout).await?;
-            if let Some(g) = gripper {
-                outputs.gripper_target(g); // at the target, as a waypoint's gripper
+            let deliver = async {
+                let mut d =
+                    Delivery::connect(&node, &joint_states, &diagnostics, &outputs, timeout)
+                        .await?;
+                d.send(&outputs, &arm, xyz, timeout).await?;
+                if line {
+                    // the line is the point: stay until it is drawn
+                    d.arrival(&arm, xyz, timeout).await?;
+                }
+                if let Some(g) = gripper {
+                    outputs.gripper_target(g); // at the target, as a waypoint's gripper
+                }
+                println!("delivered {xyz:?}");
+                anyhow::Ok(())
+            };
+            tokio::select! {
+                r = deliver => r,
+                _ = shutdown => Ok(()),
             }
-            println!("delivered {xyz:?}");
-            Ok(())
         }
         Mode::Play(path) => {
             let text =
@@ -263,8 +379,12 @@ async fn main_async() -> anyhow::Result<()> {
                 Delivery::connect(&node, &joint_states, &diagnostics, &outputs, timeout).await?;
             let play = async {
                 for (i, w) in waypoints.iter().enumerate() {
-                    // move, then set the claw there: the order --record writes rows in
+                    // move, arrive, then set the claw there: the order --record writes
+                    // rows in
                     d.send(&outputs, &arm, w.xyz, timeout)
+                        .await
+                        .with_context(|| format!("waypoint {}", i + 1))?;
+                    d.arrival(&arm, w.xyz, timeout)
                         .await
                         .with_context(|| format!("waypoint {}", i + 1))?;
                     if let Some(g) = w.gripper {
@@ -301,6 +421,9 @@ async fn main_async() -> anyhow::Result<()> {
             .await
         }
     };
+    if let Some(l) = line_motion {
+        l.restore().await;
+    }
     drop(outputs);
     drop((joint_states, diagnostics));
     node.shutdown().await;
