@@ -133,3 +133,66 @@ pub fn attach_node(logger_name: String, rosout: Option<NodeLoggingHandle>) {
         }
     }
 }
+
+/// How often a repeated complaint about the same kind of bad input is logged: the
+/// first one at once, then at most one line per [`Throttle::PERIOD`] saying how many
+/// were not logged. A publisher sending a wrong message at 50 Hz gets a clear line,
+/// not 50 a second on stderr and `/rosout` (every one is still counted in
+/// `diagnostics`).
+#[derive(Debug, Default)]
+pub struct Throttle {
+    kinds: std::collections::HashMap<String, (std::time::Instant, u64)>,
+}
+
+impl Throttle {
+    /// Least time between two lines about one kind of input.
+    pub const PERIOD: std::time::Duration = std::time::Duration::from_secs(5);
+
+    /// Whether to log a complaint of `kind` now: `Some(n)` with the number of the same
+    /// kind not logged since the last line, or `None` (counted, not logged).
+    ///
+    /// # Examples
+    /// ```
+    /// use ros_plumbing::logging::Throttle;
+    /// use std::time::{Duration, Instant};
+    /// let (mut t, t0) = (Throttle::default(), Instant::now());
+    /// assert_eq!(t.allow("nan", t0), Some(0));
+    /// assert_eq!(t.allow("nan", t0 + Duration::from_secs(1)), None);
+    /// assert_eq!(t.allow("range", t0 + Duration::from_secs(1)), Some(0));
+    /// assert_eq!(t.allow("nan", t0 + Duration::from_secs(2)), None);
+    /// assert_eq!(t.allow("nan", t0 + Duration::from_secs(6)), Some(2));
+    /// ```
+    pub fn allow(&mut self, kind: &str, now: std::time::Instant) -> Option<u64> {
+        match self.kinds.get_mut(kind) {
+            Some((last, quiet)) if now.saturating_duration_since(*last) < Self::PERIOD => {
+                *quiet += 1;
+                None
+            }
+            Some((last, quiet)) => {
+                let n = *quiet;
+                *last = now;
+                *quiet = 0;
+                Some(n)
+            }
+            None => {
+                if self.kinds.len() >= 256 {
+                    self.kinds.clear(); // kinds are a handful; never grow without bound
+                }
+                self.kinds.insert(kind.to_string(), (now, 0));
+                Some(0)
+            }
+        }
+    }
+
+    /// ` (N more like it not logged)` for a line [`Throttle::allow`] let through, or "".
+    pub fn suffix(quiet: u64) -> String {
+        if quiet == 0 {
+            String::new()
+        } else {
+            format!(
+                " ({quiet} more like it in the last {} s, not logged)",
+                Self::PERIOD.as_secs()
+            )
+        }
+    }
+}

@@ -17,6 +17,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
 use ros_plumbing::burst;
+use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::future::Future;
@@ -183,6 +184,7 @@ pub async fn run(
     // for burst::HOLD_LATE in case a newer one follows
     let mut held = burst::Held::<PointStamped>::default();
     let mut lateness = burst::Lateness::default();
+    let mut complaints = Throttle::default();
     core.set_motion(motion_settings(&params));
     // the planned motion: one step per period while moving, the first with the input
     let step_period = |core: &IkCore| Duration::from_secs_f64(core.motion().period_s);
@@ -306,7 +308,10 @@ pub async fn run(
                         .then(|| tokio::time::Instant::now() + step_period(&core));
                 }
                 Err(rejection) => {
-                    log::warn!("{rejection}");
+                    let kind = format!("{}/{}", rejection.source.topic(), rejection.reason.code());
+                    if let Some(quiet) = complaints.allow(&kind, Instant::now()) {
+                        log::warn!("{rejection}{}", Throttle::suffix(quiet));
+                    }
                     if last_immediate.elapsed() >= MIN_IMMEDIATE_DIAG_GAP {
                         last_immediate = Instant::now();
                         report(&core, &peers);

@@ -19,6 +19,7 @@ use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
 use ros_plumbing::burst;
+use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use servo_protocol::DeviceState;
@@ -394,6 +395,7 @@ pub async fn run(
     // case a newer one follows: (ticks, stamp, received)
     let mut held = burst::Held::<([u16; servo_protocol::SERVOS], Time, Instant)>::default();
     let mut lateness = burst::Lateness::default();
+    let mut complaints = Throttle::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
@@ -459,7 +461,10 @@ pub async fn run(
                             status.superseded_inputs += u64::from(superseded);
                         }
                         Err(r) => {
-                            log::warn!("servo_angles rejected: {r}");
+                            let kind = format!("{:?}", std::mem::discriminant(&r));
+                            if let Some(quiet) = complaints.allow(&kind, Instant::now()) {
+                                log::warn!("servo_angles rejected: {r}{}", Throttle::suffix(quiet));
+                            }
                             status.rejected_inputs += 1;
                             let first = status.last_rejection.is_none();
                             status.last_rejection = Some(r.to_string());

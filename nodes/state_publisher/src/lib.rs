@@ -15,6 +15,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::collections::{BTreeMap, VecDeque};
@@ -168,6 +169,7 @@ pub async fn run(
     let mut pending: BTreeMap<String, TransformStamped> = BTreeMap::new();
     let mut pending_since: Option<Instant> = None;
     let mut unreadable = 0u64;
+    let mut complaints = Throttle::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
@@ -220,7 +222,10 @@ pub async fn run(
                 };
                 let (tf, problems) = core.handle_joint_states(&msg);
                 for p in &problems {
-                    log::warn!("joint_states: {p}; skipped");
+                    let kind = format!("{:?}", std::mem::discriminant(p));
+                    if let Some(quiet) = complaints.allow(&kind, Instant::now()) {
+                        log::warn!("joint_states: {p}; skipped{}", Throttle::suffix(quiet));
+                    }
                 }
                 if tf.transforms.is_empty() {
                     continue;
