@@ -9,7 +9,7 @@ _log() { echo "[setup] $*" >&2; }
 
 # Debian packages: the AVR toolchain and Arduino core for the firmware, simavr for its
 # tests, Chromium for the browser tests of the web panel.
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium}
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev}
 _missing=()
 for p in $EEZYBOT_APT_PACKAGES; do
   dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
