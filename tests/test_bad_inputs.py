@@ -125,7 +125,8 @@ def tighter_limits():
 
 def servo_angles_verdict(msg):
     """serial_node's check (README: outside a servo's calibrated range, NaN, missing or
-    unknown servos are refused): None if accepted, else a regex of the reason."""
+    unknown servos are refused): None if accepted, else a regex of the kind of reason
+    (the nodes log each kind of rejection once every 5 s; diagnostics count them all)."""
     if len(msg.name) != len(msg.position):
         return r"\d+ names but \d+ positions"
     angles = {}
@@ -137,12 +138,12 @@ def servo_angles_verdict(msg):
         angles[name] = value
     for key, name in zip(SERVO_KEYS, SERVOS):
         if name not in angles:
-            return rf"no position for `{name}`"
+            return r"no position for `"
     for key, name in zip(SERVO_KEYS, SERVOS):
         lo, hi, _, _ = servo_range(key)
         deg = math.degrees(angles[name])
         if deg < lo - 1e-6 or deg > hi + 1e-6:
-            return rf"`{name}` at .* is outside its range"
+            return r"` at .* is outside its range"
     return None
 
 
@@ -239,13 +240,13 @@ def gen_xyz(rng, kind):
         expect = r"out of reach"
     elif kind == "nan":
         x, y, z = [math.nan if rng.random() < 0.5 or i == 0 else v for i, v in enumerate((x, y, z))]
-        expect = r"target [xyz] is NaN, not a finite number"
+        expect = r"target [xyz] is (NaN|-?inf), not a finite number"
     elif kind == "inf":
         i = rng.randrange(3)
         v = [x, y, z]
         v[i] = rng.choice([math.inf, -math.inf])
         x, y, z = v
-        expect = r"target [xyz] is -?inf, not a finite number"
+        expect = r"target [xyz] is (NaN|-?inf), not a finite number"
     elif kind == "huge":
         x, y, z = rng.choice(HUGE), rng.choice([y, rng.choice(HUGE)]), rng.choice([z, rng.choice(HUGE)])
         expect = r"out of reach|not a finite number"
@@ -257,7 +258,7 @@ def gen_xyz(rng, kind):
         expect = r"frame_id `.*` is not `base_link`"
     elif kind == "frame_1mb":
         m.header.frame_id = big("frame")
-        expect = r"frame_id `framexxx.*` is not `base_link`"
+        expect = r"frame_id `.*` is not `base_link`"
     elif kind == "odd_stamp":
         odd_stamp(m, rng)
         expect = "either"
@@ -326,14 +327,14 @@ def gen_joint_target(rng, kind):
         expect = r"unknown joint `"
     elif kind == "name_1mb":
         m.name[rng.randrange(len(m.name))] = big("joint")
-        expect = r"unknown joint `jointxxx"
+        expect = r"unknown joint `"
     elif kind == "duplicate":
         n = rng.choice(ACTUATED)
         m = joint_msg([n, n], [q[n], q[n] + rng.choice([0.0, 0.01])])
         expect = r"joint `.*` named twice"
     elif kind == "many_duplicates":
         m = joint_msg(["base_joint"] * 1000, [0.0] * 1000)
-        expect = r"joint `base_joint` named twice"
+        expect = r"joint `.*` named twice"
     elif kind == "mismatch":
         if rng.random() < 0.5:
             m.position = m.position[:-1]
@@ -345,7 +346,7 @@ def gen_joint_target(rng, kind):
         expect = r"no joint named"
     elif kind == "names_only":
         m.position = []
-        expect = r"\d+ names but 0 positions"
+        expect = r"\d+ names but \d+ positions"
     elif kind == "odd_arrays":
         m.velocity = [math.nan] * rng.randint(1, 9)
         m.effort = [1e308] * rng.randint(0, 3)
@@ -621,18 +622,26 @@ class WsClient:
                 payload, self.buf = self.buf[at:at + n], self.buf[at + n:]
                 opcode = b0 & 0x0F
                 if opcode == 1:
-                    try:
-                        msg = json.loads(payload)
-                    except ValueError:
-                        msg = payload.decode("utf-8", "replace")
+                    # the panel's own messages: answers and `sent` in full; the rest (poses,
+                    # status, possibly hundreds of KB each) by their kind only
+                    kind = re.match(rb'\{"t":"(\w+)"', payload)
+                    if kind and kind.group(1) not in (b"refused", b"ack", b"check", b"sent", b"hello"):
+                        msg = {"t": kind.group(1).decode()}
+                    else:
+                        try:
+                            msg = json.loads(payload)
+                        except ValueError:
+                            msg = payload.decode("utf-8", "replace")
                     self.messages.append((time.monotonic(), msg))
                 elif opcode == 8:
                     self.close_reason = payload
+                    self.closed_at = time.monotonic()
                     break
                 elif opcode == 9:
                     self.send(10, payload)
         except (OSError, ConnectionError) as e:
             self.close_reason = self.close_reason or repr(e)
+            self.closed_at = getattr(self, "closed_at", None) or time.monotonic()
         finally:
             self.closed.set()
 
@@ -910,13 +919,35 @@ def rule_items():
 # ---------------------------------------------------------------------------------------
 # The run
 
+def quiet_domain(tries=10, listen_s=1.5):
+    """A leased ROS domain nobody else is in: a stray node from another run (a benchmark
+    that does not lease its domain) would take part in the campaign."""
+    busy = []
+    try:
+        for _ in range(tries):
+            lease = DomainLease()
+            o = Observer(lease.id, "bad_inputs")
+            end = time.monotonic() + listen_s
+            while time.monotonic() < end and len(o.node.get_node_names()) <= 1:
+                o.spin_for(0.1)
+            others = [n for n in o.node.get_node_names() if n != "bad_inputs"]
+            if not others:
+                return lease, o
+            print(f"ROS domain {lease.id} is in use by {others}: trying another")
+            o.close()
+            busy.append(lease)
+        raise RuntimeError(f"no quiet ROS domain in {tries} tries")
+    finally:
+        for lease in busy:
+            lease.release()
+
+
 class Graph:
     def __init__(self, workdir):
-        self.lease = DomainLease()
+        self.lease, self.o = quiet_domain()
         self.domain = self.lease.id
         self.uno = SimulatedUno(workdir, FIRMWARE)
         self.port = free_port()
-        self.o = Observer(self.domain, "bad_inputs")
         node = self.o.node
         d = ["-p", "diagnostics_period:=0.2"]
         self.procs = {}
@@ -1140,7 +1171,7 @@ def get_params(g, node_name, names):
 
 COMPUTE_IK_LINE = re.compile(r"\]: (xyz_target|gripper_target|joint_target) rejected: (.*)$")
 SERIAL_LINE = re.compile(r"\]: servo_angles rejected: (.*)$")
-STATE_PUB_LINE = re.compile(r"\]: joint_states: (.*); skipped$")
+STATE_PUB_LINE = re.compile(r"\]: joint_states: (.*); skipped(?: \(\d+ more like it.*)?$")
 
 
 def ik_superseded(r, log):
@@ -1335,7 +1366,11 @@ def campaign(tmp_path_factory):
             r["sent"]["ws"] += 1
         for name, make in WS_ODD_FRAMING:
             c = WsClient(g.port, name)
-            c.sock.sendall(make())
+            try:
+                c.sock.sendall(make())
+            except OSError as e:
+                r["ws_protocol"].append((name, f"send failed: {e!r}", c.close_reason))
+                continue
             answered = g.wait(lambda: c.answers(), 10)
             answer = c.answers()[0] if answered else None
             r["ws_protocol"].append((name, "refused" if answer and answer.get("t") == "refused" else f"answer {answer}",
@@ -1360,6 +1395,9 @@ def campaign(tmp_path_factory):
         r["ws_closed"] = (ws.closed.is_set(), ws.close_reason)
         r["ws_broadcasts"] = Counter(m.get("t") for _, m in list(ws.messages) if isinstance(m, dict))
 
+        r["ws_closed_detail"] = (getattr(ws, "closed_at", None), dict(g.values("gui_bridge")))
+        ws.close()
+        ws = WsClient(g.port, "after")  # a fresh browser for what follows
         # ---- joint targets the panel cannot check: refused by it, or forwarded to compute_ik?
         r["gui_rules"] = {}
         for name, req in GUI_RULES.items():
@@ -1499,7 +1537,8 @@ def print_report(r):
     summary = {k: r.get(k) for k in ("seed", "plan", "total", "timing", "reasons", "rules", "params", "ws_protocol",
                                      "descriptions", "answering", "diag_longest", "longest_log_line", "gui_diag",
                                      "ws_closed", "exit_codes", "after_checks", "problems", "gui_rules", "cdr",
-                                     "cdr_sent", "alive_after_random", "alive_at_end", "spin_errors")}
+                                     "cdr_sent", "alive_after_random", "alive_at_end", "spin_errors",
+                                     "ws_closed_detail")}
     summary["sent"] = dict(r["sent"])
     summary["kinds"] = {f"{c}/{k}": n for (c, k), n in sorted(r["kinds"].items())}
     summary["ws_answers"] = Counter(a.get("t") for a in r.get("ws_answers", []))
@@ -1643,11 +1682,20 @@ def test_every_message_reached_its_node(campaign):
     assert rej <= r["bad_servo_angles"] <= rej + sup_s, (rej, sup_s, r["bad_servo_angles"])
 
 
+QUIET = re.compile(r" \((\d+) more like it in the last \d+ s, not logged\)$")
+
+
+def logged(reasons):
+    """Rejections a log accounts for: its lines, and the ones they say were not logged
+    (repeated bad input is logged once per kind every 5 s, with a count of the rest)."""
+    return sum(1 + int(m.group(1)) if (m := QUIET.search(x)) else 1 for x in reasons)
+
+
 def test_compute_ik_counts_and_names_every_rejection(campaign):
     r = campaign
-    lines = [COMPUTE_IK_LINE.search(l) for l in log_segment(r, "compute_ik").splitlines()]
+    lines = [COMPUTE_IK_LINE.search(line) for line in log_segment(r, "compute_ik").splitlines()]
     reasons = [m.group(2) for m in lines if m]
-    assert len(reasons) == delta(r, "compute_ik", "rejected") > 1000
+    assert 0 < logged(reasons) <= delta(r, "compute_ik", "rejected") and delta(r, "compute_ik", "rejected") > 1000
     assert all(x.strip() for x in reasons)
     for regex, n in r["expect_reasons"]["compute_ik"].items():
         assert any(re.search(regex, x) for x in reasons), f"no rejection says /{regex}/ ({n} sent)"
@@ -1659,7 +1707,7 @@ def test_compute_ik_counts_and_names_every_rejection(campaign):
 def test_serial_node_counts_and_names_every_rejection(campaign):
     r = campaign
     reasons = [m.group(1) for m in map(SERIAL_LINE.search, log_segment(r, "serial_node").splitlines()) if m]
-    assert len(reasons) == delta(r, "serial_node", "inputs_rejected") > 300
+    assert 0 < logged(reasons) <= delta(r, "serial_node", "inputs_rejected") and delta(r, "serial_node", "inputs_rejected") > 300
     for regex, n in r["expect_reasons"]["serial_node"].items():
         assert any(re.search(regex, x) for x in reasons), f"no rejection says /{regex}/ ({n} sent)"
     assert len(r["diag_seen"]["serial_node"]) > 5, r["diag_seen"]["serial_node"]
@@ -1669,8 +1717,10 @@ def test_serial_node_counts_and_names_every_rejection(campaign):
 
 def test_state_publisher_counts_and_names_every_skipped_joint(campaign):
     r = campaign
-    problems = [m.group(1) for m in map(STATE_PUB_LINE.search, log_segment(r, "state_publisher").splitlines()) if m]
-    assert delta(r, "state_publisher", "joints_skipped") == r["expected_skipped"] == len(problems) > 300
+    lines = [line for line in log_segment(r, "state_publisher").splitlines() if STATE_PUB_LINE.search(line)]
+    problems = [STATE_PUB_LINE.search(line).group(1) for line in lines]
+    assert delta(r, "state_publisher", "joints_skipped") == r["expected_skipped"] > 300
+    assert 0 < logged(lines) <= r["expected_skipped"]
     for regex in [r"unknown joint `", r"position is (NaN|inf|-inf)", r"has no position", r"is fixed and takes no position"]:
         assert any(re.search(regex, x) for x in problems), regex
     bad = [x for x in r["reasons"] if x[0] == "state_publisher" and not x[3]]
@@ -1781,11 +1831,36 @@ def test_gui_bridge_names_websocket_rejections_in_diagnostics_and_logs(campaign)
 
 
 @pytest.mark.xfail(strict=True, reason="a 1 MB frame_id or name is echoed whole into the rejection's log line, "
-                   "/rosout and every diagnostics report until the next rejection (issue 9 item 7 report)")
-def test_log_lines_and_diagnostics_stay_readable_with_1mb_inputs(campaign):
-    r = campaign
-    assert max(r["longest_log_line"].values()) < 64 * 1024, r["longest_log_line"]
-    assert max(r["diag_longest"].values()) < 64 * 1024, r["diag_longest"]
+                   "/rosout and the diagnostics (compute_ik: frame_id; serial_node: servo name; state_publisher: joint "
+                   "name), where diagnostics repeat it every period until the next rejection (issue 9 item 7 report)")
+def test_a_1mb_name_gives_a_readable_log_line_and_diagnostics(launch, observer):
+    """One 1 MB frame_id, servo name and joint name each, to nodes that saw no bad input
+    before (the first of a kind is always logged)."""
+    procs = {n: launch(n, "--ros-args", "-p", "diagnostics_period:=0.2", *extra)
+             for n, extra in [("compute_ik", []), ("serial_node", ["-p", "port:=mock"]), ("state_publisher", [])]}
+    diags = observer.sub("/diagnostics", DiagnosticArray)
+    pubs = {t: observer.pub("/" + t, typ) for t, typ in [("xyz_target", PointStamped), ("servo_angles", JointState),
+                                                         ("joint_states", JointState)]}
+    for p in pubs.values():
+        observer.wait_matched(p)
+    observer.wait_publisher("/diagnostics")
+    m = PointStamped()
+    m.header.frame_id = big("frame")
+    pubs["xyz_target"].publish(m)
+    pubs["servo_angles"].publish(joint_msg(SERVOS[:3] + [big("servo")], [1.0] * 4))
+    pubs["joint_states"].publish(joint_msg(["base_joint", big("joint")], [0.0, 0.0]))
+    longest = Counter()
+
+    def seen():
+        for _, arr in diags:
+            for st in arr.status:
+                node = st.name.split(":")[0]
+                longest[node] = max([longest[node], len(st.message)] + [len(kv.value) for kv in st.values])
+        return all(any(f"[{n}]" in line and "xxxxxxxx" in line for line in procs[n].output().splitlines()) for n in procs)
+    observer.spin_until(seen, 10)
+    lines = {n: max((len(line) for line in p.output().splitlines() if "xxxxxxxx" in line), default=0) for n, p in procs.items()}
+    assert all(0 < n < 64 * 1024 for n in lines.values()), lines
+    assert max(longest.values(), default=0) < 64 * 1024, dict(longest)
 
 
 @pytest.mark.xfail(strict=True, reason="RustDDS (patches/rustdds): a service reply over ~1.25 KB (fragmented) is "
