@@ -9,7 +9,7 @@
 
 use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
 use eezybot_msgs::geometry_msgs::{
-    Point, PointStamped, Quaternion, Transform, TransformStamped, Vector3,
+    Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3,
 };
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64, Header, String as StringMsg};
@@ -136,6 +136,44 @@ fn cases() -> Vec<Case> {
                     x: f64::MIN,
                     y: 1e300,
                     z: -5e-324,
+                },
+            },
+        ),
+        case(
+            "pose_stamped",
+            PoseStamped {
+                header: header(1_700_000_000, 987_654_321, "base_link"),
+                pose: Pose {
+                    position: Point {
+                        x: 0.3,
+                        y: -0.25,
+                        z: 0.5,
+                    },
+                    orientation: Quaternion {
+                        x: 0.0,
+                        y: std::f64::consts::FRAC_1_SQRT_2,
+                        z: 0.0,
+                        w: std::f64::consts::FRAC_1_SQRT_2,
+                    },
+                },
+            },
+        ),
+        case(
+            "pose_stamped_odd",
+            PoseStamped {
+                header: header(-1, 1, UNICODE),
+                pose: Pose {
+                    position: Point {
+                        x: nan,
+                        y: -0.0,
+                        z: f64::MAX,
+                    },
+                    orientation: Quaternion {
+                        x: 0.0,
+                        y: 0.0,
+                        z: 0.0,
+                        w: 0.0,
+                    },
                 },
             },
         ),

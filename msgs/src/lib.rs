@@ -190,7 +190,27 @@ pub mod geometry_msgs {
         pub transform: Transform,
     }
 
+    /// [geometry_msgs/msg/Pose](https://github.com/ros2/common_interfaces/blob/rolling/geometry_msgs/msg/Pose.msg)
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct Pose {
+        /// Position (m).
+        pub position: Point,
+        /// Orientation.
+        pub orientation: Quaternion,
+    }
+
+    /// [geometry_msgs/msg/PoseStamped](https://github.com/ros2/common_interfaces/blob/rolling/geometry_msgs/msg/PoseStamped.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct PoseStamped {
+        /// Stamp and frame of the pose.
+        pub header: Header,
+        /// The pose.
+        pub pose: Pose,
+    }
+
     ros_message!(Point, "geometry_msgs", "Point");
+    ros_message!(Pose, "geometry_msgs", "Pose");
+    ros_message!(PoseStamped, "geometry_msgs", "PoseStamped");
     ros_message!(PointStamped, "geometry_msgs", "PointStamped");
     ros_message!(Vector3, "geometry_msgs", "Vector3");
     ros_message!(Quaternion, "geometry_msgs", "Quaternion");

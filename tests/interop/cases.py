@@ -7,7 +7,7 @@ import math
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, PointStamped, Quaternion, Transform, TransformStamped, Vector3
+from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Header, String
 
@@ -63,6 +63,10 @@ def cases():
         ("point", Point(x=-0.0, y=INF, z=NAN)),
         ("point_stamped", PointStamped(header=header(1_700_000_000, 123_456_789, "base_link"), point=Point(x=0.2, y=-0.05, z=0.15))),
         ("point_stamped_odd_frame", PointStamped(header=header(-1, 1, "x"), point=Point(x=-F64_MAX, y=1e300, z=-5e-324))),
+        ("pose_stamped", PoseStamped(header=header(1_700_000_000, 987_654_321, "base_link"),
+                                     pose=Pose(position=Point(x=0.3, y=-0.25, z=0.5), orientation=quat(0, math.sqrt(0.5), 0, math.sqrt(0.5))))),
+        ("pose_stamped_odd", PoseStamped(header=header(-1, 1, UNICODE),
+                                         pose=Pose(position=Point(x=NAN, y=-0.0, z=F64_MAX), orientation=quat(0, 0, 0, 0)))),
         ("vector3", vec(-F64_MAX, 5e-324, -INF)),
         ("quaternion_identity", quat(0, 0, 0, 1)),
         ("quaternion_odd", quat(NAN, -0.0, INF, -1)),
