@@ -144,6 +144,8 @@ pub struct RobotModel {
     /// Joints ordered parents before children (so poses can be accumulated in order).
     pub joints: Vec<JointModel>,
     index: HashMap<String, usize>,
+    /// `<limit velocity>` of every movable joint that gives a positive one (rad/s or m/s).
+    velocity: HashMap<String, f64>,
 }
 
 fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
@@ -249,7 +251,11 @@ impl RobotModel {
             .map(|(i, j)| (j.name.clone(), i))
             .collect();
         let mut joints = Vec::with_capacity(ordered.len());
+        let mut velocity = HashMap::new();
         for j in &ordered {
+            if j.limit.velocity.is_finite() && j.limit.velocity > 0.0 {
+                velocity.insert(j.name.clone(), j.limit.velocity);
+            }
             let axis = || {
                 let v = Vector3::from(j.axis.xyz.0);
                 Unit::try_new(v, 1e-12)
@@ -326,6 +332,7 @@ impl RobotModel {
             links,
             joints,
             index,
+            velocity,
         })
     }
 
@@ -337,6 +344,39 @@ impl RobotModel {
     /// Index of a joint in [`RobotModel::joints`].
     pub fn joint_index(&self, name: &str) -> Option<usize> {
         self.index.get(name).copied()
+    }
+
+    /// The `<limit velocity>` of a joint (rad/s or m/s), if the URDF gives a positive one.
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::urdf::RobotModel;
+    /// let m = RobotModel::load(std::path::Path::new(concat!(
+    ///     env!("CARGO_MANIFEST_DIR"), "/../../urdf/jaco.urdf"))).unwrap();
+    /// assert!((m.velocity_limit("jaco_joint_1").unwrap() - 36f64.to_radians()).abs() < 1e-12);
+    /// assert_eq!(m.velocity_limit("jaco_end_effector_joint"), None); // fixed
+    /// ```
+    pub fn velocity_limit(&self, joint: &str) -> Option<f64> {
+        self.joint(joint)
+            .filter(|j| j.is_movable())
+            .and_then(|j| self.velocity.get(&j.name).copied())
+    }
+
+    /// Links that are no joint's parent (the ends of the tree), in file order.
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::urdf::RobotModel;
+    /// let m = RobotModel::load(std::path::Path::new(concat!(
+    ///     env!("CARGO_MANIFEST_DIR"), "/../../urdf/jaco.urdf"))).unwrap();
+    /// assert_eq!(m.leaf_links(), ["jaco_end_effector"]);
+    /// ```
+    pub fn leaf_links(&self) -> Vec<&str> {
+        self.links
+            .iter()
+            .filter(|l| !self.joints.iter().any(|j| &j.parent == *l))
+            .map(String::as_str)
+            .collect()
     }
 
     /// Joints whose position comes from `joint_states`: movable and not mimic.
