@@ -6,7 +6,7 @@ import time
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, PoseStamped
 from rcl_interfaces.msg import Log, Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from sensor_msgs.msg import JointState
@@ -194,8 +194,16 @@ def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
         assert joints_of(js)[j] == kept[j]
     # back to OK once an input is accepted
     assert observer.spin_until(lambda: rig.last_diag()[0].level == b"\x00", 5)
-    # one log line per rejection
-    assert rig.proc.output().count("rejected:") == len(BAD_INPUTS)
+    # a log line for every kind of rejection (repeats of one kind within 5 s are counted
+    # in diagnostics, not logged again)
+    log = rig.proc.output()
+    first_of_kind = {}
+    for topic, _, code, text in BAD_INPUTS:
+        first_of_kind.setdefault((topic, code), text)
+    lines = [line for line in log.splitlines() if "rejected:" in line]
+    assert len(lines) == len(first_of_kind), lines
+    for (topic, code), text in first_of_kind.items():
+        assert any(text in line for line in lines), f"{code} not logged"
 
 
 def test_diagnostics_are_periodic_and_on_rosout_too(launch, observer):
@@ -398,3 +406,143 @@ def test_a_straight_line_leaving_the_workspace_is_refused_before_the_move(launch
     assert "% along the line" in rig.last_diag()[1]["last_rejection"]
     observer.spin_for(0.3)
     assert len(rig.servo_angles) == n
+
+
+# --- issue 10: solvers, undesirable configurations, nearest point, pose_target ---
+
+def set_params(observer, node_name, **values):
+    """Set parameters through /<node>/set_parameters; returns the SetParametersResult list."""
+    setp = observer.node.create_client(SetParameters, f"/{node_name}/set_parameters")
+    params = []
+    for name, v in values.items():
+        if isinstance(v, bool):
+            pv = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=v)
+        elif isinstance(v, float):
+            pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=v)
+        else:
+            pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=v)
+        params.append(Parameter(name=name, value=pv))
+    return call(observer, setp, SetParameters.Request(parameters=params)).results
+
+
+AGREEMENT_TARGETS = [(0.2, 0.05, 0.15), (0.15, -0.1, 0.2), (0.25, 0.0, 0.1), (0.12, 0.06, 0.24)]
+
+
+def test_every_solver_switched_at_run_time_agrees_with_the_closed_form(launch, observer):
+    """`ros2 param set /compute_ik solver …` while running: jacobian, dls and newton put
+    the arm where the closed form does, within 1e-9 m (tool) on the same targets; an
+    unknown solver is refused with the valid ones."""
+    rig = IkRig(launch, observer)
+    arm = ("base_joint", "shoulder_joint", "elbow_joint")
+    closed = []
+    for p in AGREEMENT_TARGETS:
+        js, _ = rig.send_and_wait(rig.xyz, target(*p))
+        closed.append([joints_of(js)[j] for j in arm])
+    bad = set_params(observer, "compute_ik", solver="levenberg")[0]
+    assert not bad.successful
+    assert "levenberg" in bad.reason and "analytic, jacobian, dls, newton" in bad.reason, bad.reason
+    for solver in ("jacobian", "dls", "newton"):
+        assert set_params(observer, "compute_ik", solver=solver)[0].successful
+        for p, q_closed in zip(AGREEMENT_TARGETS, closed):
+            js, sa = rig.send_and_wait(rig.xyz, target(*p))
+            q = [joints_of(js)[j] for j in arm]
+            check_state(js, sa, 0.0)  # passive joints and servo mapping as before
+            assert math.dist(fk(*q), fk(*q_closed)) <= 1e-9, (solver, p)
+            assert math.dist(fk(*q), p) <= 1e-9, (solver, p)
+            assert q == pytest.approx(q_closed, abs=1e-7), (solver, p)
+        assert observer.spin_until(lambda: rig.last_diag()[1].get("solver") == solver, 5)
+        assert rig.last_diag()[1]["last_solve"].startswith(f"{solver}: converged"), rig.last_diag()[1]
+    # an unreachable target is refused by the numerical solver with the distance it got to
+    rejected = rig.rejected_count()
+    rig.xyz.publish(target(0.5, 0.0, 0.15))
+    assert observer.spin_until(lambda: rig.rejected_count() > rejected, 10)
+    values = rig.last_diag()[1]
+    assert values["last_rejection_code"] == "ik_not_converged"
+    assert values["last_rejection"].startswith("not reached: the closest the newton solver got within the joint limits is 0.2"), values
+    # back to the closed form
+    assert set_params(observer, "compute_ik", solver="analytic")[0].successful
+    js, _ = rig.send_and_wait(rig.xyz, target(*AGREEMENT_TARGETS[0]))
+    assert [joints_of(js)[j] for j in arm] == closed[0]
+
+
+def test_undesirable_configurations_are_in_diagnostics_with_a_way_out(launch, observer):
+    rig = IkRig(launch, observer, "--ros-args", "-p", "diagnostics_period:=0.2")
+    assert observer.spin_until(lambda: rig.diagnostics and rig.last_diag()[1].get("undesirable") == "none", 5)
+    # the shoulder at its upper limit (125 deg)
+    rig.send_and_wait(rig.joints, joint_target(["shoulder_joint", "elbow_joint"], [math.radians(125), math.radians(-110)]))
+    key = "undesirable:at_limit:shoulder_joint:upper"
+    assert observer.spin_until(lambda: key in rig.last_diag()[1], 5), rig.last_diag()[1]
+    status, values = rig.last_diag()
+    assert "at_limit:shoulder_joint:upper" in values["undesirable"]
+    assert "away: shoulder_joint -1.00" in values[key], values[key]
+    assert status.level == b"\x00"  # an accepted target: still OK
+    # the forearm elevation phi half a degree above its lower limit (-65 deg): the coupling constraint
+    rig.send_and_wait(rig.joints, joint_target(["shoulder_joint", "elbow_joint"], [math.radians(60), math.radians(-124.5)]))
+    key = "undesirable:at_limit:forearm_elevation:lower"
+    assert observer.spin_until(lambda: key in rig.last_diag()[1], 5), rig.last_diag()[1]
+    assert "shoulder_joint +0.71, elbow_joint +0.71" in rig.last_diag()[1][key]
+    # the away direction works: a step along it clears the report
+    rig.send_and_wait(rig.joints, joint_target(["shoulder_joint", "elbow_joint"], [math.radians(65), math.radians(-120)]))
+    assert observer.spin_until(lambda: rig.last_diag()[1].get("undesirable") == "none", 5), rig.last_diag()[1]
+
+
+def test_a_target_just_outside_is_replaced_by_the_nearest_reachable_point_when_asked(launch, observer):
+    rosout = observer.sub("/rosout", Log)
+    rig = IkRig(launch, observer)
+    outside = (0.29, 0.0, 0.15)  # ROBOT.md: at z = 0.15 the tool reaches r 0.278 at most
+    rejected = rig.rejected_count()
+    rig.xyz.publish(target(*outside))
+    assert observer.spin_until(lambda: rig.rejected_count() > rejected, 10)
+    assert rig.last_diag()[1]["substitute_nearest"] == "off"
+    assert set_params(observer, "compute_ik", substitute_nearest=True, substitute_max_distance=0.02)[0].successful
+    js, _ = rig.send_and_wait(rig.xyz, target(*outside))
+    reached = fk(*[joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")])
+    d = math.dist(reached, outside)
+    assert 0.005 < d < 0.02, d
+    assert abs(reached[1]) < 1e-6 and reached[2] == pytest.approx(0.15, abs=0.01)
+    assert observer.spin_until(lambda: rig.last_diag()[1].get("substitutions") == "1", 5)
+    values = rig.last_diag()[1]
+    assert "xyz_target (0.2900, 0.0000, 0.1500) m is out of reach" in values["last_substitution"]
+    assert f"{d:.4f} m away" in values["last_substitution"], (d, values["last_substitution"])
+    assert observer.spin_until(lambda: any("nearest reachable point" in m.msg for _, m in rosout), 5)
+    # farther out than substitute_max_distance: refused as before
+    rejected = rig.rejected_count()
+    rig.xyz.publish(target(0.5, 0.0, 0.15))
+    assert observer.spin_until(lambda: rig.rejected_count() > rejected, 10)
+    assert rig.last_diag()[1]["last_rejection_code"] == "too_far"
+
+
+def pose_target(x, y, z, q=(0.0, 0.0, 0.0, 1.0)):
+    m = PoseStamped()
+    m.header.frame_id = "base_link"
+    m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = float(x), float(y), float(z)
+    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = map(float, q)
+    return m
+
+
+def test_pose_target_moves_the_eezybot_to_its_position_and_reports_the_orientation(launch, observer):
+    """The EezyBot (3 DOF) takes a pose position first: the tool goes where xyz_target
+    would put it, and diagnostics say how far the orientation asked is from the one its
+    level claw takes. A quaternion that is no rotation is refused."""
+    rig = IkRig(launch, observer)
+    pose = observer.pub("/pose_target", PoseStamped)
+    observer.wait_matched(pose)
+    yaw = math.atan2(0.05, 0.2)
+    level = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))  # what the claw takes there
+    before = None
+    for q, off in ((level, 0.0), ((0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)), None)):
+        js, _ = rig.send_and_wait(pose, pose_target(0.2, 0.05, 0.15, q))
+        assert math.dist(fk(*[joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")]), (0.2, 0.05, 0.15)) < 1e-9
+        assert observer.spin_until(lambda: rig.last_diag()[1].get("last_pose_target") not in (None, before), 5)
+        text = before = rig.last_diag()[1]["last_pose_target"]
+        taken = float(text.split("the orientation taken is ")[1].split("°")[0])
+        if off is not None:
+            assert taken == pytest.approx(off, abs=0.01), text
+        else:
+            assert taken > 80, text
+    rejected = rig.rejected_count()
+    pose.publish(pose_target(0.2, 0.0, 0.15, (0.0, 0.0, 0.0, 0.0)))
+    assert observer.spin_until(lambda: rig.rejected_count() > rejected, 10)
+    assert rig.last_diag()[1]["last_rejection_code"] == "bad_orientation"
+    assert rig.last_diag()[1]["last_rejection_topic"] == "pose_target"

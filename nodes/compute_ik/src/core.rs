@@ -1,18 +1,24 @@
 //! The IK node's logic, free of ROS I/O: targets in, joint states and servo angles
 //! out, or a rejection with its reason. A rejected input never changes the state.
 
+use crate::numeric::{describe_pose, NumericIk, Solver};
+use eezybot_kinematics::ik::Target;
+use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{
     Arm, ArmConfig, ArmJoints, ArmState, Joint, KinematicsError, MotionLimits, ServoCalibrations,
     ServoId, ACTUATED_JOINTS,
 };
 use eezybot_motion::{straight_line, AxisLimits, LineError, Planner};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
-use eezybot_msgs::geometry_msgs::PointStamped;
+use eezybot_msgs::geometry_msgs::{PointStamped, Pose, PoseStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::fmt;
+
+/// The EezyBot's URDF (`urdf/eezybot.urdf`), whose chain the numerical solvers drive.
+pub const EEZYBOT_URDF: &str = include_str!("../../../urdf/eezybot.urdf");
 
 /// Which input topic a request came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,6 +29,8 @@ pub enum Source {
     GripperTarget,
     /// `joint_target`
     JointTarget,
+    /// `pose_target`
+    PoseTarget,
 }
 
 impl Source {
@@ -32,6 +40,7 @@ impl Source {
             Source::XyzTarget => "xyz_target",
             Source::GripperTarget => "gripper_target",
             Source::JointTarget => "joint_target",
+            Source::PoseTarget => "pose_target",
         }
     }
 }
@@ -53,6 +62,13 @@ pub enum Reason {
     UnknownJoint {
         /// the name given
         name: String,
+    },
+    /// `joint_target` names a joint that a URDF arm does not have (or does not move).
+    UnknownArmJoint {
+        /// the name given
+        name: String,
+        /// the joints it accepts
+        known: Vec<String>,
     },
     /// `joint_target` names a joint twice.
     DuplicateJoint {
@@ -87,6 +103,36 @@ pub enum Reason {
         /// what the middleware said
         error: String,
     },
+    /// A `pose_target`'s orientation is not a rotation (a quaternion far from unit
+    /// length, or not finite).
+    BadOrientation {
+        /// the quaternion given (x, y, z, w)
+        quaternion: [f64; 4],
+    },
+    /// A numerical solver did not reach the target (or another error of the chain).
+    Numeric {
+        /// the solver
+        solver: Solver,
+        /// what it said
+        error: KinematicsError,
+        /// whether the target's orientation was required (its residual matters)
+        orientation: bool,
+    },
+    /// `gripper_target` for an arm without the EezyBot's claw.
+    NoGripper,
+    /// A joint of a URDF arm would leave its limits (or a linear constraint of them).
+    JointLimit {
+        /// the joint, or the constraint's name
+        name: String,
+        /// the value it would have (rad or m)
+        value: f64,
+        /// lower limit
+        lower: f64,
+        /// upper limit
+        upper: f64,
+        /// rad (else m)
+        revolute: bool,
+    },
 }
 
 impl Reason {
@@ -95,7 +141,7 @@ impl Reason {
         match self {
             Reason::Kinematics(e) => e.code(),
             Reason::WrongFrame { .. } => "wrong_frame".into(),
-            Reason::UnknownJoint { .. } => "unknown_joint".into(),
+            Reason::UnknownJoint { .. } | Reason::UnknownArmJoint { .. } => "unknown_joint".into(),
             Reason::DuplicateJoint { .. } => "duplicate_joint".into(),
             Reason::LengthMismatch { .. } => "length_mismatch".into(),
             Reason::NoJoints => "no_joints".into(),
@@ -103,7 +149,27 @@ impl Reason {
             Reason::TooOld { .. } => "too_old".into(),
             Reason::Line { .. } => "line_leaves_workspace".into(),
             Reason::Unreadable { .. } => "unreadable".into(),
+            Reason::BadOrientation { .. } => "bad_orientation".into(),
+            Reason::Numeric { error, .. } => error.code(),
+            Reason::NoGripper => "no_gripper".into(),
+            Reason::JointLimit { name, .. } => format!("out_of_limits:{name}"),
         }
+    }
+
+    /// Whether the target is out of the arm's reach or limits (what the nearest
+    /// reachable point may replace), rather than malformed.
+    pub fn is_out_of_workspace(&self) -> bool {
+        matches!(
+            self,
+            Reason::Kinematics(
+                KinematicsError::TooFar { .. }
+                    | KinematicsError::TooClose { .. }
+                    | KinematicsError::OutOfLimits { .. }
+            ) | Reason::Numeric {
+                error: KinematicsError::IkNotConverged { .. },
+                ..
+            }
+        )
     }
 }
 
@@ -121,6 +187,9 @@ impl fmt::Display for Reason {
                     ACTUATED_JOINTS.join(", ")
                 )
             }
+            Reason::UnknownArmJoint { name, known } => {
+                write!(f, "unknown joint `{name}` (this arm's joints: {})", known.join(", "))
+            }
             Reason::DuplicateJoint { name } => write!(f, "joint `{name}` named twice"),
             Reason::LengthMismatch { names, positions } => {
                 write!(f, "{names} names but {positions} positions")
@@ -136,6 +205,69 @@ impl fmt::Display for Reason {
             ),
             Reason::Line { why } => write!(f, "{why}"),
             Reason::Unreadable { error } => write!(f, "unreadable sample: {error}"),
+            Reason::BadOrientation { quaternion: [x, y, z, w] } => write!(
+                f,
+                "orientation ({x}, {y}, {z}, {w}) is not a rotation: a unit quaternion x y z w is expected (no rotation is 0 0 0 1)"
+            ),
+            Reason::Numeric {
+                solver,
+                error:
+                    KinematicsError::IkNotConverged {
+                        position_error_m,
+                        orientation_error_rad,
+                        iterations,
+                        attempts,
+                    },
+                orientation,
+            } => {
+                write!(
+                    f,
+                    "not reached: the closest the {} solver got within the joint limits is {position_error_m:.4} m",
+                    solver.name()
+                )?;
+                if *orientation {
+                    write!(f, " and {:.2}°", orientation_error_rad.to_degrees())?;
+                }
+                write!(
+                    f,
+                    " away ({iterations} iterations, {attempts} attempt{}): {}",
+                    if *attempts == 1 { "" } else { "s" },
+                    if *orientation {
+                        "out of reach, past a joint limit, or an orientation this arm cannot take there"
+                    } else {
+                        "out of reach or past a joint limit"
+                    }
+                )
+            }
+            Reason::Numeric { solver, error, .. } => {
+                write!(f, "{} solver: {error}", solver.name())
+            }
+            Reason::NoGripper => write!(
+                f,
+                "this arm has no gripper_target claw (that is the EezyBot's): move its joints with joint_target"
+            ),
+            Reason::JointLimit {
+                name,
+                value,
+                lower,
+                upper,
+                revolute,
+            } => {
+                if *revolute {
+                    write!(
+                        f,
+                        "{name} would be {:.2}°, outside its limits {:.2}° … {:.2}°",
+                        value.to_degrees(),
+                        lower.to_degrees(),
+                        upper.to_degrees()
+                    )
+                } else {
+                    write!(
+                        f,
+                        "{name} would be {value:.4} m, outside its limits {lower:.4} m … {upper:.4} m"
+                    )
+                }
+            }
         }
     }
 }
@@ -266,12 +398,62 @@ pub struct IkCore {
     counters: Counters,
     last_rejection: Option<Rejection>,
     last_event_rejected: bool,
+    /// the URDF whose chain the numerical solvers drive
+    model: Option<RobotModel>,
+    /// that chain with this arm's limits (None: the URDF is not the EezyBot's)
+    numeric: Option<NumericIk>,
+    numeric_error: Option<KinematicsError>,
+    solver: Solver,
+    /// replace targets this close outside the workspace by the nearest reachable point
+    substitute_max_m: Option<f64>,
+    substitutions: u64,
+    last_substitution: Option<String>,
+    last_pose: Option<String>,
+    notices: Vec<Notice>,
 }
+
+/// Something the node should log that is not a rejection (a substituted target, an
+/// orientation the arm cannot take): a throttle kind and the line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Notice {
+    /// What kind, for [`ros_plumbing::logging::Throttle`], e.g. `xyz_target/substituted`.
+    pub kind: String,
+    /// The line to log.
+    pub text: String,
+}
+
+/// Largest joint difference (rad) by which a numerical solution outside the limits (by
+/// rounding in the projection onto them) is moved back inside.
+const LIMIT_ROUNDING_RAD: f64 = 1e-9;
+
+/// Above this difference (deg) between a `pose_target`'s orientation and the one the
+/// arm takes, a notice is logged.
+const ORIENTATION_NOTICE_DEG: f64 = 1.0;
 
 impl IkCore {
     /// A core for this configuration, at rest in the home pose with the claw closed,
-    /// with the default [`MotionSettings`].
+    /// with the default [`MotionSettings`] and the closed-form solver; the numerical
+    /// solvers drive the shipped `urdf/eezybot.urdf`.
     pub fn new(config: &ArmConfig, base_frame: &str) -> IkCore {
+        let model = RobotModel::from_urdf_str(EEZYBOT_URDF, "urdf/eezybot.urdf").ok();
+        Self::build(config, base_frame, model)
+    }
+
+    /// As [`IkCore::new`], the numerical solvers driving this EezyBot URDF (its chain
+    /// `base_link` → `tool0` with the passive linkage joints, [`Arm::serial_chain`]).
+    pub fn with_model(
+        config: &ArmConfig,
+        base_frame: &str,
+        model: RobotModel,
+    ) -> Result<IkCore, KinematicsError> {
+        let core = Self::build(config, base_frame, Some(model));
+        match &core.numeric_error {
+            Some(e) => Err(e.clone()),
+            None => Ok(core),
+        }
+    }
+
+    fn build(config: &ArmConfig, base_frame: &str, model: Option<RobotModel>) -> IkCore {
         let motion = MotionSettings::default();
         let state = ArmState::default();
         let planner = Planner::new(
@@ -280,7 +462,7 @@ impl IkCore {
             motion.period_s,
         )
         .unwrap_or_else(|_| unreachable!("validated limits and a finite home pose"));
-        IkCore {
+        let mut core = IkCore {
             arm: config.arm(),
             calibration: config.servos,
             limits: config.motion,
@@ -294,12 +476,44 @@ impl IkCore {
             counters: Counters::default(),
             last_rejection: None,
             last_event_rejected: false,
+            model,
+            numeric: None,
+            numeric_error: None,
+            solver: Solver::Analytic,
+            substitute_max_m: None,
+            substitutions: 0,
+            last_substitution: None,
+            last_pose: None,
+            notices: Vec::new(),
+        };
+        core.rebuild_chain();
+        core
+    }
+
+    /// The chain of the URDF with this arm's limits (again after a configuration change).
+    fn rebuild_chain(&mut self) {
+        let built = match &self.model {
+            Some(m) => self.arm.serial_chain(m),
+            None => Err(KinematicsError::UnknownLink {
+                link: "base_link".into(),
+            }),
+        };
+        match built {
+            Ok(chain) => {
+                self.numeric = Some(NumericIk::new(chain, false));
+                self.numeric_error = None;
+            }
+            Err(e) => {
+                self.numeric = None;
+                self.numeric_error = Some(e);
+            }
         }
     }
 
     /// Swap in a new configuration (kept state is re-checked on the next input; the
     /// motion under way continues within the new limits).
     pub fn set_config(&mut self, config: &ArmConfig) {
+        let changed = config.arm() != self.arm;
         self.arm = config.arm();
         self.calibration = config.servos;
         self.limits = config.motion;
@@ -307,6 +521,36 @@ impl IkCore {
         let _ = self
             .planner
             .set_limits(axis_limits(&config.motion, &config.servos));
+        if changed {
+            self.rebuild_chain();
+        }
+    }
+
+    /// Choose the IK solver for Cartesian targets (`analytic`: the closed form).
+    pub fn set_solver(&mut self, solver: Solver) {
+        self.solver = solver;
+    }
+
+    /// The solver in use.
+    pub fn solver(&self) -> Solver {
+        self.solver
+    }
+
+    /// Replace a target at most `max_m` outside the workspace by the nearest reachable
+    /// point, reported, instead of refusing it (`None`: refuse every unreachable one).
+    pub fn set_substitution(&mut self, max_m: Option<f64>) {
+        self.substitute_max_m = max_m.filter(|m| *m > 0.0);
+    }
+
+    /// What to log besides rejections since the last call (substitutions, orientations
+    /// the arm cannot take).
+    pub fn take_notices(&mut self) -> Vec<Notice> {
+        std::mem::take(&mut self.notices)
+    }
+
+    /// The numerical chain, if the URDF is the EezyBot's.
+    pub fn numeric(&self) -> Option<&NumericIk> {
+        self.numeric.as_ref()
     }
 
     /// Change how the arm is moved. A new step period applies from the next target.
@@ -390,28 +634,217 @@ impl IkCore {
         let result = (|| {
             self.check_estop()?;
             self.check_age(stamp, now)?;
-            let frame = msg.header.frame_id.as_str();
-            if !(frame.is_empty() || frame == self.base_frame) {
-                return Err(Reason::WrongFrame {
-                    frame_id: frame.to_string(),
-                    expected: self.base_frame.clone(),
-                });
-            }
+            check_frame(&msg.header.frame_id, &self.base_frame)?;
             let target = Vector3::new(msg.point.x, msg.point.y, msg.point.z);
-            let joints = self
-                .arm
-                .solve_position(&target, self.goal.joints.base_rad)?;
-            let goal = ArmState {
-                joints,
-                ..self.goal
-            };
-            self.calibration.servo_angles(&goal)?;
-            if self.motion.mode == MotionMode::Line {
-                self.plan_line(target, goal)?;
-            }
-            Ok(goal)
+            self.move_to_point(Source::XyzTarget, target, None)
         })();
         self.finish(Source::XyzTarget, stamp, now, result)
+    }
+
+    /// Handle a `pose_target` arriving at `now`. The EezyBot has three joints: its claw
+    /// stays level and faces along the base angle, so its orientation follows from the
+    /// position. The pose is solved position first (the numerical solvers pursue the
+    /// orientation in what freedom the position leaves, which for this arm is none);
+    /// the angle between the orientation asked and the one taken is reported in
+    /// `diagnostics` (`last_pose_target`) and logged when over 1°.
+    pub fn handle_pose_target(
+        &mut self,
+        msg: &PoseStamped,
+        now: Time,
+    ) -> Result<Output, Rejection> {
+        let stamp = msg.header.stamp;
+        let result = (|| {
+            self.check_estop()?;
+            self.check_age(stamp, now)?;
+            check_frame(&msg.header.frame_id, &self.base_frame)?;
+            let (position, rotation) = pose_parts(&msg.pose)?;
+            let goal = self.move_to_point(Source::PoseTarget, position, Some(rotation))?;
+            let taken = self.tool_pose(&goal.joints);
+            let off_deg = taken.rotation.angle_to(&rotation).to_degrees();
+            let text = format!(
+                "position first: the orientation taken is {off_deg:.2}° from the one asked (this arm's claw stays level, facing along the base angle); tool0 at {}",
+                describe_pose(&taken)
+            );
+            if off_deg > ORIENTATION_NOTICE_DEG {
+                self.notices.push(Notice {
+                    kind: "pose_target/orientation".into(),
+                    text: format!("pose_target: {text}"),
+                });
+            }
+            self.last_pose = Some(text);
+            Ok(goal)
+        })();
+        self.finish(Source::PoseTarget, stamp, now, result)
+    }
+
+    /// `tool0` in `base_link` for these joints (from the URDF chain when there is one).
+    fn tool_pose(&self, q: &ArmJoints) -> Isometry3<f64> {
+        match self
+            .numeric
+            .as_ref()
+            .map(|n| n.chain().forward(&q.to_chain()))
+        {
+            Some(Ok(p)) => p,
+            _ => Isometry3::from_parts(
+                Translation3::from(self.arm.forward(q)),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, q.base_rad),
+            ),
+        }
+    }
+
+    /// The goal for a Cartesian target (position, and for a pose its orientation):
+    /// solved, checked against the servo ranges, and planned as a line in line mode. A
+    /// target just outside the workspace may be replaced by the nearest reachable point
+    /// ([`IkCore::set_substitution`]).
+    fn move_to_point(
+        &mut self,
+        source: Source,
+        target: Vector3<f64>,
+        orientation: Option<UnitQuaternion<f64>>,
+    ) -> Result<ArmState, Reason> {
+        let (joints, point, substituted) = self.solve_point(source, target, orientation)?;
+        let goal = ArmState {
+            joints,
+            ..self.goal
+        };
+        self.calibration.servo_angles(&goal)?;
+        if self.motion.mode == MotionMode::Line {
+            let record = self.numeric.as_ref().and_then(|n| n.last_solve().cloned());
+            let planned = self.plan_line(point, goal);
+            if let Some(n) = self.numeric.as_mut() {
+                n.restore_last_solve(record); // the target's solve, not the line's last sample
+            }
+            planned?;
+        }
+        if let Some(text) = substituted {
+            self.substitutions += 1;
+            self.notices.push(Notice {
+                kind: format!("{}/substituted", source.topic()),
+                text: text.clone(),
+            });
+            self.last_substitution = Some(text);
+        }
+        Ok(goal)
+    }
+
+    /// Joints for a point with the current solver, or those of the nearest reachable
+    /// point when substitution is on and the point is just outside the workspace; with
+    /// the point they reach and, if substituted, the line that says so.
+    fn solve_point(
+        &mut self,
+        source: Source,
+        target: Vector3<f64>,
+        orientation: Option<UnitQuaternion<f64>>,
+    ) -> Result<(ArmJoints, Vector3<f64>, Option<String>), Reason> {
+        let reason = match self.solve_exact(&target, orientation) {
+            Ok(q) => return Ok((q, target, None)),
+            Err(reason) => reason,
+        };
+        let Some(max_m) = self.substitute_max_m else {
+            return Err(reason);
+        };
+        if !reason.is_out_of_workspace() {
+            return Err(reason);
+        }
+        let seed = self.goal.joints.to_chain();
+        let Some(numeric) = self.numeric.as_mut() else {
+            return Err(reason);
+        };
+        let Ok(near) = numeric.nearest(&target, &seed) else {
+            return Err(reason);
+        };
+        if near.distance_m > max_m {
+            return Err(reason);
+        }
+        let Some(q) = ArmJoints::from_chain(&near.joints) else {
+            return Err(reason);
+        };
+        let q = self.inside_limits(q)?;
+        let p = self.arm.forward(&q);
+        let text = format!(
+            "{} ({:.4}, {:.4}, {:.4}) m is out of reach ({reason}): moved to the nearest reachable point ({:.4}, {:.4}, {:.4}) m, {:.4} m away",
+            source.topic(),
+            target.x,
+            target.y,
+            target.z,
+            p.x,
+            p.y,
+            p.z,
+            (p - target).norm()
+        );
+        Ok((q, p, Some(text)))
+    }
+
+    /// Joints that put `tool0` at `target` with the current solver (the closed form or a
+    /// numerical one on the URDF chain, warm-started from the goal).
+    fn solve_exact(
+        &mut self,
+        target: &Vector3<f64>,
+        orientation: Option<UnitQuaternion<f64>>,
+    ) -> Result<ArmJoints, Reason> {
+        let solver = self.solver;
+        if solver.algorithm().is_none() {
+            return Ok(self.arm.solve_position(target, self.goal.joints.base_rad)?);
+        }
+        for (axis, value) in [("x", target.x), ("y", target.y), ("z", target.z)] {
+            if !value.is_finite() {
+                return Err(KinematicsError::NonFiniteTarget { axis, value }.into());
+            }
+        }
+        let seed = self.goal.joints.to_chain();
+        let Some(numeric) = self.numeric.as_mut() else {
+            return Err(Reason::Numeric {
+                solver,
+                orientation: false,
+                error: self
+                    .numeric_error
+                    .clone()
+                    .unwrap_or(KinematicsError::UnknownLink {
+                        link: "tool0".into(),
+                    }),
+            });
+        };
+        let goal = match orientation {
+            None => Target::position(*target),
+            Some(r) => {
+                Target::pose_preferred(Isometry3::from_parts(Translation3::from(*target), r), 1.0)
+            }
+        };
+        let sol = numeric
+            .solve(solver, &goal, &seed)
+            .map_err(|error| Reason::Numeric {
+                solver,
+                error,
+                orientation: false,
+            })?;
+        let q = ArmJoints::from_chain(&sol.joints).ok_or(Reason::Numeric {
+            solver,
+            orientation: false,
+            error: KinematicsError::DimensionMismatch {
+                what: "solution",
+                expected: 3,
+                got: sol.joints.len(),
+            },
+        })?;
+        self.inside_limits(q)
+    }
+
+    /// `q`, or `q` moved back inside the limits when a numerical solution is outside them
+    /// by rounding only.
+    fn inside_limits(&self, q: ArmJoints) -> Result<ArmJoints, Reason> {
+        let Err(e) = self.arm.limits.check(&q) else {
+            return Ok(q);
+        };
+        let c = self.arm.limits.clamp(&q);
+        let moved = (c.base_rad - q.base_rad)
+            .abs()
+            .max((c.shoulder_rad - q.shoulder_rad).abs())
+            .max((c.elbow_rad - q.elbow_rad).abs());
+        if moved <= LIMIT_ROUNDING_RAD && self.arm.limits.check(&c).is_ok() {
+            Ok(c)
+        } else {
+            Err(e.into())
+        }
     }
 
     /// The straight line from where the arm stops to `target`, checked along its
@@ -421,16 +854,39 @@ impl IkCore {
         let from_state = state_of(&stop);
         let from = self.arm.forward(&from_state.joints);
         let arm = self.arm;
-        let mut seed = from_state.joints.base_rad;
+        let solver = self.solver;
+        let numeric = &mut self.numeric;
+        let mut seed = from_state.joints;
         let path = straight_line(
             [from.x, from.y, from.z],
             [target.x, target.y, target.z],
             self.motion.line_step_m,
             LINE_MAX_JOINT_STEP_RAD,
             |p| {
-                let q = arm.solve_position(&Vector3::new(p[0], p[1], p[2]), seed)?;
-                seed = q.base_rad;
-                Ok::<_, KinematicsError>(vec![q.base_rad, q.shoulder_rad, q.elbow_rad])
+                let point = Vector3::new(p[0], p[1], p[2]);
+                let q = if (point - target).norm() <= 1e-12 {
+                    goal.joints // the end: the goal itself (a substituted point lies on the boundary)
+                } else {
+                    match (solver.algorithm(), numeric.as_mut()) {
+                        (Some(_), Some(n)) => {
+                            let sol = n
+                                .solve_unrecorded(
+                                    solver,
+                                    &Target::position(point),
+                                    &seed.to_chain(),
+                                )
+                                .map_err(|error| Reason::Numeric {
+                                    solver,
+                                    error,
+                                    orientation: false,
+                                })?;
+                            ArmJoints::from_chain(&sol.joints).unwrap_or(seed)
+                        }
+                        _ => arm.solve_position(&point, seed.base_rad)?,
+                    }
+                };
+                seed = q;
+                Ok::<_, Reason>(vec![q.base_rad, q.shoulder_rad, q.elbow_rad])
             },
         )
         .map_err(|e| match &e {
@@ -581,15 +1037,7 @@ impl IkCore {
     /// A target stamped longer than `max_target_age` before `now` is refused; a zero
     /// stamp means "now", and a stamp ahead of our clock is not old.
     fn check_age(&self, stamp: Time, now: Time) -> Result<(), Reason> {
-        let max = self.motion.max_target_age_s;
-        if max <= 0.0 || stamp == Time::ZERO {
-            return Ok(());
-        }
-        let age_s = (now.to_nanos() - stamp.to_nanos()) as f64 * 1e-9;
-        if age_s > max {
-            return Err(Reason::TooOld { age_s, max_s: max });
-        }
-        Ok(())
+        check_age(stamp, now, self.motion.max_target_age_s)
     }
 
     /// Make a validated goal the planner's (unless the line planner already took it)
@@ -746,8 +1194,104 @@ impl IkCore {
             values.push(("last_rejection_code", r.reason.code()));
             values.push(("last_rejection_topic", r.source.topic().to_string()));
         }
+        let mut more: Vec<(String, String)> = vec![(
+            "solver".into(),
+            match (&self.numeric, self.solver.algorithm()) {
+                (None, Some(_)) => format!(
+                    "{} (unusable: {})",
+                    self.solver.name(),
+                    self.numeric_error
+                        .as_ref()
+                        .map(|e| e.to_string())
+                        .unwrap_or_default()
+                ),
+                _ => self.solver.name().to_string(),
+            },
+        )];
+        if let Some(n) = &self.numeric {
+            if let Some(r) = n.last_solve() {
+                more.push(("last_solve".into(), r.describe()));
+            }
+            // undesirable configurations of the commanded state, each with a way out
+            more.extend(n.assess_values(&q.to_chain()));
+        }
+        more.push((
+            "substitute_nearest".into(),
+            match self.substitute_max_m {
+                Some(m) => format!("on, within {m} m"),
+                None => "off".into(),
+            },
+        ));
+        more.push(("substitutions".into(), self.substitutions.to_string()));
+        if let Some(t) = &self.last_substitution {
+            more.push(("last_substitution".into(), t.clone()));
+        }
+        if let Some(t) = &self.last_pose {
+            more.push(("last_pose_target".into(), t.clone()));
+        }
+        values.extend(more.iter().map(|(k, v)| (k.as_str(), v.clone())));
         ros_plumbing::diagnostics::status(level, name, "eezybot_arm", &message, &values)
     }
+}
+
+/// A target stamped longer than `max_s` before `now` is refused; a zero stamp means
+/// "now", a stamp ahead of our clock is not old, and `max_s` ≤ 0 means no limit.
+pub fn check_age(stamp: Time, now: Time, max_s: f64) -> Result<(), Reason> {
+    if max_s <= 0.0 || stamp == Time::ZERO {
+        return Ok(());
+    }
+    let age_s = (now.to_nanos() - stamp.to_nanos()) as f64 * 1e-9;
+    if age_s > max_s {
+        return Err(Reason::TooOld { age_s, max_s });
+    }
+    Ok(())
+}
+
+/// A target's `frame_id` must be empty or the base frame.
+pub fn check_frame(frame_id: &str, base_frame: &str) -> Result<(), Reason> {
+    if frame_id.is_empty() || frame_id == base_frame {
+        Ok(())
+    } else {
+        Err(Reason::WrongFrame {
+            frame_id: frame_id.to_string(),
+            expected: base_frame.to_string(),
+        })
+    }
+}
+
+/// Relative error of a quaternion's length accepted (and normalized away), so that
+/// hand-typed values such as `0.707 0 0 0.707` pass.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 0.01;
+
+/// Position and rotation of a pose: the quaternion must be finite and of unit length
+/// within [`QUATERNION_NORM_TOLERANCE`] (it is normalized); the position is checked by
+/// the solvers.
+///
+/// # Examples
+/// ```
+/// use compute_ik::core::pose_parts;
+/// use eezybot_msgs::geometry_msgs::{Point, Pose, Quaternion};
+/// let pose = Pose { position: Point { x: 0.2, y: 0.0, z: 0.1 },
+///                   orientation: Quaternion { x: 0.0, y: 0.0, z: 0.707, w: 0.707 } };
+/// let (p, r) = pose_parts(&pose).unwrap();
+/// assert!((r.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-12 && p.x == 0.2);
+/// let zero = Pose { orientation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 0.0 }, ..pose };
+/// assert_eq!(pose_parts(&zero).unwrap_err().code(), "bad_orientation");
+/// ```
+pub fn pose_parts(pose: &Pose) -> Result<(Vector3<f64>, UnitQuaternion<f64>), Reason> {
+    let o = pose.orientation;
+    let q = Quaternion::new(o.w, o.x, o.y, o.z);
+    let norm = q.norm();
+    if !(norm.is_finite() && (norm - 1.0).abs() <= QUATERNION_NORM_TOLERANCE) {
+        return Err(Reason::BadOrientation {
+            quaternion: [o.x, o.y, o.z, o.w],
+        });
+    }
+    let p = pose.position;
+    Ok((
+        Vector3::new(p.x, p.y, p.z),
+        UnitQuaternion::from_quaternion(q),
+    ))
 }
 
 /// The actuators a state sets, the planner's axes: base θ1, shoulder α, forearm

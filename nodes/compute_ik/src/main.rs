@@ -1,10 +1,9 @@
 //! `compute_ik` binary: sets up ROS and runs [`compute_ik::run`].
 
-use anyhow::Context as _;
-use compute_ik::core::{IkCore, Source};
-use compute_ik::{load_config, Input, Outputs};
+use compute_ik::core::Source;
+use compute_ik::{Core, Input, Outputs};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
-use eezybot_msgs::geometry_msgs::PointStamped;
+use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64};
 use eezybot_msgs::Time;
@@ -19,7 +18,8 @@ struct RosOutputs<'a> {
     node: &'a ros2_client::Node,
     xyz: &'a Subscription<PointStamped>,
     joint_states: Publisher<JointState>,
-    servo_angles: Publisher<JointState>,
+    /// the EezyBot's servos; an arm without a servo mapping has none
+    servo_angles: Option<Publisher<JointState>>,
     diagnostics: DiagnosticsPublisher,
 }
 
@@ -30,8 +30,10 @@ impl Outputs for RosOutputs<'_> {
         }
     }
     fn servo_angles(&self, msg: JointState) {
-        if let Err(e) = self.servo_angles.publish(msg) {
-            log::warn!("could not publish servo_angles: {e:?}");
+        if let Some(p) = &self.servo_angles {
+            if let Err(e) = p.publish(msg) {
+                log::warn!("could not publish servo_angles: {e:?}");
+            }
         }
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
@@ -39,7 +41,9 @@ impl Outputs for RosOutputs<'_> {
     }
     fn peer_counts(&self) -> [usize; 3] {
         [
-            self.servo_angles.get_subscription_count(self.node),
+            self.servo_angles
+                .as_ref()
+                .map_or(0, |p| p.get_subscription_count(self.node)),
             self.joint_states.get_subscription_count(self.node),
             self.xyz.get_publisher_count(self.node),
         ]
@@ -53,21 +57,19 @@ async fn main_async() -> anyhow::Result<()> {
         anyhow::bail!("unexpected argument `{extra}` (see --help)");
     }
     let params = node.params().clone();
-    let config =
-        load_config(&params.string("arm_config").unwrap_or_default()).context("arm_config")?;
-    let core = IkCore::new(
-        &config,
-        &params
-            .string("base_frame")
-            .unwrap_or_else(|| "base_link".into()),
-    );
+    let core = Core::from_params(&params).map_err(anyhow::Error::msg)?;
 
     let xyz = node.subscription::<PointStamped>("xyz_target", qos::COMMANDS)?;
     let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
     let joints = node.subscription::<JointState>("joint_target", qos::COMMANDS)?;
+    let pose = node.subscription::<PoseStamped>("pose_target", qos::COMMANDS)?;
     let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
     let joint_states = node.publisher("joint_states", qos::COMMANDS)?;
-    let servo_angles = node.publisher("servo_angles", qos::COMMANDS)?;
+    let servo_angles = if core.has_servos() {
+        Some(node.publisher("servo_angles", qos::COMMANDS)?)
+    } else {
+        None
+    };
     let diagnostics = node.diagnostics()?;
     let peers = PeerWatch::new(&compute_ik::watched_topics(
         &node.resolver().resolve("servo_angles")?,
@@ -103,6 +105,12 @@ async fn main_async() -> anyhow::Result<()> {
                 Err(e) => Input::Unreadable(Source::JointTarget, format!("{e:?}")),
             })
             .boxed(),
+        pose.async_stream()
+            .map(|r| match r {
+                Ok((m, _)) => Input::PoseTarget(m),
+                Err(e) => Input::Unreadable(Source::PoseTarget, format!("{e:?}")),
+            })
+            .boxed(),
         estop
             .async_stream()
             .filter_map(|r| async move {
@@ -120,17 +128,22 @@ async fn main_async() -> anyhow::Result<()> {
 
     let diag_name = format!("{}: inverse kinematics", node.resolver().node_name());
     log::info!(
-        "{} ready in ROS domain {}: {} -> {}, {}",
+        "{} ready in ROS domain {}: {} -> {}{}; arm: {}",
         node.resolver().node_fqn(),
         node.domain_id(),
         node.resolver().resolve("xyz_target")?,
         node.resolver().resolve("joint_states")?,
-        node.resolver().resolve("servo_angles")?
+        if core.has_servos() {
+            format!(", {}", node.resolver().resolve("servo_angles")?)
+        } else {
+            String::new()
+        },
+        core.describe()
     );
     let shutdown = ros_plumbing::shutdown_logged();
     compute_ik::run(core, inputs, &outputs, params, diag_name, peers, shutdown).await;
     drop(outputs);
-    drop((xyz, gripper, joints, estop));
+    drop((xyz, gripper, joints, pose, estop));
     node.shutdown().await;
     Ok(())
 }
