@@ -5,7 +5,9 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -256,3 +258,72 @@ def compose_chain(transforms, root, frame):
         pos = (pos[0] + r[0], pos[1] + r[1], pos[2] + r[2])
         rot = qmul(rot, (q.x, q.y, q.z, q.w))
     return pos, rot
+
+
+# ---------------------------------------------------------------------------------------
+# Modules whose rclpy participants live in network namespaces run in a pytest process of
+# their own. Fast DDS keeps process-wide state about the network interfaces: a
+# participant created in namespace `pc` after one in the root namespace announced the
+# root namespace's address (192.0.2.2 here), which nobody in `pc` can reach, so it
+# discovered nothing; and the other way round. Mark such a module with
+# `pytestmark = [pytest.mark.own_process, ...]`.
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "own_process: run this module's tests in a pytest process of their own")
+
+
+_OWN_PROCESS_RESULTS = {}
+
+
+def _run_module_in_own_process(item):
+    module = str(item.fspath)
+    if module not in _OWN_PROCESS_RESULTS:
+        ids = [i.nodeid for i in item.session.items if str(i.fspath) == module]
+        with tempfile.TemporaryDirectory() as tmp:
+            junit = Path(tmp) / "junit.xml"
+            started = time.monotonic()
+            proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-s", "-o",
+                                   "junit_logging=all", f"--junitxml={junit}", *ids],
+                                  cwd=str(item.session.config.rootpath), capture_output=True, text=True,
+                                  env={**os.environ, "EEZYBOT_OWN_PROCESS": "1"})
+            cases = {}
+            if junit.exists():
+                for case in ET.parse(junit).getroot().iter("testcase"):
+                    cases[case.get("name")] = case
+            _OWN_PROCESS_RESULTS[module] = (cases, proc, time.monotonic() - started)
+    return _OWN_PROCESS_RESULTS[module]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_protocol(item, nextitem):
+    if os.environ.get("EEZYBOT_OWN_PROCESS") or item.get_closest_marker("own_process") is None:
+        return None
+    from _pytest.reports import TestReport
+
+    item.ihook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
+    cases, proc, _ = _run_module_in_own_process(item)
+    case = cases.get(item.name)
+    outcome, longrepr, duration, sections = "passed", None, 0.0, []
+    if case is None:
+        outcome = "failed"
+        longrepr = (f"{item.nodeid} did not run in its own process (exit {proc.returncode})\n"
+                    f"{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
+    else:
+        duration = float(case.get("time") or 0.0)
+        for tag in ("failure", "error"):
+            bad = case.find(tag)
+            if bad is not None:
+                outcome = "failed"
+                longrepr = f"{bad.get('message', '')}\n{bad.text or ''}"
+        skipped = case.find("skipped")
+        if skipped is not None and outcome == "passed":
+            outcome = "skipped"
+            longrepr = (str(item.fspath), item.location[1] or 0, skipped.get("message", "skipped"))
+        out = case.find("system-out")
+        if out is not None and out.text:
+            sections.append(("Captured stdout call", out.text))
+    report = TestReport(item.nodeid, item.location, {k: 1 for k in item.keywords}, outcome, longrepr, "call",
+                        sections=sections, duration=duration)
+    item.ihook.pytest_runtest_logreport(report=report)
+    item.ihook.pytest_runtest_logfinish(nodeid=item.nodeid, location=item.location)
+    return True

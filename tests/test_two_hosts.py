@@ -18,7 +18,8 @@ from conftest import Observer
 from split_graph import SplitGraph, seconds, stamp_of
 from startup import run_in_subprocess
 
-pytestmark = pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")
+pytestmark = [pytest.mark.own_process,
+              pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")]
 
 # ROBOT.md, written out again so the test does not trust the code under test.
 H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
