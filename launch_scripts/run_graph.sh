@@ -5,30 +5,67 @@
 # on /dev/eezybot or /dev/ttyACM0; when none of them exists it uses the built-in virtual
 # Arduino (SERIAL_PORT=mock asks for it), and says so.
 #
-# Arguments are ROS arguments for every node, e.g.
+# Another arm: `--arm jaco` as the first arguments (or ARM=jaco) runs compute_ik and
+# state_publisher on urdf/jaco.urdf (the Kinova Jaco 2, 6 DOF) with gui_bridge, and no
+# serial_node (the Jaco has no hobby servos: compute_ik publishes no servo_angles).
+# `--arm eezybot` (the default) is the EezyBotArm.
+#
+# The other arguments are ROS arguments for every node, e.g.
 #   launch_scripts/run_graph.sh -r __ns:=/arm2
+#   launch_scripts/run_graph.sh --arm jaco -r __ns:=/jaco
 # Ctrl-C (or SIGTERM) stops every node; the script then exits 0.
 # Split across two machines: pc.sh on the operator's PC, pi.sh next to the Arduino.
 set -euo pipefail
 EEZYBOT_SCRIPT=run_graph.sh
 . "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
-eezybot_find_binaries compute_ik state_publisher serial_node gui_bridge
-eezybot_ros_args "$@"
-eezybot_serial_port
-if [ "$EEZYBOT_PORT_FOUND" = 0 ]; then
-  eezybot_say "no Arduino at ${SERIAL_PORT:-/dev/eezybot or /dev/ttyACM0}: using the built-in virtual Arduino"
-  EEZYBOT_PORT=mock
-fi
+arm=${ARM:-eezybot}
+case "${1:-}" in
+  --arm) [ $# -ge 2 ] || { eezybot_say "--arm needs a value: eezybot or jaco"; exit 2; }
+         arm=$2; shift 2 ;;
+  --arm=*) arm=${1#--arm=}; shift ;;
+esac
 bind=${GUI_BIND:-127.0.0.1:8080}
 
-eezybot_start compute_ik
-eezybot_start state_publisher
-eezybot_start serial_node -p "port:=$EEZYBOT_PORT"
-eezybot_start gui_bridge -p "bind:=$bind"
+case "$arm" in
+  eezybot)
+    eezybot_find_binaries compute_ik state_publisher serial_node gui_bridge
+    eezybot_ros_args "$@"
+    eezybot_serial_port
+    if [ "$EEZYBOT_PORT_FOUND" = 0 ]; then
+      eezybot_say "no Arduino at ${SERIAL_PORT:-/dev/eezybot or /dev/ttyACM0}: using the built-in virtual Arduino"
+      EEZYBOT_PORT=mock
+    fi
 
-eezybot_banner
-eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($([ "$EEZYBOT_PORT" = mock ] && echo "virtual Arduino" || echo "Arduino on $EEZYBOT_PORT"))"
-eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
-eezybot_say "try: ros2 topic pub --once /xyz_target geometry_msgs/msg/PointStamped \"{header: {frame_id: base_link}, point: {x: 0.2, y: 0.0, z: 0.15}}\""
+    eezybot_start compute_ik
+    eezybot_start state_publisher
+    eezybot_start serial_node -p "port:=$EEZYBOT_PORT"
+    eezybot_start gui_bridge -p "bind:=$bind"
+
+    eezybot_banner
+    eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($([ "$EEZYBOT_PORT" = mock ] && echo "virtual Arduino" || echo "Arduino on $EEZYBOT_PORT"))"
+    eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
+    eezybot_say "try: ros2 topic pub --once /xyz_target geometry_msgs/msg/PointStamped \"{header: {frame_id: base_link}, point: {x: 0.2, y: 0.0, z: 0.15}}\""
+    ;;
+  jaco)
+    urdf="$EEZYBOT_ROOT/urdf/jaco.urdf"
+    [ -f "$urdf" ] || { eezybot_say "no $urdf: --arm jaco runs from a source tree"; exit 1; }
+    eezybot_find_binaries compute_ik state_publisher gui_bridge
+    eezybot_ros_args "$@"
+
+    eezybot_start compute_ik -p "urdf:=$urdf" -p "tip_link:=jaco_end_effector"
+    eezybot_start state_publisher -p "urdf:=$urdf"
+    eezybot_start gui_bridge -p "bind:=$bind"
+
+    eezybot_banner
+    eezybot_say "arm: Kinova Jaco 2 (6 DOF, $urdf), tip jaco_end_effector; no serial_node (no servos to drive)"
+    eezybot_say "running here: compute_ik, state_publisher, gui_bridge"
+    eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
+    eezybot_say "try: ros2 topic pub --once /pose_target geometry_msgs/msg/PoseStamped \"{header: {frame_id: base_link}, pose: {position: {x: 0.5, y: 0.0, z: 0.4}, orientation: {x: 0.0, y: 0.7071068, z: 0.0, w: 0.7071068}}}\""
+    ;;
+  *)
+    eezybot_say "unknown arm \`$arm\` (--arm or ARM): eezybot or jaco"
+    exit 2
+    ;;
+esac
 eezybot_wait
