@@ -135,6 +135,8 @@ def servo_angles_verdict(msg):
             return r"unknown servo `"
         if not math.isfinite(value):
             return r"` is (NaN|inf|-inf)"
+        if name in angles:
+            return r"` is given twice"
         angles[name] = value
     for key, name in zip(SERVO_KEYS, SERVOS):
         if name not in angles:
@@ -162,15 +164,21 @@ MIMIC = [j for j, t in JOINTS.items() if t == "mimic"]
 
 
 def joint_states_problems(msg):
-    """How many joints state_publisher must skip and name (README: unknown names, NaN
-    positions, names without positions, fixed joints)."""
-    n = 0
+    """How many problems state_publisher must name (README: unknown names, NaN
+    positions, names without positions, fixed joints, a joint named again, positions
+    past the names)."""
+    n = 1 if len(msg.position) > len(msg.name) else 0
+    seen = set()
     for k, name in enumerate(msg.name):
         kind = JOINTS.get(name)
-        if kind is None or kind == "fixed":
+        if kind is None:
             n += 1
-        elif kind == "mimic":
+        elif name in seen:
+            n += 1
+        elif (seen.add(name) or kind) == "mimic":
             continue
+        elif kind == "fixed":
+            n += 1
         elif k >= len(msg.position) or not math.isfinite(msg.position[k]):
             n += 1
     return n
@@ -1787,23 +1795,17 @@ def test_the_graph_still_works_after_the_campaign(campaign):
 # The project rule, where the nodes do not follow it yet (each input sent alone after the
 # campaign): bad input gets a log line and a diagnostics entry naming the reason.
 
-@pytest.mark.xfail(strict=True, reason="serial_node takes the last of two positions given to one servo name, "
-                   "with no log line or diagnostics (issue 9 item 7 report)")
 def test_serial_node_refuses_a_duplicate_servo_name(campaign):
     """servo_angles names base_servo twice (90° then 120°): an ambiguous command."""
     n, reason = campaign["rules"]["serial_node duplicate servo name"]
     assert n == 1 and "base_servo" in reason, (n, reason)
 
 
-@pytest.mark.xfail(strict=True, reason="state_publisher publishes the last of a joint named twice, with no log "
-                   "line or diagnostics (issue 9 item 7 report)")
 def test_state_publisher_names_a_joint_given_twice(campaign):
     n, reason = campaign["rules"]["state_publisher duplicate joint name"]
     assert n >= 1 and "base_joint" in reason, (n, reason)
 
 
-@pytest.mark.xfail(strict=True, reason="state_publisher ignores positions beyond the names, with no log line or "
-                   "diagnostics (issue 9 item 7 report)")
 def test_state_publisher_names_positions_without_names(campaign):
     n, reason = campaign["rules"]["state_publisher more positions than names"]
     assert n >= 1 and reason, (n, reason)

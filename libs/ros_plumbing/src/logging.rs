@@ -196,3 +196,22 @@ impl Throttle {
         }
     }
 }
+
+/// `text` cut to `max` characters for a log line or a diagnostics value, saying how
+/// long it was: a 1 MB name in a bad message must not become a 1 MB log line.
+///
+/// # Examples
+/// ```
+/// use ros_plumbing::logging::shorten;
+/// assert_eq!(shorten("base_servo", 64), "base_servo");
+/// assert_eq!(shorten(&"x".repeat(100), 8), "xxxxxxxx… (100 bytes)");
+/// ```
+pub fn shorten(text: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(max) {
+        Some((i, _)) => format!("{}… ({} bytes)", &text[..i], text.len()).into(),
+        None => text.into(),
+    }
+}
+
+/// The length names are cut to in log lines and diagnostics ([`shorten`]).
+pub const NAME_MAX: usize = 64;

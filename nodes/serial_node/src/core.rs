@@ -2,6 +2,7 @@
 
 use eezybot_kinematics::{ServoCalibration, ServoCalibrations, ServoId};
 use eezybot_msgs::sensor_msgs::JointState;
+use ros_plumbing::logging::{shorten, NAME_MAX};
 use servo_protocol::{SERVOS, TICKS_PER_US};
 use std::fmt;
 
@@ -19,6 +20,11 @@ pub enum Rejection {
     UnknownServo {
         /// the name
         name: String,
+    },
+    /// A servo named twice: an ambiguous command.
+    DuplicateServo {
+        /// the servo
+        name: &'static str,
     },
     /// A servo is missing from the message.
     MissingServo {
@@ -51,6 +57,7 @@ impl Rejection {
         match self {
             Rejection::LengthMismatch { .. } => "length_mismatch",
             Rejection::UnknownServo { .. } => "unknown_servo",
+            Rejection::DuplicateServo { .. } => "duplicate_servo",
             Rejection::MissingServo { .. } => "missing_servo",
             Rejection::NonFinite { .. } => "non_finite",
             Rejection::OutOfRange { .. } => "out_of_range",
@@ -64,10 +71,16 @@ impl fmt::Display for Rejection {
             Rejection::LengthMismatch { names, positions } => write!(f, "{names} names but {positions} positions"),
             Rejection::UnknownServo { name } => write!(
                 f,
-                "unknown servo `{name}` (servos: base_servo, shoulder_servo, elbow_servo, gripper_servo)"
+                "unknown servo `{}` (servos: base_servo, shoulder_servo, elbow_servo, gripper_servo)",
+                shorten(name, NAME_MAX)
             ),
+            Rejection::DuplicateServo { name } => {
+                write!(f, "`{name}` is given twice (an ambiguous command)")
+            }
             Rejection::MissingServo { name } => write!(f, "no position for `{name}`"),
-            Rejection::NonFinite { name, value } => write!(f, "`{name}` is {value}"),
+            Rejection::NonFinite { name, value } => {
+                write!(f, "`{}` is {value}", shorten(name, NAME_MAX))
+            }
             Rejection::OutOfRange { name, angle_deg, min_deg, max_deg } => write!(
                 f,
                 "`{name}` at {angle_deg:.2}° is outside its range {min_deg:.2}° … {max_deg:.2}°"
@@ -122,6 +135,11 @@ pub fn angles_to_ticks(
             return Err(Rejection::NonFinite {
                 name: name.clone(),
                 value,
+            });
+        }
+        if angles[i].is_some() {
+            return Err(Rejection::DuplicateServo {
+                name: ServoId::ALL[i].name(),
             });
         }
         angles[i] = Some(value);

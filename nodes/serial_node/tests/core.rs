@@ -65,6 +65,19 @@ fn bad_messages_are_named() {
             "unknown_servo",
         ),
         (msg(&ALL[..3], &[1.0; 3]), "missing_servo"),
+        (
+            msg(
+                &[
+                    "base_servo",
+                    "shoulder_servo",
+                    "elbow_servo",
+                    "gripper_servo",
+                    "base_servo",
+                ],
+                &[1.0, 1.0, 1.0, 1.2, 2.0],
+            ),
+            "duplicate_servo",
+        ),
         (msg(&ALL, &[1.0, f64::NAN, 1.0, 1.2]), "non_finite"),
         (msg(&ALL, &[1.0, 1.0, 1.0, 0.5]), "out_of_range"), // gripper below 60°
         (msg(&ALL, &[-0.1, 1.0, 1.0, 1.2]), "out_of_range"),
@@ -72,4 +85,19 @@ fn bad_messages_are_named() {
     for (m, code) in cases {
         assert_eq!(angles_to_ticks(&cal, &m).unwrap_err().code(), code, "{m:?}");
     }
+}
+
+#[test]
+fn a_huge_name_is_cut_in_the_reason() {
+    let cal = ServoCalibrations::default();
+    let huge = "x".repeat(1 << 20);
+    let names = ["base_servo", "shoulder_servo", "elbow_servo", huge.as_str()];
+    let reason = angles_to_ticks(&cal, &msg(&names, &[1.0; 4]))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        reason.len() < 300 && reason.contains("(1048576 bytes)"),
+        "{}",
+        reason.len()
+    );
 }

@@ -8,6 +8,7 @@ use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::Time;
 use nalgebra::Isometry3;
+use ros_plumbing::logging::{shorten, NAME_MAX};
 use std::collections::HashMap;
 use std::fmt;
 
@@ -36,12 +37,28 @@ pub enum JointProblem {
         /// the name
         name: String,
     },
+    /// A joint named again in the same message: its first position is used.
+    Duplicate {
+        /// the name
+        name: String,
+    },
+    /// More positions than names: the ones past the names belong to no joint.
+    SurplusPositions {
+        /// names in the message
+        names: usize,
+        /// positions in the message
+        positions: usize,
+    },
 }
 
 impl fmt::Display for JointProblem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            JointProblem::Unknown { name } => write!(f, "unknown joint `{name}` (not in the URDF)"),
+            JointProblem::Unknown { name } => write!(
+                f,
+                "unknown joint `{}` (not in the URDF)",
+                shorten(name, NAME_MAX)
+            ),
             JointProblem::NotMovable { name } => {
                 write!(f, "joint `{name}` is fixed and takes no position")
             }
@@ -51,6 +68,15 @@ impl fmt::Display for JointProblem {
             JointProblem::NoPosition { name } => write!(
                 f,
                 "joint `{name}` has no position (fewer positions than names)"
+            ),
+            JointProblem::Duplicate { name } => write!(
+                f,
+                "joint `{name}` is named twice (its first position is used)"
+            ),
+            JointProblem::SurplusPositions { names, positions } => write!(
+                f,
+                "{positions} positions for {names} names: the last {} belong to no joint",
+                positions - names
             ),
         }
     }
@@ -153,12 +179,23 @@ impl TfCore {
     pub fn handle_joint_states(&mut self, msg: &JointState) -> (TFMessage, Vec<JointProblem>) {
         self.messages += 1;
         let mut problems = Vec::new();
+        if msg.position.len() > msg.name.len() {
+            problems.push(JointProblem::SurplusPositions {
+                names: msg.name.len(),
+                positions: msg.position.len(),
+            });
+        }
         let mut transforms = Vec::with_capacity(msg.name.len() + 2);
+        let mut seen = vec![false; self.positions.len()];
         for (k, name) in msg.name.iter().enumerate() {
             let Some(i) = self.model.joint_index(name) else {
                 problems.push(JointProblem::Unknown { name: name.clone() });
                 continue;
             };
+            if std::mem::replace(&mut seen[i], true) {
+                problems.push(JointProblem::Duplicate { name: name.clone() });
+                continue;
+            }
             let joint = &self.model.joints[i];
             if joint.mimic.is_some() {
                 continue; // follows its leader, as in robot_state_publisher

@@ -156,3 +156,23 @@ fn urdf_default_needs_no_file_of_the_build_tree() {
     assert!(!help.contains(env!("CARGO_MANIFEST_DIR")), "{help}");
     assert!(help.contains("built into this binary"), "{help}");
 }
+
+#[test]
+fn a_joint_named_twice_and_positions_without_names_are_named() {
+    let mut core = TfCore::new(test_robot(), "");
+    let (tf, problems) =
+        core.handle_joint_states(&js(&["wheel_joint", "wheel_joint"], &[0.5, 1.5, 2.5]));
+    assert_eq!(
+        tf.transforms.len(),
+        1,
+        "the first position of the wheel is used"
+    );
+    let text: Vec<String> = problems.iter().map(|p| p.to_string()).collect();
+    assert_eq!(
+        text,
+        [
+            "3 positions for 2 names: the last 1 belong to no joint",
+            "joint `wheel_joint` is named twice (its first position is used)",
+        ]
+    );
+}
