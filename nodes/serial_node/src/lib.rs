@@ -155,6 +155,9 @@ pub struct LinkStatus {
     estop: bool,
     /// ticks and state of the last servo_state published, to skip repeats
     last_published: Option<([u16; servo_protocol::SERVOS], DeviceState)>,
+    /// the settings the device was given, shown with its state: the device's
+    /// watchdog (`500 ms, hold`) and what the e-stop does
+    pub settings: Vec<(&'static str, String)>,
 }
 
 fn time_s(t: Time) -> f64 {
@@ -342,6 +345,7 @@ impl LinkStatus {
             ),
             ("estop", self.estop.to_string()),
         ];
+        values.extend(self.settings.iter().map(|(k, v)| (*k, v.clone())));
         if let Some((a, b)) = self.connected {
             values.push(("firmware", format!("{a}.{b}")));
         }
@@ -383,7 +387,27 @@ pub async fn run(
     let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
-    let mut status = LinkStatus::default();
+    let mut status = LinkStatus {
+        settings: vec![
+            (
+                "device_watchdog",
+                format!(
+                    "{} ms, {}",
+                    params.i64("watchdog_ms").unwrap_or(500),
+                    params
+                        .string("watchdog_action")
+                        .unwrap_or_else(|| "hold".into())
+                ),
+            ),
+            (
+                "estop_action",
+                params
+                    .string("estop_action")
+                    .unwrap_or_else(|| "hold".into()),
+            ),
+        ],
+        ..LinkStatus::default()
+    };
     let mut peer_poll = tokio::time::interval(PEER_POLL);
     peer_poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let report = |status: &LinkStatus, peers: &PeerWatch| {

@@ -222,12 +222,13 @@ fn unplug_and_replug_twenty_times_while_streaming() {
                 .is_some(),
             "cycle {cycle}"
         );
-        r.settle(Duration::from_millis(250));
-        assert_eq!(
-            r.device_state().1,
-            [3300 + (newest % 7) as u16; 4],
-            "cycle {cycle}"
-        );
+        // ... and reached (a bound for a loaded machine, not a timing requirement)
+        let want = [3300 + (newest % 7) as u16; 4];
+        let until = Instant::now() + Duration::from_secs(3);
+        while r.device_state().1 != want && Instant::now() < until {
+            r.settle(Duration::from_millis(20));
+        }
+        assert_eq!(r.device_state().1, want, "cycle {cycle}");
     }
     reconnect_ms.sort_by(f64::total_cmp);
     println!(
