@@ -237,9 +237,48 @@ def test_page_is_small_local_and_shows_the_live_arm(launch, observer, browser):
         time.sleep(1.0)
         OUTPUT.mkdir(parents=True, exist_ok=True)
         p.page.screenshot(path=str(OUTPUT / "gui_panel.png"))
+        # the joint mode's sliders came from the EezyBot's URDF: its three arm joints, not the passive ones
+        p.page.wait_for_function("() => robot.from_urdf", timeout=10000)
+        ids = p.page.eval_on_selector_all("#joint-panel input[type=range]", "els => els.map(e => e.id)")
+        assert ids == ["j_base_joint", "j_shoulder_joint", "j_elbow_joint"]
         assert p.bytes < 300_000, f"page and assets are {p.bytes} bytes"
         foreign = [u for u in p.requests if not u.startswith(p.url.rstrip("/")) and not u.startswith(f"ws://127.0.0.1:{p.port}")]
         assert not foreign, foreign
+    finally:
+        p.close()
+
+
+def test_joint_mode_builds_its_sliders_from_the_urdf_for_any_arm(launch, observer, browser):
+    """With the Jaco's URDF on robot_description, the joint mode has one slider per Jaco
+    joint within its URDF limits (a continuous joint: -pi … pi); a slider publishes
+    joint_target for that joint, compute_ik moves the arm, the page shows it."""
+    jaco = REPO / "urdf" / "jaco.urdf"
+    launch("compute_ik", "--ros-args", "-p", f"urdf:={jaco}", "-p", "tip_link:=jaco_end_effector")
+    launch("state_publisher", "--ros-args", "-p", f"urdf:={jaco}")
+    states = observer.sub("/joint_states", JointState)
+    p = Panel(launch, observer, browser)
+    try:
+        p.page.click("#mode-joint")
+        p.page.wait_for_function("() => document.getElementById('j_jaco_joint_6') !== null", timeout=20000)
+        sliders = p.page.eval_on_selector_all("#joint-panel input[type=range]", "els => els.map(e => [e.id, +e.min, +e.max])")
+        assert [s[0] for s in sliders] == [f"j_jaco_joint_{k}" for k in range(1, 7)]
+        limits = {s[0]: (s[1], s[2]) for s in sliders}
+        # make_jaco_urdf.py: joint 2 within pi/2 +- 133 deg, joint 1 continuous
+        assert limits["j_jaco_joint_2"] == pytest.approx((math.pi / 2 - math.radians(133), math.pi / 2 + math.radians(133)), abs=1e-12)
+        assert limits["j_jaco_joint_1"] == pytest.approx((-math.pi, math.pi), abs=1e-12)
+        assert p.page.is_hidden("#gripper-row"), "the Jaco has no gripper_target claw"
+        p.set_slider("j_jaco_joint_3", -0.5)
+        assert p.spin_until(lambda: p.joints and p.joints[-1][1].name == ["jaco_joint_3"])
+        sent = p.joints[-1][1].position[0]
+        assert sent == pytest.approx(-0.5, abs=1e-3)
+
+        def at_target():
+            return bool(states) and dict(zip(states[-1][1].name, states[-1][1].position)).get("jaco_joint_3") == pytest.approx(sent, abs=1e-9)
+        assert observer.spin_until(at_target, 15)
+        p.page.wait_for_function("() => document.getElementById('pose').textContent.includes('jaco_joint_3 -28.')", timeout=10000)
+        assert "jaco_end_effector (" in p.page.inner_text("#pose")
+        OUTPUT.mkdir(parents=True, exist_ok=True)
+        p.page.screenshot(path=str(OUTPUT / "gui_panel_jaco.png"))
     finally:
         p.close()
 

@@ -11,7 +11,7 @@ pub mod access;
 pub mod teleop;
 pub mod web;
 
-use crate::teleop::{Command, Event, Teleop};
+use crate::teleop::{Command, Event, RobotView, Teleop};
 use crate::web::{ClientRequest, FromClient, Requests, WebStats};
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{ArmJoints, ACTUATED_JOINTS};
@@ -206,6 +206,32 @@ fn joints_json(q: &ArmJoints) -> serde_json::Value {
     json!({"base_joint": q.base_rad, "shoulder_joint": q.shoulder_rad, "elbow_joint": q.elbow_rad})
 }
 
+/// The arm as the page needs it: its name, whether it is the EezyBot, the joint
+/// mode's sliders (from the URDF once `robot_description` arrived) and its reach.
+pub fn robot_json(teleop: &Teleop) -> serde_json::Value {
+    let sliders: Vec<serde_json::Value> = teleop
+        .joint_sliders()
+        .iter()
+        .map(|j| json!({"name": j.name, "lower": j.lower, "upper": j.upper}))
+        .collect();
+    match teleop.robot() {
+        Some(RobotView {
+            name,
+            eezybot,
+            reach_m,
+            tool_link,
+            ..
+        }) => json!({
+            "name": name, "eezybot": eezybot, "joints": sliders, "reach": reach_m,
+            "tool_link": tool_link, "from_urdf": true,
+        }),
+        None => json!({
+            "name": "eezybot", "eezybot": true, "joints": sliders, "reach": 0.33,
+            "tool_link": "tool0", "from_urdf": false,
+        }),
+    }
+}
+
 /// The snapshot a browser gets when it connects.
 pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
     let arm = teleop.arm();
@@ -215,6 +241,7 @@ pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
         "t": "hello",
         "target": teleop.target(),
         "rate": rate,
+        "robot": robot_json(teleop),
         "limits": {
             "base_joint": [l.base_rad.0, l.base_rad.1],
             "shoulder_joint": [l.shoulder_rad.0, l.shoulder_rad.1],
@@ -254,11 +281,14 @@ fn serve_request(teleop: &std::sync::Mutex<Teleop>, from: FromClient, stats: &We
     let FromClient { request, reply } = from;
     let event = match request {
         ClientRequest::Check { xyz } => {
-            let answer = match teleop.lock().map(|t| t.check(xyz)) {
-                Ok(Ok(q)) => {
+            let answer = match teleop.lock().map(|t| (t.is_eezybot(), t.check(xyz))) {
+                Ok((false, _)) => {
+                    json!({"t": "check", "xyz": xyz, "reachable": null, "reason": "not checked here: this arm has no closed form, compute_ik decides when it is sent"})
+                }
+                Ok((true, Ok(q))) => {
                     json!({"t": "check", "xyz": xyz, "reachable": true, "joints": joints_json(&q)})
                 }
-                Ok(Err(e)) => {
+                Ok((true, Err(e))) => {
                     json!({"t": "check", "xyz": xyz, "reachable": false, "reason": e.to_string()})
                 }
                 Err(_) => return,
@@ -274,12 +304,17 @@ fn serve_request(teleop: &std::sync::Mutex<Teleop>, from: FromClient, stats: &We
         },
         ClientRequest::Estop { on } => Event::Estop { engaged: on },
     };
-    let result = teleop.lock().map(|mut t| t.handle_event(event));
+    let result = teleop
+        .lock()
+        .map(|mut t| (t.is_eezybot(), t.handle_event(event)));
     let answer = match result {
-        Ok(Ok(f)) => {
+        Ok((true, Ok(f))) => {
             json!({"t": "ack", "target": f.target, "joints": joints_json(&f.joints), "reachable": true})
         }
-        Ok(Err(refusal)) => {
+        Ok((false, Ok(f))) => {
+            json!({"t": "ack", "target": f.target, "joints": null, "reachable": true})
+        }
+        Ok((_, Err(refusal))) => {
             json!({"t": "refused", "reason": refusal.to_string(), "reachable": false})
         }
         Err(_) => return,
@@ -439,6 +474,23 @@ pub async fn run<F: Fn() -> Vec<usize>>(
             input = inputs.next() => {
                 let Some(input) = input else { break };
                 match input {
+                    Input::JointStates(js) if !teleop.lock().map(|t| t.is_eezybot()).unwrap_or(true) => {
+                        // any other arm: every joint, the links' segments and its tool
+                        if let Some(m) = model.as_ref() {
+                            let finite: Vec<(String, f64)> = js.name.iter().cloned().zip(js.position.iter().copied())
+                                .filter(|(_, v)| v.is_finite()).collect();
+                            let refs: Vec<(&str, f64)> = finite.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+                            let tool_link = teleop.lock().ok().and_then(|t| t.robot().and_then(|r| r.tool_link.clone()));
+                            let tool = tool_link.and_then(|l| m.link_poses(&refs).get(&l).map(|p| p.translation.vector));
+                            let joints: serde_json::Map<String, serde_json::Value> =
+                                finite.iter().map(|(n, v)| (n.clone(), json!(v))).collect();
+                            send(json!({
+                                "t": "pose", "joints": joints, "gripper": null,
+                                "tool": tool.map(|p| [p.x, p.y, p.z]),
+                                "segments": segments(m, &js),
+                            }));
+                        }
+                    }
                     Input::JointStates(js) => {
                         let get = |n: &str| js.name.iter().position(|x| x == n).and_then(|i| js.position.get(i).copied());
                         if let (Some(b), Some(s), Some(e)) = (get(ACTUATED_JOINTS[0]), get(ACTUATED_JOINTS[1]), get(ACTUATED_JOINTS[2])) {
@@ -458,6 +510,10 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                     Input::RobotDescription(text) => match RobotModel::from_urdf_str(&text, "robot_description") {
                         Ok(m) => {
                             log::info!("robot_description: {} ({} links)", m.name, m.links.len());
+                            // the joint mode's sliders come from the URDF, for any arm
+                            if let Ok(robot) = teleop.lock().map(|mut t| { t.set_robot(&m); robot_json(&t) }) {
+                                send(json!({"t": "robot", "robot": robot}));
+                            }
                             model = Some(m);
                         }
                         Err(e) => log::warn!("robot_description not usable for the live view: {e}"),

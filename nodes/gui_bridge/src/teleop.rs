@@ -2,9 +2,117 @@
 //! → the targets to publish. No I/O: the web server, the keyboard, the gamepad and the
 //! command line all feed it the same events.
 
+use eezybot_kinematics::urdf::{JointKind, RobotModel};
 use eezybot_kinematics::{Arm, ArmJoints, Joint, KinematicsError, ACTUATED_JOINTS};
 use nalgebra::Vector3;
+use std::f64::consts::PI;
 use std::time::{Duration, Instant};
+
+/// One slider of the joint mode.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointSlider {
+    /// The joint's name on `joint_target`.
+    pub name: String,
+    /// Lowest value (rad or m).
+    pub lower: f64,
+    /// Highest value (rad or m).
+    pub upper: f64,
+}
+
+/// The arm the panel drives, from `robot_description`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotView {
+    /// The URDF's robot name.
+    pub name: String,
+    /// The EezyBot (its closed form checks Cartesian targets; its claw has a slider).
+    pub eezybot: bool,
+    /// The joint mode's sliders.
+    pub joints: Vec<JointSlider>,
+    /// A generous reach (m): the sum of the joint offsets from the root, for the
+    /// Cartesian sliders' range and the live view's scale.
+    pub reach_m: f64,
+    /// The link a Cartesian target places, when the URDF has one end (else none).
+    pub tool_link: Option<String>,
+}
+
+impl RobotView {
+    /// The panel's view of a URDF: for the EezyBot (its chain builds with `arm`'s
+    /// passive linkage joints) the three actuated arm joints within `arm`'s limits, as
+    /// without a URDF; for any other arm every movable joint that is not a mimic, within
+    /// its URDF limits (a continuous joint: −π … π).
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::{Arm, urdf::RobotModel};
+    /// use gui_bridge::teleop::RobotView;
+    /// let jaco = RobotModel::load(std::path::Path::new(concat!(
+    ///     env!("CARGO_MANIFEST_DIR"), "/../../urdf/jaco.urdf"))).unwrap();
+    /// let v = RobotView::of(&jaco, &Arm::default());
+    /// assert!(!v.eezybot && v.joints.len() == 6 && v.joints[0].name == "jaco_joint_1");
+    /// let eezybot = RobotModel::load(std::path::Path::new(concat!(
+    ///     env!("CARGO_MANIFEST_DIR"), "/../../urdf/eezybot.urdf"))).unwrap();
+    /// let v = RobotView::of(&eezybot, &Arm::default());
+    /// assert!(v.eezybot);
+    /// assert_eq!(v.joints.iter().map(|j| j.name.as_str()).collect::<Vec<_>>(),
+    ///            ["base_joint", "shoulder_joint", "elbow_joint"]);
+    /// ```
+    pub fn of(model: &RobotModel, arm: &Arm) -> RobotView {
+        let eezybot = arm.serial_chain(model).is_ok();
+        let joints = if eezybot {
+            eezybot_sliders(arm)
+        } else {
+            model
+                .independent_joints()
+                .map(|j| {
+                    let (lower, upper) = match &j.kind {
+                        JointKind::Revolute { limits, .. }
+                        | JointKind::Prismatic { limits, .. } => *limits,
+                        _ => (-PI, PI),
+                    };
+                    JointSlider {
+                        name: j.name.clone(),
+                        lower,
+                        upper,
+                    }
+                })
+                .collect()
+        };
+        let reach_m = model
+            .joints
+            .iter()
+            .map(|j| j.origin.translation.vector.norm())
+            .sum::<f64>()
+            .max(0.05);
+        let tool_link = match model.leaf_links().as_slice() {
+            [one] => Some(one.to_string()),
+            _ => None,
+        };
+        RobotView {
+            name: model.name.clone(),
+            eezybot,
+            joints,
+            reach_m,
+            tool_link,
+        }
+    }
+}
+
+/// The EezyBot's joint sliders: base, shoulder, elbow within the arm's limits.
+fn eezybot_sliders(arm: &Arm) -> Vec<JointSlider> {
+    let l = arm.limits;
+    [
+        (ACTUATED_JOINTS[0], l.base_rad),
+        (ACTUATED_JOINTS[1], l.shoulder_rad),
+        (ACTUATED_JOINTS[2], l.elbow_rad),
+    ]
+    .iter()
+    .map(|(name, (lower, upper))| JointSlider {
+        name: (*name).to_string(),
+        lower: *lower,
+        upper: *upper,
+    })
+    .collect()
+}
 
 /// Something the operator did.
 #[derive(Clone, Debug, PartialEq)]
@@ -116,6 +224,7 @@ pub struct Teleop {
     gripper: Slot<f64>,
     joint_target: Slot<Vec<(String, f64)>>,
     estop: Option<bool>,
+    robot: Option<RobotView>,
 }
 
 impl Teleop {
@@ -131,6 +240,30 @@ impl Teleop {
             gripper: Slot::default(),
             joint_target: Slot::default(),
             estop: None,
+            robot: None,
+        }
+    }
+
+    /// The arm `robot_description` describes: joint mode and checks follow it.
+    pub fn set_robot(&mut self, model: &RobotModel) -> &RobotView {
+        self.robot.insert(RobotView::of(model, &self.arm))
+    }
+
+    /// The arm from `robot_description`, if one arrived.
+    pub fn robot(&self) -> Option<&RobotView> {
+        self.robot.as_ref()
+    }
+
+    /// Whether the arm is the EezyBot (also before any `robot_description`).
+    pub fn is_eezybot(&self) -> bool {
+        self.robot.as_ref().is_none_or(|r| r.eezybot)
+    }
+
+    /// The joint mode's sliders: the URDF's joints, or the EezyBot's before any URDF.
+    pub fn joint_sliders(&self) -> Vec<JointSlider> {
+        match &self.robot {
+            Some(r) => r.joints.clone(),
+            None => eezybot_sliders(&self.arm),
         }
     }
 
@@ -186,6 +319,30 @@ impl Teleop {
                 self.gripper.pending = Some(opening);
                 Ok(self.feedback())
             }
+            Event::Joints { positions } if !self.is_eezybot() => {
+                let sliders = self.joint_sliders();
+                for (name, value) in &positions {
+                    let Some(j) = sliders.iter().find(|j| &j.name == name) else {
+                        return Err(Refusal::BadValue(format!(
+                            "unknown joint `{name}` (this arm's: {})",
+                            sliders
+                                .iter()
+                                .map(|j| j.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )));
+                    };
+                    if !value.is_finite() || *value < j.lower || *value > j.upper {
+                        return Err(Refusal::BadValue(format!(
+                            "{name} = {value} is outside {} … {}",
+                            j.lower, j.upper
+                        )));
+                    }
+                }
+                self.xyz.pending = None;
+                self.joint_target.pending = Some(positions);
+                Ok(self.feedback())
+            }
             Event::Joints { positions } => {
                 let mut q = self.joints;
                 for (name, value) in &positions {
@@ -225,7 +382,15 @@ impl Teleop {
     }
 
     fn move_to(&mut self, xyz: [f64; 3]) -> Result<Feedback, Refusal> {
-        let joints = self.check(xyz)?;
+        let joints = if self.is_eezybot() {
+            self.check(xyz)?
+        } else {
+            // no closed form here: compute_ik is the judge (its refusal shows on the page)
+            if xyz.iter().any(|v| !v.is_finite()) {
+                return Err(Refusal::BadValue(format!("target {xyz:?} is not finite")));
+            }
+            self.joints
+        };
         self.target = Vector3::from(xyz);
         self.joints = joints;
         self.joint_target.pending = None;

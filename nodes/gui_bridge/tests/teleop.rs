@@ -128,3 +128,54 @@ fn waypoints_roundtrip_and_name_bad_lines() {
         .unwrap_err()
         .contains("line 2"));
 }
+
+#[test]
+fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
+    let jaco = eezybot_kinematics::urdf::RobotModel::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../urdf/jaco.urdf"
+    )))
+    .unwrap();
+    let mut t = teleop();
+    assert!(t.is_eezybot() && t.joint_sliders().len() == 3);
+    let view = t.set_robot(&jaco).clone();
+    assert!(!view.eezybot && view.tool_link.as_deref() == Some("jaco_end_effector"));
+    assert!(!t.is_eezybot());
+    let names: Vec<String> = t.joint_sliders().into_iter().map(|j| j.name).collect();
+    assert_eq!(
+        names,
+        (1..=6)
+            .map(|i| format!("jaco_joint_{i}"))
+            .collect::<Vec<_>>()
+    );
+    // the EezyBot's joints are not this arm's
+    let e = t
+        .handle_event(Event::Joints {
+            positions: vec![("base_joint".into(), 0.1)],
+        })
+        .unwrap_err();
+    assert!(e.to_string().contains("this arm's: jaco_joint_1"), "{e}");
+    // its URDF limits apply
+    assert!(t
+        .handle_event(Event::Joints {
+            positions: vec![("jaco_joint_2".into(), 4.0)],
+        })
+        .is_err());
+    t.handle_event(Event::Joints {
+        positions: vec![("jaco_joint_2".into(), 1.0)],
+    })
+    .unwrap();
+    assert_eq!(
+        t.take_due(Instant::now()),
+        vec![Command::Joints(vec![("jaco_joint_2".into(), 1.0)])]
+    );
+    // a Cartesian target out of the EezyBot's reach is sent: compute_ik judges it
+    t.handle_event(Event::SetTarget {
+        xyz: [0.5, 0.2, 0.4],
+    })
+    .unwrap();
+    assert_eq!(
+        t.take_due(Instant::now() + Duration::from_secs(1)),
+        vec![Command::Target([0.5, 0.2, 0.4])]
+    );
+}
