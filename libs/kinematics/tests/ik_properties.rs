@@ -59,8 +59,13 @@ fn pose_error(chain: &SerialChain, x: &[f64], goal: &Isometry3<f64>) -> (f64, f6
     )
 }
 
+fn smallest_singular_value(x: &[f64]) -> f64 {
+    let (_, j) = JACO.jacobian(x).unwrap();
+    j.svd(false, false).singular_values.min()
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 100, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 100, max_global_rejects: 1_000_000, ..ProptestConfig::default() })]
 
     #[test]
     fn jaco_fk_of_ik_is_the_pose_for_every_solver(seed in any::<u64>()) {
@@ -79,6 +84,9 @@ proptest! {
         }
     }
 
+    /// Away from singularities (the solvers' own `near_singular`: smallest singular
+    /// value of the Jacobian under 0.01), where Newton-Raphson may need a restart: seed
+    /// 6765700043639165130, smallest singular value 1.5e-4, stalled at 5e-5 m.
     #[test]
     fn jaco_warm_start_takes_few_iterations(seed in any::<u64>()) {
         let mut rng = SplitMix64::new(seed);
@@ -86,6 +94,7 @@ proptest! {
         let mut near = q.clone();
         near.iter_mut().for_each(|v| *v += rng.uniform(-0.02, 0.02));
         JACO.project(&mut near);
+        prop_assume!(smallest_singular_value(&q) > 0.01 && smallest_singular_value(&near) > 0.01);
         let goal = JACO.forward(&near).unwrap();
         for algorithm in ALGORITHMS {
             let sol = solver(algorithm, 1).solve(&JACO, &Target::pose(goal), &q).unwrap();
