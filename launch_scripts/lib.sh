@@ -65,6 +65,7 @@ eezybot_start() {
 
 eezybot_stop_all() {
   local i p deadline
+  [ ${#EEZYBOT_PIDS[@]} -gt 0 ] || return 0
   for p in "${EEZYBOT_PIDS[@]}"; do kill -INT "$p" 2>/dev/null || true; done
   deadline=$((SECONDS + ${EEZYBOT_STOP_TIMEOUT:-5}))
   for i in "${!EEZYBOT_PIDS[@]}"; do
@@ -78,18 +79,30 @@ eezybot_stop_all() {
   wait 2>/dev/null || true
 }
 
+# Ctrl-C / SIGTERM: before eezybot_wait (while building or starting nodes) stop what has
+# started and exit 0 at once; in eezybot_wait, let it stop the nodes. Installed when this
+# file is sourced, so no signal can leave a started node behind.
 eezybot_on_signal() {
   EEZYBOT_STOPPING=1
-  eezybot_say "$1: stopping ${EEZYBOT_NAMES[*]}"
+  eezybot_say "$1: stopping ${EEZYBOT_NAMES[*]:-(nothing started yet)}"
+  if [ "$EEZYBOT_WAITING" = 0 ]; then
+    trap - EXIT
+    eezybot_stop_all
+    exit 0
+  fi
 }
+EEZYBOT_WAITING=0
+trap 'eezybot_on_signal SIGINT' INT
+trap 'eezybot_on_signal SIGTERM' TERM
+# any other exit (a failed check under set -e) stops the nodes already started, too
+trap 'eezybot_stop_all' EXIT
 
 # Wait until a node exits or a signal arrives, then stop every node. Exits 0 after
 # Ctrl-C / SIGTERM, else with the exit code of the node that stopped first.
 eezybot_wait() {
   local code=0 i
-  trap 'eezybot_on_signal SIGINT' INT
-  trap 'eezybot_on_signal SIGTERM' TERM
-  trap 'eezybot_stop_all' EXIT
+  EEZYBOT_WAITING=1
+  [ "$EEZYBOT_STOPPING" = 0 ] || { trap - EXIT; eezybot_stop_all; exit 0; }
   wait -n "${EEZYBOT_PIDS[@]}" || code=$?
   if [ "$EEZYBOT_STOPPING" = 0 ]; then
     for i in "${!EEZYBOT_PIDS[@]}"; do

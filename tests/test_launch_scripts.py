@@ -40,6 +40,39 @@ def descendants(pid):
     return out
 
 
+NODES = {"compute_ik", "state_publisher", "gui_bridge", "serial_node", "virtual_arduino"}
+
+
+def nodes(pid):
+    """The node processes below `pid` (not the scripts' own short-lived helpers such as
+    dirname or hostname)."""
+    out = []
+    for kid in descendants(pid):
+        try:
+            exe = os.readlink(f"/proc/{kid}/exe")
+        except OSError:
+            continue
+        if Path(exe).name in NODES:
+            out.append(kid)
+    return out
+
+
+_STARTED = []
+
+
+@pytest.fixture(autouse=True)
+def reap_scripts():
+    """Whatever a test does or fails at, no script's process group outlives it: a node
+    left running would answer the next test in the same ROS domain."""
+    yield
+    while _STARTED:
+        pgid = _STARTED.pop()
+        try:
+            os.killpg(pgid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
 def alive(pid):
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
@@ -56,9 +89,11 @@ class Script:
         self.proc = subprocess.Popen([str(SCRIPTS / name), *args], stdout=self.log, stderr=subprocess.STDOUT,
                                      env={**os.environ, "EEZYBOT_BIN_DIR": BIN_DIR, "GUI_BIND": "127.0.0.1:0",
                                           **(env or {})}, start_new_session=True)
+        _STARTED.append(self.proc.pid)
 
     def output(self):
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
         return self.log_path.read_text()
 
     def wait_output(self, text, timeout=20):
@@ -72,11 +107,11 @@ class Script:
     def children(self, n, timeout=20):
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            kids = descendants(self.proc.pid)
+            kids = nodes(self.proc.pid)
             if len(kids) >= n:
                 return kids
             time.sleep(0.1)
-        raise AssertionError(f"{len(descendants(self.proc.pid))} children, expected {n}:\n{self.output()}")
+        raise AssertionError(f"{len(nodes(self.proc.pid))} nodes running, expected {n}:\n{self.output()}")
 
     def stop(self, sig=signal.SIGINT, timeout=20):
         self.proc.send_signal(sig)
@@ -187,11 +222,12 @@ def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
     env.pop("EEZYBOT_BIN_DIR", None)
     proc = subprocess.Popen([str(bundle / "launch_scripts" / "pi.sh")], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, env=env, text=True, start_new_session=True)
+    _STARTED.append(proc.pid)
     try:
         end = time.monotonic() + 20
-        while time.monotonic() < end and not descendants(proc.pid):
+        while time.monotonic() < end and not nodes(proc.pid):
             time.sleep(0.1)
-        kids = descendants(proc.pid)
+        kids = nodes(proc.pid)
         assert kids, "pi.sh started nothing"
         exe = os.readlink(f"/proc/{kids[0]}/exe")
         assert exe == str(bundle / "bin" / "serial_node")
@@ -200,6 +236,44 @@ def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0, out
     assert "cargo" not in out and str(bundle / "bin") in out
+
+
+def group_alive(pgid):
+    """Live (not zombie) processes of process group `pgid`."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.parametrize("script", ["run_graph.sh", "pc.sh", "pi.sh"])
+def test_ctrl_c_while_starting_leaves_nothing_behind(script, domain, tmp_path):
+    """Ctrl-C while the script is still starting up (its nodes are running, it is printing
+    where: a slow `hostname` holds it there): every node started is stopped and the script
+    exits 0. Before the fix the signal was only trapped once the script waited on its
+    nodes, so the script went on to wait forever, or died leaving its nodes running."""
+    shim = tmp_path / "hostname"
+    shim.write_text(f"#!/bin/sh\nsleep 1\nexec {shutil.which('hostname')} \"$@\"\n")
+    shim.chmod(0o755)
+    s = Script(script, env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock",
+                            "PATH": f"{tmp_path}:{os.environ['PATH']}"})
+    try:
+        s.children(1)
+        assert "web panel" not in s.output() and "running here" not in s.output()
+        code = s.stop()
+    finally:
+        if s.proc.poll() is None:
+            s.stop(signal.SIGKILL)
+    assert code == 0, s.output()
+    end = time.monotonic() + 2
+    while time.monotonic() < end and group_alive(s.proc.pid):
+        time.sleep(0.1)
+    assert not group_alive(s.proc.pid), s.output()
 
 
 def test_a_node_that_dies_stops_the_others(domain):
