@@ -169,3 +169,34 @@ def test_a_detaching_estop_stops_the_pulses_until_a_new_command(uno):
     uno.send(set_pulses(4, [3100] * 4))
     assert state_reply(uno, 4)["state"] == "running"
     assert medians(uno, last_rx_cycle(uno)) == pytest.approx([1550] * 4, abs=1.0)
+
+
+# A stray start byte whose length nibble (15) runs over the frames after it: when the 19th
+# byte makes that candidate fail, every whole frame behind it must be handled at once, in
+# order, each once. protocol.cpp used to return one frame per byte received; the next was
+# left in the buffer, and the pause after it made the 5 ms gap rule drop it.
+@pytest.mark.parametrize("frames, acks, ticks", [
+    # the bad-input campaign's and fuzz_firmware_strict's case, byte for byte
+    ([frame(HEARTBEAT, 11), set_pulses(12, [3000] * 4)], [11, 12], [3000] * 4),
+    # the most one byte can complete: four frames
+    ([frame(HEARTBEAT, seq) for seq in (21, 22, 23, 24)], [21, 22, 23, 24], HOLD_TICKS),
+], ids=["heartbeat+set_pulses", "four-heartbeats"])
+def test_every_whole_frame_after_a_stray_start_byte_is_handled(uno, frames, acks, ticks):
+    data = b"\xa5\x3f" + b"".join(frames) + b"\x00"
+    assert len(data) == 19  # the stray candidate's length: the last byte decides it
+    uno.send(data)
+    replies = uno.receive(0.2)  # a pause far over the 5 ms gap rule
+    assert [(t, p[0]) for t, _, p in replies] == [(STATE, a) for a in acks], replies
+    states = [parse_state(p) for _, _, p in replies]
+    assert states[-1]["ticks"] == ticks
+    assert states[0]["rx_errors"] >= 1  # the stray start byte is counted
+    if ticks != HOLD_TICKS:
+        assert states[-1]["state"] == "running"
+        us = [t / 2 for t in ticks]
+        assert medians(uno, last_rx_cycle(uno)) == pytest.approx(us, abs=2.0)
+    else:
+        edges, _ = uno.events()
+        assert all(level == 0 for _, _, level in edges)
+    # and the link goes on: the next heartbeat is answered with the same pose
+    uno.send(frame(HEARTBEAT, acks[-1] + 1))
+    assert state_reply(uno, acks[-1] + 1)["ticks"] == ticks

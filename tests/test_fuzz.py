@@ -1,6 +1,6 @@
 """The firmware's frame parser and the sketch's logic fuzzed on the host (libFuzzer with
 ASan and UBSan; firmware/servo_control/fuzz/README.md): a short run of each target in
-the test command, and the one finding so far, on the host and on the real ELF in simavr.
+the test command, and the one finding so far (fixed), on the host and on the real ELF in simavr.
 Long runs: `make -C firmware/servo_control fuzz RUNS=1000000`."""
 import shutil
 import subprocess
@@ -48,17 +48,12 @@ def test_a_short_fuzz_run_finds_nothing(fuzzers, target, tmp_path):
     assert code == 0 and f"Done {SHORT_RUNS} runs" in out, finding(out)
 
 
-@pytest.mark.xfail(strict=True, reason="protocol.cpp returns at most one frame per byte: after a stray 0xA5 whose "
-                   "length runs over the next frames, a frame whose last byte is in waits in the buffer for another "
-                   "byte, and the 5 ms gap rule then drops it (issue 9 item 7 report)")
 def test_the_strict_model_finds_no_frame_held_back(fuzzers, tmp_path):
     """fuzz_firmware_strict: every frame is handled as soon as its last byte is in."""
     code, out = run_fuzzer(fuzzers, "firmware_strict", 300_000, tmp_path)
     assert code == 0, finding(out)
 
 
-@pytest.mark.xfail(strict=True, reason="the real ELF drops a complete SET_PULSES that follows a stray `A5 3F` and a "
-                   "HEARTBEAT when the host then pauses: only the HEARTBEAT is answered (issue 9 item 7 report)")
 def test_a_complete_frame_after_a_stray_start_byte_is_handled(tmp_path):
     """Line noise `A5 3F` (a start byte whose length nibble says 15), then a HEARTBEAT and a
     SET_PULSES in one write, then a pause as between two heartbeats: both frames are whole

@@ -48,7 +48,8 @@ static int8_t try_frame(Decoder *d, Frame *out) {
   uint8_t total = len + PROTO_OVERHEAD;
   if (d->n < total) return 0;
   uint8_t type = d->buf[1] >> 4;
-  if (proto_crc8(d->buf + 1, total - 2) != d->buf[total - 1] || proto_payload_len(type) != (int8_t)len) {
+  // the length first: it spares the CRC of most false starts
+  if (proto_payload_len(type) != (int8_t)len || proto_crc8(d->buf + 1, total - 2) != d->buf[total - 1]) {
     drop(d, 1);  // only the start byte: a real frame may begin inside
     d->errors++;
     return -1;
@@ -61,16 +62,20 @@ static int8_t try_frame(Decoder *d, Frame *out) {
   return 1;
 }
 
-int proto_decoder_push(Decoder *d, uint8_t byte, Frame *out) {
-  if (d->n == sizeof(d->buf)) {  // cannot happen with valid lengths; be safe
+void proto_decoder_push(Decoder *d, uint8_t byte) {
+  if (d->n == sizeof(d->buf)) {  // only if the caller did not pop until 0; be safe
     drop(d, 1);
     d->errors++;
   }
   d->buf[d->n++] = byte;
+}
+
+// Each failed candidate drops at least one byte, so a pop ends within d->n rounds, and
+// every byte is dropped or taken once: O(buffer) work per byte pushed, on average.
+int proto_decoder_pop(Decoder *d, Frame *out) {
   for (;;) {
     int8_t r = try_frame(d, out);
-    if (r == 1) return 1;
-    if (r == 0) return 0;
+    if (r >= 0) return r;
   }
 }
 

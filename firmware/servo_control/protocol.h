@@ -29,15 +29,26 @@ uint8_t proto_crc8(const uint8_t *data, size_t n);
 // Payload length each type must have, or -1 for an unknown type.
 int8_t proto_payload_len(uint8_t type);
 
-// Streaming decoder: feed bytes one by one; returns 1 when `out` holds a frame,
-// 0 otherwise. Invalid frames are dropped and counted in `errors`.
+// Streaming decoder (PROTOCOL.md's receiver). Push each byte received, then pop until
+// it returns 0:
+//
+//   proto_decoder_push(&d, byte);
+//   while (proto_decoder_pop(&d, &f)) handle(&f);
+//
+// One byte can complete several frames: when it makes a candidate fail (bad CRC or
+// length), only that start byte is dropped and the frames already received behind it
+// come out, in order, each once. Invalid bytes are dropped and counted in `errors`.
+// Drained after each push, the buffer holds at most one incomplete candidate
+// (< PROTO_MAX_PAYLOAD + PROTO_OVERHEAD bytes), so the next push always fits.
 struct Decoder {
   uint8_t buf[PROTO_MAX_PAYLOAD + PROTO_OVERHEAD];
   uint8_t n;
   uint8_t errors;
 };
 void proto_decoder_init(Decoder *d);
-int proto_decoder_push(Decoder *d, uint8_t byte, Frame *out);
+void proto_decoder_push(Decoder *d, uint8_t byte);
+// 1: `out` holds the next complete frame (taken from the buffer); 0: none is complete.
+int proto_decoder_pop(Decoder *d, Frame *out);
 
 // Encode a frame into `out` (at least len + PROTO_OVERHEAD bytes); returns its size.
 uint8_t proto_encode(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len, uint8_t *out);

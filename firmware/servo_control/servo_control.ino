@@ -132,10 +132,12 @@ void loop() {
   while (Serial.available() > 0) {
     Frame f;
     last_byte_ms = millis();
-    if (proto_decoder_push(&decoder, (uint8_t)Serial.read(), &f)) handle(&f);
+    proto_decoder_push(&decoder, (uint8_t)Serial.read());
+    // every frame this byte completes: after a false start byte there can be several
+    while (proto_decoder_pop(&decoder, &f)) handle(&f);
   }
   if (decoder.n > 0 && (unsigned long)(millis() - last_byte_ms) > FRAME_GAP_MS) {
-    decoder.n = 0;  // the rest of that frame is not coming
+    decoder.n = 0;  // a partial frame only (the rest of it is not coming)
     decoder.errors++;
   }
   if (state == STATE_RUNNING && (unsigned long)(millis() - last_rx_ms) > watchdog_ms) {

@@ -22,13 +22,9 @@
 //    STATE when the watchdog fires, nothing for device-to-host types; transmit sequence
 //    numbers count up by one;
 //  - a valid frame after garbage and a pause longer than FRAME_GAP_MS is handled, and a
-//    frame whose last byte has arrived is handled at once, never dropped as a partial
-//    frame. Built with -DSPEC_ONE_FRAME_PER_BYTE=1 the model handles at most one frame
-//    per byte received, as protocol.cpp does (fuzz/README.md: the known deviation this
-//    target finds otherwise), so that the fuzzer can look past it.
-#ifndef SPEC_ONE_FRAME_PER_BYTE
-#define SPEC_ONE_FRAME_PER_BYTE 0
-#endif
+//    frame is handled in the loop() that reads the byte making it decodable (its last
+//    byte, or the one that makes a false start before it fail: then several are handled
+//    at once), never left waiting and dropped as a partial frame.
 
 // The sketch, its statics in sections of their own: every run starts from them as they
 // were at power-up (restored byte for byte), whatever statics the sketch has.
@@ -287,7 +283,6 @@ static void resync_check(uint8_t seq) {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   boot();
   model = Model();
-  model.dec.one_per_byte = SPEC_ONE_FRAME_PER_BYTE;
   tx_decoder.clear();
   tx_seen = 0;
   last_tx_seq = 0;

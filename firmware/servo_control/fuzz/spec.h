@@ -66,12 +66,10 @@ inline std::vector<uint8_t> encode(uint8_t type, uint8_t seq, const uint8_t *pay
 
 // "A receiver scans for 0xA5, waits for len + 4 bytes and checks the CRC and that len is
 // the length of that type. On any failure it drops only the start byte and scans again."
-// Every complete frame comes out as soon as its last byte is in. With `one_per_byte`
-// it mimics protocol.cpp's proto_decoder_push instead: at most one frame per byte, the
-// rest stays buffered until the next byte (see fuzz/README.md: a known deviation).
+// Every frame comes out as soon as the byte that makes it decodable is in: its last byte,
+// or the byte that makes a candidate before it fail (then several can come out at once).
 struct Decoder {
   std::vector<uint8_t> buf;
-  bool one_per_byte = false;
   void clear() { buf.clear(); }
   void feed(uint8_t byte, std::vector<Frame> &out) {
     buf.push_back(byte);
@@ -92,7 +90,6 @@ struct Decoder {
       f.payload.assign(buf.begin() + 3, buf.begin() + 3 + len);
       out.push_back(f);
       buf.erase(buf.begin(), buf.begin() + total);
-      if (one_per_byte) return;
     }
   }
 };
