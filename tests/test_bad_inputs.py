@@ -1865,11 +1865,6 @@ def test_a_1mb_name_gives_a_readable_log_line_and_diagnostics(launch, observer):
     assert max(longest.values(), default=0) < 64 * 1024, dict(longest)
 
 
-@pytest.mark.xfail(strict=True, reason="RustDDS (patches/rustdds): a service reply over ~1.25 KB (fragmented) is "
-                   "written with a submessage length 1 byte short: in debug builds debug_assert_eq!(buf.len(), total) "
-                   "in Message::write_to_vec_fast kills the DDS event loop thread (the node stays up, exits 0, answers "
-                   "nothing); in release builds the reply never arrives and the service answers no further request "
-                   "(issue 9 item 7 report)")
 def test_a_long_parameter_error_reply_does_not_kill_the_node(launch, observer):
     """`ros2 param set /compute_ik arm_config` with a 1300-character path: refused with
     "File name too long", a reply of ~1.35 KB."""

@@ -3042,6 +3042,89 @@ mod tests {
       assert_eq!(f.repair_round(), 5);
     }
 
+    // A service reply (inline QoS: the request's identity) to everyone and to
+    // one reader: every datagram serializes to the length its submessage
+    // headers announce, reads back, and the fragments reassemble the sample.
+    // Every sample size up to 3104 bytes (13 fragments): the fragmentation
+    // threshold, each fragment boundary and each boundary between datagrams.
+    // The DATA_FRAG's inline QoS used to get a one-byte Option tag, one byte
+    // more than announced: write_to_vec_fast's debug_assert killed the event
+    // loop, and in release builds the receiver could not parse the fragment.
+    #[test]
+    fn fragmented_reply_datagrams_have_their_announced_length() {
+      use bytes::Bytes;
+
+      use crate::{
+        dds::with_key::datawriter::WriteOptionsBuilder,
+        messages::submessages::submessages::WriterSubmessage, rpc::SampleIdentity,
+        rtps::SubmessageBody,
+      };
+
+      let f = Fixture::user(0, 0, None);
+      let identity = SampleIdentity {
+        writer_guid: GUID::new(GuidPrefix::new(&[3; 12]), EntityId::UNKNOWN),
+        sequence_number: SequenceNumber::new(5),
+      };
+      let options = WriteOptionsBuilder::new()
+        .related_sample_identity(identity)
+        .source_timestamp(Timestamp::now())
+        .build();
+      let mut checked_frags = 0;
+      for payload_len in 0..=3100 {
+        let payload: Vec<u8> = (0..payload_len).map(|i| i as u8).collect();
+        let data = DDSData::new(SerializedPayload::new(
+          RepresentationIdentifier::CDR_LE,
+          payload,
+        ));
+        let sample = data.bytes_slice(0, data.payload_size());
+        let cc = CacheChange::new(
+          f.writer.my_guid,
+          SequenceNumber::new(1),
+          options.clone(),
+          data,
+        );
+        for target in [None, Some(f.reader_proxy())] {
+          let mut reassembled = vec![0; sample.len()];
+          let mut frags = 0;
+          let iter =
+            FragmentationIter::new_resume(&f.writer, &cc, target, true, SampleCursor::Fresh);
+          for (_, msg) in iter {
+            let announced = 20
+              + msg
+                .submessages
+                .iter()
+                .map(|s| 4 + usize::from(s.header.content_length))
+                .sum::<usize>();
+            let bytes = msg.write_to_vec_fast(f.writer.endianness).unwrap();
+            assert_eq!(bytes.len(), announced, "payload {payload_len}");
+            let read = Message::read_from_buffer(&Bytes::from(bytes)).unwrap();
+            assert_eq!(read.submessages.len(), msg.submessages.len());
+            for sm in read.submessages {
+              match sm.body {
+                SubmessageBody::Writer(WriterSubmessage::DataFrag(df, _)) => {
+                  assert!(df.inline_qos.is_some(), "payload {payload_len}");
+                  let from = (usize::from(df.fragment_starting_num) - 1) * FRAGMENT_SIZE;
+                  reassembled[from..from + df.serialized_payload.len()]
+                    .copy_from_slice(&df.serialized_payload);
+                  frags += usize::from(df.fragments_in_submessage);
+                }
+                SubmessageBody::Writer(WriterSubmessage::Data(d, _)) => {
+                  assert!(d.inline_qos.is_some(), "payload {payload_len}");
+                  let p = d.serialized_payload.unwrap();
+                  reassembled.copy_from_slice(&p[..sample.len()]);
+                }
+                _ => (),
+              }
+            }
+          }
+          assert_eq!(reassembled, sample, "payload {payload_len}");
+          assert!(frags == 0 || frags == sample.len().div_ceil(FRAGMENT_SIZE));
+          checked_frags += frags;
+        }
+      }
+      assert!(checked_frags > 0, "no size was fragmented");
+    }
+
     // While the reader's send socket has queued control datagrams, a round
     // sends nothing and re-arms; once the queue drains, repair proceeds.
     #[test]

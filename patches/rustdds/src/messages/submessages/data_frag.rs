@@ -301,8 +301,9 @@ impl<C: Context> Writable<C> for DataFrag {
     writer.write_value(&self.fragments_in_submessage)?;
     writer.write_value(&self.fragment_size)?;
     writer.write_value(&self.data_size)?;
-    if self.inline_qos.is_some() && !self.inline_qos.as_ref().unwrap().parameters.is_empty() {
-      writer.write_value(&self.inline_qos)?;
+    // The ParameterList itself, not the Option (speedy would prefix a tag byte).
+    if let Some(inline_qos) = self.inline_qos.as_ref() {
+      writer.write_value(inline_qos)?;
     }
     writer.write_bytes(&self.serialized_payload)?;
     Ok(())
@@ -325,7 +326,10 @@ mod tests {
   use speedy::{Endianness, Writable};
 
   use super::*;
-  use crate::messages::submessages::submessages::DATAFRAG_Flags;
+  use crate::{
+    messages::submessages::{elements::parameter::Parameter, submessages::DATAFRAG_Flags},
+    structure::parameter_id::ParameterId,
+  };
 
   fn serialize_body(df: &DataFrag) -> Bytes {
     let mut buf = Vec::new();
@@ -381,6 +385,45 @@ mod tests {
     };
     let bytes = serialize_body(&df);
     assert!(DataFrag::deserialize(&bytes, BitFlags::<DATAFRAG_Flags>::empty()).is_err());
+  }
+
+  // With inline QoS (a service reply carries its request's identity there), a
+  // DATA_FRAG body is exactly `len_serialized()` bytes, the length its
+  // submessage header announces, and reads back the same. The QoS used to be
+  // written with a one-byte Option tag in front of it.
+  #[test]
+  fn inline_qos_body_has_its_announced_length_and_reads_back() {
+    let mut qos = ParameterList::new();
+    for parameter_id in [
+      ParameterId::PID_RELATED_SAMPLE_IDENTITY,
+      ParameterId::PID_RELATED_SAMPLE_IDENTITY_CUSTOM,
+    ] {
+      qos.push(Parameter {
+        parameter_id,
+        value: vec![7; 24],
+      });
+    }
+    for inline_qos in [None, Some(qos)] {
+      for payload_len in 1..=1300usize {
+        let df = DataFrag {
+          writer_sn: SequenceNumber::new(3),
+          fragment_starting_num: FragmentNumber::new(1),
+          fragments_in_submessage: payload_len.div_ceil(256) as u16,
+          fragment_size: 256,
+          data_size: 1400,
+          inline_qos: inline_qos.clone(),
+          serialized_payload: Bytes::from((0..payload_len).map(|i| i as u8).collect::<Vec<_>>()),
+          ..Default::default()
+        };
+        let bytes = serialize_body(&df);
+        assert_eq!(bytes.len(), df.len_serialized(), "payload {payload_len}");
+        let mut flags = BitFlags::from_flag(DATAFRAG_Flags::Endianness);
+        if df.inline_qos.is_some() {
+          flags |= DATAFRAG_Flags::InlineQos;
+        }
+        assert_eq!(DataFrag::deserialize(&bytes, flags).unwrap(), df);
+      }
+    }
   }
 
   #[test]
