@@ -19,6 +19,14 @@ impl VendorId {
 
   pub const THIS_IMPLEMENTATION: Self = Self::ATOSTEK;
 
+  pub const RTI_CONNEXT: Self = Self {
+    vendor_id: [0x01, 0x01],
+  };
+
+  pub const EPROSIMA_FASTDDS: Self = Self {
+    vendor_id: [0x01, 0x0F],
+  };
+
   pub fn as_bytes(&self) -> [u8; 2] {
     self.vendor_id
   }

@@ -1043,9 +1043,13 @@ impl DPEventLoop {
 
         if match_to_writer {
           let offered_qos = remote_writer.publication_topic_data.qos();
+          let vendor_id = discovery_db_read(&self.discovery_db)
+            .find_participant_proxy(remote_writer.writer_proxy.remote_writer_guid.prefix)
+            .map(|participant| participant.vendor_id);
           // Should we check if the participant has published a QoS for the topic?
           reader.update_writer_proxy(
-            RtpsWriterProxy::from_discovered_writer_data(remote_writer, &[], &[]),
+            RtpsWriterProxy::from_discovered_writer_data(remote_writer, &[], &[])
+              .with_vendor_id(vendor_id),
             &offered_qos,
           );
         }

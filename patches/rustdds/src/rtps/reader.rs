@@ -1420,14 +1420,8 @@ impl Reader {
   }
 
   // An ACKNACK without the final flag requests an immediate HEARTBEAT from the
-  // writer. Its readerSNState has base 0 and no bits, as Fast DDS' own pre-emptive
-  // ACKNACK: Fast DDS answers only that form with a HEARTBEAT at once (base 0 is
-  // outside RTPS 8.3.5.5's validity rule, but it is what Fast DDS sends and expects,
-  // Cyclone DDS accepts it, and RustDDS' writer treats it as acknowledging nothing).
-  // With base 1 Fast DDS took it as a plain acknowledgement and waited for its
-  // periodic HEARTBEAT (3 s): a sample it published before we had matched it
-  // arrived that late, or never if the publisher went away first (`ros2 topic pub
-  // --once`).
+  // writer. Its readerSNState has no bits, and its base is
+  // `preemptive_acknack_base` of the writer's vendor.
   fn send_preemptive_acknack_to(&self, writer_proxy: &mut RtpsWriterProxy) {
     let flags = BitFlags::<ACKNACK_Flags>::from_flag(ACKNACK_Flags::Endianness);
     let acknack_count = writer_proxy.next_ack_nack_sequence_number();
@@ -1441,7 +1435,9 @@ impl Reader {
       AckNack {
         reader_id: self.entity_id(),
         writer_id: remote_writer_guid.entity_id,
-        reader_sn_state: SequenceNumberSet::new_empty(SequenceNumber::new(0)),
+        reader_sn_state: SequenceNumberSet::new_empty(preemptive_acknack_base(
+          writer_proxy.remote_vendor_id,
+        )),
         count: acknack_count,
       },
       InfoDestination {
@@ -1465,6 +1461,25 @@ impl Reader {
     })
   }
 } // impl Reader
+
+// The base of a pre-emptive ACKNACK's readerSNState, by the writer's vendor.
+// Fast DDS answers only base 0 (and no bits) with a HEARTBEAT at once, the form
+// its own readers send; with base 1 it took the ACKNACK as a plain
+// acknowledgement and waited for its periodic HEARTBEAT (3 s): a sample it
+// published before we had matched it arrived that late, or never if the
+// publisher went away first (`ros2 topic pub --once`). But base 0 is outside
+// RTPS 2.5 8.3.5.5's validity rule (bitmapBase >= 1): Cyclone DDS accepts it
+// only from eProsima and RTI, and otherwise drops the datagram with "malformed
+// packet received from vendor 1.18 ... parse:shortmsg" on stderr, once per
+// matched writer, in every Cyclone DDS application. Everyone else (and a writer
+// whose vendor discovery does not know) gets the valid base 1, which RustDDS'
+// writer, like Cyclone DDS', also treats as acknowledging nothing.
+fn preemptive_acknack_base(vendor_id: Option<VendorId>) -> SequenceNumber {
+  match vendor_id {
+    Some(VendorId::EPROSIMA_FASTDDS) | Some(VendorId::RTI_CONNEXT) => SequenceNumber::new(0),
+    _ => SequenceNumber::new(1),
+  }
+}
 
 impl HasQoSPolicy for Reader {
   fn qos(&self) -> QosPolicies {
@@ -1501,6 +1516,28 @@ mod tests {
     QosPolicyBuilder,
   };
   use super::*;
+
+  // Fast DDS (and RTI, which sends it too) gets base 0, the form Fast DDS answers
+  // at once; everyone else, Cyclone DDS and RustDDS included, and a writer of
+  // unknown vendor the valid base 1 (Cyclone DDS dropped base 0 from us as a
+  // malformed packet).
+  #[test]
+  fn preemptive_acknack_base_is_zero_only_for_fast_dds_and_rti() {
+    assert_eq!(
+      preemptive_acknack_base(Some(VendorId::EPROSIMA_FASTDDS)),
+      SequenceNumber::new(0)
+    );
+    assert_eq!(
+      preemptive_acknack_base(Some(VendorId::RTI_CONNEXT)),
+      SequenceNumber::new(0)
+    );
+    let cyclone = VendorId {
+      vendor_id: [0x01, 0x10],
+    };
+    for vendor in [Some(cyclone), Some(VendorId::ATOSTEK), None] {
+      assert_eq!(preemptive_acknack_base(vendor), SequenceNumber::new(1));
+    }
+  }
 
   #[test]
   fn reader_sends_notification_when_receiving_data() {

@@ -6,6 +6,7 @@ use log::{debug, error, info, trace, warn};
 
 use crate::{
   discovery::sedp_messages::DiscoveredWriterData,
+  messages::vendor_id::VendorId,
   rtps::constant::MAX_TRACKED_CHANGES_PER_WRITER,
   structure::{
     guid::{EntityId, GUID},
@@ -30,6 +31,9 @@ pub(crate) struct RtpsWriterProxy {
 
   /// Identifies the group to which the matched Reader belongs
   pub remote_group_entity_id: EntityId,
+
+  /// The vendor of the remote writer's participant, when discovery knows it.
+  pub remote_vendor_id: Option<VendorId>,
 
   // See RTPS Spec v2.5 Section 8.4.10.4 on how the WriterProxy is supposed to
   // operate.
@@ -89,6 +93,7 @@ impl RtpsWriterProxy {
       unicast_locator_list,
       multicast_locator_list,
       remote_group_entity_id,
+      remote_vendor_id: None,
       changes: BTreeMap::new(),
       received_heartbeat_count: 0,
       sent_ack_nack_count: 0,
@@ -116,6 +121,14 @@ impl RtpsWriterProxy {
     self.unicast_locator_list = other.unicast_locator_list;
     self.multicast_locator_list = other.multicast_locator_list;
     self.remote_group_entity_id = other.remote_group_entity_id;
+    if other.remote_vendor_id.is_some() {
+      self.remote_vendor_id = other.remote_vendor_id;
+    }
+  }
+
+  pub fn with_vendor_id(mut self, vendor_id: Option<VendorId>) -> Self {
+    self.remote_vendor_id = vendor_id;
+    self
   }
 
   // This is used to check for DEADLINE policy
@@ -323,6 +336,7 @@ impl RtpsWriterProxy {
     RtpsWriterProxy {
       remote_writer_guid: discovered_writer_data.writer_proxy.remote_writer_guid,
       remote_group_entity_id: EntityId::UNKNOWN,
+      remote_vendor_id: None,
       unicast_locator_list,
       multicast_locator_list,
       changes: BTreeMap::new(),

@@ -1,0 +1,81 @@
+"""RTPS-level interoperability of our nodes (RustDDS, patches/rustdds) with the two DDS
+implementations ROS 2 users run: Fast DDS (rclpy's default RMW) and Cyclone DDS
+(rmw_cyclonedds_cpp).
+
+- A Cyclone DDS application that talks to our nodes prints nothing about them: RustDDS'
+  pre-emptive ACKNACK with sequence-number base 0 (the form Fast DDS needs) was dropped
+  by Cyclone DDS as a malformed packet, one stderr line per matched writer, in every
+  Cyclone DDS application on the network (patches/README.md, rustdds entry 11).
+- What `ros2 topic pub --once` does (a new participant publishes one sample as soon as
+  it is matched, then leaves) reaches compute_ik every time: Fast DDS answers our reader's
+  pre-emptive ACKNACK with a HEARTBEAT at once only in that base-0 form (entry 6).
+"""
+import os
+import subprocess
+import sys
+import textwrap
+import time
+
+from geometry_msgs.msg import PointStamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from conftest import Observer
+
+CYCLONE_READER = textwrap.dedent("""
+    import sys, time
+    sys.path.insert(0, sys.argv[2])
+    from conftest import TfListener
+    tf = TfListener(int(sys.argv[1]))
+    end = time.monotonic() + 15
+    while time.monotonic() < end and not ("tool0" in tf.static and "main_arm" in tf.dynamic):
+        tf.poll()
+        time.sleep(0.05)
+    time.sleep(1.0)  # what each side sends after matching (ACKNACKs, HEARTBEATs)
+    tf.poll()
+    print(len(tf.static), len(tf.dynamic))
+""")
+
+
+def test_a_cyclone_dds_reader_of_our_tf_prints_no_malformed_packets(launch, domain):
+    launch("compute_ik")
+    launch("state_publisher")
+    run = subprocess.run([sys.executable, "-c", CYCLONE_READER, str(domain), os.path.dirname(__file__)],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr[-2000:]
+    static, dynamic = (int(x) for x in run.stdout.split())
+    assert static > 0 and dynamic > 0, (run.stdout, run.stderr[-2000:])
+    malformed = [line for line in run.stderr.splitlines() if "malformed packet" in line]
+    assert not malformed, f"{len(malformed)} lines, e.g. {malformed[0]}"
+
+
+def test_one_sample_from_a_fresh_fast_dds_publisher_that_leaves_reaches_compute_ik(launch, observer, domain):
+    """Ten times: a new rclpy participant publishes one target as soon as compute_ik's
+    reader is matched and is gone 0.3 s later, as `ros2 topic pub --once` is."""
+    launch("compute_ik")
+    # every step of every motion (compute_ik streams 50 a second): the stamps we look for
+    # are the first ones
+    joints = observer.sub("/joint_states", JointState, QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    observer.wait_publisher("/joint_states")
+    sent = []
+    for i in range(10):
+        once = Observer(domain, name=f"once_{i}")
+        try:
+            pub = once.pub("/xyz_target", PointStamped)
+            assert once.spin_until(lambda: pub.get_subscription_count() > 0, Observer.MATCH_TIMEOUT)
+            m = PointStamped()
+            m.header.frame_id = "base_link"
+            t = time.time()
+            m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
+            m.point.x, m.point.y, m.point.z = 0.2, 0.02 * (i % 3 - 1), 0.15
+            pub.publish(m)
+            sent.append((m.header.stamp.sec, m.header.stamp.nanosec))
+            observer.spin_for(0.3)  # the publisher's DDS threads deliver meanwhile
+        finally:
+            once.close()
+    # compute_ik's first step of each motion carries the target's stamp
+    def received():
+        stamps = {(j.header.stamp.sec, j.header.stamp.nanosec) for _, j in joints}
+        return [s for s in sent if s not in stamps]
+    observer.spin_until(lambda: not received(), 10)
+    assert not received(), f"{len(received())} of {len(sent)} never reached compute_ik"
