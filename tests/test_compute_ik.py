@@ -308,6 +308,24 @@ def test_a_custom_calibration_file_is_used(launch, observer, tmp_path):
     assert math.degrees(sa.position[0]) == pytest.approx(95.0, abs=1e-9)
 
 
+def test_a_deeply_nested_arm_config_is_refused_at_once_and_the_calibration_kept(launch, observer, tmp_path):
+    """YAML nested thousands deep took the parser seconds to minutes (it is quadratic in
+    the nesting): now refused before parsing, in the reply, a log line and diagnostics."""
+    cfg = tmp_path / "arm.yaml"
+    cfg.write_text("servos:\n  base: { offset_deg: 95.0, gain: -2.0, min_deg: 0.0, max_deg: 180.0, pulse_min_us: 544, pulse_max_us: 2400 }\n")
+    rig = IkRig(launch, observer, "--ros-args", "-p", f"arm_config:={cfg}", "-p", "diagnostics_period:=0.2")
+    deep = tmp_path / "deep.yaml"
+    deep.write_text("geometry: " + "[" * 10_000 + "]" * 10_000 + "\n")
+    [result] = set_params(observer, "compute_ik", arm_config=str(deep))
+    assert not result.successful and "10000 `[` or `{`" in result.reason and str(deep) in result.reason
+    assert observer.spin_until(lambda: "last_parameter_refusal" in rig.last_diag()[1], 5)
+    diag = rig.last_diag()[1]
+    assert diag["parameters_refused"] == "1" and diag["last_parameter_refusal"].startswith("arm_config: ")
+    assert observer.spin_until(lambda: "parameter arm_config refused" in rig.proc.output(), 5)
+    _, sa = rig.send_and_wait(rig.xyz, target(0.2, 0.0, 0.15))
+    assert math.degrees(sa.position[0]) == pytest.approx(95.0, abs=1e-9)
+
+
 def test_domains_do_not_hear_each_other(launch, observer, other_domain):
     stranger = Observer(other_domain, "stranger")
     try:

@@ -6,6 +6,8 @@ import xml.etree.ElementTree as ET
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -130,6 +132,8 @@ def test_bad_joint_states_are_skipped_with_diagnostics(launch, observer, domain)
     (None, "cannot read"),
     ("<robot name='x'><link name='a'/><link name='a'/></robot>", "defined twice"),
     ("<robot name='x'><link name='a'>", "not a valid URDF"),
+    pytest.param("<robot name='x'><link name='a'>" + "<visual>" * 10_000 + "</visual>" * 10_000 + "</link></robot>",
+                 "nested 10002 deep, more than the 64", id="nested-10000-deep"),
 ])
 def test_bad_urdf_exits_nonzero_naming_file_and_problem(tmp_path, domain, content, message):
     import os
@@ -140,6 +144,37 @@ def test_bad_urdf_exits_nonzero_naming_file_and_problem(tmp_path, domain, conten
     r = subprocess.run([bin_path("state_publisher"), "--ros-args", "-p", f"urdf:={path}"], capture_output=True, text=True, env=env, timeout=20)
     assert r.returncode != 0
     assert str(path) in r.stderr and message in r.stderr, r.stderr
+
+
+def test_a_deeply_nested_urdf_parameter_is_refused_and_the_model_kept(launch, observer, domain, tmp_path):
+    """urdf-rs recursed once per element: a URDF nested 10 000 deep overflowed the stack
+    (SIGABRT). Now refused before parsing, in the reply, a log line and diagnostics."""
+    tf = TfListener(domain)
+    proc = launch("state_publisher", "--ros-args", "-p", f"urdf:={TEST_URDF}", "-p", "diagnostics_period:=0.2")
+    diags = observer.sub("/diagnostics", DiagnosticArray)
+    observer.wait_publisher("/diagnostics")
+    deep = tmp_path / "deep.urdf"
+    deep.write_text("<robot name='deep'><link name='a'>" + "<visual>" * 10_000 + "</visual>" * 10_000 + "</link></robot>")
+    cli = observer.node.create_client(SetParameters, "/state_publisher/set_parameters")
+    assert cli.wait_for_service(timeout_sec=15)
+    value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=str(deep))
+    fut = cli.call_async(SetParameters.Request(parameters=[Parameter(name="urdf", value=value)]))
+    assert observer.spin_until(fut.done, 10)
+    result = fut.result().results[0]
+    assert not result.successful and "nested 10002 deep, more than the 64" in result.reason, result
+
+    def refusal():
+        values = {kv.key: kv.value for kv in diags[-1][1].status[0].values} if diags else {}
+        return values.get("last_parameter_refusal", "")
+
+    assert observer.spin_until(lambda: refusal().startswith("urdf: "), 5)
+    assert observer.spin_until(lambda: "parameter urdf refused" in proc.output(), 5)
+    # the model in use is still the test robot's
+    pub = observer.pub("/joint_states", JointState)
+    observer.wait_matched(pub)
+    pub.publish(JointState(name=["wheel_joint"], position=[1.0]))
+    assert wait_tf(observer, tf, lambda: "wheel" in tf.dynamic)
+    assert proc.proc.poll() is None
 
 
 def test_arm_is_in_tf_before_any_target(launch, observer, domain):

@@ -2,10 +2,21 @@
 
 use crate::{Arm, JointLimits, MotionLimits, ServoCalibrations};
 use serde::{Deserialize, Serialize};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// The configuration shipped in `config/arm.yaml`, compiled in as the default.
 pub const SHIPPED_ARM_YAML: &str = include_str!("../../../config/arm.yaml");
+
+/// The largest configuration file read (bytes); the shipped one is 2.5 KB.
+pub const MAX_CONFIG_BYTES: usize = 64 * 1024;
+
+/// The most flow collections (`[` or `{`) a configuration may open; the shipped one
+/// opens 12. The YAML parser's time grows with the product of their nesting and the
+/// file's length (thousands nested take seconds to minutes), and every `[`/`{` anywhere
+/// in the text (even in a comment or a string) counts, so this bounds the nesting without
+/// having to understand YAML.
+pub const MAX_FLOW_COLLECTIONS: usize = 256;
 
 /// Why a configuration file could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -18,6 +29,26 @@ pub enum ConfigError {
         path: PathBuf,
         /// the I/O error
         source: std::io::Error,
+    },
+    /// The file is larger than [`MAX_CONFIG_BYTES`].
+    #[error("{origin}: {bytes} bytes, more than the {limit} an arm configuration may have")]
+    TooLarge {
+        /// the file, or `<inline>`
+        origin: String,
+        /// its size (or as much of it as was read)
+        bytes: u64,
+        /// [`MAX_CONFIG_BYTES`]
+        limit: usize,
+    },
+    /// The text opens more `[`/`{` than [`MAX_FLOW_COLLECTIONS`]: refused before parsing.
+    #[error("{origin}: {count} `[` or `{{` (flow collections), more than the {limit} an arm configuration may have")]
+    TooManyFlowCollections {
+        /// the file, or `<inline>`
+        origin: String,
+        /// how many `[` and `{` the text has
+        count: usize,
+        /// [`MAX_FLOW_COLLECTIONS`]
+        limit: usize,
     },
     /// The YAML is malformed or has unknown or mistyped fields.
     #[error("{origin}: {message}")]
@@ -130,8 +161,25 @@ impl ArmConfig {
         Self::from_yaml(SHIPPED_ARM_YAML, "config/arm.yaml (built in)")
     }
 
-    /// Parse and validate YAML text; `origin` names it in errors.
+    /// Parse and validate YAML text; `origin` names it in errors. Text over
+    /// [`MAX_CONFIG_BYTES`] or with more than [`MAX_FLOW_COLLECTIONS`] `[`/`{` is refused
+    /// before it is parsed.
     pub fn from_yaml(text: &str, origin: &str) -> Result<ArmConfig, ConfigError> {
+        if text.len() > MAX_CONFIG_BYTES {
+            return Err(ConfigError::TooLarge {
+                origin: origin.to_string(),
+                bytes: text.len() as u64,
+                limit: MAX_CONFIG_BYTES,
+            });
+        }
+        let count = text.bytes().filter(|&b| b == b'[' || b == b'{').count();
+        if count > MAX_FLOW_COLLECTIONS {
+            return Err(ConfigError::TooManyFlowCollections {
+                origin: origin.to_string(),
+                count,
+                limit: MAX_FLOW_COLLECTIONS,
+            });
+        }
         let config: ArmConfig = serde_norway::from_str(text).map_err(|e| ConfigError::Parse {
             origin: origin.to_string(),
             message: e.to_string(),
@@ -150,13 +198,29 @@ impl ArmConfig {
         }
     }
 
-    /// Read, parse and validate a file.
+    /// Read, parse and validate a file. No more than [`MAX_CONFIG_BYTES`] + 1 bytes are
+    /// read, so a huge or endless file (`/dev/zero`) is refused as too large.
     pub fn load(path: &Path) -> Result<ArmConfig, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let read_error = |source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
-        })?;
-        Self::from_yaml(&text, &path.display().to_string())
+        };
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_CONFIG_BYTES as u64 + 1).read_to_end(&mut bytes))
+            .map_err(read_error)?;
+        let origin = path.display().to_string();
+        if bytes.len() > MAX_CONFIG_BYTES {
+            let size = std::fs::metadata(path).map_or(0, |m| m.len());
+            return Err(ConfigError::TooLarge {
+                origin,
+                bytes: size.max(bytes.len() as u64),
+                limit: MAX_CONFIG_BYTES,
+            });
+        }
+        let text = String::from_utf8(bytes)
+            .map_err(|e| read_error(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
+        Self::from_yaml(&text, &origin)
     }
 
     /// Check that every value is usable: positive lengths, ordered finite limits,
@@ -256,6 +320,58 @@ mod tests {
     fn reversed_limits_are_rejected() {
         let err = ArmConfig::from_yaml("limits_deg: { base: [45, -45] }", "t").unwrap_err();
         assert!(err.to_string().contains("limits_deg.base"), "{err}");
+    }
+
+    #[test]
+    fn deeply_nested_flow_collections_are_refused_before_parsing() {
+        for depth in [10_000, 100_000] {
+            let text = format!("geometry: {}{}\n", "[".repeat(depth), "]".repeat(depth));
+            let started = std::time::Instant::now();
+            let err = ArmConfig::from_yaml(&text, "deep.yaml").unwrap_err();
+            assert!(started.elapsed() < std::time::Duration::from_secs(1));
+            let text = err.to_string();
+            assert!(text.contains("deep.yaml"), "{text}");
+            match (depth, err) {
+                (10_000, ConfigError::TooManyFlowCollections { count, limit, .. }) => {
+                    assert_eq!((count, limit), (10_000, MAX_FLOW_COLLECTIONS), "{text}");
+                }
+                (100_000, ConfigError::TooLarge { bytes, .. }) => assert_eq!(bytes, 200_011),
+                (_, err) => panic!("{err}"),
+            }
+        }
+        let many = format!("geometry: {}{}\n", "{".repeat(300), "}".repeat(300));
+        let err = ArmConfig::from_yaml(&many, "t").unwrap_err();
+        assert!(err.to_string().contains("300 `[` or `{`"), "{err}");
+    }
+
+    #[test]
+    fn a_huge_or_endless_file_is_refused_without_reading_it_all() {
+        let err = ArmConfig::load(Path::new("/dev/zero")).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                ConfigError::TooLarge {
+                    limit: MAX_CONFIG_BYTES,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let path = std::env::temp_dir().join(format!("arm_config_big_{}.yaml", std::process::id()));
+        std::fs::write(&path, format!("# {}\n", "x".repeat(MAX_CONFIG_BYTES))).unwrap();
+        let err = ArmConfig::load(&path).unwrap_err();
+        std::fs::remove_file(&path).unwrap();
+        assert!(
+            matches!(err, ConfigError::TooLarge { bytes, .. } if bytes == MAX_CONFIG_BYTES as u64 + 3),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn shipped_config_is_well_inside_the_limits() {
+        assert!(SHIPPED_ARM_YAML.len() < MAX_CONFIG_BYTES / 8);
+        let flows = SHIPPED_ARM_YAML.matches(['[', '{']).count();
+        assert!(flows < MAX_FLOW_COLLECTIONS / 8, "{flows}");
     }
 
     #[test]

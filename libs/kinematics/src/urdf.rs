@@ -37,6 +37,17 @@ pub enum UrdfError {
         /// what the parser said
         message: String,
     },
+    /// Elements are nested deeper than [`MAX_ELEMENT_DEPTH`]: refused before parsing,
+    /// as urdf-rs recurses once per level and would overflow the stack.
+    #[error("{origin}: elements nested {depth} deep, more than the {limit} a URDF may have")]
+    TooDeep {
+        /// the file
+        origin: String,
+        /// the deepest nesting found
+        depth: usize,
+        /// [`MAX_ELEMENT_DEPTH`]
+        limit: usize,
+    },
     /// The URDF parses but its structure is not a tree of links.
     #[error("{origin}: {message}")]
     Structure {
@@ -45,6 +56,96 @@ pub enum UrdfError {
         /// what is wrong
         message: String,
     },
+}
+
+/// The deepest element nesting a URDF may have. A real one is about 6 deep
+/// (`robot/link/visual/geometry/mesh`, `gazebo/plugin/...`); urdf-rs recurses once per
+/// level, so a document nested thousands deep would overflow the stack.
+pub const MAX_ELEMENT_DEPTH: usize = 64;
+
+/// The largest URDF file read (16 MiB; a large robot's expanded xacro is about 1 MB), so
+/// that a path to an endless file (`/dev/zero`, a FIFO) is refused instead of read forever.
+pub const MAX_URDF_BYTES: usize = 16 << 20;
+
+/// Read a URDF file's text: at most [`MAX_URDF_BYTES`] + 1 bytes are read, and a larger
+/// file is refused ([`UrdfError::Read`] saying so).
+pub fn read_urdf_file(path: &Path) -> Result<String, UrdfError> {
+    use std::io::Read;
+    let origin = path.display().to_string();
+    let read_error = |message: String| UrdfError::Read {
+        origin: origin.clone(),
+        message,
+    };
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_URDF_BYTES as u64 + 1).read_to_end(&mut bytes))
+        .map_err(|e| read_error(e.to_string()))?;
+    if bytes.len() > MAX_URDF_BYTES {
+        return Err(read_error(format!(
+            "larger than the {} MiB a URDF may have",
+            MAX_URDF_BYTES >> 20
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| read_error(format!("not UTF-8: {e}")))
+}
+
+/// The deepest element nesting of an XML document, found by a linear, non-recursive
+/// scan of its markup: start tags (not self-closing) open a level, end tags close one;
+/// comments, CDATA sections, processing instructions and declarations (`<!DOCTYPE ...>`)
+/// are skipped as the parsers skip them, and `>` inside quoted attribute values does not
+/// end a tag. Malformed markup is counted as it comes (never fewer levels than a parser
+/// could build before it gives up): this bounds the parse, it does not validate.
+fn element_depth(text: &str) -> usize {
+    let b = text.as_bytes();
+    let find = |from: usize, pat: &[u8]| {
+        b.get(from..)
+            .and_then(|rest| rest.windows(pat.len()).position(|w| w == pat))
+            .map_or(b.len(), |at| from + at + pat.len())
+    };
+    let (mut i, mut depth, mut deepest) = (0, 0usize, 0usize);
+    while let Some(at) = b
+        .get(i..)
+        .and_then(|rest| rest.iter().position(|&c| c == b'<'))
+    {
+        let start = i + at;
+        let rest = &b[start..];
+        if rest.starts_with(b"<!--") {
+            i = find(start + 4, b"-->");
+        } else if rest.starts_with(b"<![CDATA[") {
+            i = find(start + 9, b"]]>");
+        } else if rest.starts_with(b"<?") {
+            i = find(start + 2, b"?>");
+        } else if rest.starts_with(b"<!") {
+            // a declaration ends at the first `>`, as RustyXML (urdf-rs's first pass) ends it
+            i = find(start + 2, b">");
+        } else if rest.starts_with(b"</") {
+            depth = depth.saturating_sub(1);
+            i = find(start + 2, b">");
+        } else {
+            // a start tag: `>` ends it unless inside a value quoted after `=`
+            let (mut j, mut after_eq, mut self_closing) = (start + 1, false, false);
+            while let Some(&c) = b.get(j) {
+                match c {
+                    b'>' => break,
+                    b'"' | b'\'' if after_eq => {
+                        j = find(j + 1, &[c]) - 1;
+                        after_eq = false;
+                    }
+                    b'=' => after_eq = true,
+                    b' ' | b'\t' | b'\r' | b'\n' => {}
+                    _ => after_eq = false,
+                }
+                self_closing = c == b'/';
+                j += 1;
+            }
+            deepest = deepest.max(depth + 1);
+            if !self_closing {
+                depth += 1;
+            }
+            i = j + 1;
+        }
+    }
+    deepest
 }
 
 /// How a joint moves.
@@ -160,16 +261,23 @@ fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
 impl RobotModel {
     /// Read and validate a URDF file.
     pub fn load(path: &Path) -> Result<RobotModel, UrdfError> {
-        let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| UrdfError::Read {
-            origin: origin.clone(),
-            message: e.to_string(),
-        })?;
-        Self::from_urdf_str(&text, &origin)
+        let text = read_urdf_file(path)?;
+        Self::from_urdf_str(&text, &path.display().to_string())
     }
 
     /// Parse and validate URDF text; `origin` names it in errors.
+    ///
+    /// A document nested deeper than [`MAX_ELEMENT_DEPTH`] is refused before it is
+    /// parsed ([`UrdfError::TooDeep`]).
     pub fn from_urdf_str(text: &str, origin: &str) -> Result<RobotModel, UrdfError> {
+        let depth = element_depth(text);
+        if depth > MAX_ELEMENT_DEPTH {
+            return Err(UrdfError::TooDeep {
+                origin: origin.to_string(),
+                depth,
+                limit: MAX_ELEMENT_DEPTH,
+            });
+        }
         let robot = urdf_rs::read_from_string(text).map_err(|e| UrdfError::Parse {
             origin: origin.to_string(),
             message: e.to_string(),
@@ -456,11 +564,101 @@ mod tests {
         }
     }
 
+    /// A link with `depth` `<tag>` elements nested in it: `depth + 2` levels.
+    fn deep_urdf(tag: &str, depth: usize) -> String {
+        format!(
+            "<robot name='deep'><link name='a'>{}{}</link></robot>",
+            format!("<{tag}>").repeat(depth),
+            format!("</{tag}>").repeat(depth)
+        )
+    }
+
+    #[test]
+    fn deeply_nested_urdf_is_refused_before_parsing() {
+        for depth in [10_000, 100_000] {
+            let started = std::time::Instant::now();
+            let err =
+                RobotModel::from_urdf_str(&deep_urdf("visual", depth), "deep.urdf").unwrap_err();
+            assert!(
+                matches!(err, UrdfError::TooDeep { depth: d, limit: 64, .. } if d == depth + 2),
+                "{err}"
+            );
+            let text = err.to_string();
+            assert!(
+                text.contains("deep.urdf") && text.contains(&format!("{}", depth + 2)),
+                "{text}"
+            );
+            assert!(started.elapsed() < std::time::Duration::from_secs(2));
+        }
+    }
+
+    #[test]
+    fn nesting_up_to_the_limit_is_parsed() {
+        // robot + link + 62 unknown elements = 64 levels: parsed (urdf-rs ignores them)
+        let r = RobotModel::from_urdf_str(&deep_urdf("extra", MAX_ELEMENT_DEPTH - 2), "t");
+        assert!(r.is_ok(), "{r:?}");
+        assert!(matches!(
+            RobotModel::from_urdf_str(&deep_urdf("extra", MAX_ELEMENT_DEPTH - 1), "t"),
+            Err(UrdfError::TooDeep { depth: 65, .. })
+        ));
+    }
+
+    #[test]
+    fn element_depth_skips_what_is_not_an_element() {
+        let cases = [
+            ("<a/>", 1),
+            ("<a><b/><b></b></a>", 2),
+            ("<?xml version='1.0'?><!DOCTYPE robot><a></a>", 1),
+            ("<a><!-- <b><c><d> --></a>", 1),
+            ("<a><![CDATA[<b><c><d>]]></a>", 1),
+            ("<a><?pi <b><c> ?></a>", 1),
+            (r#"<a x="<b>" y='/>'><b z = ">"/></a>"#, 2),
+            ("<a><b><c></c></b><b></b></a>", 3),
+            // malformed: counted as it comes, never fewer levels than exist
+            ("<a><b x=\"unterminated><c><d>", 2),
+            ("<a'><b><c>", 3),
+            ("</a></a><b><c>", 2),
+        ];
+        for (text, depth) in cases {
+            assert_eq!(element_depth(text), depth, "{text}");
+        }
+    }
+
+    #[test]
+    fn shipped_urdfs_are_shallow() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../urdf");
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "urdf") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                let depth = element_depth(&text);
+                assert!((2..=8).contains(&depth), "{}: {depth}", path.display());
+            }
+        }
+    }
+
+    #[test]
+    fn comments_and_cdata_do_not_hide_or_add_structure() {
+        let text = r#"<?xml version="1.0"?>
+            <!-- a comment with <link name="fake"/> and > -->
+            <robot name="r"><link name="a"><![CDATA[ <joint> ]]></link><link name="b"/>
+            <joint name="j" type="continuous"><parent link="a"/><child link="b"/>
+            <axis xyz="0 0 1"/></joint></robot>"#;
+        let m = RobotModel::from_urdf_str(text, "t").unwrap();
+        assert_eq!(m.links, ["a", "b"]);
+    }
+
     #[test]
     fn continuous_joint_turns_the_child() {
         let m = RobotModel::from_urdf_str(TWO, "t").unwrap();
         let p = m.link_poses(&[("j", std::f64::consts::FRAC_PI_2)]);
         let x = p["b"] * nalgebra::Point3::new(1.0, 0.0, 0.0);
         assert!((x - nalgebra::Point3::new(0.0, 1.0, 0.0)).norm() < 1e-15);
+    }
+
+    #[test]
+    fn an_endless_urdf_file_is_refused_not_read_forever() {
+        let err = RobotModel::load(Path::new("/dev/zero")).unwrap_err();
+        assert!(err.to_string().contains("larger than the 16 MiB"), "{err}");
     }
 }

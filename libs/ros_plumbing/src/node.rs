@@ -141,16 +141,20 @@ impl RosNode {
         let specs = spec.params.clone();
         let current = params.clone();
         options = options.parameter_validator(Box::new(move |name, value| {
-            let Some(spec) = specs.iter().find(|s| s.name == name) else {
-                return Err(format!("`{name}` is not a parameter of this node"));
+            let check = || {
+                let name_shown = logging::shorten(name, logging::NAME_MAX);
+                let Some(spec) = specs.iter().find(|s| s.name == name) else {
+                    return Err(format!("`{name_shown}` is not a parameter of this node"));
+                };
+                let checked = spec.check(value)?;
+                if spec.read_only && current.get(name).is_some_and(|v| v != checked) {
+                    return Err(format!(
+                        "`{name_shown}` is read-only: set it on the command line or in a params file"
+                    ));
+                }
+                Ok(())
             };
-            let checked = spec.check(value)?;
-            if spec.read_only && current.get(name).is_some_and(|v| v != checked) {
-                return Err(format!(
-                    "`{name}` is read-only: set it on the command line or in a params file"
-                ));
-            }
-            Ok(())
+            check().map_err(|reason| current.note_refusal(name, reason))
         }));
         let store = params.clone();
         options = options.parameter_set_action(Box::new(move |name, value| {

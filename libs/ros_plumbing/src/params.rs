@@ -3,6 +3,8 @@
 
 use crate::args::RosArgs;
 use crate::error::PlumbingError;
+use crate::logging::shorten;
+use eezybot_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
 use ros2_client::ParameterValue;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -365,7 +367,21 @@ pub fn initial_values(
 pub struct Params {
     values: Arc<RwLock<BTreeMap<String, ParameterValue>>>,
     changed: Arc<tokio::sync::watch::Sender<u64>>,
+    refusals: Arc<RwLock<Refusals>>,
 }
+
+/// The values the parameter services refused: how many, and the last one.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Refusals {
+    /// Refused values since the start.
+    pub count: u64,
+    /// The last one: the parameter's name and why (cut to [`REFUSAL_MAX`] characters).
+    pub last: Option<(String, String)>,
+}
+
+/// The length a refusal's name and reason are cut to in [`Refusals`], logs and
+/// diagnostics (the reply to the caller keeps the whole reason).
+pub const REFUSAL_MAX: usize = 300;
 
 impl Params {
     /// A store with these values.
@@ -374,6 +390,41 @@ impl Params {
         Params {
             values: Arc::new(RwLock::new(values)),
             changed: Arc::new(tx),
+            refusals: Arc::default(),
+        }
+    }
+
+    /// Record a value the parameter services refused (the value is not stored), log it
+    /// and return the reason unchanged for the reply.
+    pub fn note_refusal(&self, name: &str, reason: String) -> String {
+        let name = shorten(name, crate::logging::NAME_MAX).into_owned();
+        let short = shorten(&reason, REFUSAL_MAX).into_owned();
+        log::warn!("parameter {name} refused, keeping its value: {short}");
+        if let Ok(mut r) = self.refusals.write() {
+            r.count += 1;
+            r.last = Some((name, short));
+        }
+        reason
+    }
+
+    /// The values refused so far ([`Params::note_refusal`]).
+    pub fn refusals(&self) -> Refusals {
+        self.refusals.read().map(|r| r.clone()).unwrap_or_default()
+    }
+
+    /// Add `parameters_refused` and, after a refusal, `last_parameter_refusal` to a
+    /// node's `diagnostics` entry.
+    pub fn annotate(&self, status: &mut DiagnosticStatus) {
+        let r = self.refusals();
+        status.values.push(KeyValue {
+            key: "parameters_refused".into(),
+            value: r.count.to_string(),
+        });
+        if let Some((name, reason)) = r.last {
+            status.values.push(KeyValue {
+                key: "last_parameter_refusal".into(),
+                value: format!("{name}: {reason}"),
+            });
         }
     }
 

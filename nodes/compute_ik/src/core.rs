@@ -15,6 +15,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use ros_plumbing::logging::{shorten, NAME_MAX};
 use std::fmt;
 
 /// The EezyBot's URDF (`urdf/eezybot.urdf`), whose chain the numerical solvers drive.
@@ -152,7 +153,9 @@ impl Reason {
             Reason::BadOrientation { .. } => "bad_orientation".into(),
             Reason::Numeric { error, .. } => error.code(),
             Reason::NoGripper => "no_gripper".into(),
-            Reason::JointLimit { name, .. } => format!("out_of_limits:{name}"),
+            Reason::JointLimit { name, .. } => {
+                format!("out_of_limits:{}", shorten(name, NAME_MAX))
+            }
         }
     }
 
@@ -177,20 +180,29 @@ impl fmt::Display for Reason {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Reason::Kinematics(e) => write!(f, "{e}"),
-            Reason::WrongFrame { frame_id, expected } => {
-                write!(f, "frame_id `{frame_id}` is not `{expected}` (targets must be given in the arm's base frame)")
-            }
+            Reason::WrongFrame { frame_id, expected } => write!(
+                f,
+                "frame_id `{}` is not `{}` (targets must be given in the arm's base frame)",
+                shorten(frame_id, NAME_MAX),
+                shorten(expected, NAME_MAX)
+            ),
             Reason::UnknownJoint { name } => {
                 write!(
                     f,
-                    "unknown joint `{name}` (actuated joints: {})",
+                    "unknown joint `{}` (actuated joints: {})",
+                    shorten(name, NAME_MAX),
                     ACTUATED_JOINTS.join(", ")
                 )
             }
-            Reason::UnknownArmJoint { name, known } => {
-                write!(f, "unknown joint `{name}` (this arm's joints: {})", known.join(", "))
+            Reason::UnknownArmJoint { name, known } => write!(
+                f,
+                "unknown joint `{}` (this arm's joints: {})",
+                shorten(name, NAME_MAX),
+                known.join(", ")
+            ),
+            Reason::DuplicateJoint { name } => {
+                write!(f, "joint `{}` named twice", shorten(name, NAME_MAX))
             }
-            Reason::DuplicateJoint { name } => write!(f, "joint `{name}` named twice"),
             Reason::LengthMismatch { names, positions } => {
                 write!(f, "{names} names but {positions} positions")
             }
@@ -253,6 +265,7 @@ impl fmt::Display for Reason {
                 upper,
                 revolute,
             } => {
+                let name = shorten(name, NAME_MAX);
                 if *revolute {
                     write!(
                         f,

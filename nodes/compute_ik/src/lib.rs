@@ -497,6 +497,7 @@ pub async fn run(
     let report = |core: &Core, peers: &PeerWatch| {
         let mut s = core.diagnostic_status(&diag_name);
         peers.annotate(&mut s, Instant::now());
+        params.annotate(&mut s);
         outputs.diagnostics(s);
     };
     let publish = |step: Step| {

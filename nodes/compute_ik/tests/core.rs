@@ -87,6 +87,39 @@ fn empty_frame_means_base_link() {
 }
 
 #[test]
+fn a_1mb_name_is_cut_in_the_rejection_and_diagnostics() {
+    let huge = "x".repeat(1 << 20);
+    let mut c = core();
+    let joints = |names: Vec<String>| JointState {
+        position: vec![0.0; names.len()],
+        name: names,
+        ..JointState::default()
+    };
+    let rejections = [
+        c.handle_xyz_target(&target(0.2, 0.0, 0.15, &huge), now()),
+        c.handle_joint_target(&joints(vec![huge.clone()]), now()),
+        c.handle_joint_target(&joints(vec![huge.clone(), huge.clone()]), now()),
+    ];
+    for result in rejections {
+        let text = result.unwrap_err().to_string();
+        assert!(
+            text.len() < 1024 && text.contains("xxxxxxxx… (1048576 bytes)"),
+            "{}",
+            &text[..text.len().min(300)]
+        );
+        let d = c.diagnostic_status("compute_ik");
+        let longest = d.values.iter().map(|kv| kv.value.len()).max().unwrap_or(0);
+        assert!(d.message.len() < 1024 && longest < 1024);
+    }
+    c.set_base_frame(&huge);
+    let text = c
+        .handle_xyz_target(&target(0.2, 0.0, 0.15, "map"), now())
+        .unwrap_err()
+        .to_string();
+    assert!(text.len() < 1024, "{}", &text[..text.len().min(300)]);
+}
+
+#[test]
 fn every_bad_input_is_refused_and_keeps_the_state() {
     let mut c = core();
     c.handle_xyz_target(&target(0.2, 0.0, 0.15, "base_link"), now())

@@ -74,8 +74,8 @@ pub fn load_urdf(path: &str) -> Result<Description, String> {
     if path.is_empty() {
         return parse_urdf(SHIPPED_URDF.to_string(), SHIPPED_URDF_ORIGIN);
     }
-    let text = std::fs::read_to_string(Path::new(path))
-        .map_err(|e| format!("{path}: cannot read: {e}"))?;
+    let text =
+        eezybot_kinematics::urdf::read_urdf_file(Path::new(path)).map_err(|e| e.to_string())?;
     parse_urdf(text, path)
 }
 
@@ -184,6 +184,7 @@ pub async fn run(
                 extra.push(("unreadable_samples", unreadable.to_string()));
                 let mut status = core.diagnostic_status(&diag_name, &extra);
                 peers.annotate(&mut status, Instant::now());
+                params.annotate(&mut status);
                 outputs.diagnostics(status);
             }
             _ = peer_poll.tick() => {
