@@ -815,3 +815,86 @@ def test_flooding_client_neither_grows_memory_nor_delays_another_clients_estop(l
     assert result["sent"] == FLOOD_MESSAGES and result["served_s"] is not None
     assert len(flooded) >= 3, "the flood ended before the e-stop could be measured under it"
     assert rss_peak - rss_before < 64 * 1024, report
+
+
+# ---------------------------------------------------------------------------------------
+# Bad input through the WebSocket (issue 9, item 7 report): refused by the panel itself,
+# counted and named in its diagnostics, logged; a client's broken connection ends only it.
+
+def test_joint_targets_it_cannot_check_are_refused_counted_and_never_published(launch, observer):
+    joint_target = observer.sub("/joint_target", JointState)
+    diags = observer.sub("/diagnostics", DiagnosticArray)
+    proc, port = start_panel(launch, observer)
+    observer.wait_publisher("/joint_target")
+    ws = RawWs(port)
+    ws.recv_json(lambda m: m["t"] == "hello")
+
+    def answer(msg):
+        ws.send(msg)
+        return ws.recv_json(lambda m: m["t"] in ("ack", "refused"))
+    bad = {"gripper_joint 1e300": ({"gripper_joint": 1e300}, "gripper_joint = 1e300 is outside its limits"),
+           "no joint": ({}, "names no joint"),
+           "unknown joint": ({"wrist_joint": 0.1}, "unknown joint `wrist_joint`"),
+           "one of two out of range": ({"base_joint": 0.1, "elbow_joint": -1e300}, "elbow_joint = -1e300"),
+           "1 KB name": ({"j" * 1000: 0.0}, "unknown joint `jjj")}
+    for name, (q, says) in bad.items():
+        a = answer({"t": "joints", "q": q})
+        assert a["t"] == "refused" and says in a["reason"] and len(a["reason"]) < 300, (name, a)
+    assert answer(b"{not json")["t"] == "refused"
+    # the last good state is kept: a good target afterwards is taken and is all that went out
+    a = answer({"t": "joints", "q": {"base_joint": 0.1, "gripper_joint": 0.3}})
+    assert a["t"] == "ack" and abs(a["joints"]["base_joint"] - 0.1) < 1e-12, a
+    assert observer.spin_until(lambda: joint_target, 5)
+    observer.spin_for(0.5)
+    assert [(list(m.name), list(m.position)) for _, m in joint_target] == [(["base_joint", "gripper_joint"], [0.1, 0.3])]
+
+    # every refusal counted, the last one named (cut to a readable length)
+    def values():
+        s = panel_status(diags)
+        return s[2] if s else {}
+    assert observer.spin_until(lambda: values().get("rejected") == str(len(bad) + 1), 5), values()
+    v = values()
+    assert v["bad_requests"] == "1" and v["last_rejection"].startswith("bad request: "), v
+    out = proc.output()
+    assert "web request refused (bad_joint_target): gripper_joint = 1e300" in out, out
+    assert "bad request from 127.0.0.1" in out, out
+    assert max(len(line) for line in out.splitlines()) < 1000
+
+
+def test_a_broken_client_connection_is_counted_and_ends_only_that_client(launch, observer):
+    diags = observer.sub("/diagnostics", DiagnosticArray)
+    proc, port = start_panel(launch, observer)
+    other = RawWs(port)
+    other.recv_json(lambda m: m["t"] == "hello")
+    other.drain_in_background()
+
+    def values():
+        s = panel_status(diags)
+        return s[2] if s else {}
+    # reset without closing, in the middle of the panel's broadcasts: a read or write
+    # error (broken pipe, connection reset) for that client only
+    for _ in range(3):
+        gone = RawWs(port)
+        gone.recv_json(lambda m: m["t"] == "hello")
+        gone.sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        gone.close()
+    assert observer.spin_until(lambda: values().get("clients_dropped") == "3", 5), values()
+    assert "gone without closing the connection" in values()["last_client_drop"], values()
+    # a client that closes in order is counted apart
+    closing = RawWs(port)
+    closing.recv_json(lambda m: m["t"] == "hello")
+    closing.sock.sendall(RawWs.frame(struct.pack(">H", 1000), opcode=0x8))
+    while closing.recv()[0] != 0x8:
+        pass
+    closing.close()
+    assert observer.spin_until(lambda: values().get("clients_closed") == "1", 5), values()
+    # the node and the other clients go on
+    fresh = RawWs(port)
+    fresh.recv_json(lambda m: m["t"] == "hello")
+    fresh.send({"t": "check", "xyz": [0.2, 0.0, 0.15]})
+    assert fresh.recv_json(lambda m: m["t"] == "check")["reachable"] is True
+    assert values()["clients"] == "2" or observer.spin_until(lambda: values().get("clients") == "2", 3), values()
+    out = proc.output()
+    # logged, throttled: the first at once, the next ones within 5 s counted, not logged
+    assert out.count("dropped: gone without closing the connection") == 1, out
+    assert proc.proc.poll() is None

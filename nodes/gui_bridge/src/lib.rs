@@ -19,6 +19,7 @@ use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::logging::{shorten, Throttle};
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use serde_json::json;
@@ -86,6 +87,46 @@ pub enum Input {
     ServoState(JointState),
     /// `estop`
     Estop(bool),
+    /// A sample on `topic` that could not be deserialized (malformed CDR): logged,
+    /// counted in `diagnostics`, otherwise ignored (an unreadable `estop` changes nothing).
+    Unreadable {
+        /// the topic, as subscribed (`joint_states`, `estop`, …)
+        topic: &'static str,
+        /// why it could not be read
+        error: String,
+    },
+}
+
+/// Samples that could not be read, for `diagnostics` and the (throttled) log.
+#[derive(Debug, Default)]
+struct UnreadableSamples {
+    count: u64,
+    last: Option<String>,
+    complaints: Throttle,
+}
+
+impl UnreadableSamples {
+    fn note(&mut self, topic: &str, error: &str) {
+        self.count += 1;
+        let error = shorten(error, web::REASON_MAX);
+        self.last = Some(format!("{topic}: {error}"));
+        if let Some(quiet) = self.complaints.allow(topic, Instant::now()) {
+            log::warn!(
+                "unreadable sample on {topic} ignored: {error}{}",
+                Throttle::suffix(quiet)
+            );
+        }
+    }
+
+    fn values(&self) -> [(&'static str, String); 2] {
+        [
+            ("unreadable_samples", self.count.to_string()),
+            (
+                "last_unreadable_sample",
+                self.last.clone().unwrap_or_default(),
+            ),
+        ]
+    }
 }
 
 /// Where the bridge's targets go.
@@ -315,7 +356,9 @@ fn serve_request(teleop: &std::sync::Mutex<Teleop>, from: FromClient, stats: &We
             json!({"t": "ack", "target": f.target, "joints": null, "reachable": true})
         }
         Ok((_, Err(refusal))) => {
-            json!({"t": "refused", "reason": refusal.to_string(), "reachable": false})
+            let reason = refusal.to_string();
+            stats.rejected_request(refusal.kind(), &reason);
+            json!({"t": "refused", "reason": shorten(&reason, web::REASON_MAX), "reachable": false})
         }
         Err(_) => return,
     };
@@ -397,12 +440,13 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     let mut sent = 0u64;
     let mut diag_tick = tokio::time::interval(Duration::from_secs(1));
     let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
-    let report = |peers: &PeerWatch, sent: u64| {
+    let report = |peers: &PeerWatch, sent: u64, unreadable: &UnreadableSamples| {
         let mut values = vec![
             ("url", reporting.url.clone()),
             ("targets_sent", sent.to_string()),
         ];
         values.extend(reporting.web.values());
+        values.extend(unreadable.values());
         let recent = reporting
             .web
             .last_refusal()
@@ -431,6 +475,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
         outputs.diagnostics(s);
     };
     let mut health = NodeHealth::default();
+    let mut unreadable = UnreadableSamples::default();
     let mut latency = Latency::default();
     let mut model: Option<RobotModel> = None;
     let mut status_tick = tokio::time::interval(Duration::from_millis(500));
@@ -458,12 +503,12 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                 publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers);
             }
             _ = status_tick.tick() => send(health.json()),
-            _ = diag_tick.tick() => report(&reporting.peers, sent),
+            _ = diag_tick.tick() => report(&reporting.peers, sent, &unreadable),
             _ = peer_poll.tick() => {
                 let changes = reporting.peers.update(&(reporting.counts)(), Instant::now());
                 changes.iter().for_each(|c| c.log());
                 if !changes.is_empty() {
-                    report(&reporting.peers, sent);
+                    report(&reporting.peers, sent, &unreadable);
                 }
             }
             Ok(()) = param_changes.changed() => {
@@ -525,6 +570,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                         }
                     }
                     Input::Estop(on) => send(json!({"t": "estop", "on": on})),
+                    Input::Unreadable { topic, error } => unreadable.note(topic, &error),
                 }
             }
             Some(from) = requests.others.recv() => {

@@ -548,26 +548,46 @@ async fn web(
             log::error!("web server stopped: {e}");
         }
     });
+    // a sample that cannot be read becomes Input::Unreadable: logged and counted
+    let unreadable = |topic: &'static str, e: &dyn std::fmt::Debug| Input::Unreadable {
+        topic,
+        error: format!("{e:?}"),
+    };
     let inputs = futures::stream::select_all([
         joint_states
             .async_stream()
-            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::JointStates(m)) })
+            .map(move |r| match r {
+                Ok((m, _)) => Input::JointStates(m),
+                Err(e) => unreadable("joint_states", &e),
+            })
             .boxed(),
         description
             .async_stream()
-            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::RobotDescription(m.data)) })
+            .map(move |r| match r {
+                Ok((m, _)) => Input::RobotDescription(m.data),
+                Err(e) => unreadable("robot_description", &e),
+            })
             .boxed(),
         diagnostics
             .async_stream()
-            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::Diagnostics(m)) })
+            .map(move |r| match r {
+                Ok((m, _)) => Input::Diagnostics(m),
+                Err(e) => unreadable("diagnostics", &e),
+            })
             .boxed(),
         servo_state
             .async_stream()
-            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::ServoState(m)) })
+            .map(move |r| match r {
+                Ok((m, _)) => Input::ServoState(m),
+                Err(e) => unreadable("servo_state", &e),
+            })
             .boxed(),
         estop
             .async_stream()
-            .filter_map(|r| async move { r.ok().map(|(m, _)| Input::Estop(m.data)) })
+            .map(move |r| match r {
+                Ok((m, _)) => Input::Estop(m.data),
+                Err(e) => unreadable("estop", &e),
+            })
             .boxed(),
     ]);
     let reporting = gui_bridge::Reporting {

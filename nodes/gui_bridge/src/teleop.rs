@@ -3,8 +3,9 @@
 //! command line all feed it the same events.
 
 use eezybot_kinematics::urdf::{JointKind, RobotModel};
-use eezybot_kinematics::{Arm, ArmJoints, Joint, KinematicsError, ACTUATED_JOINTS};
+use eezybot_kinematics::{Arm, ArmJoints, KinematicsError, ACTUATED_JOINTS};
 use nalgebra::Vector3;
+use ros_plumbing::logging::{shorten, NAME_MAX};
 use std::f64::consts::PI;
 use std::time::{Duration, Instant};
 
@@ -167,6 +168,99 @@ pub enum Refusal {
     /// A value is not a finite number or is out of its range.
     #[error("{0}")]
     BadValue(String),
+    /// A joint target that names no joint.
+    #[error("joint target names no joint (this arm's: {})", known.join(", "))]
+    NoJoints {
+        /// the joints a target may name
+        known: Vec<String>,
+    },
+    /// A joint target names a joint this arm has not (or that takes no target).
+    #[error("unknown joint `{name}` (this arm's: {})", known.join(", "))]
+    UnknownJoint {
+        /// the name given (cut to [`NAME_MAX`] characters)
+        name: String,
+        /// the joints a target may name
+        known: Vec<String>,
+    },
+    /// A joint target names a joint twice.
+    #[error("joint `{name}` given twice")]
+    DuplicateJoint {
+        /// the joint (cut to [`NAME_MAX`] characters)
+        name: String,
+    },
+    /// A joint position is NaN, infinite or outside the joint's limits.
+    #[error("{joint} = {value:?} is outside its limits {lower:?} … {upper:?}")]
+    JointOutOfLimits {
+        /// the joint
+        joint: String,
+        /// the value given (rad, or m for a prismatic joint)
+        value: f64,
+        /// lowest value
+        lower: f64,
+        /// highest value
+        upper: f64,
+    },
+}
+
+impl Refusal {
+    /// What kind of refusal, for diagnostics and log throttling: `unreachable`,
+    /// `bad_value` or `bad_joint_target`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Refusal::Unreachable(_) => "unreachable",
+            Refusal::BadValue(_) => "bad_value",
+            Refusal::NoJoints { .. }
+            | Refusal::UnknownJoint { .. }
+            | Refusal::DuplicateJoint { .. }
+            | Refusal::JointOutOfLimits { .. } => "bad_joint_target",
+        }
+    }
+}
+
+/// Check a joint target against the joints it may name and their limits, before
+/// anything is sent: at least one joint, each known and named once, each position a
+/// finite number within its limits (inclusive). The first problem is the refusal.
+///
+/// # Examples
+/// ```
+/// use gui_bridge::teleop::{check_joint_positions, JointSlider, Refusal};
+/// let limits = [JointSlider { name: "gripper_joint".into(), lower: 0.0, upper: 0.6 }];
+/// assert!(check_joint_positions(&[("gripper_joint".into(), 0.3)], &limits).is_ok());
+/// let e = check_joint_positions(&[("gripper_joint".into(), 1e300)], &limits).unwrap_err();
+/// assert_eq!(e.to_string(), "gripper_joint = 1e300 is outside its limits 0.0 … 0.6");
+/// assert!(matches!(check_joint_positions(&[], &limits), Err(Refusal::NoJoints { .. })));
+/// ```
+pub fn check_joint_positions(
+    positions: &[(String, f64)],
+    limits: &[JointSlider],
+) -> Result<(), Refusal> {
+    let known = || limits.iter().map(|j| j.name.clone()).collect::<Vec<_>>();
+    if positions.is_empty() {
+        return Err(Refusal::NoJoints { known: known() });
+    }
+    for (i, (name, value)) in positions.iter().enumerate() {
+        let Some(j) = limits.iter().find(|j| &j.name == name) else {
+            return Err(Refusal::UnknownJoint {
+                name: shorten(name, NAME_MAX).into_owned(),
+                known: known(),
+            });
+        };
+        if positions[..i].iter().any(|(n, _)| n == name) {
+            return Err(Refusal::DuplicateJoint {
+                name: shorten(name, NAME_MAX).into_owned(),
+            });
+        }
+        // NaN fails both comparisons: refused as well
+        if !(value.is_finite() && *value >= j.lower && *value <= j.upper) {
+            return Err(Refusal::JointOutOfLimits {
+                joint: name.clone(),
+                value: *value,
+                lower: j.lower,
+                upper: j.upper,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// What the operator sees after an event.
@@ -267,6 +361,21 @@ impl Teleop {
         }
     }
 
+    /// The joints a `joint_target` may name, within their limits: the joint sliders,
+    /// and for the EezyBot its claw too (`gripper_joint`, 0 closed … `gripper_open_rad`
+    /// open, as compute_ik takes it).
+    pub fn joint_target_limits(&self) -> Vec<JointSlider> {
+        let mut limits = self.joint_sliders();
+        if self.is_eezybot() {
+            limits.push(JointSlider {
+                name: ACTUATED_JOINTS[3].to_string(),
+                lower: 0.0,
+                upper: self.arm.geometry.gripper_open_rad,
+            });
+        }
+        limits
+    }
+
     /// Change the publish rate limit.
     pub fn set_rate(&mut self, rate_hz: f64) {
         self.min_interval = Duration::from_secs_f64(1.0 / rate_hz.max(0.1));
@@ -319,57 +428,24 @@ impl Teleop {
                 self.gripper.pending = Some(opening);
                 Ok(self.feedback())
             }
-            Event::Joints { positions } if !self.is_eezybot() => {
-                let sliders = self.joint_sliders();
-                for (name, value) in &positions {
-                    let Some(j) = sliders.iter().find(|j| &j.name == name) else {
-                        return Err(Refusal::BadValue(format!(
-                            "unknown joint `{name}` (this arm's: {})",
-                            sliders
-                                .iter()
-                                .map(|j| j.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )));
-                    };
-                    if !value.is_finite() || *value < j.lower || *value > j.upper {
-                        return Err(Refusal::BadValue(format!(
-                            "{name} = {value} is outside {} … {}",
-                            j.lower, j.upper
-                        )));
-                    }
-                }
-                self.xyz.pending = None;
-                self.joint_target.pending = Some(positions);
-                Ok(self.feedback())
-            }
             Event::Joints { positions } => {
-                let mut q = self.joints;
-                for (name, value) in &positions {
-                    let joint = match name.as_str() {
-                        "base_joint" => Joint::Base,
-                        "shoulder_joint" => Joint::Shoulder,
-                        "elbow_joint" => Joint::Elbow,
-                        "gripper_joint" => continue,
-                        _ => {
-                            return Err(Refusal::BadValue(format!(
-                                "unknown joint `{name}` (actuated: {})",
-                                ACTUATED_JOINTS.join(", ")
-                            )))
+                check_joint_positions(&positions, &self.joint_target_limits())?;
+                if self.is_eezybot() {
+                    // each joint within its own limits (checked above); the forearm
+                    // elevation (shoulder + elbow) within its limits as well
+                    let mut q = self.joints;
+                    for (name, value) in &positions {
+                        match name.as_str() {
+                            "base_joint" => q.base_rad = *value,
+                            "shoulder_joint" => q.shoulder_rad = *value,
+                            "elbow_joint" => q.elbow_rad = *value,
+                            _ => {} // gripper_joint: compute_ik applies it
                         }
-                    };
-                    if !value.is_finite() {
-                        return Err(Refusal::BadValue(format!("{name} is {value}")));
                     }
-                    match joint {
-                        Joint::Base => q.base_rad = *value,
-                        Joint::Shoulder => q.shoulder_rad = *value,
-                        _ => q.elbow_rad = *value,
-                    }
+                    self.arm.limits.check(&q).map_err(Refusal::Unreachable)?;
+                    self.joints = q;
+                    self.target = self.arm.forward(&q);
                 }
-                self.arm.limits.check(&q).map_err(Refusal::Unreachable)?;
-                self.joints = q;
-                self.target = self.arm.forward(&q);
                 self.xyz.pending = None;
                 self.joint_target.pending = Some(positions);
                 Ok(self.feedback())

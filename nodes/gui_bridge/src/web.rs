@@ -17,8 +17,11 @@ use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::Extension;
 use axum::Router;
+use futures::SinkExt as _;
+use ros_plumbing::logging::{shorten, Throttle};
 use serde::Deserialize;
 use std::collections::HashSet;
+use std::fmt;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -180,14 +183,160 @@ pub struct WebStats {
     pub refused_busy: AtomicU64,
     /// Clients closed for a message over [`Limits::max_message_bytes`].
     pub oversized: AtomicU64,
-    /// Messages that were not a request.
+    /// Messages that were not a request (counted in [`WebStats::rejected`] too).
     pub bad_requests: AtomicU64,
+    /// Requests refused: messages that were not a request, and requests refused after
+    /// parsing (unreachable targets, values out of range, joint targets it cannot check).
+    pub rejected: AtomicU64,
+    /// Clients that closed their connection with the closing handshake.
+    pub clients_closed: AtomicU64,
+    /// Clients whose connection ended any other way: gone without closing, a read or
+    /// write error, a message over the limit, stalled (see [`ClientEnd`]).
+    pub clients_dropped: AtomicU64,
     /// Replies dropped because a client's queue was full.
     pub dropped_replies: AtomicU64,
     /// Clients dropped because they did not take their messages.
     pub stalled: AtomicU64,
     last_refusal: Mutex<Option<(Instant, String)>>,
     logged: Mutex<HashSet<(IpAddr, &'static str)>>,
+    last_rejection: Mutex<Option<String>>,
+    last_drop: Mutex<Option<String>>,
+    complaints: Mutex<Throttle>,
+}
+
+/// The length reasons are cut to in log lines, diagnostics and answers.
+pub const REASON_MAX: usize = 200;
+
+/// How a client's connection ended.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ClientEnd {
+    /// The client closed it with the closing handshake (a page closed or reloaded).
+    Closed,
+    /// The client went away without closing: connection reset, broken pipe, end of stream.
+    Gone(String),
+    /// Receiving failed: a WebSocket protocol violation or another I/O error.
+    ReadError(String),
+    /// Sending failed.
+    WriteError(String),
+    /// A message over [`Limits::max_message_bytes`] (closed with code 1009 and the reason).
+    Oversized {
+        /// the limit
+        max_bytes: usize,
+    },
+    /// The client did not take a message within [`Limits::send_timeout`].
+    Stalled {
+        /// the timeout
+        timeout: Duration,
+    },
+    /// The node stops.
+    Shutdown,
+}
+
+impl ClientEnd {
+    /// Short name for diagnostics and log throttling, e.g. `client/read_error`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ClientEnd::Closed => "client/closed",
+            ClientEnd::Gone(_) => "client/gone",
+            ClientEnd::ReadError(_) => "client/read_error",
+            ClientEnd::WriteError(_) => "client/write_error",
+            ClientEnd::Oversized { .. } => "client/oversized",
+            ClientEnd::Stalled { .. } => "client/stalled",
+            ClientEnd::Shutdown => "client/shutdown",
+        }
+    }
+
+    /// Whether the panel dropped the client (counted in [`WebStats::clients_dropped`]),
+    /// rather than the client or the node ending the connection in order.
+    pub fn is_drop(&self) -> bool {
+        !matches!(self, ClientEnd::Closed | ClientEnd::Shutdown)
+    }
+
+    /// How loud its log line is: debug for an orderly end, info for a client that went
+    /// away, warn for errors.
+    pub fn level(&self) -> log::Level {
+        match self {
+            ClientEnd::Closed | ClientEnd::Shutdown => log::Level::Debug,
+            ClientEnd::Gone(_) => log::Level::Info,
+            _ => log::Level::Warn,
+        }
+    }
+
+    /// The end a failed receive (`reading`) or send means.
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::web::ClientEnd;
+    /// let reset = tungstenite::Error::Io(std::io::ErrorKind::ConnectionReset.into());
+    /// assert!(matches!(ClientEnd::from_error(&reset, true, 65536), ClientEnd::Gone(_)));
+    /// let pipe = tungstenite::Error::Io(std::io::ErrorKind::BrokenPipe.into());
+    /// assert!(matches!(ClientEnd::from_error(&pipe, false, 65536), ClientEnd::Gone(_)));
+    /// ```
+    pub fn from_error(e: &tungstenite::Error, reading: bool, max_bytes: usize) -> ClientEnd {
+        use std::io::ErrorKind;
+        use tungstenite::error::ProtocolError;
+        let text = || shorten(&e.to_string(), REASON_MAX).into_owned();
+        match e {
+            tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed => {
+                ClientEnd::Closed
+            }
+            tungstenite::Error::Capacity(_) if reading => ClientEnd::Oversized { max_bytes },
+            tungstenite::Error::Protocol(ProtocolError::ResetWithoutClosingHandshake) => {
+                ClientEnd::Gone(text())
+            }
+            tungstenite::Error::Io(io)
+                if matches!(
+                    io.kind(),
+                    ErrorKind::BrokenPipe
+                        | ErrorKind::ConnectionReset
+                        | ErrorKind::ConnectionAborted
+                        | ErrorKind::UnexpectedEof
+                ) =>
+            {
+                ClientEnd::Gone(text())
+            }
+            _ if reading => ClientEnd::ReadError(text()),
+            _ => ClientEnd::WriteError(text()),
+        }
+    }
+
+    /// [`ClientEnd::from_error`] for axum's error (which wraps tungstenite's).
+    fn from_axum(e: axum::Error, reading: bool, max_bytes: usize) -> ClientEnd {
+        let inner = e.into_inner();
+        match inner.downcast_ref::<tungstenite::Error>() {
+            Some(t) => ClientEnd::from_error(t, reading, max_bytes),
+            None => {
+                let text = shorten(&inner.to_string(), REASON_MAX).into_owned();
+                if reading {
+                    ClientEnd::ReadError(text)
+                } else {
+                    ClientEnd::WriteError(text)
+                }
+            }
+        }
+    }
+}
+
+impl fmt::Display for ClientEnd {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ClientEnd::Closed => write!(f, "closed by the client"),
+            ClientEnd::Gone(e) => write!(f, "gone without closing the connection ({e})"),
+            ClientEnd::ReadError(e) => write!(f, "read error: {e}"),
+            ClientEnd::WriteError(e) => write!(f, "write error: {e}"),
+            ClientEnd::Oversized { max_bytes } => {
+                write!(
+                    f,
+                    "message larger than {max_bytes} bytes (closed with 1009)"
+                )
+            }
+            ClientEnd::Stalled { timeout } => {
+                write!(f, "took no message within {:.1} s", timeout.as_secs_f64())
+            }
+            ClientEnd::Shutdown => write!(f, "the node stops"),
+        }
+    }
 }
 
 /// Refused clients whose refusal is logged; past this many, refusals are only counted.
@@ -230,6 +379,112 @@ impl WebStats {
         }
     }
 
+    /// Whether a complaint of `kind` is logged now ([`Throttle`]): `Some(n)` with the
+    /// number of the same kind not logged since.
+    fn throttle(&self, kind: &str) -> Option<u64> {
+        self.complaints
+            .lock()
+            .ok()
+            .and_then(|mut t| t.allow(kind, Instant::now()))
+    }
+
+    fn set_last_rejection(&self, reason: String) {
+        if let Ok(mut last) = self.last_rejection.lock() {
+            *last = Some(reason);
+        }
+    }
+
+    /// Count a message from `from` that is no request (`reason`: why not); log it,
+    /// once per [`Throttle::PERIOD`] with the number not logged.
+    pub fn bad_request(&self, from: &str, reason: &str) {
+        self.bad_requests.fetch_add(1, Ordering::Relaxed);
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+        let reason = shorten(reason, REASON_MAX);
+        self.set_last_rejection(format!("bad request: {reason}"));
+        if let Some(quiet) = self.throttle("request/bad_request") {
+            log::warn!(
+                "bad request from {from} refused: {reason}{}",
+                Throttle::suffix(quiet)
+            );
+        }
+    }
+
+    /// Count a request refused after parsing (`kind`:
+    /// [`Refusal::kind`](crate::teleop::Refusal::kind)); log it, once per kind per
+    /// [`Throttle::PERIOD`] (an unreachable target at info: the operator is exploring
+    /// the reach; the others at warn).
+    pub fn rejected_request(&self, kind: &'static str, reason: &str) {
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+        let reason = shorten(reason, REASON_MAX);
+        self.set_last_rejection(reason.to_string());
+        if let Some(quiet) = self.throttle(&format!("request/{kind}")) {
+            let level = if kind == "unreachable" {
+                log::Level::Info
+            } else {
+                log::Level::Warn
+            };
+            log::log!(
+                level,
+                "web request refused ({kind}): {reason}{}",
+                Throttle::suffix(quiet)
+            );
+        }
+    }
+
+    /// The reason of the latest refused request.
+    pub fn last_rejection(&self) -> Option<String> {
+        self.last_rejection.lock().ok().and_then(|l| l.clone())
+    }
+
+    /// Count and log the end of `from`'s connection, after `bad_requests` bad requests
+    /// from it (errors at most once per kind per [`Throttle::PERIOD`]).
+    pub fn client_ended(&self, from: &str, end: &ClientEnd, bad_requests: u64) {
+        let after = if bad_requests > 0 {
+            format!(" after {bad_requests} bad requests")
+        } else {
+            String::new()
+        };
+        if !end.is_drop() {
+            if matches!(end, ClientEnd::Closed) {
+                self.clients_closed.fetch_add(1, Ordering::Relaxed);
+            }
+            log::log!(end.level(), "web client {from} left: {end}{after}");
+            return;
+        }
+        self.clients_dropped.fetch_add(1, Ordering::Relaxed);
+        if let ClientEnd::Oversized { .. } = end {
+            self.oversized.fetch_add(1, Ordering::Relaxed);
+        }
+        if let ClientEnd::Stalled { .. } = end {
+            self.stalled.fetch_add(1, Ordering::Relaxed);
+        }
+        if let Ok(mut last) = self.last_drop.lock() {
+            *last = Some(format!("{from}: {end}"));
+        }
+        if let Some(quiet) = self.throttle(end.kind()) {
+            log::log!(
+                end.level(),
+                "web client {from} dropped: {end}{after}{}",
+                Throttle::suffix(quiet)
+            );
+        }
+    }
+
+    /// Count and log a WebSocket upgrade that failed after the HTTP request was taken.
+    pub fn upgrade_failed(&self, from: &str, error: &str) {
+        self.clients_dropped.fetch_add(1, Ordering::Relaxed);
+        let reason = format!("WebSocket upgrade failed: {}", shorten(error, REASON_MAX));
+        if let Ok(mut last) = self.last_drop.lock() {
+            *last = Some(format!("{from}: {reason}"));
+        }
+        if let Some(quiet) = self.throttle("client/upgrade_failed") {
+            log::warn!(
+                "web client {from} dropped: {reason}{}",
+                Throttle::suffix(quiet)
+            );
+        }
+    }
+
     /// The latest refusal and when.
     pub fn last_refusal(&self) -> Option<(Instant, String)> {
         self.last_refusal.lock().ok().and_then(|l| l.clone())
@@ -251,15 +506,22 @@ impl WebStats {
     /// The counters as `diagnostics` key/values.
     pub fn values(&self) -> Vec<(&'static str, String)> {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed).to_string();
+        let text =
+            |m: &Mutex<Option<String>>| m.lock().ok().and_then(|l| l.clone()).unwrap_or_default();
         vec![
             ("clients", get(&self.clients)),
             ("refused_origin", get(&self.refused_origin)),
             ("refused_host", get(&self.refused_host)),
             ("refused_token", get(&self.refused_token)),
             ("refused_busy", get(&self.refused_busy)),
+            ("clients_closed", get(&self.clients_closed)),
+            ("clients_dropped", get(&self.clients_dropped)),
+            ("last_client_drop", text(&self.last_drop)),
             ("closed_oversized", get(&self.oversized)),
             ("closed_stalled", get(&self.stalled)),
+            ("rejected", get(&self.rejected)),
             ("bad_requests", get(&self.bad_requests)),
+            ("last_rejection", text(&self.last_rejection)),
             ("dropped_replies", get(&self.dropped_replies)),
         ]
     }
@@ -410,78 +672,80 @@ async fn ws_handler(
             .into_response();
     };
     let l = state.limits;
+    let from = who.map_or_else(|| "(unknown address)".to_string(), |a| a.to_string());
+    let (stats, failed_from) = (state.stats.clone(), from.clone());
     ws.max_message_size(l.max_message_bytes)
         .max_frame_size(l.max_message_bytes)
         .max_write_buffer_size(l.max_write_buffer_bytes)
+        .on_failed_upgrade(move |e: axum::Error| stats.upgrade_failed(&failed_from, &e.to_string()))
         .on_upgrade(move |socket| async move {
             state.stats.clients.fetch_add(1, Ordering::Relaxed);
-            client(socket, &state, who).await;
+            let mut bad = 0;
+            let end = client(socket, &state, &from, &mut bad).await;
             state.stats.clients.fetch_sub(1, Ordering::Relaxed);
+            // a broken connection ends this client's task only: counted, logged, gone
+            state.stats.client_ended(&from, &end, bad);
             drop(slot);
         })
 }
 
-/// Is this receive error a message over the size limit?
-fn is_too_big(e: axum::Error) -> bool {
-    matches!(
-        e.into_inner().downcast_ref::<tungstenite::Error>(),
-        Some(tungstenite::Error::Capacity(_))
-    )
-}
-
-/// A client's send: gives up (None) on a closed socket or after the send timeout.
-async fn send(socket: &mut WebSocket, msg: WsMessage, state: &WebState) -> Option<()> {
+/// A client's send: gives up on a broken connection or after the send timeout.
+async fn send(socket: &mut WebSocket, msg: WsMessage, state: &WebState) -> Result<(), ClientEnd> {
     match tokio::time::timeout(state.limits.send_timeout, socket.send(msg)).await {
-        Ok(Ok(())) => Some(()),
-        Ok(Err(_)) => None,
-        Err(_) => {
-            state.stats.stalled.fetch_add(1, Ordering::Relaxed);
-            None
-        }
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(e)) => Err(ClientEnd::from_axum(
+            e,
+            false,
+            state.limits.max_message_bytes,
+        )),
+        Err(_) => Err(ClientEnd::Stalled {
+            timeout: state.limits.send_timeout,
+        }),
     }
 }
 
-fn shorten(text: &str, max: usize) -> String {
-    match text.char_indices().nth(max) {
-        Some((i, _)) => format!("{}…", &text[..i]),
-        None => text.to_string(),
-    }
+fn refused(reason: &str) -> WsMessage {
+    let answer = serde_json::json!({"t": "refused", "reason": reason});
+    WsMessage::Text(answer.to_string().into())
 }
 
-async fn client(mut socket: WebSocket, state: &WebState, who: Option<SocketAddr>) {
-    let from = who.map_or_else(|| "a client".to_string(), |a| a.to_string());
+/// Serve one client until its connection ends; how it ended. `bad` counts the
+/// messages from it that were no request.
+async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u64) -> ClientEnd {
     let mut all = state.broadcast.subscribe();
     let (reply_tx, mut replies) = mpsc::channel::<String>(state.limits.reply_queue.max(1));
-    let mut bad = 0u64;
-    if send(&mut socket, WsMessage::Text((state.hello)().into()), state)
-        .await
-        .is_none()
-    {
-        return;
+    if let Err(end) = send(&mut socket, WsMessage::Text((state.hello)().into()), state).await {
+        return end;
     }
+    let max_bytes = state.limits.max_message_bytes;
     loop {
         tokio::select! {
             incoming = socket.recv() => {
                 let text = match incoming {
-                    None | Some(Ok(WsMessage::Close(_))) => break,
+                    None => return ClientEnd::Closed,
+                    Some(Ok(WsMessage::Close(_))) => {
+                        // the library queued the answering close frame: send it before
+                        // the connection is dropped, so the close handshake completes
+                        let _ = tokio::time::timeout(state.limits.send_timeout, socket.flush()).await;
+                        return ClientEnd::Closed;
+                    }
                     Some(Ok(WsMessage::Text(text))) => text,
                     Some(Ok(WsMessage::Binary(_))) => {
-                        bad += 1;
-                        state.stats.bad_requests.fetch_add(1, Ordering::Relaxed);
-                        let refused = serde_json::json!({"t": "refused", "reason": "bad request: binary messages are not understood"});
-                        if send(&mut socket, WsMessage::Text(refused.to_string().into()), state).await.is_none() { break }
+                        *bad += 1;
+                        let reason = "bad request: binary messages are not understood";
+                        state.stats.bad_request(from, "binary messages are not understood");
+                        if let Err(end) = send(&mut socket, refused(reason), state).await { return end }
                         continue;
                     }
                     Some(Ok(_)) => continue, // ping/pong: answered by the library
                     Some(Err(e)) => {
-                        if is_too_big(e) {
-                            state.stats.oversized.fetch_add(1, Ordering::Relaxed);
-                            let reason = format!("message larger than {} bytes", state.limits.max_message_bytes);
-                            log::warn!("web panel closed {from}: {reason}");
+                        let end = ClientEnd::from_axum(e, true, max_bytes);
+                        if let ClientEnd::Oversized { .. } = end {
+                            let reason = format!("message larger than {max_bytes} bytes");
                             let close = CloseFrame { code: 1009, reason: reason.into() };
                             let _ = send(&mut socket, WsMessage::Close(Some(close)), state).await;
                         }
-                        break;
+                        return end;
                     }
                 };
                 match serde_json::from_str::<ClientRequest>(&text) {
@@ -489,32 +753,25 @@ async fn client(mut socket: WebSocket, state: &WebState, who: Option<SocketAddr>
                         // waits while the loop is busy: this client's next message stays
                         // unread (TCP holds it), other clients take their turns
                         if state.requests.send(FromClient { request, reply: reply_tx.clone() }).await.is_err() {
-                            break;
+                            return ClientEnd::Shutdown;
                         }
                     }
                     Err(e) => {
-                        bad += 1;
-                        state.stats.bad_requests.fetch_add(1, Ordering::Relaxed);
-                        let reason = shorten(&e.to_string(), 200);
-                        if bad == 1 {
-                            log::warn!("bad request from {from} ignored: {reason} (further ones from this client are counted, not logged)");
-                        }
-                        let refused = serde_json::json!({"t": "refused", "reason": format!("bad request: {reason}")});
-                        if send(&mut socket, WsMessage::Text(refused.to_string().into()), state).await.is_none() { break }
+                        *bad += 1;
+                        let reason = shorten(&e.to_string(), REASON_MAX).into_owned();
+                        state.stats.bad_request(from, &reason);
+                        if let Err(end) = send(&mut socket, refused(&format!("bad request: {reason}")), state).await { return end }
                     }
                 }
             }
             Some(text) = replies.recv() => {
-                if send(&mut socket, WsMessage::Text(text.into()), state).await.is_none() { break }
+                if let Err(end) = send(&mut socket, WsMessage::Text(text.into()), state).await { return end }
             }
             out = all.recv() => match out {
-                Ok(text) => if send(&mut socket, WsMessage::Text(text.into()), state).await.is_none() { break },
+                Ok(text) => if let Err(end) = send(&mut socket, WsMessage::Text(text.into()), state).await { return end },
                 Err(broadcast::error::RecvError::Lagged(_)) => continue,
-                Err(broadcast::error::RecvError::Closed) => break,
+                Err(broadcast::error::RecvError::Closed) => return ClientEnd::Shutdown,
             },
         }
-    }
-    if bad > 1 {
-        log::warn!("{from} sent {bad} bad requests in all");
     }
 }

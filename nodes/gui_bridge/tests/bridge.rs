@@ -4,6 +4,7 @@
 
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::Time;
+use futures::StreamExt;
 use gui_bridge::teleop::Teleop;
 use gui_bridge::web::{request_channels, ClientRequest, FromClient, Limits, WebStats};
 use gui_bridge::{Outputs, Reporting};
@@ -158,4 +159,102 @@ async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
         .await
         .expect("the loop stalled on a client that reads nothing");
     assert_eq!(stats.dropped_replies.load(Ordering::Relaxed), 96);
+}
+
+/// Records what the loop publishes.
+#[derive(Default)]
+struct Recorder {
+    joint_targets: RefCell<Vec<Vec<(String, f64)>>>,
+    diagnostics: RefCell<Vec<DiagnosticStatus>>,
+}
+
+impl Outputs for Recorder {
+    fn xyz_target(&self, _: [f64; 3], _: Time) {}
+    fn gripper_target(&self, _: f64) {}
+    fn joint_target(&self, q: &[(String, f64)], _: Time) {
+        self.joint_targets.borrow_mut().push(q.to_vec());
+    }
+    fn estop(&self, _: bool) {}
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.borrow_mut().push(status);
+    }
+}
+
+impl Recorder {
+    fn last_value(&self, key: &str) -> Option<String> {
+        let d = self.diagnostics.borrow();
+        let kv = d.last()?.values.iter().find(|kv| kv.key == key)?;
+        Some(kv.value.clone())
+    }
+}
+
+#[tokio::test]
+async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published() {
+    let (senders, requests) = request_channels(&Limits::default());
+    let (to_clients, _) = broadcast::channel(16);
+    let (reply, mut replies) = mpsc::channel(16);
+    let joints = |q: &[(&str, f64)]| ClientRequest::Joints {
+        q: q.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
+    };
+    for request in [
+        joints(&[("gripper_joint", 1e300)]),
+        joints(&[]),
+        joints(&[("base_joint", 0.1), ("wrist_joint", 0.0)]),
+    ] {
+        senders
+            .try_send(FromClient {
+                request,
+                reply: reply.clone(),
+            })
+            .unwrap();
+    }
+    let inputs = futures::stream::iter([gui_bridge::Input::Unreadable {
+        topic: "joint_states",
+        error: "the sample ends early".into(),
+    }])
+    .chain(futures::stream::pending());
+    let recorder = Recorder::default();
+    let stats = Arc::new(WebStats::default());
+    let counted = async {
+        while !(recorder.last_value("rejected").as_deref() == Some("3")
+            && recorder.last_value("unreadable_samples").as_deref() == Some("1"))
+        {
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        }
+    };
+    let run = gui_bridge::run(
+        teleop(),
+        inputs,
+        requests,
+        to_clients,
+        &recorder,
+        Params::new(BTreeMap::new()),
+        reporting(stats.clone()),
+        counted,
+    );
+    tokio::time::timeout(std::time::Duration::from_secs(10), run)
+        .await
+        .expect("no diagnostics counting the refusals and the unreadable sample");
+    for says in [
+        "gripper_joint = 1e300 is outside its limits",
+        "names no joint",
+        "unknown joint `wrist_joint`",
+    ] {
+        let answer: serde_json::Value =
+            serde_json::from_str(&replies.recv().await.unwrap()).unwrap();
+        assert_eq!(answer["t"], "refused", "{answer}");
+        assert!(
+            answer["reason"].as_str().unwrap().contains(says),
+            "{answer}"
+        );
+    }
+    assert!(recorder.joint_targets.borrow().is_empty());
+    assert!(recorder
+        .last_value("last_rejection")
+        .unwrap()
+        .starts_with("unknown joint `wrist_joint`"));
+    assert_eq!(
+        recorder.last_value("last_unreadable_sample").as_deref(),
+        Some("joint_states: the sample ends early")
+    );
 }

@@ -179,3 +179,128 @@ fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
         vec![Command::Target([0.5, 0.2, 0.4])]
     );
 }
+
+#[test]
+fn joint_targets_it_cannot_check_are_refused_and_change_nothing() {
+    let mut t = teleop();
+    t.handle_event(Event::Joints {
+        positions: vec![("base_joint".into(), 0.2), ("gripper_joint".into(), 0.3)],
+    })
+    .unwrap();
+    t.take_due(Instant::now());
+    let (target, joints) = (
+        t.target(),
+        t.handle_event(Event::Joints { positions: vec![] }),
+    );
+    assert!(
+        matches!(joints, Err(Refusal::NoJoints { .. })),
+        "{joints:?}"
+    );
+    for (positions, says) in [
+        (
+            vec![("gripper_joint".to_string(), 1e300)],
+            "gripper_joint = 1e300 is outside its limits 0.0 … 0.6",
+        ),
+        (vec![("gripper_joint".into(), -0.1)], "gripper_joint = -0.1"),
+        (vec![("base_joint".into(), f64::NAN)], "base_joint = NaN"),
+        (
+            vec![("shoulder_joint".into(), f64::INFINITY)],
+            "shoulder_joint = inf",
+        ),
+        (
+            vec![("base_joint".into(), 0.1), ("wrist_joint".into(), 0.0)],
+            "unknown joint `wrist_joint` (this arm's: base_joint, shoulder_joint, elbow_joint, gripper_joint)",
+        ),
+        (
+            vec![("base_joint".into(), 0.1), ("base_joint".into(), 0.2)],
+            "joint `base_joint` given twice",
+        ),
+        (
+            vec![("gripper_mimic_joint".into(), 0.1)],
+            "unknown joint `gripper_mimic_joint`",
+        ),
+    ] {
+        let e = t
+            .handle_event(Event::Joints {
+                positions: positions.clone(),
+            })
+            .unwrap_err();
+        assert!(e.to_string().contains(says), "{positions:?}: {e}");
+        assert_eq!(e.kind(), "bad_joint_target");
+        assert_eq!(t.target(), target, "{positions:?} moved the target");
+        assert!(t.take_due(Instant::now() + Duration::from_secs(1)).is_empty());
+    }
+    // a 1 MB name comes back cut to a readable length
+    let e = t
+        .handle_event(Event::Joints {
+            positions: vec![("j".repeat(1 << 20), 0.0)],
+        })
+        .unwrap_err();
+    assert!(e.to_string().len() < 300, "{} bytes", e.to_string().len());
+    // the claw within its range is taken
+    t.handle_event(Event::Joints {
+        positions: vec![("gripper_joint".into(), 0.6)],
+    })
+    .unwrap();
+    assert_eq!(
+        t.take_due(Instant::now() + Duration::from_secs(1)),
+        vec![Command::Joints(vec![("gripper_joint".into(), 0.6)])]
+    );
+}
+
+#[test]
+fn check_joint_positions_takes_the_limits_inclusive() {
+    let limits = [JointSlider {
+        name: "j".into(),
+        lower: -1.0,
+        upper: 1.0,
+    }];
+    for ok in [-1.0, 0.0, 1.0] {
+        check_joint_positions(&[("j".into(), ok)], &limits).unwrap();
+    }
+    for bad in [
+        -1.0 - 1e-12,
+        1.0 + 1e-12,
+        f64::NAN,
+        f64::NEG_INFINITY,
+        1e300,
+    ] {
+        assert!(
+            matches!(
+                check_joint_positions(&[("j".into(), bad)], &limits),
+                Err(Refusal::JointOutOfLimits { .. })
+            ),
+            "{bad}"
+        );
+    }
+    assert!(matches!(
+        check_joint_positions(&[], &limits),
+        Err(Refusal::NoJoints { .. })
+    ));
+}
+
+#[test]
+fn a_urdf_arm_refuses_a_joint_target_naming_no_joint() {
+    let jaco = eezybot_kinematics::urdf::RobotModel::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../urdf/jaco.urdf"
+    )))
+    .unwrap();
+    let mut t = teleop();
+    t.set_robot(&jaco);
+    let e = t
+        .handle_event(Event::Joints { positions: vec![] })
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("names no joint (this arm's: jaco_joint_1"),
+        "{e}"
+    );
+    // the claw of the EezyBot is not this arm's
+    assert!(t
+        .handle_event(Event::Joints {
+            positions: vec![("gripper_joint".into(), 0.1)],
+        })
+        .is_err());
+    assert!(t.take_due(Instant::now()).is_empty());
+}

@@ -29,3 +29,79 @@ fn the_page_is_small_and_self_contained() {
         assert!(hits.is_empty(), "the page refers to another host: {hits:?}");
     }
 }
+
+fn value(stats: &WebStats, key: &str) -> String {
+    stats
+        .values()
+        .into_iter()
+        .find(|(k, _)| *k == key)
+        .map(|(_, v)| v)
+        .unwrap_or_else(|| panic!("no {key} in {:?}", stats.values()))
+}
+
+#[test]
+fn every_refused_request_is_counted_and_the_last_named() {
+    let stats = WebStats::default();
+    assert_eq!(value(&stats, "rejected"), "0");
+    assert_eq!(value(&stats, "last_rejection"), "");
+    stats.bad_request("127.0.0.1:5000", "expected value at line 1 column 1");
+    stats.rejected_request(
+        "bad_joint_target",
+        "gripper_joint = 1e300 is outside its limits 0.0 … 0.6",
+    );
+    assert_eq!(value(&stats, "rejected"), "2");
+    assert_eq!(value(&stats, "bad_requests"), "1");
+    assert_eq!(
+        value(&stats, "last_rejection"),
+        "gripper_joint = 1e300 is outside its limits 0.0 … 0.6"
+    );
+    // a long reason is cut to a readable length
+    stats.bad_request("127.0.0.1:5000", &"x".repeat(1 << 20));
+    let last = value(&stats, "last_rejection");
+    assert!(
+        last.starts_with("bad request: xxx") && last.len() < REASON_MAX + 64,
+        "{}",
+        last.len()
+    );
+}
+
+#[test]
+fn client_ends_are_counted_by_kind() {
+    let stats = WebStats::default();
+    stats.client_ended("127.0.0.1:5000", &ClientEnd::Closed, 0);
+    stats.client_ended("127.0.0.1:5001", &ClientEnd::Shutdown, 0);
+    assert_eq!(value(&stats, "clients_closed"), "1");
+    assert_eq!(value(&stats, "clients_dropped"), "0");
+    let pipe = tungstenite::Error::Io(std::io::ErrorKind::BrokenPipe.into());
+    let end = ClientEnd::from_error(&pipe, false, 65536);
+    assert!(
+        matches!(end, ClientEnd::Gone(_)) && end.is_drop(),
+        "{end:?}"
+    );
+    stats.client_ended("127.0.0.1:5002", &end, 3);
+    stats.client_ended(
+        "127.0.0.1:5003",
+        &ClientEnd::Oversized { max_bytes: 65536 },
+        0,
+    );
+    let protocol =
+        tungstenite::Error::Protocol(tungstenite::error::ProtocolError::NonZeroReservedBits);
+    let end = ClientEnd::from_error(&protocol, true, 65536);
+    assert!(matches!(end, ClientEnd::ReadError(_)), "{end:?}");
+    stats.client_ended("127.0.0.1:5004", &end, 0);
+    assert_eq!(value(&stats, "clients_dropped"), "3");
+    assert_eq!(value(&stats, "closed_oversized"), "1");
+    assert!(value(&stats, "last_client_drop").starts_with("127.0.0.1:5004: read error: "));
+    let too_big = tungstenite::Error::Capacity(tungstenite::error::CapacityError::MessageTooLong {
+        size: 70000,
+        max_size: 65536,
+    });
+    assert_eq!(
+        ClientEnd::from_error(&too_big, true, 65536),
+        ClientEnd::Oversized { max_bytes: 65536 }
+    );
+    assert_eq!(
+        ClientEnd::from_error(&tungstenite::Error::ConnectionClosed, false, 65536),
+        ClientEnd::Closed
+    );
+}
