@@ -272,7 +272,7 @@ pub use request_id::RmwRequestId;
 #[doc(inline)]
 pub use node_options::NodeOptions;
 #[doc(inline)]
-pub use parameters::{Parameter, ParameterValue};
+pub use parameters::{NumericRange, Parameter, ParameterDescriptor, ParameterValue};
 #[doc(inline)]
 pub use qos::QosProfile;
 #[doc(inline)]

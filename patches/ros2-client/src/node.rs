@@ -588,7 +588,8 @@ impl Node {
       options.parameter_validator.take(),
       options.parameter_set_action.take(),
     )
-    .map_err(NodeCreateError::BadParameter)?;
+    .map_err(NodeCreateError::BadParameter)?
+    .with_descriptors(std::mem::take(&mut options.parameter_descriptors));
 
     let mut node = Node {
       node_name,

@@ -12,7 +12,7 @@
 //! `src/zenoh_backend/node.rs`). Fields not honored by a backend are
 //! documented as no-ops there (logged once at `debug` level).
 
-use crate::parameters::{Parameter, ParameterValue, SetParametersResult};
+use crate::parameters::{Parameter, ParameterDescriptor, ParameterValue, SetParametersResult};
 
 /// Signature of a user-supplied parameter validator / set-action callback
 /// (see [`NodeOptions::parameter_validator`] /
@@ -34,6 +34,7 @@ pub struct NodeOptions {
   pub(crate) enable_rosout_reading: bool,
   pub(crate) start_parameter_services: bool,
   pub(crate) declared_parameters: Vec<Parameter>,
+  pub(crate) parameter_descriptors: Vec<ParameterDescriptor>,
   pub(crate) allow_undeclared_parameters: bool,
   pub(crate) parameter_validator: Option<Box<ParameterFunc>>,
   pub(crate) parameter_set_action: Option<Box<ParameterFunc>>,
@@ -49,6 +50,7 @@ impl NodeOptions {
       enable_rosout_reading: false,
       start_parameter_services: true,
       declared_parameters: Vec::new(),
+      parameter_descriptors: Vec::new(),
       allow_undeclared_parameters: false,
       parameter_validator: None,
       parameter_set_action: None,
@@ -93,6 +95,28 @@ impl NodeOptions {
     });
     // TODO: check for duplicate parameter names
     self
+  }
+
+  /// Declare a parameter with its documentation and constraints, as rclcpp's
+  /// `declare_parameter(name, default, descriptor)` does.
+  ///
+  /// `describe_parameters` (`ros2 param describe`) reports the descriptor's
+  /// description, additional constraints, `read_only`, `dynamic_typing` and
+  /// range, with the name given here and the type of the current value. The
+  /// descriptor is documentation: enforce it with a
+  /// [`parameter_validator`](NodeOptions::parameter_validator).
+  pub fn declare_parameter_with_descriptor(
+    mut self,
+    name: &str,
+    value: ParameterValue,
+    descriptor: ParameterDescriptor,
+  ) -> NodeOptions {
+    self.parameter_descriptors.retain(|d| d.name != name);
+    self.parameter_descriptors.push(ParameterDescriptor {
+      name: name.to_owned(),
+      ..descriptor
+    });
+    self.declare_parameter(name, value)
   }
 
   /// Whether parameters that were not declared may be set, both locally and

@@ -198,6 +198,7 @@ impl From<SetParametersResult> for raw::SetParametersResult {
 }
 
 /// Documentation and constraints for a [`Parameter`]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ParameterDescriptor {
   pub name: String,
   pub param_type: ParameterType, // ParameterType.msg defines enum
@@ -237,6 +238,7 @@ impl ParameterDescriptor {
 }
 
 /// Optional Limits for a numeric [`Parameter`]
+#[derive(Debug, Clone, PartialEq)]
 pub enum NumericRange {
   NotSpecified,
   IntegerRange {
@@ -346,6 +348,8 @@ impl ParameterChanges {
 /// [`ParameterChanges`] the caller should publish as a `ParameterEvent`.
 pub(crate) struct ParameterStore {
   values: Mutex<BTreeMap<String, ParameterValue>>,
+  // Declared descriptors by name (see `with_descriptors`).
+  descriptors: BTreeMap<String, ParameterDescriptor>,
   allow_undeclared: bool,
   // Not held at the same time as `values`, as the callbacks may be slow.
   validator: Option<Mutex<Box<ParameterFunc>>>,
@@ -380,6 +384,7 @@ impl ParameterStore {
 
     let store = ParameterStore {
       values: Mutex::new(values),
+      descriptors: BTreeMap::new(),
       allow_undeclared,
       validator: validator.map(Mutex::new),
       set_action: set_action.map(Mutex::new),
@@ -390,6 +395,19 @@ impl ParameterStore {
       store.run_set_action(name, value)?;
     }
     Ok(store)
+  }
+
+  /// Describe parameters with these descriptors (see
+  /// [`NodeOptions::declare_parameter_with_descriptor`](crate::NodeOptions::declare_parameter_with_descriptor)).
+  pub fn with_descriptors(
+    mut self,
+    descriptors: impl IntoIterator<Item = ParameterDescriptor>,
+  ) -> Self {
+    self.descriptors = descriptors
+      .into_iter()
+      .map(|d| (d.name.clone(), d))
+      .collect();
+    self
   }
 
   pub fn allow_undeclared(&self) -> bool {
@@ -428,10 +446,17 @@ impl ParameterStore {
     let values = self.values.lock().unwrap();
     names
       .iter()
-      .map(|name| match values.get(name) {
-        Some(value) => ParameterDescriptor::from_value(name, value),
-        None => ParameterDescriptor::unknown(name),
-      })
+      .map(
+        |name| match (values.get(name), self.descriptors.get(name)) {
+          (Some(value), Some(declared)) => ParameterDescriptor {
+            name: name.clone(),
+            param_type: value.to_parameter_type(),
+            ..declared.clone()
+          },
+          (Some(value), None) => ParameterDescriptor::from_value(name, value),
+          (None, _) => ParameterDescriptor::unknown(name),
+        },
+      )
       .collect()
   }
 
@@ -850,5 +875,57 @@ mod tests {
     // The separator after the prefix counts towards depth.
     assert_eq!(names(&["a"], 1).names, ["a"]);
     assert_eq!(names(&["a"], 2).names, ["a", "a.b"]);
+  }
+
+  #[test]
+  fn declared_descriptors_are_described_with_the_current_type() {
+    use super::{NumericRange, ParameterDescriptor, ParameterType};
+    let declared = ParameterDescriptor {
+      name: "rate".to_string(),
+      param_type: ParameterType::NotSet,
+      description: "how often, Hz".to_string(),
+      additional_constraints: "".to_string(),
+      read_only: true,
+      dynamic_typing: false,
+      range: NumericRange::FloatingPointRange {
+        from_value: 1.0,
+        to_value: 50.0,
+        step: 0.0,
+      },
+    };
+    let s = ParameterStore::new(
+      vec![
+        param("rate", ParameterValue::Double(10.0)),
+        param("other", ParameterValue::Integer(1)),
+      ],
+      false,
+      None,
+      None,
+    )
+    .unwrap()
+    .with_descriptors([declared.clone()]);
+    let names: Vec<String> = ["rate", "other", "missing"].map(String::from).into();
+    let [rate, other, missing]: [ParameterDescriptor; 3] = s.describe(&names).try_into().unwrap();
+    assert_eq!(
+      rate,
+      ParameterDescriptor {
+        param_type: ParameterType::Double,
+        ..declared
+      }
+    );
+    let raw = super::raw::ParameterDescriptor::from(rate);
+    assert_eq!(raw.r#type, 3);
+    assert!(raw.read_only && raw.integer_range.is_empty());
+    assert_eq!(
+      (
+        raw.floating_point_range[0].from_value,
+        raw.floating_point_range[0].to_value
+      ),
+      (1.0, 50.0)
+    );
+    // Declared without a descriptor, and unknown: as before.
+    assert_eq!(other.param_type, ParameterType::Integer);
+    assert!(!other.read_only);
+    assert_eq!(missing.param_type, ParameterType::NotSet);
   }
 }

@@ -139,7 +139,8 @@ impl Node {
         options.parameter_validator.take(),
         options.parameter_set_action.take(),
       )
-      .map_err(bad_parameter)?;
+      .map_err(bad_parameter)?
+      .with_descriptors(std::mem::take(&mut options.parameter_descriptors));
       node.parameter_server = Some(node.parameter_server_with_store(store)?);
     }
 
