@@ -107,6 +107,9 @@ pub mod action_msgs; // action mechanism implementation
 /// Some builtin interfaces for ROS2 communication
 pub mod builtin_interfaces;
 
+/// `rosgraph_msgs/msg/Clock`, the message of `/clock`
+pub mod rosgraph_msgs;
+
 #[doc(hidden)]
 #[cfg(feature = "dds")]
 pub mod context;

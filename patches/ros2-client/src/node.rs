@@ -17,7 +17,7 @@ use rustdds::*;
 
 use crate::{
   action::*,
-  action_msgs, builtin_interfaces,
+  action_msgs,
   context::{Context, DEFAULT_SUBSCRIPTION_QOS},
   entities_info::{NodeEntitiesInfo, ParticipantEntitiesInfo},
   error::{CreateError, CreateResult},
@@ -32,6 +32,7 @@ use crate::{
   qos::{History, QosProfile},
   rcl_interfaces,
   ros_time::ROSTime,
+  rosgraph_msgs::Clock,
   rosout::{NodeLoggingHandle, RosoutRaw},
   service::{Client, Server, ServiceMapping},
 };
@@ -164,11 +165,10 @@ impl Spinner {
     let ros_discovery_stream = ros_discovery_reader.async_stream();
     pin_mut!(ros_discovery_stream);
 
-    let ros_clock_reader = self
-      .ros_context
-      .create_subscription::<builtin_interfaces::Time>(&self.clock_topic, None)?;
-    let ros_clock_stream = ros_clock_reader.async_stream();
-    pin_mut!(ros_clock_stream);
+    // `/clock` is read only while `use_sim_time` is true, as in rclcpp, so a
+    // node on system time neither subscribes to nor shows a `/clock` topic.
+    let use_sim_time_set = self.parameters.use_sim_time_set();
+    let mut ros_clock_reader: Option<Subscription<Clock>> = None;
 
     // These are Option< impl Stream<_>>
     let mut get_parameters_stream_opt = self
@@ -199,17 +199,38 @@ impl Spinner {
     info!("Spinner {} initialized", self.fully_qualified_node_name);
 
     loop {
+      if self.parameters.use_sim_time() != ros_clock_reader.is_some() {
+        ros_clock_reader = if self.parameters.use_sim_time() {
+          self
+            .ros_context
+            .create_subscription::<Clock>(&self.clock_topic, None)
+            .map_err(|e| warn!("Cannot subscribe to /clock: {e:?}"))
+            .ok()
+        } else {
+          None
+        };
+      }
+      let next_clock = async {
+        match &ros_clock_reader {
+          Some(reader) => reader.async_take().await,
+          None => std::future::pending().await,
+        }
+      };
+
       futures::select! {
         _ = self.stop_spin_receiver.recv().fuse() => {
           break;
         }
 
-        clock_msg = ros_clock_stream.select_next_some() => {
+        _ = use_sim_time_set.recv().fuse() => {
+          // (un)subscribe at the top of the loop
+        }
+
+        clock_msg = next_clock.fuse() => {
           match clock_msg {
-            Ok((time,_msg_info)) => {
-              // Simulated time is updated internally unconditionally.
+            Ok((Clock { clock },_msg_info)) => {
               // The logic in Node decides if it is used.
-              *self.sim_time.lock().unwrap() = time.into();
+              *self.sim_time.lock().unwrap() = clock.into();
             }
             Err(e) => warn!("Simulated clock receive error {e:?}")
           }
@@ -729,7 +750,7 @@ impl Node {
 
     let clock_topic = self.create_topic(
       &Name::new("/", "clock").unwrap(),
-      MessageTypeName::new("builtin_interfaces", "Time"),
+      MessageTypeName::new("rosgraph_msgs", "Clock"),
       &DEFAULT_SUBSCRIPTION_QOS,
     )?;
 

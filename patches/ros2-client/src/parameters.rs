@@ -355,6 +355,9 @@ pub(crate) struct ParameterStore {
   validator: Option<Mutex<Box<ParameterFunc>>>,
   set_action: Option<Mutex<Box<ParameterFunc>>>,
   use_sim_time: AtomicBool,
+  // Wakes the DDS Spinner when `use_sim_time` is set, so that it subscribes
+  // to `/clock` exactly while simulated time is in use.
+  use_sim_time_set: (async_channel::Sender<()>, async_channel::Receiver<()>),
 }
 
 impl ParameterStore {
@@ -389,6 +392,7 @@ impl ParameterStore {
       validator: validator.map(Mutex::new),
       set_action: set_action.map(Mutex::new),
       use_sim_time: AtomicBool::new(false),
+      use_sim_time_set: async_channel::bounded(1),
     };
     for (name, value) in &initial {
       store.check_value(name, value)?;
@@ -418,6 +422,13 @@ impl ParameterStore {
   #[cfg(any(feature = "dds", test))]
   pub fn use_sim_time(&self) -> bool {
     self.use_sim_time.load(Ordering::SeqCst)
+  }
+
+  /// Receives a notification each time `use_sim_time` is set (several sets
+  /// may be reported as one).
+  #[cfg(any(feature = "dds", test))]
+  pub fn use_sim_time_set(&self) -> async_channel::Receiver<()> {
+    self.use_sim_time_set.1.clone()
   }
 
   pub fn get(&self, name: &str) -> Option<ParameterValue> {
@@ -578,6 +589,8 @@ impl ParameterStore {
     if name == Self::USE_SIM_TIME {
       if let ParameterValue::Boolean(b) = value {
         self.use_sim_time.store(*b, Ordering::SeqCst);
+        // Full means a notification is pending already.
+        let _ = self.use_sim_time_set.0.try_send(());
       }
       return Ok(());
     }
@@ -749,6 +762,7 @@ mod tests {
       .set("use_sim_time", ParameterValue::Boolean(true))
       .unwrap();
     assert!(s.use_sim_time());
+    assert!(s.use_sim_time_set().try_recv().is_ok());
     // It existed already, so this is a change, not a new parameter.
     assert_eq!(changes.changed_parameters.len(), 1);
     assert!(changes.new_parameters.is_empty());
