@@ -302,6 +302,20 @@ pub struct Rejection {
     pub stamp: Time,
 }
 
+impl Rejection {
+    /// The refused input's stamp as `SEC.NANOSEC` (nine digits of nanoseconds), the
+    /// `last_rejection_stamp` diagnostics value: a sender knows its target was refused
+    /// when it reads its target's stamp there.
+    pub fn stamp_text(&self) -> String {
+        let ns = self.stamp.to_nanos();
+        format!(
+            "{}.{:09}",
+            ns.div_euclid(1_000_000_000),
+            ns.rem_euclid(1_000_000_000)
+        )
+    }
+}
+
 impl fmt::Display for Rejection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} rejected: {}", self.source.topic(), self.reason)
@@ -1206,6 +1220,8 @@ impl IkCore {
             values.push(("last_rejection", r.reason.to_string()));
             values.push(("last_rejection_code", r.reason.code()));
             values.push(("last_rejection_topic", r.source.topic().to_string()));
+            // the refusal signal `gui_bridge once/play` wait for (gui_bridge::REJECTED_STAMP_KEY)
+            values.push(("last_rejection_stamp", r.stamp_text()));
         }
         let mut more: Vec<(String, String)> = vec![(
             "solver".into(),

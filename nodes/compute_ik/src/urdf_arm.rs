@@ -910,6 +910,7 @@ impl UrdfCore {
             values.push(("last_rejection".into(), r.reason.to_string()));
             values.push(("last_rejection_code".into(), r.reason.code()));
             values.push(("last_rejection_topic".into(), r.source.topic().to_string()));
+            values.push(("last_rejection_stamp".into(), r.stamp_text()));
         }
         let refs: Vec<(&str, String)> = values
             .iter()
