@@ -83,6 +83,10 @@ class Panel:
         self.page = browser.new_page(viewport={"width": 1280, "height": 820})
         self.page.add_init_script(FAKE_GAMEPAD)
         self.page.on("request", lambda r: self.requests.append(r.url))
+        # every console error or warning of the page, and every uncaught exception
+        self.console = []
+        self.page.on("console", lambda m: self.console.append((m.type, m.text)) if m.type in ("error", "warning") else None)
+        self.page.on("pageerror", lambda e: self.console.append(("pageerror", str(e))))
         self.page.on("response", lambda r: self._count(r))
         self.page.goto(self.url)
         self.page.wait_for_function("() => window.__sent !== undefined || document.getElementById('ws-dot').className.includes('up')")
@@ -101,6 +105,10 @@ class Panel:
 
     def close(self):
         self.page.close()
+
+    def assert_quiet_console(self):
+        """The page logged no error or warning (a missing favicon is an error too)."""
+        assert not self.console, self.console
 
 
 @pytest.fixture
@@ -244,6 +252,29 @@ def test_page_is_small_local_and_shows_the_live_arm(launch, observer, browser):
         assert p.bytes < 300_000, f"page and assets are {p.bytes} bytes"
         foreign = [u for u in p.requests if not u.startswith(p.url.rstrip("/")) and not u.startswith(f"ws://127.0.0.1:{p.port}")]
         assert not foreign, foreign
+        # the icon the page links is served (bundled in the binary), and nothing went to the console
+        assert p.page.eval_on_selector("link[rel=icon]", "l => l.href") == p.url + "favicon.ico"
+        status, headers, body = http_get(p.port, "/favicon.ico")
+        assert status == 200 and headers.get("content-type") == ["image/svg+xml"] and body.startswith("<svg"), (status, headers)
+        p.assert_quiet_console()
+    finally:
+        p.close()
+
+
+def test_panel_lists_the_nodes_under_the_names_they_run_under(launch, observer, browser):
+    """compute_ik run as `ik2` shows as ik2, up, in place of compute_ik; the nodes not
+    running show as missing; the page logs nothing to the console."""
+    launch("compute_ik", "--ros-args", "-r", "__node:=ik2")
+    p = Panel(launch, observer, browser)
+    try:
+        p.page.wait_for_function("() => { const d = document.querySelector('#status-ik2 .dot'); return d && d.className.includes('up'); }",
+                                 timeout=20000)
+        assert p.page.query_selector("#status-compute_ik") is None
+        names = p.page.eval_on_selector_all("#nodes > span", "els => els.map(e => e.id)")
+        assert names == ["status-ik2", "status-state_publisher", "status-serial_node"], names
+        assert "down" in p.page.get_attribute("#status-serial_node .dot", "class")
+        assert "inverse kinematics" in p.page.get_attribute("#status-ik2", "title")
+        p.assert_quiet_console()
     finally:
         p.close()
 
@@ -306,6 +337,46 @@ def test_once_delivers_one_target_or_says_why_not(launch, observer, domain):
     assert observer.spin_until(lambda: any(tool(m) == pytest.approx((0.2, 0.01, 0.15), abs=1e-9) for _, m in states), 5)
     r = run_cli(domain, "--once", "0.5", "0", "0.15", "--timeout", "10")
     assert r.returncode != 0 and "out of reach" in r.stderr
+
+
+def test_help_lists_the_commands_and_usage_errors_exit_2(domain):
+    r = run_cli(domain, "--help")
+    assert r.returncode == 0, r.stderr
+    for word in ("serve", "once", "--once", "play", "record", "--ros-args", "ROS_DOMAIN_ID", "bind", "Exit status"):
+        assert word in r.stdout, (word, r.stdout)
+    assert run_cli(domain, "once", "--help").returncode == 0
+    for bad in (["--bogus"], ["--once", "0.2", "0"], ["--once", "0.2", "nan", "0.15"], ["once", "0.2", "0", "0.15", "--gripper", "2"],
+                ["--record", "x.csv", "--line"], ["serve", "--timeout", "3"], ["--ros-args", "--bogus"],
+                ["--ros-args", "-p", "arm_config:=/nonexistent/arm.yaml"]):
+        r = run_cli(domain, *bad)
+        assert r.returncode == 2, (bad, r.returncode, r.stderr)
+        assert r.stderr.strip(), bad
+
+
+def test_once_knows_taken_and_refused_from_stamps_under_any_node_name(launch, observer, domain):
+    """`once` knows its target was taken from the joint_states stamp and refused from
+    diagnostics' last_rejection_stamp: neither depends on compute_ik's node name."""
+    launch("compute_ik", "--ros-args", "-r", "__node:=ik2")
+    states = observer.sub("/joint_states", JointState)
+    observer.wait_publisher("/joint_states")
+    r = run_cli(domain, "once", "0.2", "-0.02", "0.15", "--gripper", "0.5", "--timeout", "20")
+    assert r.returncode == 0, r.stderr
+    assert "delivered [0.2, -0.02, 0.15]" in r.stdout
+    # refused by the local check before anything is sent: 1
+    r = run_cli(domain, "--once", "0.5", "0", "0.15", "--timeout", "10")
+    assert r.returncode == 1 and "out of reach" in r.stderr, r.stderr
+    # refused by ik2 (the emergency stop is engaged): 1 with its reason, at once, not at the timeout
+    estop = observer.pub("/estop", Bool, LATCHED)
+    observer.wait_matched(estop)
+    estop.publish(Bool(data=True))
+    observer.spin_for(0.5)
+    start = time.monotonic()
+    r = run_cli(domain, "--once", "0.2", "0.03", "0.15", "--timeout", "20")
+    assert r.returncode == 1, (r.returncode, r.stderr)
+    assert "ik2 refused [0.2, 0.03, 0.15]" in r.stderr and "emergency stop" in r.stderr, r.stderr
+    assert time.monotonic() - start < 10
+    estop.publish(Bool(data=False))
+    observer.spin_for(0.5)
 
 
 def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):

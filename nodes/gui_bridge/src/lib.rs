@@ -2,12 +2,18 @@
 //!
 //! A web page (served by the node, no build step, WebSocket) with x/y/z and gripper
 //! sliders, a joint mode, keyboard jog, gamepad with deadman, a live side and top view,
-//! node status, end-to-end latency and an e-stop button; and a command-line driver
-//! (`--once X Y Z`, `--play waypoints.csv`, `--record out.csv`). The operator logic is
-//! [`teleop::Teleop`]; [`run`] is the loop between the browsers and ROS.
+//! node status, end-to-end latency and an e-stop button ([`serve`]); and a command-line
+//! driver ([`cli`]: `once X Y Z`, `play waypoints.csv` in [`delivery`], `record out.csv`
+//! in [`record`]). The operator logic is [`teleop::Teleop`]; [`run`] is the loop between
+//! the browsers and ROS.
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod access;
+pub mod cli;
+pub mod delivery;
+pub mod record;
+pub mod ros_outputs;
+pub mod serve;
 pub mod teleop;
 pub mod web;
 
@@ -35,7 +41,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
         name: "gui_bridge",
         description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
-        usage: "[--once X Y Z [--gripper G] | --play WAYPOINTS.csv | --record OUT.csv] [--line] [--timeout S]",
+        usage: "[serve | once X Y Z [--gripper G] [--line] [--timeout S] | play WAYPOINTS.csv [--line] [--timeout S] | record OUT.csv]",
         params: vec![
             ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
             ParamSpec::new(
@@ -170,44 +176,173 @@ pub struct Reporting<F: Fn() -> Vec<usize>> {
 /// How long a refused client keeps the panel's diagnostics at WARN.
 pub const REFUSAL_WARN_FOR: Duration = Duration::from_secs(60);
 
-/// Health of the other nodes, from their `diagnostics`.
-#[derive(Default)]
+/// The `diagnostics` key by which a node that takes targets (compute_ik) says it refused
+/// one: its value is the refused target's `header.stamp` as [`stamp_text`] writes it.
+/// `once`/`play` know their target was refused when a status carries it with their
+/// target's stamp (and taken when `joint_states` carries that stamp); the panel shows
+/// the `last_rejection` of the status that carries it.
+pub const REJECTED_STAMP_KEY: &str = "last_rejection_stamp";
+
+/// A stamp as `SEC.NANOSEC`, nine digits of nanoseconds (`1712345678.000123456`), the
+/// value of [`REJECTED_STAMP_KEY`].
+///
+/// # Examples
+/// ```
+/// use eezybot_msgs::Time;
+/// assert_eq!(gui_bridge::stamp_text(Time::new(1712345678, 123456)), "1712345678.000123456");
+/// ```
+pub fn stamp_text(stamp: Time) -> String {
+    let ns = stamp.to_nanos();
+    format!(
+        "{}.{:09}",
+        ns.div_euclid(1_000_000_000),
+        ns.rem_euclid(1_000_000_000)
+    )
+}
+
+/// The node and the task a `diagnostics` status names, by diagnostic_updater's
+/// convention `NODE: TASK` (every node of the graph follows it: `compute_ik: inverse
+/// kinematics`, `ik2: inverse kinematics` under `-r __node:=ik2`); a name without `: `
+/// is a node's name with no task. `None` unless NODE is a valid ROS node name.
+///
+/// # Examples
+/// ```
+/// assert_eq!(gui_bridge::status_node("ik2: inverse kinematics"), Some(("ik2", "inverse kinematics")));
+/// assert_eq!(gui_bridge::status_node("serial_node"), Some(("serial_node", "")));
+/// assert_eq!(gui_bridge::status_node("::::"), None);
+/// ```
+pub fn status_node(status_name: &str) -> Option<(&str, &str)> {
+    let (node, task) = status_name
+        .split_once(':')
+        .map_or((status_name, ""), |(n, t)| (n, t.trim()));
+    let valid = !node.is_empty()
+        && node.len() <= NODE_NAME_MAX
+        && node.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !node.starts_with(|c: char| c.is_ascii_digit());
+    valid.then_some((node, task))
+}
+
+/// Longest node name the panel shows.
+const NODE_NAME_MAX: usize = 64;
+/// Most nodes the panel tracks; a new one beyond them replaces one gone silent, if any.
+pub const MAX_TRACKED_NODES: usize = 16;
+/// A node heard within this is up.
+const UP_WITHIN: Duration = Duration::from_secs(3);
+/// A node not heard for this long is forgotten (its task's placeholder shows again).
+const FORGET_AFTER: Duration = Duration::from_secs(60);
+
+/// The graph's other nodes the panel always shows: (default node name, the task their
+/// `diagnostics` entry names). Until a node reporting that task is heard, the default
+/// name shows as missing; any node reporting it, under whatever name, takes its place.
+pub const EXPECTED_NODES: [(&str, &str); 3] = [
+    ("compute_ik", "inverse kinematics"),
+    ("state_publisher", "robot state"),
+    ("serial_node", "servo link"),
+];
+
+struct Heard {
+    task: String,
+    hardware_id: String,
+    level: u8,
+    message: String,
+    at: Instant,
+}
+
+/// Health of the other nodes, from their `diagnostics`: every node heard, by the name
+/// it reports (so under any remap or namespace), besides this one.
 struct NodeHealth {
-    seen: BTreeMap<String, (u8, String, Instant)>,
+    own: String,
+    seen: BTreeMap<String, Heard>,
     last_rejection: Option<String>,
 }
 
 impl NodeHealth {
-    fn update(&mut self, msg: &DiagnosticArray) {
-        for s in &msg.status {
-            let node = s
-                .name
-                .split(':')
-                .next()
-                .unwrap_or(&s.name)
-                .trim()
-                .to_string();
-            if node.starts_with("compute_ik") {
-                if let Some(kv) = s.values.iter().find(|kv| kv.key == "last_rejection") {
-                    self.last_rejection = Some(kv.value.clone());
-                }
-            }
-            self.seen
-                .insert(node, (s.level, s.message.clone(), Instant::now()));
+    fn new(own: &str) -> Self {
+        NodeHealth {
+            own: own.to_string(),
+            seen: BTreeMap::new(),
+            last_rejection: None,
         }
     }
 
-    fn json(&self) -> serde_json::Value {
-        let mut nodes = serde_json::Map::new();
-        for name in ["compute_ik", "state_publisher", "serial_node"] {
-            let v = match self.seen.get(name) {
-                Some((level, message, at)) => {
-                    let age = at.elapsed().as_secs_f64();
-                    json!({"up": age < 3.0, "level": level, "message": message, "age_s": age})
-                }
-                None => json!({"up": false, "level": 3, "message": "not seen", "age_s": null}),
+    fn update(&mut self, msg: &DiagnosticArray) {
+        let now = Instant::now();
+        self.seen
+            .retain(|_, h| now.duration_since(h.at) < FORGET_AFTER);
+        for s in &msg.status {
+            if let Some(kv) = s.values.iter().find(|kv| kv.key == REJECTED_STAMP_KEY) {
+                let reason = s
+                    .values
+                    .iter()
+                    .find(|kv| kv.key == "last_rejection")
+                    .map_or(kv.value.as_str(), |r| r.value.as_str());
+                self.last_rejection = Some(shorten(reason, web::REASON_MAX).into_owned());
+            }
+            let Some((node, task)) = status_node(&s.name) else {
+                continue;
             };
-            nodes.insert(name.to_string(), v);
+            if node == self.own {
+                continue;
+            }
+            if !self.seen.contains_key(node) && self.seen.len() >= MAX_TRACKED_NODES {
+                // room only by forgetting one gone silent: a flood of names never
+                // pushes out a node that is up
+                let silent = self
+                    .seen
+                    .iter()
+                    .filter(|(_, h)| now.duration_since(h.at) >= UP_WITHIN)
+                    .min_by_key(|(_, h)| h.at)
+                    .map(|(n, _)| n.clone());
+                match silent {
+                    Some(n) => self.seen.remove(&n),
+                    None => continue,
+                };
+            }
+            self.seen.insert(
+                node.to_string(),
+                Heard {
+                    task: shorten(task, NODE_NAME_MAX).into_owned(),
+                    hardware_id: shorten(&s.hardware_id, NODE_NAME_MAX).into_owned(),
+                    level: s.level,
+                    message: shorten(&s.message, web::REASON_MAX).into_owned(),
+                    at: now,
+                },
+            );
+        }
+    }
+
+    /// `{"t": "status", "nodes": [{name, task, hardware_id, up, level, message, age_s}…],
+    /// "last_rejection"}`: the expected tasks first (each node heard reporting it, or its
+    /// default name as missing), then every other node heard, by name.
+    fn json(&self) -> serde_json::Value {
+        let entry = |name: &str, h: &Heard| {
+            let age = h.at.elapsed();
+            json!({"name": name, "task": h.task, "hardware_id": h.hardware_id, "up": age < UP_WITHIN,
+                   "level": h.level, "message": h.message, "age_s": age.as_secs_f64()})
+        };
+        let mut nodes = vec![];
+        let mut listed: Vec<&str> = vec![];
+        for (default, task) in EXPECTED_NODES {
+            let mut doing = self
+                .seen
+                .iter()
+                .filter(|(n, h)| h.task == task || n.as_str() == default)
+                .peekable();
+            if doing.peek().is_none() {
+                nodes.push(json!({"name": default, "task": task, "hardware_id": "", "up": false,
+                                  "level": DiagnosticStatus::STALE, "message": "not seen", "age_s": null}));
+            }
+            for (n, h) in doing {
+                if !listed.contains(&n.as_str()) {
+                    listed.push(n);
+                    nodes.push(entry(n, h));
+                }
+            }
+        }
+        for (n, h) in &self.seen {
+            if !listed.contains(&n.as_str()) {
+                nodes.push(entry(n, h));
+            }
         }
         json!({"t": "status", "nodes": nodes, "last_rejection": self.last_rejection})
     }
@@ -281,6 +416,7 @@ pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
     json!({
         "t": "hello",
         "target": teleop.target(),
+        "pose": teleop.last_pose(),
         "rate": rate,
         "robot": robot_json(teleop),
         "limits": {
@@ -474,7 +610,8 @@ pub async fn run<F: Fn() -> Vec<usize>>(
         peers.annotate(&mut s, Instant::now());
         outputs.diagnostics(s);
     };
-    let mut health = NodeHealth::default();
+    let own = status_node(&reporting.name).map_or("", |(n, _)| n);
+    let mut health = NodeHealth::new(own);
     let mut unreadable = UnreadableSamples::default();
     let mut latency = Latency::default();
     let mut model: Option<RobotModel> = None;
@@ -482,6 +619,13 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     let mut param_changes = params.subscribe();
     let send = |v: serde_json::Value| {
         let _ = to_browsers.send(v.to_string());
+    };
+    // a browser that connects later gets the latest pose with its hello
+    let send_pose = |v: serde_json::Value| {
+        let _ = to_browsers.send(v.to_string());
+        if let Ok(mut t) = teleop.lock() {
+            t.set_last_pose(v);
+        }
     };
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
@@ -529,7 +673,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                             let tool = tool_link.and_then(|l| m.link_poses(&refs).get(&l).map(|p| p.translation.vector));
                             let joints: serde_json::Map<String, serde_json::Value> =
                                 finite.iter().map(|(n, v)| (n.clone(), json!(v))).collect();
-                            send(json!({
+                            send_pose(json!({
                                 "t": "pose", "joints": joints, "gripper": null,
                                 "tool": tool.map(|p| [p.x, p.y, p.z]),
                                 "segments": segments(m, &js),
@@ -543,7 +687,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                                 let q = ArmJoints { base_rad: b, shoulder_rad: s, elbow_rad: e };
                                 let tool = teleop.lock().map(|mut t| { t.observe_joints(q); t.arm().forward(&q) });
                                 let segs = model.as_ref().map(|m| segments(m, &js)).unwrap_or_default();
-                                send(json!({
+                                send_pose(json!({
                                     "t": "pose", "joints": joints_json(&q),
                                     "gripper": get(ACTUATED_JOINTS[3]),
                                     "tool": tool.map(|p| [p.x, p.y, p.z]).ok(),
@@ -580,5 +724,115 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                 tokio::task::yield_now().await;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use eezybot_msgs::diagnostic_msgs::KeyValue;
+    use eezybot_msgs::std_msgs::Header;
+
+    /// (status name, level, key-value pairs)
+    type Entry<'a> = (&'a str, u8, &'a [(&'a str, &'a str)]);
+
+    fn array(statuses: &[Entry]) -> DiagnosticArray {
+        DiagnosticArray {
+            header: Header::default(),
+            status: statuses
+                .iter()
+                .map(|(name, level, values)| DiagnosticStatus {
+                    level: *level,
+                    name: (*name).into(),
+                    message: "m".into(),
+                    hardware_id: "eezybot_arm".into(),
+                    values: values
+                        .iter()
+                        .map(|(k, v)| KeyValue {
+                            key: (*k).into(),
+                            value: (*v).into(),
+                        })
+                        .collect(),
+                })
+                .collect(),
+        }
+    }
+
+    fn names(h: &NodeHealth) -> Vec<(String, bool)> {
+        h.json()["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|n| {
+                (
+                    n["name"].as_str().unwrap().to_string(),
+                    n["up"].as_bool().unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn nodes_show_under_the_names_they_run_under() {
+        let mut h = NodeHealth::new("gui_bridge");
+        assert_eq!(
+            names(&h),
+            [
+                ("compute_ik".into(), false),
+                ("state_publisher".into(), false),
+                ("serial_node".into(), false)
+            ]
+        );
+        h.update(&array(&[
+            ("ik2: inverse kinematics", 0, &[]),
+            ("gui_bridge: operator panel", 0, &[]),
+            ("serial_node: servo link", 1, &[]),
+            ("camera: frames", 0, &[]),
+        ]));
+        assert_eq!(
+            names(&h),
+            [
+                ("ik2".into(), true),
+                ("state_publisher".into(), false),
+                ("serial_node".into(), true),
+                ("camera".into(), true)
+            ]
+        );
+    }
+
+    #[test]
+    fn the_rejection_shown_is_the_one_carrying_the_refusal_key() {
+        let mut h = NodeHealth::new("gui_bridge");
+        h.update(&array(&[(
+            "serial_node: servo link",
+            1,
+            &[("last_rejection", "servo")],
+        )]));
+        assert!(h.json()["last_rejection"].is_null());
+        h.update(&array(&[(
+            "ik2: inverse kinematics",
+            1,
+            &[
+                ("last_rejection", "out of reach"),
+                (REJECTED_STAMP_KEY, "1.000000002"),
+            ],
+        )]));
+        assert_eq!(h.json()["last_rejection"], "out of reach");
+    }
+
+    #[test]
+    fn a_flood_of_names_never_pushes_out_a_node_that_is_up() {
+        let mut h = NodeHealth::new("gui_bridge");
+        h.update(&array(&[("compute_ik: inverse kinematics", 0, &[])]));
+        let many: Vec<String> = (0..2000).map(|i| format!("s{i}")).collect();
+        let flood: Vec<Entry> = many.iter().map(|n| (n.as_str(), 0, &[][..])).collect();
+        h.update(&array(&flood));
+        h.update(&array(&[
+            (":::", 0, &[]),
+            ("", 0, &[]),
+            ("\u{2603}: x", 0, &[]),
+        ]));
+        assert_eq!(h.seen.len(), MAX_TRACKED_NODES);
+        assert!(h.seen.contains_key("compute_ik"));
     }
 }

@@ -319,6 +319,7 @@ pub struct Teleop {
     joint_target: Slot<Vec<(String, f64)>>,
     estop: Option<bool>,
     robot: Option<RobotView>,
+    last_pose: Option<serde_json::Value>,
 }
 
 impl Teleop {
@@ -335,6 +336,7 @@ impl Teleop {
             joint_target: Slot::default(),
             estop: None,
             robot: None,
+            last_pose: None,
         }
     }
 
@@ -389,6 +391,16 @@ impl Teleop {
     /// The arm model used for the checks.
     pub fn arm(&self) -> &Arm {
         &self.arm
+    }
+
+    /// The latest `pose` message sent to the browsers, for one that connects later.
+    pub fn last_pose(&self) -> Option<&serde_json::Value> {
+        self.last_pose.as_ref()
+    }
+
+    /// Remember the `pose` message just sent to the browsers.
+    pub fn set_last_pose(&mut self, pose: serde_json::Value) {
+        self.last_pose = Some(pose);
     }
 
     /// The arm moved (from `joint_states`): jogs continue from where it is.

@@ -31,6 +31,10 @@ use tokio::sync::{broadcast, mpsc, Semaphore};
 /// The page: one file, no build step, no request to any other host.
 pub const INDEX_HTML: &str = include_str!("../web/index.html");
 
+/// The page's icon (SVG), served at `/favicon.ico` to anyone: it is no secret, and a
+/// page refused for its token still gets it (no console error for a missing icon).
+pub const FAVICON_SVG: &str = include_str!("../web/favicon.svg");
+
 /// A message from a browser.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(tag = "t", rename_all = "snake_case")]
@@ -567,7 +571,8 @@ impl WebState {
     }
 }
 
-/// The router: `/` the page, `/ws` the WebSocket, both behind the access policy.
+/// The router: `/` the page, `/ws` the WebSocket, both behind the access policy;
+/// `/favicon.ico` the icon, open to all.
 /// Serve it with `into_make_service_with_connect_info::<SocketAddr>()` so refusals
 /// name the client's address.
 pub fn router(state: WebState) -> Router {
@@ -575,7 +580,19 @@ pub fn router(state: WebState) -> Router {
         .route("/", get(page))
         .route("/ws", get(ws_handler))
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
+        .route("/favicon.ico", get(favicon))
         .with_state(state)
+}
+
+async fn favicon() -> impl IntoResponse {
+    (
+        [
+            (header::CONTENT_TYPE, "image/svg+xml"),
+            (header::CACHE_CONTROL, "max-age=86400"),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
+        FAVICON_SVG,
+    )
 }
 
 async fn page() -> impl IntoResponse {

@@ -1,0 +1,310 @@
+//! `once` and `play`: deliver targets to compute_ik and wait for its answer, through its
+//! public interfaces only. A target is **taken** when `joint_states` carries its stamp
+//! (the first step of the motion it starts carries the target's `header.stamp`), and
+//! **refused** when a `diagnostics` status carries [`REJECTED_STAMP_KEY`] with that
+//! stamp; it **arrived** when `joint_states` has the arm at its joints.
+
+use crate::cli::{DeliveryArgs, OnceArgs, PlayArgs};
+use crate::ros_outputs::RosOutputs;
+use crate::teleop::parse_waypoints;
+use crate::{stamp_text, status_node, Outputs, REJECTED_STAMP_KEY};
+use anyhow::{anyhow, Context as _};
+use eezybot_kinematics::Arm;
+use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::Time;
+use futures::StreamExt;
+use ros2_client::Subscription;
+use ros_plumbing::remote_params::RemoteParameters;
+use ros_plumbing::{qos, ParameterValue, RosNode};
+use std::future::Future;
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// Why a target was not delivered: the command was refused (exit status 1), as
+/// opposed to a usage or configuration error.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum NotDelivered {
+    /// The local reachability check (the same closed form as compute_ik's) refused it.
+    #[error("target {xyz:?} refused before sending: {reason}")]
+    Unreachable {
+        /// the target
+        xyz: [f64; 3],
+        /// why
+        reason: String,
+    },
+    /// A node refused it (its diagnostics carried the target's stamp).
+    #[error("{node} refused {xyz:?}: {reason}")]
+    Refused {
+        /// the node that refused it, as it names itself
+        node: String,
+        /// the target
+        xyz: [f64; 3],
+        /// its `last_rejection`, or its status message
+        reason: String,
+    },
+    /// Nobody subscribes `xyz_target`.
+    #[error("nobody subscribes {topic} (is compute_ik running in this ROS domain?)")]
+    NobodyListens {
+        /// the resolved topic
+        topic: String,
+    },
+    /// No answer in time.
+    #[error("no answer from compute_ik within {0:.1} s")]
+    NoAnswer(f64),
+    /// Taken, but the arm was not there in time.
+    #[error("the arm did not arrive at {xyz:?} within {timeout_s:.1} s")]
+    DidNotArrive {
+        /// the target
+        xyz: [f64; 3],
+        /// how long we waited
+        timeout_s: f64,
+    },
+}
+
+/// `once X Y Z [--gripper G]`: deliver one target (with `--line`, wait until the arm is
+/// there), then set the claw.
+pub async fn once(
+    node: &mut RosNode,
+    arm: &Arm,
+    args: OnceArgs,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let xyz = args.xyz();
+    check(arm, xyz)?;
+    let line = LineMotion::engage_for(node, &args.delivery).await?;
+    let mut d = Delivery::new(node, &args.delivery)?;
+    let node = &*node;
+    let work = async {
+        d.connect(node).await?;
+        d.send(xyz).await?;
+        if args.delivery.line {
+            // the line is the point: stay until it is drawn
+            d.arrival(arm, xyz).await?;
+        }
+        if let Some(g) = args.gripper {
+            d.out.gripper_target(g); // at the target, as a waypoint's gripper
+        }
+        println!("delivered {xyz:?}");
+        Ok(())
+    };
+    finish(work, shutdown, line).await
+}
+
+/// `play FILE`: each row in turn: move, arrive, set the claw, dwell; the first refusal
+/// stops with its waypoint's number.
+pub async fn play(
+    node: &mut RosNode,
+    arm: &Arm,
+    args: PlayArgs,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let path = args.file.display().to_string();
+    let text =
+        std::fs::read_to_string(&args.file).with_context(|| format!("cannot read {path}"))?;
+    let waypoints = parse_waypoints(&text).map_err(|e| anyhow!("{path}: {e}"))?;
+    let line = LineMotion::engage_for(node, &args.delivery).await?;
+    let mut d = Delivery::new(node, &args.delivery)?;
+    let node = &*node;
+    let work = async {
+        d.connect(node).await?;
+        for (i, w) in waypoints.iter().enumerate() {
+            // move, arrive, then set the claw there: the order `record` writes rows in
+            let at = || format!("waypoint {}", i + 1);
+            check(arm, w.xyz).with_context(at)?;
+            d.send(w.xyz).await.with_context(at)?;
+            d.arrival(arm, w.xyz).await.with_context(at)?;
+            if let Some(g) = w.gripper {
+                d.out.gripper_target(g);
+            }
+            println!(
+                "waypoint {}/{}: {:?} gripper {:?}, dwell {:.2} s",
+                i + 1,
+                waypoints.len(),
+                w.xyz,
+                w.gripper,
+                w.dwell_s
+            );
+            tokio::time::sleep(Duration::from_secs_f64(w.dwell_s)).await;
+        }
+        Ok(())
+    };
+    finish(work, shutdown, line).await
+}
+
+/// Run `work` until it ends or `shutdown` (Ctrl-C: exit 0), then put compute_ik's
+/// `motion` back.
+async fn finish(
+    work: impl Future<Output = anyhow::Result<()>>,
+    shutdown: impl Future<Output = ()>,
+    line: Option<LineMotion>,
+) -> anyhow::Result<()> {
+    let result = tokio::select! {
+        r = work => r,
+        _ = shutdown => Ok(()),
+    };
+    if let Some(l) = line {
+        l.restore().await;
+    }
+    result
+}
+
+/// The local reachability check (the closed form compute_ik uses for the EezyBot).
+fn check(arm: &Arm, xyz: [f64; 3]) -> Result<(), NotDelivered> {
+    arm.solve_position(&xyz.into(), 0.0)
+        .map(|_| ())
+        .map_err(|e| NotDelivered::Unreachable {
+            xyz,
+            reason: e.to_string(),
+        })
+}
+
+/// The publishers and subscriptions of a delivery.
+struct Delivery {
+    out: RosOutputs,
+    joint_states: Subscription<JointState>,
+    diagnostics: Subscription<DiagnosticArray>,
+    topic: String,
+    timeout: Duration,
+}
+
+impl Delivery {
+    fn new(node: &mut RosNode, args: &DeliveryArgs) -> anyhow::Result<Delivery> {
+        Ok(Delivery {
+            out: RosOutputs::new(node)?,
+            joint_states: node.subscription("joint_states", qos::COMMANDS)?,
+            diagnostics: node.subscription("diagnostics", qos::DIAGNOSTICS)?,
+            topic: node.resolver().resolve("xyz_target")?,
+            timeout: args.timeout,
+        })
+    }
+
+    /// Wait until someone subscribes `xyz_target`, and a little more for their reader
+    /// to see our writer too.
+    async fn connect(&self, node: &RosNode) -> Result<(), NotDelivered> {
+        let deadline = Instant::now() + self.timeout;
+        while self.out.xyz.get_subscription_count(node.node()) == 0 {
+            if Instant::now() > deadline {
+                return Err(NotDelivered::NobodyListens {
+                    topic: self.topic.clone(),
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        Ok(())
+    }
+
+    /// Publish `xyz` stamped now; wait until `joint_states` carries the stamp (taken)
+    /// or a `diagnostics` status carries it under [`REJECTED_STAMP_KEY`] (refused).
+    async fn send(&mut self, xyz: [f64; 3]) -> Result<(), NotDelivered> {
+        let stamp = Time::now();
+        let refused_stamp = stamp_text(stamp);
+        self.out.xyz_target(xyz, stamp);
+        let deadline = Instant::now() + self.timeout;
+        let js = self.joint_states.async_stream();
+        let diags = self.diagnostics.async_stream();
+        tokio::pin!(js, diags);
+        loop {
+            tokio::select! {
+                _ = tokio::time::sleep_until(deadline) => return Err(NotDelivered::NoAnswer(self.timeout.as_secs_f64())),
+                Some(Ok((m, _))) = js.next() => if m.header.stamp == stamp { return Ok(()) },
+                Some(Ok((d, _))) = diags.next() => {
+                    let value = |s: &eezybot_msgs::diagnostic_msgs::DiagnosticStatus, k: &str| {
+                        s.values.iter().find(|kv| kv.key == k).map(|kv| kv.value.clone())
+                    };
+                    if let Some(s) = d.status.iter().find(|s| value(s, REJECTED_STAMP_KEY).as_deref() == Some(refused_stamp.as_str())) {
+                        return Err(NotDelivered::Refused {
+                            node: status_node(&s.name).map_or_else(|| s.name.clone(), |(n, _)| n.to_string()),
+                            xyz,
+                            reason: value(s, "last_rejection").unwrap_or_else(|| s.message.clone()),
+                        });
+                    }
+                }
+            }
+        }
+    }
+
+    /// Wait until `joint_states` has the arm at `xyz` (compute_ik's planned motion ends
+    /// exactly on the target's joints).
+    async fn arrival(&self, arm: &Arm, xyz: [f64; 3]) -> anyhow::Result<()> {
+        let goal = arm
+            .solve_position(&xyz.into(), 0.0)
+            .map_err(|e| anyhow!("target {xyz:?}: {e}"))?;
+        let want = [goal.base_rad, goal.shoulder_rad, goal.elbow_rad];
+        let names = &eezybot_kinematics::ACTUATED_JOINTS[..3];
+        let at_goal = |m: &JointState| {
+            names.iter().zip(want).all(|(n, w)| {
+                m.name
+                    .iter()
+                    .position(|x| x == n)
+                    .and_then(|i| m.position.get(i))
+                    .is_some_and(|p| (p - w).abs() < 1e-6)
+            })
+        };
+        let js = self.joint_states.async_stream();
+        tokio::pin!(js);
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            tokio::select! {
+                _ = tokio::time::sleep_until(deadline) => return Err(NotDelivered::DidNotArrive { xyz, timeout_s: self.timeout.as_secs_f64() }.into()),
+                Some(Ok((m, _))) = js.next() => if at_goal(&m) { return Ok(()) },
+            }
+        }
+    }
+}
+
+/// compute_ik's `motion` set to `line` for a delivery, and put back afterwards.
+struct LineMotion {
+    client: RemoteParameters,
+    previous: ParameterValue,
+}
+
+impl LineMotion {
+    /// With `--line`: set the `motion` of `--ik-node` to `line`.
+    async fn engage_for(
+        node: &mut RosNode,
+        args: &DeliveryArgs,
+    ) -> anyhow::Result<Option<LineMotion>> {
+        if !args.line {
+            return Ok(None);
+        }
+        let client = RemoteParameters::new(node, &args.ik_node)?;
+        client
+            .wait(node, args.timeout)
+            .await
+            .map_err(|e| anyhow!(e))?;
+        let previous = client
+            .get("motion")
+            .await
+            .map_err(|e| anyhow!(e))?
+            .ok_or_else(|| {
+                anyhow!(
+                    "{} has no `motion` parameter (too old a compute_ik?)",
+                    client.node_name()
+                )
+            })?;
+        client
+            .set("motion", ParameterValue::String("line".into()))
+            .await
+            .map_err(|e| anyhow!(e))?;
+        log::info!("{} motion:=line for this delivery", client.node_name());
+        Ok(Some(LineMotion { client, previous }))
+    }
+
+    async fn restore(self) {
+        match self.client.set("motion", self.previous.clone()).await {
+            Ok(()) => log::info!(
+                "{} motion back to {:?}",
+                self.client.node_name(),
+                self.previous
+            ),
+            Err(e) => log::error!(
+                "could not put {}'s motion back to {:?}: {e}",
+                self.client.node_name(),
+                self.previous
+            ),
+        }
+    }
+}

@@ -1,0 +1,235 @@
+//! `serve` (the default): the web panel, wired to ROS, and the start line with its URL.
+
+use crate::access::{self, AccessPolicy, Token, TokenSource};
+use crate::ros_outputs::RosOutputs;
+use crate::teleop::Teleop;
+use crate::web::{Limits, WebState};
+use crate::Input;
+use anyhow::Context as _;
+use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::{Bool, String as StringMsg};
+use futures::StreamExt;
+use ros_plumbing::peers::PeerWatch;
+use ros_plumbing::{qos, ParameterValue, RosNode};
+use std::future::Future;
+use std::io::Write as _;
+use std::net::{IpAddr, SocketAddr};
+use std::sync::{Arc, Mutex};
+
+/// Serve the panel on the `bind` parameter's address until `shutdown`.
+pub async fn serve(
+    node: &mut RosNode,
+    arm: eezybot_kinematics::Arm,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let params = node.params().clone();
+    let outputs = RosOutputs::new(node)?;
+    let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
+    let diagnostics = node.subscription::<DiagnosticArray>("diagnostics", qos::DIAGNOSTICS)?;
+    let rate = params.f64("rate").unwrap_or(50.0);
+    let teleop = Arc::new(Mutex::new(Teleop::new(arm, rate)));
+    let description =
+        node.subscription::<StringMsg>("robot_description", qos::ROBOT_DESCRIPTION)?;
+    let servo_state = node.subscription::<JointState>("servo_state", qos::COMMANDS)?;
+    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let (to_browsers, _) = tokio::sync::broadcast::channel(256);
+    let limits = Limits::default();
+    let (req_tx, req_rx) = crate::web::request_channels(&limits);
+    let t = teleop.clone();
+    let p = params.clone();
+    let bind = params
+        .string("bind")
+        .unwrap_or_else(|| "127.0.0.1:8080".into());
+    let listener = tokio::net::TcpListener::bind(&bind)
+        .await
+        .with_context(|| format!("cannot listen on {bind}"))?;
+    let local = listener
+        .local_addr()
+        .with_context(|| format!("cannot tell the address bound for {bind}"))?;
+    let (token, source) = access::resolve_token(
+        &params.string("token").unwrap_or_default(),
+        local.ip().is_loopback(),
+        || {
+            let mut bytes = [0u8; access::GENERATED_TOKEN_BYTES];
+            getrandom::fill(&mut bytes).map_err(|e| e.to_string())?;
+            Ok(bytes)
+        },
+    )?;
+    hide_token_parameter(node, &params, source);
+    let state = WebState::new(
+        to_browsers.clone(),
+        req_tx,
+        Arc::new(move || {
+            t.lock()
+                .map(|t| crate::hello_json(&t, p.f64("rate").unwrap_or(50.0)))
+                .unwrap_or_default()
+        }),
+        AccessPolicy::new(token.clone(), local.port()),
+        limits,
+    );
+    let web_stats = state.stats.clone();
+    let url = format!("http://{local}/");
+    log::info!(
+        "{} ready in ROS domain {}: web panel on {url} ({}) -> {}",
+        node.resolver().node_fqn(),
+        node.domain_id(),
+        match source {
+            TokenSource::None => "loopback only, no token",
+            TokenSource::Generated => "token required, generated",
+            TokenSource::Parameter => "token required, from the token parameter",
+        },
+        node.resolver().resolve("xyz_target")?
+    );
+    print_panel_urls(local, token.as_ref());
+    let server = tokio::spawn(async move {
+        let app = crate::web::router(state).into_make_service_with_connect_info::<SocketAddr>();
+        if let Err(e) = axum::serve(listener, app).await {
+            log::error!("web server stopped: {e}");
+        }
+    });
+    // a sample that cannot be read becomes Input::Unreadable: logged and counted
+    let unreadable = |topic: &'static str, e: &dyn std::fmt::Debug| Input::Unreadable {
+        topic,
+        error: format!("{e:?}"),
+    };
+    let inputs = futures::stream::select_all([
+        joint_states
+            .async_stream()
+            .map(move |r| match r {
+                Ok((m, _)) => Input::JointStates(m),
+                Err(e) => unreadable("joint_states", &e),
+            })
+            .boxed(),
+        description
+            .async_stream()
+            .map(move |r| match r {
+                Ok((m, _)) => Input::RobotDescription(m.data),
+                Err(e) => unreadable("robot_description", &e),
+            })
+            .boxed(),
+        diagnostics
+            .async_stream()
+            .map(move |r| match r {
+                Ok((m, _)) => Input::Diagnostics(m),
+                Err(e) => unreadable("diagnostics", &e),
+            })
+            .boxed(),
+        servo_state
+            .async_stream()
+            .map(move |r| match r {
+                Ok((m, _)) => Input::ServoState(m),
+                Err(e) => unreadable("servo_state", &e),
+            })
+            .boxed(),
+        estop
+            .async_stream()
+            .map(move |r| match r {
+                Ok((m, _)) => Input::Estop(m.data),
+                Err(e) => unreadable("estop", &e),
+            })
+            .boxed(),
+    ]);
+    let reporting = crate::Reporting {
+        name: format!("{}: operator panel", node.resolver().node_name()),
+        url,
+        peers: PeerWatch::new(&crate::watched_topics(
+            &node.resolver().resolve("xyz_target")?,
+            &node.resolver().resolve("servo_state")?,
+        )),
+        counts: || {
+            vec![
+                outputs.xyz.get_subscription_count(node.node()),
+                servo_state.get_publisher_count(node.node()),
+            ]
+        },
+        web: web_stats,
+    };
+    crate::run(
+        teleop,
+        inputs,
+        req_rx,
+        to_browsers,
+        &outputs,
+        params,
+        reporting,
+        shutdown,
+    )
+    .await;
+    server.abort();
+    Ok(())
+}
+
+/// From now on the `token` parameter reads `(generated)` or `(hidden)`, so that
+/// `ros2 param get` (and `ros2 param dump`) never shows the secret: anyone in the ROS
+/// domain may read parameters.
+fn hide_token_parameter(node: &RosNode, params: &ros_plumbing::Params, source: TokenSource) {
+    let Some(shown) = source.shown_as() else {
+        return;
+    };
+    // the store first: the read-only check compares with it and lets the same value pass
+    params.set("token", ParameterValue::String(shown.into()));
+    if let Err(e) = node
+        .node()
+        .set_parameter("token", ParameterValue::String(shown.into()))
+    {
+        log::warn!("the token parameter could not be hidden from `ros2 param get`: {e}");
+    }
+}
+
+/// The addresses a panel bound to `local` is reached at: `local` itself, or for an
+/// unspecified address (0.0.0.0, [::]) this host's addresses, loopback first.
+fn panel_addresses(local: SocketAddr) -> Vec<IpAddr> {
+    if !local.ip().is_unspecified() {
+        return vec![local.ip()];
+    }
+    let mut found: Vec<IpAddr> = vec![];
+    #[cfg(unix)]
+    if let Ok(addrs) = nix::ifaddrs::getifaddrs() {
+        for a in addrs {
+            let Some(addr) = a.address else { continue };
+            let ip = if let Some(v4) = addr.as_sockaddr_in() {
+                IpAddr::V4(v4.ip())
+            } else if let Some(v6) = addr.as_sockaddr_in6() {
+                // link-local addresses need a zone in a URL: leave them out
+                if !local.is_ipv6() || (v6.ip().segments()[0] & 0xffc0) == 0xfe80 {
+                    continue;
+                }
+                IpAddr::V6(v6.ip())
+            } else {
+                continue;
+            };
+            if !found.contains(&ip) {
+                found.push(ip);
+            }
+        }
+    }
+    if found.is_empty() {
+        found.push(local.ip());
+    }
+    found.sort_by_key(|ip| !ip.is_loopback());
+    found
+}
+
+/// The start line meant for the operator: the panel's URL(s) with the token, on
+/// standard output only (never in the log, which also goes to `/rosout`).
+fn print_panel_urls(local: SocketAddr, token: Option<&Token>) {
+    let query = token
+        .map(|t| format!("?token={}", t.reveal()))
+        .unwrap_or_default();
+    let mut out = std::io::stdout().lock();
+    for ip in panel_addresses(local) {
+        let _ = writeln!(
+            out,
+            "web panel: http://{}/{query}",
+            SocketAddr::new(ip, local.port())
+        );
+    }
+    if token.is_some() {
+        let _ = writeln!(
+            out,
+            "web panel: every client needs the token above; anyone who has it can move the arm (README: Exposing the web panel safely)"
+        );
+    }
+    let _ = out.flush();
+}
