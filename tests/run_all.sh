@@ -15,6 +15,7 @@ cargo test --workspace
 echo "== Raspberry Pi: cross-build (aarch64, profile pi), pure crates' tests under qemu-aarch64"
 . launch_scripts/setup_cross.sh
 launch_scripts/cross_build.sh aarch64
-cargo test --target aarch64-unknown-linux-gnu -p eezybot_kinematics -p servo_protocol -p eezybot_msgs
+# the IK properties with 25 cases each under emulation (200 natively, above)
+PROPTEST_CASES=25 cargo test --target aarch64-unknown-linux-gnu -p eezybot_kinematics -p servo_protocol -p eezybot_msgs
 echo "== integration tests (real ROS 2)"
 "$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider "$@"
