@@ -113,6 +113,16 @@ impl RosNode {
         domain_env: Option<&str>,
     ) -> Result<RosNode, PlumbingError> {
         let (user_args, ros): (Vec<String>, RosArgs) = args::parse(argv)?;
+        if let (true, Some(extra)) = (spec.usage.is_empty(), user_args.first()) {
+            // before any DDS entity exists: nothing to announce and tear down again
+            return Err(PlumbingError::BadArgument {
+                arg: extra.clone(),
+                why: format!(
+                    "unexpected argument ({} takes none besides --ros-args; see --help)",
+                    spec.name
+                ),
+            });
+        }
         logging::init(
             ros.log_level.unwrap_or(log::LevelFilter::Info),
             ros.stdout_logs.unwrap_or(true),
@@ -135,8 +145,11 @@ impl RosNode {
         let mut options = NodeOptions::new()
             .enable_rosout(rosout)
             .start_parameter_services(true);
-        for (k, v) in values {
-            options = options.declare_parameter(&k, v);
+        let use_sim_time = values.get(params::USE_SIM_TIME.name)
+            == Some(&ros2_client::ParameterValue::Boolean(true));
+        for p in spec.params.iter().chain([&*params::USE_SIM_TIME]) {
+            let value = values.get(p.name).unwrap_or(&p.default).clone();
+            options = options.declare_parameter_with_descriptor(p.name, value, p.descriptor());
         }
         let specs = spec.params.clone();
         let current = params.clone();
@@ -200,6 +213,12 @@ impl RosNode {
             }
         });
         log::debug!("node {} up in ROS domain {domain_id}", resolver.node_fqn());
+        if use_sim_time {
+            log::info!(
+                "use_sim_time: the node's clock follows /clock; its messages are still stamped \
+                 with the system clock"
+            );
+        }
         Ok(RosNode {
             node,
             resolver,

@@ -5,7 +5,7 @@ use crate::args::RosArgs;
 use crate::error::PlumbingError;
 use crate::logging::shorten;
 use eezybot_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
-use ros2_client::ParameterValue;
+use ros2_client::{NumericRange, ParameterDescriptor, ParameterValue};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::{Arc, RwLock};
@@ -47,6 +47,9 @@ pub struct ParamSpec {
     pub range: ParamRange,
     /// If true, it can only be set at start (command line, params file).
     pub read_only: bool,
+    /// What else a value must satisfy, in words (e.g. the accepted names); empty if
+    /// nothing. `ros2 param describe` shows it as the additional constraints.
+    pub constraints: &'static str,
     /// A further check of the value (e.g. that a file loads), after type and range.
     pub validator: Option<ValueCheck>,
 }
@@ -64,6 +67,7 @@ impl ParamSpec {
             description,
             range: ParamRange::Any,
             read_only: false,
+            constraints: "",
             validator: None,
         }
     }
@@ -84,6 +88,38 @@ impl ParamSpec {
     pub fn read_only(mut self) -> ParamSpec {
         self.read_only = true;
         self
+    }
+
+    /// With further constraints described in words (see [`ParamSpec::constraints`]).
+    pub fn constraints(mut self, constraints: &'static str) -> ParamSpec {
+        self.constraints = constraints;
+        self
+    }
+
+    /// The descriptor `describe_parameters` (`ros2 param describe`) answers with:
+    /// description, read-only flag, range (step 0: any value in it) and constraints.
+    pub fn descriptor(&self) -> ParameterDescriptor {
+        ParameterDescriptor {
+            name: self.name.to_string(),
+            param_type: self.default.to_parameter_type(),
+            description: self.description.to_string(),
+            additional_constraints: self.constraints.to_string(),
+            read_only: self.read_only,
+            dynamic_typing: false,
+            range: match self.range {
+                ParamRange::Any => NumericRange::NotSpecified,
+                ParamRange::Integer { min, max } => NumericRange::IntegerRange {
+                    from_value: min,
+                    to_value: max,
+                    step: 0,
+                },
+                ParamRange::Double { min, max } => NumericRange::FloatingPointRange {
+                    from_value: min,
+                    to_value: max,
+                    step: 0.0,
+                },
+            },
+        }
     }
 
     /// Check a value against type and range; an integer is accepted for a double.
@@ -307,6 +343,17 @@ fn flatten(
     }
 }
 
+/// The parameter every ROS 2 node has; ros2-client keeps it (it subscribes to `/clock`
+/// while it is true), this spec describes and checks it.
+pub static USE_SIM_TIME: std::sync::LazyLock<ParamSpec> = std::sync::LazyLock::new(|| {
+    ParamSpec::new(
+        "use_sim_time",
+        ParameterValue::Boolean(false),
+        "follow the simulated time on /clock (rosgraph_msgs/msg/Clock) instead of the \
+         system clock; these nodes still stamp their own messages with the system clock",
+    )
+});
+
 /// Starting values: defaults, then params files in order, then `-p` in order; each
 /// checked against its spec. Unknown names are refused (a typo should not pass silently).
 pub fn initial_values(
@@ -331,27 +378,17 @@ pub fn initial_values(
         }
     }
     for (name, value, origin) in overrides {
-        if name == "use_sim_time" {
-            // Handled by ros2-client itself; we only accept the harmless default.
-            if value != ParameterValue::Boolean(false) {
-                return Err(PlumbingError::Parameter {
-                    name,
-                    why: "simulated time is not supported by these nodes".into(),
-                });
-            }
-            continue;
-        }
-        let spec =
-            specs
-                .iter()
-                .find(|s| s.name == name)
-                .ok_or_else(|| PlumbingError::Parameter {
-                    name: name.clone(),
-                    why: format!(
-                        "not a parameter of this node (from {origin}); known: {}",
-                        specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
-                    ),
-                })?;
+        let spec = specs
+            .iter()
+            .chain([&*USE_SIM_TIME])
+            .find(|s| s.name == name)
+            .ok_or_else(|| PlumbingError::Parameter {
+                name: name.clone(),
+                why: format!(
+                    "not a parameter of this node (from {origin}); known: {}",
+                    specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+                ),
+            })?;
         let value = spec.check(&value).map_err(|why| PlumbingError::Parameter {
             name: name.clone(),
             why: format!("{why} (from {origin})"),

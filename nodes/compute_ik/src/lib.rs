@@ -43,11 +43,13 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String(String::new()),
                 "arm geometry, limits and servo calibration YAML; empty = the shipped config/arm.yaml",
             )
+            .constraints("empty, or an arm_config YAML file that loads")
             .validator(|v| match v {
                 ParameterValue::String(p) => load_config(p).map(|_| ()).map_err(|e| e.to_string()),
                 _ => Ok(()),
             }),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame xyz_target must be given in")
+                .constraints("not empty")
                 .validator(|v| match v {
                     ParameterValue::String(s) if s.is_empty() => Err("must not be empty".into()),
                     _ => Ok(()),
@@ -59,6 +61,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String("joint".into()),
                 "how xyz targets are moved to: `joint` (every servo within its limits, together) or `line` (the tool on a straight line, refused if any point of it is unreachable)",
             )
+            .constraints("one of: joint, line")
             .validator(|v| match v {
                 ParameterValue::String(s) if MotionMode::parse(s).is_some() => Ok(()),
                 _ => Err("must be `joint` or `line`".into()),
@@ -80,6 +83,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String("analytic".into()),
                 "IK of xyz_target and pose_target: `analytic` (the EezyBot's closed form; dls for an arm without one), `jacobian` (pseudo-inverse), `dls` (damped least squares), `newton` (Newton-Raphson); switchable while running",
             )
+            .constraints("one of: analytic, jacobian, dls, newton")
             .validator(|v| match v {
                 ParameterValue::String(s) => Solver::check(s).map(|_| ()),
                 _ => Ok(()),
@@ -90,6 +94,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "the arm's URDF; empty = the EezyBot (closed form, servo mapping); any other arm is solved numerically on the chain base_link -> tip_link and publishes no servo_angles",
             )
             .read_only()
+            .constraints("empty, or a URDF file that loads")
             .validator(|v| match v {
                 ParameterValue::String(p) if !p.is_empty() => RobotModel::load(std::path::Path::new(p))
                     .map(|_| ())

@@ -52,12 +52,14 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 .read_only(),
             int("watchdog_ms", 500, 20, 60_000, "device holds/detaches after this much silence"),
             ParamSpec::new("watchdog_action", ParameterValue::String("hold".into()), "`hold` or `detach` on watchdog")
+                .constraints("one of: hold, detach")
                 .validator(|v| match v {
                     ParameterValue::String(s) if s == "hold" || s == "detach" => Ok(()),
                     _ => Err("must be `hold` or `detach`".into()),
                 })
                 .read_only(),
             ParamSpec::new("estop_action", ParameterValue::String("hold".into()), "`hold` (the servos keep their position) or `detach` (the pulses stop, servos go limp) on e-stop")
+                .constraints("one of: hold, detach")
                 .validator(|v| match v {
                     ParameterValue::String(s) if s == "hold" || s == "detach" => Ok(()),
                     _ => Err("must be `hold` or `detach`".into()),
@@ -71,6 +73,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String(String::new()),
                 "servo calibration (pulse ranges) and motion limits (the velocity guard) YAML; empty = the shipped config/arm.yaml",
             )
+            .constraints("empty, or an arm_config YAML file that loads")
             .validator(|v| match v {
                 ParameterValue::String(p) => load_calibration(p).map(|_| ()),
                 _ => Ok(()),

@@ -42,6 +42,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String(String::new()),
                 "path of the URDF to publish; empty = the EezyBotArm URDF built into this binary (urdf/eezybot.urdf)",
             )
+                .constraints("empty, or a URDF file that loads")
                 .validator(|v| match v {
                     ParameterValue::String(p) => load_urdf(p).map(|_| ()),
                     _ => Ok(()),
