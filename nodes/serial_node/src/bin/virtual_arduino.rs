@@ -19,13 +19,64 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
+const USAGE: &str = "\
+virtual_arduino: the virtual Arduino (servo_control firmware's protocol, limits, watchdog
+and servo motion) behind a pseudo-terminal, for serial_node's real serial-port path.
+
+usage: virtual_arduino [--] PTY_LINK_PATH
+       virtual_arduino --help
+
+PTY_LINK_PATH  the symbolic link to create to the pseudo-terminal (replaced if it
+               exists, removed on exit); give it to serial_node as -p port:=PTY_LINK_PATH
+
+Stops on SIGINT/SIGTERM. Exit codes: 0 stopped by a signal, 1 could not serve (no
+pseudo-terminal, cannot create the link), 2 usage error.
+";
+
+/// What the command line asks for.
+#[derive(Debug, PartialEq)]
+enum Command {
+    Help,
+    Serve(String),
+}
+
+/// `args` without argv\[0\]; the error is the usage problem.
+fn parse(args: &[String]) -> Result<Command, String> {
+    let mut paths = Vec::new();
+    let mut options_done = false;
+    for arg in args {
+        match arg.as_str() {
+            "-h" | "--help" if !options_done => return Ok(Command::Help),
+            "--" if !options_done => options_done = true,
+            a if a.starts_with('-') && a != "-" && !options_done => {
+                return Err(format!("unknown option `{a}`"))
+            }
+            a => paths.push(a.to_string()),
+        }
+    }
+    match <[String; 1]>::try_from(paths) {
+        Ok([path]) => Ok(Command::Serve(path)),
+        Err(paths) if paths.is_empty() => Err("missing PTY_LINK_PATH".into()),
+        Err(paths) => Err(format!("one PTY_LINK_PATH expected, got {}", paths.len())),
+    }
+}
+
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().collect();
-    let [_, link] = args.as_slice() else {
-        eprintln!("usage: virtual_arduino PTY_LINK_PATH");
-        return ExitCode::from(2);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let link = match parse(&args) {
+        Ok(Command::Help) => {
+            print!("{USAGE}");
+            return ExitCode::SUCCESS;
+        }
+        Ok(Command::Serve(link)) => link,
+        Err(why) => {
+            eprintln!(
+                "virtual_arduino: {why}\nusage: virtual_arduino [--] PTY_LINK_PATH (see --help)"
+            );
+            return ExitCode::from(2);
+        }
     };
-    match serve(link) {
+    match serve(&link) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("virtual_arduino: {e}");
@@ -83,4 +134,25 @@ fn serve(link: &str) -> Result<(), Box<dyn std::error::Error>> {
     let _ = std::fs::remove_file(link);
     drop(pty.slave);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(args: &[&str]) -> Result<Command, String> {
+        parse(&args.iter().map(|a| a.to_string()).collect::<Vec<_>>())
+    }
+
+    #[test]
+    fn help_is_not_a_pty_path() {
+        assert_eq!(p(&["--help"]), Ok(Command::Help));
+        assert_eq!(p(&["-h"]), Ok(Command::Help));
+        assert_eq!(p(&["/tmp/tty", "--help"]), Ok(Command::Help));
+        assert_eq!(p(&["/tmp/tty"]), Ok(Command::Serve("/tmp/tty".into())));
+        assert_eq!(p(&["--", "--help"]), Ok(Command::Serve("--help".into())));
+        assert!(p(&["--bogus", "/tmp/tty"]).unwrap_err().contains("--bogus"));
+        assert!(p(&[]).is_err());
+        assert!(p(&["a", "b"]).is_err());
+    }
 }

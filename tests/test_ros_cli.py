@@ -1,0 +1,180 @@
+"""What the stock ROS 2 tools see of our nodes, asked the way they ask it through real rclpy
+(`ros2 param describe/list`, `ros2 topic list -t`), and the binaries' command lines."""
+import re
+import subprocess
+import time
+
+import pytest
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters, GetParameterTypes, ListParameters
+
+from conftest import bin_path
+
+ROS_NODES = ["compute_ik", "serial_node", "state_publisher"]
+NODE_ARGS = {"serial_node": ["--ros-args", "-p", "port:=mock"]}
+
+
+def call(observer, client, request, timeout=10):
+    assert client.wait_for_service(timeout_sec=timeout), f"{client.srv_name} not offered"
+    future = client.call_async(request)
+    assert observer.spin_until(future.done, timeout), f"{client.srv_name} did not answer"
+    return future.result()
+
+
+def help_table(name):
+    """name -> (description, read-only) from the binary's --help, the other place the
+    parameters are documented."""
+    out = subprocess.run([bin_path(name), "--help"], capture_output=True, text=True, timeout=30).stdout
+    table = {}
+    for line in out.split("parameters:\n", 1)[1].splitlines():
+        m = re.match(r"  (\S+)\s+(.*) \(default .*\)(, read-only)?$", line)
+        if m:
+            table[m.group(1)] = (m.group(2), bool(m.group(3)))
+    return table
+
+
+# Ranges and constraints stated in each node's spec, as describe_parameters must report them
+# (from_value, to_value); any other parameter has no range.
+RANGES = {
+    "compute_ik": {"diagnostics_period": (0.05, 60.0), "motion_rate": (1.0, 500.0), "max_target_age": (0.0, 3600.0),
+                   "substitute_max_distance": (1e-6, 1.0), "gripper_up_angle": (0.0, 180.0)},
+    "serial_node": {"baud": (1200, 4_000_000), "send_rate": (1.0, 500.0), "watchdog_ms": (20, 60_000),
+                    "heartbeat_period": (0.01, 10.0), "diagnostics_period": (0.05, 60.0)},
+    "state_publisher": {"publish_frequency": (0.0, 10_000.0), "diagnostics_period": (0.05, 60.0)},
+}
+CONSTRAINTS = {
+    "compute_ik": {"solver": "one of: analytic, jacobian, dls, newton", "motion": "one of: joint, line"},
+    "serial_node": {"watchdog_action": "one of: hold, detach", "estop_action": "one of: hold, detach"},
+    "state_publisher": {"urdf": "a URDF file that loads"},
+}
+
+
+@pytest.mark.parametrize("name", ROS_NODES)
+def test_describe_parameters_gives_description_type_read_only_and_range(launch, observer, name):
+    launch(name, *NODE_ARGS.get(name, []))
+    node = observer.node
+    listed = call(observer, node.create_client(ListParameters, f"/{name}/list_parameters"),
+                  ListParameters.Request()).result.names
+    documented = help_table(name)
+    assert set(listed) == set(documented) | {"use_sim_time"}, listed
+
+    types = call(observer, node.create_client(GetParameterTypes, f"/{name}/get_parameter_types"),
+                 GetParameterTypes.Request(names=[*listed, "no_such_parameter"])).types
+    assert types[-1] == ParameterType.PARAMETER_NOT_SET
+    described = call(observer, node.create_client(DescribeParameters, f"/{name}/describe_parameters"),
+                     DescribeParameters.Request(names=listed)).descriptors
+    assert [d.name for d in described] == listed
+
+    for d, t in zip(described, types):
+        assert d.type == t != ParameterType.PARAMETER_NOT_SET, d
+        assert d.description and "not implemented" not in d.description, d
+        if d.name == "use_sim_time":
+            assert d.type == ParameterType.PARAMETER_BOOL and not d.read_only
+            assert "/clock" in d.description
+            continue
+        assert (d.description, d.read_only) == documented[d.name], d.name
+        expected = RANGES[name].get(d.name)
+        if expected is None:
+            assert not d.integer_range and not d.floating_point_range, d
+        elif d.type == ParameterType.PARAMETER_INTEGER:
+            [r] = d.integer_range
+            assert (r.from_value, r.to_value, r.step) == (*expected, 0) and not d.floating_point_range, d
+        else:
+            assert d.type == ParameterType.PARAMETER_DOUBLE
+            [r] = d.floating_point_range
+            assert (r.from_value, r.to_value, r.step) == (*expected, 0.0) and not d.integer_range, d
+        if d.name in CONSTRAINTS[name]:
+            assert CONSTRAINTS[name][d.name] in d.additional_constraints, d
+    by_name = {d.name: d for d in described}
+    if name == "compute_ik":
+        # the issue's example: `ros2 param describe /compute_ik diagnostics_period`
+        assert by_name["diagnostics_period"].description == "seconds between diagnostics reports"
+        assert not by_name["diagnostics_period"].read_only and by_name["urdf"].read_only
+    if name == "serial_node":
+        assert by_name["port"].read_only and by_name["port"].type == ParameterType.PARAMETER_STRING
+
+
+def clock_subscriptions(observer):
+    return observer.node.get_subscriptions_info_by_topic("/clock")
+
+
+def test_clock_is_subscribed_only_with_use_sim_time_and_as_rosgraph_clock(launch, observer):
+    launch("compute_ik")
+    launch("state_publisher", "--ros-args", "-p", "use_sim_time:=true")
+    observer.spin_until(lambda: len(clock_subscriptions(observer)) > 0, 10)
+    observer.spin_for(2.0)  # compute_ik (system time) has had time to show up too, if it did
+    subs = clock_subscriptions(observer)
+    assert len(subs) == 1, subs  # state_publisher's only
+    assert subs[0].topic_type == "rosgraph_msgs/msg/Clock"
+    # nobody offers /clock with the wrong type (`ros2 topic list -t`)
+    assert dict(observer.node.get_topic_names_and_types()).get("/clock") == ["rosgraph_msgs/msg/Clock"]
+
+
+def set_use_sim_time(observer, on):
+    from rcl_interfaces.msg import Parameter, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    setp = observer.node.create_client(SetParameters, "/state_publisher/set_parameters")
+    value = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=on)
+    [result] = call(observer, setp, SetParameters.Request(parameters=[Parameter(name="use_sim_time", value=value)])).results
+    assert result.successful, result.reason
+
+
+def test_clock_is_subscribed_when_use_sim_time_is_set_at_run_time(launch, observer):
+    launch("state_publisher")
+    set_use_sim_time(observer, True)
+    assert observer.spin_until(lambda: len(clock_subscriptions(observer)) == 1, 10)
+    assert clock_subscriptions(observer)[0].topic_type == "rosgraph_msgs/msg/Clock"
+
+
+@pytest.mark.xfail(strict=True, reason="the node drops its /clock reader (RustDDS logs `Dispose Reader` and "
+                   "sends the SEDP dispose) but Fast DDS's graph still lists it 8 s later: a deleted endpoint "
+                   "of a live RustDDS participant is not removed from rclpy's graph (not investigated yet)")
+def test_clock_is_unsubscribed_when_use_sim_time_is_cleared_at_run_time(launch, observer):
+    launch("state_publisher", "--ros-args", "-p", "use_sim_time:=true")
+    assert observer.spin_until(lambda: len(clock_subscriptions(observer)) == 1, 10)
+    set_use_sim_time(observer, False)
+    assert observer.spin_until(lambda: len(clock_subscriptions(observer)) == 0, 10)
+
+
+def library_warnings(text):
+    """WARN and ERROR lines from RustDDS or ros2-client (targets `node:rustdds::…`)."""
+    return [line for line in text.splitlines()
+            if re.match(r"\[(WARN|ERROR)\] \[[0-9.]+\] \[[^\]]*:(rustdds|ros2_client)", line)]
+
+
+def test_no_library_warnings_at_start_with_an_rclpy_peer(launch, observer):
+    from std_msgs.msg import String
+    observer.pub("chatter", String)  # a Fast DDS peer with endpoints of its own
+    procs = [launch(name, *NODE_ARGS.get(name, [])) for name in ROS_NODES]
+    for name in ROS_NODES:
+        observer.spin_until(lambda: name in observer.node.get_node_names(), 10)
+    observer.spin_for(4.0)
+    for p in procs:
+        assert p.proc.poll() is None, p.output()
+        assert library_warnings(p.output()) == [], p.output()
+
+
+BINARIES = [*ROS_NODES, "virtual_arduino"]
+
+
+@pytest.mark.parametrize("name", BINARIES)
+def test_help_goes_to_stdout_and_exits_0(name, tmp_path):
+    r = subprocess.run([bin_path(name), "--help"], capture_output=True, text=True, timeout=30, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "usage:" in r.stdout and r.stderr == ""
+    assert list(tmp_path.iterdir()) == []  # virtual_arduino made a pty link named --help
+
+
+@pytest.mark.parametrize("name", BINARIES)
+@pytest.mark.parametrize("args", [["--bogus"], ["--ros-args", "--bogus"], []], ids=["bogus", "bogus-ros", "none"])
+def test_a_bad_command_line_exits_2(name, args, tmp_path, domain):
+    if args == [] and name != "virtual_arduino":
+        pytest.skip("a ROS node needs no argument")
+    started = time.monotonic()
+    r = subprocess.run([bin_path(name), *args], capture_output=True, text=True, timeout=30, cwd=tmp_path,
+                       env={"ROS_DOMAIN_ID": str(domain), "PATH": "/usr/bin:/bin"})
+    assert r.returncode == 2, (r.returncode, r.stdout, r.stderr)
+    assert r.stdout == "" and name in r.stderr
+    assert len(r.stderr.splitlines()) <= 2, r.stderr  # the reason, not DDS teardown chatter
+    assert time.monotonic() - started < 10
+    assert list(tmp_path.iterdir()) == []
