@@ -611,6 +611,11 @@ impl RtpsReaderProxy {
     }
   }
 
+  // Forget every fragment requested of `seq_num` (the writer no longer has it).
+  pub fn forget_frags_requested(&mut self, seq_num: SequenceNumber) {
+    self.frags_requested.remove(&seq_num);
+  }
+
   // Note: The current implementation produces an iterator that iterates only
   // over one fragmented sample, but the upper layer should detect that
   // there are still other fragmented samples requested (if any)

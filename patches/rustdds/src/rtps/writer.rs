@@ -1652,11 +1652,30 @@ impl Writer {
           TrafficClass::Control,
         );
       } else {
-        error!(
-          "handle_repair_frags_send_worker: {:?} missing from send buffer. topic={:?}",
-          seq_num, self.my_topic_name
+        // The sample is gone: a KEEP_LAST history replaced it with newer ones while
+        // the reader was still asking for its fragments (a reader behind a lossy or
+        // interrupted link). That is routine, not an error: tell the reader it will
+        // not come (GAP), as the DATA repair path does, and forget its fragments.
+        debug!(
+          "handle_repair_frags_send_worker: {:?} no longer in the send buffer (first {:?}), \
+           sending a GAP. topic={:?}",
+          seq_num,
+          self.send_buffer.first_change_sequence_number(),
+          self.my_topic_name
         );
-        // TODO: Should we send a GAP message then?
+        let gap = MessageBuilder::new().gap_msg(
+          &BTreeSet::from([seq_num]),
+          self.entity_id(),
+          self.endianness,
+          reader_guid,
+        );
+        self.send_control_to_readers(
+          DeliveryMode::Unicast,
+          gap.add_header_and_build(self.my_guid.prefix),
+          &mut std::iter::once(&*reader_proxy),
+        );
+        reader_proxy.forget_frags_requested(seq_num);
+        return;
       }
 
       reader_proxy.mark_frag_sent(seq_num, &frag_num);
@@ -2760,7 +2779,10 @@ mod tests {
       },
       polling::new_shared_timer,
       rtps::writer_send_buffer::Admission,
-      structure::{guid::EntityKind, sequence_number::SequenceNumberSet},
+      structure::{
+        guid::EntityKind,
+        sequence_number::{FragmentNumberSet, SequenceNumberSet},
+      },
       RepresentationIdentifier,
     };
 
@@ -3123,6 +3145,30 @@ mod tests {
         }
       }
       assert!(checked_frags > 0, "no size was fragmented");
+    }
+
+    // A NACK_FRAG for a sample the history no longer holds (KEEP_LAST replaced
+    // it) is answered with a GAP and forgotten in one go. It used to log an
+    // ERROR per requested fragment ("missing from send buffer"), eight per round
+    // until the bitmap was used up, and the reader was never told; hundreds of
+    // lines for fragmented `diagnostics` behind a lossy link.
+    #[test]
+    fn fragments_of_a_sample_no_longer_held_are_answered_with_a_gap_and_forgotten() {
+      let mut f = Fixture::user(3, 8, None);
+      let gone = SequenceNumber::new(99);
+      let frags = FragmentNumberSet::from_base_and_set(
+        FragmentNumber::from(1u32),
+        &(1..=20u32).map(FragmentNumber::from).collect(),
+      );
+      let reader = f.reader_guid;
+      f.writer
+        .readers
+        .get_mut(&reader)
+        .unwrap()
+        .mark_frags_requested(gone, &frags);
+      assert!(f.reader_proxy().repair_frags_requested());
+      f.writer.handle_repair_frags_send(reader);
+      assert!(!f.reader_proxy().repair_frags_requested());
     }
 
     // While the reader's send socket has queued control datagrams, a round
