@@ -142,7 +142,10 @@ def library_warnings(text):
             if re.match(r"\[(WARN|ERROR)\] \[[0-9.]+\] \[[^\]]*:(rustdds|ros2_client)", line)]
 
 
-def test_no_library_warnings_at_start_with_an_rclpy_peer(launch, observer):
+def test_no_library_warnings_at_start_and_stop_with_an_rclpy_peer(launch, observer):
+    """Neither starting next to a Fast DDS peer nor Ctrl-C makes RustDDS or ros2-client
+    complain. At shutdown a node drops all its endpoints at once; RustDDS' removal
+    channels held 4 and logged `Cannot remove Reader … Full` (42 of 1542 test logs)."""
     from std_msgs.msg import String
     observer.pub("chatter", String)  # a Fast DDS peer with endpoints of its own
     procs = [launch(name, *NODE_ARGS.get(name, [])) for name in ROS_NODES]
@@ -152,6 +155,10 @@ def test_no_library_warnings_at_start_with_an_rclpy_peer(launch, observer):
     for p in procs:
         assert p.proc.poll() is None, p.output()
         assert library_warnings(p.output()) == [], p.output()
+    for p in procs:
+        assert p.stop() == 0
+        out = p.log_path.read_text()
+        assert library_warnings(out) == [], out[-3000:]
 
 
 BINARIES = [*ROS_NODES, "virtual_arduino"]

@@ -764,7 +764,13 @@ impl InnerPublisher {
     self
       .remove_writer_sender
       .try_send_timeout(guid, std::time::Duration::from_millis(20))
-      .unwrap_or_else(|e| error!("Cannot remove Writer {guid:?} : {e:?}"));
+      .unwrap_or_else(|e| match e {
+        // the event loop has already stopped with the participant: nothing to remove
+        std::sync::mpsc::TrySendError::Disconnected(_) => {
+          debug!("Writer {guid:?} not removed: the event loop has stopped")
+        }
+        e => error!("Cannot remove Writer {guid:?} : {e:?}"),
+      });
   }
 
   pub(crate) fn identity(&self) -> EntityId {
@@ -1414,7 +1420,13 @@ impl InnerSubscriber {
     self
       .sender_remove_reader
       .try_send_timeout(guid, std::time::Duration::from_millis(20))
-      .unwrap_or_else(|e| error!("Cannot remove Reader {guid:?} : {e:?}"));
+      .unwrap_or_else(|e| match e {
+        // the event loop has already stopped with the participant: nothing to remove
+        std::sync::mpsc::TrySendError::Disconnected(_) => {
+          debug!("Reader {guid:?} not removed: the event loop has stopped")
+        }
+        e => error!("Cannot remove Reader {guid:?} : {e:?}"),
+      });
   }
 
   fn unwrap_or_new_entity_id(
