@@ -1,0 +1,337 @@
+//! The graph's topics and their `ros2msg` schemas.
+//!
+//! A `ros2msg` schema (the format of rosbag2's MCAP files and of the Foxglove WebSocket
+//! protocol) is the message's `.msg` definition followed, for every message type it
+//! uses directly or indirectly, by a line of 80 `=`, a line `MSG: pkg/Type` and that
+//! type's definition. The definitions below are those of ROS 2's `std_msgs`,
+//! `builtin_interfaces`, `geometry_msgs`, `sensor_msgs`, `tf2_msgs` and `diagnostic_msgs`
+//! with comments and blank lines removed (field order, types, constants and default
+//! values as upstream).
+
+/// One message type: its name (`pkg/msg/Type`), its `.msg` text and the types it uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MessageDefinition {
+    /// `pkg/msg/Type`, as ROS 2 and Foxglove name it.
+    pub name: &'static str,
+    /// The `.msg` text (no comments).
+    pub text: &'static str,
+    /// The message types its fields use (`pkg/msg/Type`).
+    pub uses: &'static [&'static str],
+}
+
+const fn def(
+    name: &'static str,
+    text: &'static str,
+    uses: &'static [&'static str],
+) -> MessageDefinition {
+    MessageDefinition { name, text, uses }
+}
+
+/// `builtin_interfaces/msg/Time`.
+pub const TIME: MessageDefinition = def(
+    "builtin_interfaces/msg/Time",
+    "int32 sec\nuint32 nanosec\n",
+    &[],
+);
+/// `std_msgs/msg/Header`.
+pub const HEADER: MessageDefinition = def(
+    "std_msgs/msg/Header",
+    "builtin_interfaces/Time stamp\nstring frame_id\n",
+    &["builtin_interfaces/msg/Time"],
+);
+/// `std_msgs/msg/String`.
+pub const STRING: MessageDefinition = def("std_msgs/msg/String", "string data\n", &[]);
+/// `std_msgs/msg/Float64`.
+pub const FLOAT64: MessageDefinition = def("std_msgs/msg/Float64", "float64 data\n", &[]);
+/// `std_msgs/msg/Bool`.
+pub const BOOL: MessageDefinition = def("std_msgs/msg/Bool", "bool data\n", &[]);
+/// `geometry_msgs/msg/Vector3`.
+pub const VECTOR3: MessageDefinition = def(
+    "geometry_msgs/msg/Vector3",
+    "float64 x\nfloat64 y\nfloat64 z\n",
+    &[],
+);
+/// `geometry_msgs/msg/Point`.
+pub const POINT: MessageDefinition = def(
+    "geometry_msgs/msg/Point",
+    "float64 x\nfloat64 y\nfloat64 z\n",
+    &[],
+);
+/// `geometry_msgs/msg/Quaternion` (default values as upstream: the identity).
+pub const QUATERNION: MessageDefinition = def(
+    "geometry_msgs/msg/Quaternion",
+    "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    &[],
+);
+/// `geometry_msgs/msg/Pose`.
+pub const POSE: MessageDefinition = def(
+    "geometry_msgs/msg/Pose",
+    "Point position\nQuaternion orientation\n",
+    &["geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"],
+);
+/// `geometry_msgs/msg/Transform`.
+pub const TRANSFORM: MessageDefinition = def(
+    "geometry_msgs/msg/Transform",
+    "Vector3 translation\nQuaternion rotation\n",
+    &["geometry_msgs/msg/Vector3", "geometry_msgs/msg/Quaternion"],
+);
+/// `geometry_msgs/msg/TransformStamped`.
+pub const TRANSFORM_STAMPED: MessageDefinition = def(
+    "geometry_msgs/msg/TransformStamped",
+    "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+    &["std_msgs/msg/Header", "geometry_msgs/msg/Transform"],
+);
+/// `geometry_msgs/msg/PointStamped`.
+pub const POINT_STAMPED: MessageDefinition = def(
+    "geometry_msgs/msg/PointStamped",
+    "std_msgs/Header header\nPoint point\n",
+    &["std_msgs/msg/Header", "geometry_msgs/msg/Point"],
+);
+/// `geometry_msgs/msg/PoseStamped`.
+pub const POSE_STAMPED: MessageDefinition = def(
+    "geometry_msgs/msg/PoseStamped",
+    "std_msgs/Header header\nPose pose\n",
+    &["std_msgs/msg/Header", "geometry_msgs/msg/Pose"],
+);
+/// `tf2_msgs/msg/TFMessage`.
+pub const TF_MESSAGE: MessageDefinition = def(
+    "tf2_msgs/msg/TFMessage",
+    "geometry_msgs/TransformStamped[] transforms\n",
+    &["geometry_msgs/msg/TransformStamped"],
+);
+/// `sensor_msgs/msg/JointState`.
+pub const JOINT_STATE: MessageDefinition = def(
+    "sensor_msgs/msg/JointState",
+    "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n",
+    &["std_msgs/msg/Header"],
+);
+/// `diagnostic_msgs/msg/KeyValue`.
+pub const KEY_VALUE: MessageDefinition = def(
+    "diagnostic_msgs/msg/KeyValue",
+    "string key\nstring value\n",
+    &[],
+);
+/// `diagnostic_msgs/msg/DiagnosticStatus`.
+pub const DIAGNOSTIC_STATUS: MessageDefinition = def(
+    "diagnostic_msgs/msg/DiagnosticStatus",
+    "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\nbyte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n",
+    &["diagnostic_msgs/msg/KeyValue"],
+);
+/// `diagnostic_msgs/msg/DiagnosticArray`.
+pub const DIAGNOSTIC_ARRAY: MessageDefinition = def(
+    "diagnostic_msgs/msg/DiagnosticArray",
+    "std_msgs/Header header\nDiagnosticStatus[] status\n",
+    &[
+        "std_msgs/msg/Header",
+        "diagnostic_msgs/msg/DiagnosticStatus",
+    ],
+);
+
+/// Every message type the graph's topics use, directly or in a field.
+pub const DEFINITIONS: &[MessageDefinition] = &[
+    TIME,
+    HEADER,
+    STRING,
+    FLOAT64,
+    BOOL,
+    VECTOR3,
+    POINT,
+    QUATERNION,
+    POSE,
+    TRANSFORM,
+    TRANSFORM_STAMPED,
+    POINT_STAMPED,
+    POSE_STAMPED,
+    TF_MESSAGE,
+    JOINT_STATE,
+    KEY_VALUE,
+    DIAGNOSTIC_STATUS,
+    DIAGNOSTIC_ARRAY,
+];
+
+/// The definition of `pkg/msg/Type`, if it is one of [`DEFINITIONS`].
+pub fn definition(type_name: &str) -> Option<&'static MessageDefinition> {
+    DEFINITIONS.iter().find(|d| d.name == type_name)
+}
+
+/// The separator line before each dependency of a `ros2msg` schema: 80 `=`.
+pub const SEPARATOR: &str =
+    "================================================================================";
+
+/// The full `ros2msg` schema text of `pkg/msg/Type`: its definition, then each type it
+/// uses (depth first, each once) after [`SEPARATOR`] and `MSG: pkg/Type`.
+///
+/// # Examples
+/// ```
+/// let text = foxglove_bridge::schemas::ros2msg_schema("geometry_msgs/msg/PointStamped").unwrap();
+/// assert!(text.starts_with("std_msgs/Header header\nPoint point\n"));
+/// assert!(text.contains("\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"));
+/// ```
+pub fn ros2msg_schema(type_name: &str) -> Option<String> {
+    let top = definition(type_name)?;
+    let mut text = top.text.to_string();
+    let mut done = vec![top.name];
+    let mut stack: Vec<&str> = top.uses.iter().rev().copied().collect();
+    while let Some(name) = stack.pop() {
+        if done.contains(&name) {
+            continue;
+        }
+        let d = definition(name)?;
+        done.push(d.name);
+        text.push_str(SEPARATOR);
+        text.push_str("\nMSG: ");
+        text.push_str(&d.name.replacen("/msg/", "/", 1));
+        text.push('\n');
+        text.push_str(d.text);
+        stack.extend(d.uses.iter().rev().copied());
+    }
+    Some(text)
+}
+
+/// What a topic of the graph carries and how the bridge treats it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicSpec {
+    /// The topic's name relative to the node's namespace (`tf`, `xyz_target`, …).
+    pub topic: &'static str,
+    /// Its message type, `pkg/msg/Type`.
+    pub type_name: &'static str,
+    /// Published transient-local (the last sample is given to late subscribers).
+    pub latched: bool,
+    /// An operator target: something a Foxglove panel may publish and a recording replays.
+    pub target: bool,
+    /// Written into a recording (targets and what it takes to view the session again).
+    pub recorded: bool,
+}
+
+const fn topic(
+    topic: &'static str,
+    type_name: &'static str,
+    latched: bool,
+    target: bool,
+    recorded: bool,
+) -> TopicSpec {
+    TopicSpec {
+        topic,
+        type_name,
+        latched,
+        target,
+        recorded,
+    }
+}
+
+/// Every topic of the graph (INTERFACES.md), in the order they are advertised.
+pub const TOPICS: &[TopicSpec] = &[
+    topic(
+        "robot_description",
+        "std_msgs/msg/String",
+        true,
+        false,
+        true,
+    ),
+    topic("tf_static", "tf2_msgs/msg/TFMessage", true, false, true),
+    topic("tf", "tf2_msgs/msg/TFMessage", false, false, true),
+    topic(
+        "joint_states",
+        "sensor_msgs/msg/JointState",
+        false,
+        false,
+        true,
+    ),
+    topic(
+        "servo_angles",
+        "sensor_msgs/msg/JointState",
+        false,
+        false,
+        false,
+    ),
+    topic(
+        "servo_state",
+        "sensor_msgs/msg/JointState",
+        false,
+        false,
+        true,
+    ),
+    topic(
+        "diagnostics",
+        "diagnostic_msgs/msg/DiagnosticArray",
+        false,
+        false,
+        false,
+    ),
+    topic(
+        "xyz_target",
+        "geometry_msgs/msg/PointStamped",
+        false,
+        true,
+        true,
+    ),
+    topic(
+        "pose_target",
+        "geometry_msgs/msg/PoseStamped",
+        false,
+        true,
+        true,
+    ),
+    topic("gripper_target", "std_msgs/msg/Float64", false, true, true),
+    topic(
+        "joint_target",
+        "sensor_msgs/msg/JointState",
+        false,
+        true,
+        true,
+    ),
+    topic("estop", "std_msgs/msg/Bool", true, false, false),
+];
+
+/// The spec of a topic of the graph, by its relative name.
+pub fn topic_spec(topic: &str) -> Option<&'static TopicSpec> {
+    TOPICS.iter().find(|t| t.topic == topic)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_topic_and_every_dependency_has_a_definition() {
+        for t in TOPICS {
+            assert!(ros2msg_schema(t.type_name).is_some(), "{}", t.type_name);
+        }
+        for d in DEFINITIONS {
+            for u in d.uses {
+                assert!(definition(u).is_some(), "{} uses {u}", d.name);
+            }
+        }
+    }
+
+    #[test]
+    fn tf_message_schema_lists_each_dependency_once_in_rosbag2_format() {
+        let text = ros2msg_schema("tf2_msgs/msg/TFMessage").unwrap();
+        let blocks: Vec<&str> = text.split(&format!("{SEPARATOR}\n")).collect();
+        assert_eq!(blocks[0], "geometry_msgs/TransformStamped[] transforms\n");
+        let names: Vec<&str> = blocks[1..]
+            .iter()
+            .map(|b| b.lines().next().unwrap())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "MSG: geometry_msgs/TransformStamped",
+                "MSG: std_msgs/Header",
+                "MSG: builtin_interfaces/Time",
+                "MSG: geometry_msgs/Transform",
+                "MSG: geometry_msgs/Vector3",
+                "MSG: geometry_msgs/Quaternion",
+            ]
+        );
+    }
+
+    #[test]
+    fn a_type_without_dependencies_is_its_definition_alone() {
+        assert_eq!(
+            ros2msg_schema("std_msgs/msg/String").as_deref(),
+            Some("string data\n")
+        );
+        assert_eq!(ros2msg_schema("nope/msg/Nope"), None);
+    }
+}
