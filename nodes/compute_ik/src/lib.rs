@@ -625,10 +625,18 @@ pub async fn run(
             match result {
                 Ok(step) => {
                     publish(step);
-                    // the next step one period after this first one
+                    // The next step one and a half periods after this first one: a
+                    // target stream at the motion rate (a 50 Hz teleop) steps the
+                    // motion itself, and a fill-in step comes only when targets pause.
+                    // With one period, a target a little late behind the timer made two
+                    // steps back to back: 52 steps a second for a 50 Hz stream, more than
+                    // serial_node's 50 frames a second, so every command waited for a
+                    // frame slot (xyz_target -> first byte p50 7.5 ms). Each step is one
+                    // planner period of motion whenever it is published, so a later
+                    // fill-in never makes a step larger.
                     next_step = core
                         .is_moving()
-                        .then(|| tokio::time::Instant::now() + step_period(&core));
+                        .then(|| tokio::time::Instant::now() + step_period(&core).mul_f64(1.5));
                 }
                 Err(rejection) => {
                     let kind = format!("{}/{}", rejection.source.topic(), rejection.reason.code());
