@@ -35,6 +35,12 @@ fn is_own(target: &str) -> bool {
 
 impl log::Log for NodeLogger {
     fn enabled(&self, meta: &log::Metadata<'_>) -> bool {
+        // `tracing`'s span enter/exit records (target `tracing::span`, at the span's
+        // level: ERROR for ros2-client's `rosout_raw`) reach `log` once any crate in the
+        // build enables tracing's `log` feature (the foxglove SDK does): not messages
+        if meta.target().starts_with("tracing::span") {
+            return false;
+        }
         let ceiling = if is_own(meta.target()) {
             self.level
         } else if meta.target() == "ros2_client::distributions" {
@@ -57,6 +63,16 @@ impl log::Log for NodeLogger {
 
     fn log(&self, record: &log::Record<'_>) {
         if !self.enabled(record.metadata()) {
+            return;
+        }
+        // ros2-client's tracing echo of every /rosout message we publish ("[rosout]
+        // (node) …"), which we have printed already; its own problems still show
+        if record.target() == "ros2_client::rosout"
+            && record.args().as_str().map_or_else(
+                || record.args().to_string().starts_with("[rosout] ("),
+                |m| m.starts_with("[rosout] ("),
+            )
+        {
             return;
         }
         let name = self.name.get().map(String::as_str).unwrap_or("-");
