@@ -5,9 +5,11 @@
 //! * [`names`]: absolute name expansion and remapping (ros2-client makes `rt//x` of
 //!   relative root names; we never hand it one);
 //! * [`params`]: declared parameters with defaults and ranges, served to `ros2 param`;
-//! * [`qos`]: the QoS of each topic of `shared/INTERFACES.md`;
+//! * [`topics`]: every topic of `shared/INTERFACES.md`, declared once: name, type, QoS;
+//! * [`qos`]: the QoS profiles the topics use;
+//! * [`publisher`]: [`TopicPublisher`], publishing that logs a failed write;
 //! * [`logging`]: the `log` crate on stderr and `/rosout`;
-//! * [`diagnostics`]: `diagnostics` publishing;
+//! * [`diagnostics`]: `diagnostics` publishing, the refusal keys, latency percentiles;
 //! * [`peers`]: the remote ends of a node's topics, and when they are lost and regained;
 //! * [`remote_params`]: another node's parameters, through its parameter services;
 //! * [`node`]: [`RosNode`] ties them together around a ros2-client node, honouring
@@ -24,10 +26,14 @@ pub mod names;
 pub mod node;
 pub mod params;
 pub mod peers;
+pub mod publisher;
 pub mod qos;
 pub mod remote_params;
+pub mod topics;
 
 pub use error::PlumbingError;
 pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode};
 pub use params::{ParamRange, ParamSpec, Params};
+pub use publisher::TopicPublisher;
 pub use ros2_client::ParameterValue;
+pub use topics::Topic;

@@ -7,6 +7,8 @@ use crate::error::PlumbingError;
 use crate::logging;
 use crate::names::Resolver;
 use crate::params::{self, ParamSpec, Params};
+use crate::publisher::TopicPublisher;
+use crate::topics::{self, Topic};
 use eezybot_msgs::RosMessage;
 use ros2_client::{
     Context, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription,
@@ -25,17 +27,29 @@ pub struct NodeSpec {
     pub params: Vec<ParamSpec>,
 }
 
+/// The ROS arguments every node takes, as `--help` shows them.
+pub const ROS_ARGS_USAGE: &str = "--ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] \
+     [-p NAME:=VALUE] [--params-file FILE] [--log-level LEVEL]";
+
+/// The environment every node reads, as `--help` shows it.
+pub const ENVIRONMENT_HELP: &str = "ROS_DOMAIN_ID (0..232, default 0)";
+
 impl NodeSpec {
     /// The text `--help` prints.
     pub fn help(&self) -> String {
-        let mut s = format!(
-            "{}: {}\n\nusage: {} {}[--ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] [-p NAME:=VALUE] \
-             [--params-file FILE] [--log-level LEVEL]]\n\nenvironment: ROS_DOMAIN_ID (0..232, default 0)\n\nparameters:\n",
+        format!(
+            "{}: {}\n\nusage: {} {}[{ROS_ARGS_USAGE}]\n\nenvironment: {ENVIRONMENT_HELP}\n\nparameters:\n{}",
             self.name,
             self.description,
             self.name,
-            if self.usage.is_empty() { String::new() } else { format!("{} ", self.usage) }
-        );
+            if self.usage.is_empty() { String::new() } else { format!("{} ", self.usage) },
+            self.params_help()
+        )
+    }
+
+    /// One line per declared parameter: name, description, default, `read-only`.
+    pub fn params_help(&self) -> String {
+        let mut s = String::new();
         for p in &self.params {
             s.push_str(&format!(
                 "  {:<22} {} (default {}){}\n",
@@ -323,10 +337,35 @@ impl RosNode {
             .map_err(|e| PlumbingError::Ros(format!("cannot subscribe to {resolved}: {e:?}")))
     }
 
+    /// A publisher on a topic of the contract, with its name, type and QoS (expanded
+    /// in the node's namespace and remapped); its failed writes are logged.
+    pub fn publish_on<M: RosMessage>(
+        &mut self,
+        topic: &Topic<M>,
+    ) -> Result<TopicPublisher<M>, PlumbingError> {
+        let publisher = self.publisher(topic.name, topic.qos.clone())?;
+        Ok(TopicPublisher::new(publisher, topic.name))
+    }
+
+    /// A subscription to a topic of the contract, with its name, type and QoS
+    /// (expanded in the node's namespace and remapped).
+    pub fn subscribe_to<M: RosMessage>(
+        &mut self,
+        topic: &Topic<M>,
+    ) -> Result<Subscription<M>, PlumbingError> {
+        self.subscription(topic.name, topic.qos.clone())
+    }
+
+    /// A topic of the contract as this node names it (namespace, remaps):
+    /// `/arm2/xyz_target`.
+    pub fn resolve<M: RosMessage>(&self, topic: &Topic<M>) -> Result<String, PlumbingError> {
+        self.resolver.resolve(topic.name)
+    }
+
     /// The node's `diagnostics` publisher.
     pub fn diagnostics(&mut self) -> Result<DiagnosticsPublisher, PlumbingError> {
         Ok(DiagnosticsPublisher::new(
-            self.publisher("diagnostics", crate::qos::DIAGNOSTICS)?,
+            self.publish_on(&topics::DIAGNOSTICS)?,
         ))
     }
 }

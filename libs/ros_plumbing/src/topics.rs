@@ -1,0 +1,289 @@
+//! The topics of `shared/INTERFACES.md`, each declared once: name, message type, QoS and
+//! which of our nodes publish and subscribe it. Every endpoint of every node is created
+//! from these constants ([`RosNode::publish_on`](crate::RosNode::publish_on),
+//! [`RosNode::subscribe_to`](crate::RosNode::subscribe_to)); the Python tests read the
+//! same table from `tests/data/topics.json` and the README's topic table is
+//! [`markdown_table`]. Both are checked against [`all`] by `tests/contract.rs`;
+//! regenerate them with `cargo run -p ros_plumbing --example topics -- --json` and
+//! `-- --markdown`.
+//!
+//! # Examples
+//! ```
+//! use ros_plumbing::topics;
+//! assert_eq!(topics::ESTOP.name, "estop");
+//! assert_eq!(topics::ESTOP.type_name(), "std_msgs/msg/Bool");
+//! assert_eq!(topics::qos_text(&topics::ESTOP.qos), "reliable, transient-local, keep last 1");
+//! ```
+
+use crate::qos;
+use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::{Bool, Float64, String as StringMsg};
+use eezybot_msgs::tf2_msgs::TFMessage;
+use eezybot_msgs::RosMessage;
+use ros2_client::qos::{Durability, History, Reliability};
+use ros2_client::QosProfile;
+use std::fmt::Write as _;
+use std::marker::PhantomData;
+
+/// One topic of the contract, typed by its message `M`.
+#[derive(Debug)]
+pub struct Topic<M> {
+    /// The name, relative to the node's namespace (`xyz_target`).
+    pub name: &'static str,
+    /// Its QoS, the same at every endpoint.
+    pub qos: QosProfile,
+    /// The nodes of ours that publish it (empty: only outside tools do).
+    pub publishers: &'static [&'static str],
+    /// The nodes of ours that subscribe it (empty: only outside tools do).
+    pub subscribers: &'static [&'static str],
+    message: PhantomData<fn() -> M>,
+}
+
+impl<M: RosMessage> Topic<M> {
+    /// Declare a topic.
+    pub const fn new(
+        name: &'static str,
+        qos: QosProfile,
+        publishers: &'static [&'static str],
+        subscribers: &'static [&'static str],
+    ) -> Self {
+        Topic {
+            name,
+            qos,
+            publishers,
+            subscribers,
+            message: PhantomData,
+        }
+    }
+
+    /// The message type as `ros2 topic` prints it (`std_msgs/msg/Bool`).
+    pub fn type_name(&self) -> String {
+        M::ros_type_string()
+    }
+
+    /// This topic as a row of the untyped table.
+    pub fn entry(&self) -> TopicEntry {
+        TopicEntry {
+            name: self.name,
+            type_name: self.type_name(),
+            qos: self.qos.clone(),
+            publishers: self.publishers,
+            subscribers: self.subscribers,
+        }
+    }
+}
+
+/// One topic of [`all`], its message type as text.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TopicEntry {
+    /// [`Topic::name`]
+    pub name: &'static str,
+    /// [`Topic::type_name`]
+    pub type_name: String,
+    /// [`Topic::qos`]
+    pub qos: QosProfile,
+    /// [`Topic::publishers`]
+    pub publishers: &'static [&'static str],
+    /// [`Topic::subscribers`]
+    pub subscribers: &'static [&'static str],
+}
+
+/// `gui_bridge` (one line, to keep the table below readable).
+const GUI: &str = "gui_bridge";
+const IK: &str = "compute_ik";
+const SERIAL: &str = "serial_node";
+const STATE: &str = "state_publisher";
+/// `gui_bridge record` subscribes the targets it saves.
+const RECORD: &str = "gui_bridge (record)";
+
+/// Desired position of `tool0`, metres, in `header.frame_id`.
+pub const XYZ_TARGET: Topic<PointStamped> =
+    Topic::new("xyz_target", qos::COMMANDS, &[GUI], &[IK, RECORD]);
+/// Desired pose of the tip link (arms with orientation, `ros2 topic pub`).
+pub const POSE_TARGET: Topic<PoseStamped> = Topic::new("pose_target", qos::COMMANDS, &[], &[IK]);
+/// Claw opening, 0.0 closed … 1.0 open.
+pub const GRIPPER_TARGET: Topic<Float64> =
+    Topic::new("gripper_target", qos::COMMANDS, &[GUI], &[IK, RECORD]);
+/// Joint mode: positions of named actuated joints, rad.
+pub const JOINT_TARGET: Topic<JointState> =
+    Topic::new("joint_target", qos::COMMANDS, &[GUI], &[IK]);
+/// Emergency stop, latched: `true` = no servo moves until `false`.
+pub const ESTOP: Topic<Bool> = Topic::new("estop", qos::ESTOP, &[GUI], &[IK, SERIAL, GUI]);
+/// Every non-fixed URDF joint, rad.
+pub const JOINT_STATES: Topic<JointState> =
+    Topic::new("joint_states", qos::COMMANDS, &[IK], &[STATE, GUI]);
+/// Servo horn angles after calibration, rad.
+pub const SERVO_ANGLES: Topic<JointState> =
+    Topic::new("servo_angles", qos::COMMANDS, &[IK], &[SERIAL]);
+/// What the Arduino reports it applied, rad.
+pub const SERVO_STATE: Topic<JointState> =
+    Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI]);
+/// The URDF text, latched.
+pub const ROBOT_DESCRIPTION: Topic<StringMsg> = Topic::new(
+    "robot_description",
+    qos::ROBOT_DESCRIPTION,
+    &[STATE],
+    &[GUI],
+);
+/// Transforms of the movable joints.
+pub const TF: Topic<TFMessage> = Topic::new("tf", qos::TF, &[STATE], &[]);
+/// Transforms of the fixed joints, latched.
+pub const TF_STATIC: Topic<TFMessage> = Topic::new("tf_static", qos::TF_STATIC, &[STATE], &[]);
+/// Each node's health.
+pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
+    "diagnostics",
+    qos::DIAGNOSTICS,
+    &[GUI, IK, SERIAL, STATE],
+    &[GUI],
+);
+
+/// Every topic of the contract, in the order of `shared/INTERFACES.md`.
+pub fn all() -> Vec<TopicEntry> {
+    vec![
+        XYZ_TARGET.entry(),
+        POSE_TARGET.entry(),
+        GRIPPER_TARGET.entry(),
+        JOINT_TARGET.entry(),
+        ESTOP.entry(),
+        JOINT_STATES.entry(),
+        SERVO_ANGLES.entry(),
+        SERVO_STATE.entry(),
+        ROBOT_DESCRIPTION.entry(),
+        TF.entry(),
+        TF_STATIC.entry(),
+        DIAGNOSTICS.entry(),
+    ]
+}
+
+fn reliability_text(qos: &QosProfile) -> &'static str {
+    match qos.reliability {
+        Reliability::Reliable { .. } => "reliable",
+        Reliability::BestEffort => "best effort",
+    }
+}
+
+fn durability_text(qos: &QosProfile) -> &'static str {
+    match qos.durability {
+        Durability::Volatile => "volatile",
+        Durability::TransientLocal => "transient-local",
+    }
+}
+
+fn depth(qos: &QosProfile) -> Option<usize> {
+    match qos.history {
+        History::KeepLast { depth } => Some(depth),
+        History::KeepAll => None,
+    }
+}
+
+/// A QoS as the README and `shared/INTERFACES.md` write it:
+/// `reliable, transient-local, keep last 1`.
+pub fn qos_text(qos: &QosProfile) -> String {
+    let history = depth(qos).map_or_else(|| "keep all".to_string(), |d| format!("keep last {d}"));
+    format!(
+        "{}, {}, {history}",
+        reliability_text(qos),
+        durability_text(qos)
+    )
+}
+
+fn json_string(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if (c as u32) < 0x20 => {
+                let _ = write!(out, "\\u{:04x}", c as u32);
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+fn json_list(items: &[&str]) -> String {
+    let items: Vec<String> = items.iter().map(|s| json_string(s)).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// The table as JSON, one topic per line, as `tests/data/topics.json` holds it:
+/// `{"topics": [{"name", "type", "reliability", "durability", "depth", "qos",
+/// "publishers", "subscribers"}, …]}` (`depth` null for keep all).
+pub fn json(entries: &[TopicEntry]) -> String {
+    let rows: Vec<String> = entries
+        .iter()
+        .map(|e| {
+            format!(
+                "    {{\"name\": {}, \"type\": {}, \"reliability\": {}, \"durability\": {}, \"depth\": {}, \"qos\": {}, \"publishers\": {}, \"subscribers\": {}}}",
+                json_string(e.name),
+                json_string(&e.type_name),
+                json_string(reliability_text(&e.qos)),
+                json_string(durability_text(&e.qos)),
+                depth(&e.qos).map_or_else(|| "null".to_string(), |d| d.to_string()),
+                json_string(&qos_text(&e.qos)),
+                json_list(e.publishers),
+                json_list(e.subscribers),
+            )
+        })
+        .collect();
+    format!("{{\"topics\": [\n{}\n]}}\n", rows.join(",\n"))
+}
+
+fn nodes_text(nodes: &[&str]) -> String {
+    if nodes.is_empty() {
+        "(outside tools)".to_string()
+    } else {
+        nodes
+            .iter()
+            .map(|n| format!("`{n}`"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// The table as the README shows it: `| topic | type | QoS | publishers | subscribers |`.
+pub fn markdown_table(entries: &[TopicEntry]) -> String {
+    let mut s =
+        String::from("| topic | type | QoS | publishers | subscribers |\n|---|---|---|---|---|\n");
+    for e in entries {
+        let _ = writeln!(
+            s,
+            "| `{}` | `{}` | {} | {} | {} |",
+            e.name,
+            e.type_name,
+            qos_text(&e.qos),
+            nodes_text(e.publishers),
+            nodes_text(e.subscribers)
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_unique_and_every_node_is_ours() {
+        let all = all();
+        let mut names: Vec<_> = all.iter().map(|e| e.name).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), all.len());
+        for e in &all {
+            for n in e.publishers.iter().chain(e.subscribers) {
+                let node = n.split(' ').next().unwrap_or_default();
+                assert!([GUI, IK, SERIAL, STATE].contains(&node), "{}: {n}", e.name);
+            }
+        }
+    }
+
+    #[test]
+    fn json_escapes() {
+        assert_eq!(json_string("a\"b\\c\n"), "\"a\\\"b\\\\c\\u000a\"");
+    }
+}
