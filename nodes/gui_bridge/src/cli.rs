@@ -7,7 +7,6 @@
 //! [`EXIT_USAGE`] (usage or configuration error, as every other node of the graph).
 
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
-use ros_plumbing::ParameterValue;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -156,35 +155,14 @@ pub fn parse(user: &[String]) -> Result<Cli, clap::Error> {
 /// The part of `--help` about ROS: its arguments, the environment, the parameters
 /// and the exit status.
 pub fn ros_help(spec: &ros_plumbing::NodeSpec) -> String {
-    let mut s = String::from(
-        "ROS arguments (after gui_bridge's own):\n  --ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] [-p NAME:=VALUE] \
-         [--params-file FILE] [--log-level LEVEL] [--]\n\n\
-         Environment:\n  ROS_DOMAIN_ID (0..232, default 0)\n\nParameters (-p NAME:=VALUE):\n",
-    );
-    for p in &spec.params {
-        s.push_str(&format!(
-            "  {:<22} {} (default {}){}\n",
-            p.name,
-            p.description,
-            show(&p.default),
-            if p.read_only { ", read-only" } else { "" }
-        ));
-    }
-    s.push_str(&format!(
-        "\nExit status: {EXIT_OK} done, {EXIT_REFUSED} refused (a target refused, or not taken or \
-         reached in time), {EXIT_USAGE} usage or configuration error\n"
-    ));
-    s
-}
-
-fn show(v: &ParameterValue) -> String {
-    match v {
-        ParameterValue::Boolean(b) => b.to_string(),
-        ParameterValue::Integer(i) => i.to_string(),
-        ParameterValue::Double(d) => d.to_string(),
-        ParameterValue::String(s) => format!("{s:?}"),
-        other => format!("{other:?}"),
-    }
+    use ros_plumbing::node::{ENVIRONMENT_HELP, ROS_ARGS_USAGE};
+    format!(
+        "ROS arguments (after gui_bridge's own):\n  {ROS_ARGS_USAGE} [--]\n\n\
+         Environment:\n  {ENVIRONMENT_HELP}\n\nParameters (-p NAME:=VALUE):\n{}\n\
+         Exit status: {EXIT_OK} done, {EXIT_REFUSED} refused (a target refused, or not taken or \
+         reached in time), {EXIT_USAGE} usage or configuration error\n",
+        spec.params_help()
+    )
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@
 use crate::cli::{DeliveryArgs, OnceArgs, PlayArgs};
 use crate::ros_outputs::RosOutputs;
 use crate::teleop::parse_waypoints;
-use crate::{stamp_text, status_node, Outputs, REJECTED_STAMP_KEY};
+use crate::Outputs;
 use anyhow::{anyhow, Context as _};
 use eezybot_kinematics::Arm;
 use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
@@ -15,8 +15,9 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::StreamExt;
 use ros2_client::Subscription;
+use ros_plumbing::diagnostics::{stamp_text, status_node, LAST_REJECTION_KEY, REJECTED_STAMP_KEY};
 use ros_plumbing::remote_params::RemoteParameters;
-use ros_plumbing::{qos, ParameterValue, RosNode};
+use ros_plumbing::{topics, ParameterValue, RosNode};
 use std::future::Future;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -173,9 +174,9 @@ impl Delivery {
     fn new(node: &mut RosNode, args: &DeliveryArgs) -> anyhow::Result<Delivery> {
         Ok(Delivery {
             out: RosOutputs::new(node)?,
-            joint_states: node.subscription("joint_states", qos::COMMANDS)?,
-            diagnostics: node.subscription("diagnostics", qos::DIAGNOSTICS)?,
-            topic: node.resolver().resolve("xyz_target")?,
+            joint_states: node.subscribe_to(&topics::JOINT_STATES)?,
+            diagnostics: node.subscribe_to(&topics::DIAGNOSTICS)?,
+            topic: node.resolve(&topics::XYZ_TARGET)?,
             timeout: args.timeout,
         })
     }
@@ -218,7 +219,7 @@ impl Delivery {
                         return Err(NotDelivered::Refused {
                             node: status_node(&s.name).map_or_else(|| s.name.clone(), |(n, _)| n.to_string()),
                             xyz,
-                            reason: value(s, "last_rejection").unwrap_or_else(|| s.message.clone()),
+                            reason: value(s, LAST_REJECTION_KEY).unwrap_or_else(|| s.message.clone()),
                         });
                     }
                 }

@@ -1,11 +1,4 @@
-//! `gui_bridge`: operator input → targets.
-//!
-//! A web page (served by the node, no build step, WebSocket) with x/y/z and gripper
-//! sliders, a joint mode, keyboard jog, gamepad with deadman, a live side and top view,
-//! node status, end-to-end latency and an e-stop button ([`serve`]); and a command-line
-//! driver ([`cli`]: `once X Y Z`, `play waypoints.csv` in [`delivery`], `record out.csv`
-//! in [`record`]). The operator logic is [`teleop::Teleop`]; [`run`] is the loop between
-//! the browsers and ROS.
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod access;
@@ -25,8 +18,12 @@ use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::diagnostics::{
+    status_node, LatencyWindow, LAST_REJECTION_KEY, REJECTED_STAMP_KEY,
+};
 use ros_plumbing::logging::{shorten, Throttle};
 use ros_plumbing::peers::{Peer, PeerWatch};
+use ros_plumbing::topics;
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use serde_json::json;
 use std::collections::{BTreeMap, VecDeque};
@@ -72,12 +69,9 @@ pub fn spec() -> ros_plumbing::NodeSpec {
 
 /// The arm model from an `arm_config` path (empty: the shipped configuration).
 pub fn load_arm(path: &str) -> Result<eezybot_kinematics::Arm, String> {
-    let c = if path.is_empty() {
-        eezybot_kinematics::ArmConfig::shipped()
-    } else {
-        eezybot_kinematics::ArmConfig::load(std::path::Path::new(path))
-    };
-    c.map(|c| c.arm()).map_err(|e| e.to_string())
+    eezybot_kinematics::ArmConfig::load_or_shipped(path)
+        .map(|c| c.arm())
+        .map_err(|e| e.to_string())
 }
 
 /// One ROS input of the bridge.
@@ -176,54 +170,8 @@ pub struct Reporting<F: Fn() -> Vec<usize>> {
 /// How long a refused client keeps the panel's diagnostics at WARN.
 pub const REFUSAL_WARN_FOR: Duration = Duration::from_secs(60);
 
-/// The `diagnostics` key by which a node that takes targets (compute_ik) says it refused
-/// one: its value is the refused target's `header.stamp` as [`stamp_text`] writes it.
-/// `once`/`play` know their target was refused when a status carries it with their
-/// target's stamp (and taken when `joint_states` carries that stamp); the panel shows
-/// the `last_rejection` of the status that carries it.
-pub const REJECTED_STAMP_KEY: &str = "last_rejection_stamp";
-
-/// A stamp as `SEC.NANOSEC`, nine digits of nanoseconds (`1712345678.000123456`), the
-/// value of [`REJECTED_STAMP_KEY`].
-///
-/// # Examples
-/// ```
-/// use eezybot_msgs::Time;
-/// assert_eq!(gui_bridge::stamp_text(Time::new(1712345678, 123456)), "1712345678.000123456");
-/// ```
-pub fn stamp_text(stamp: Time) -> String {
-    let ns = stamp.to_nanos();
-    format!(
-        "{}.{:09}",
-        ns.div_euclid(1_000_000_000),
-        ns.rem_euclid(1_000_000_000)
-    )
-}
-
-/// The node and the task a `diagnostics` status names, by diagnostic_updater's
-/// convention `NODE: TASK` (every node of the graph follows it: `compute_ik: inverse
-/// kinematics`, `ik2: inverse kinematics` under `-r __node:=ik2`); a name without `: `
-/// is a node's name with no task. `None` unless NODE is a valid ROS node name.
-///
-/// # Examples
-/// ```
-/// assert_eq!(gui_bridge::status_node("ik2: inverse kinematics"), Some(("ik2", "inverse kinematics")));
-/// assert_eq!(gui_bridge::status_node("serial_node"), Some(("serial_node", "")));
-/// assert_eq!(gui_bridge::status_node("::::"), None);
-/// ```
-pub fn status_node(status_name: &str) -> Option<(&str, &str)> {
-    let (node, task) = status_name
-        .split_once(':')
-        .map_or((status_name, ""), |(n, t)| (n, t.trim()));
-    let valid = !node.is_empty()
-        && node.len() <= NODE_NAME_MAX
-        && node.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-        && !node.starts_with(|c: char| c.is_ascii_digit());
-    valid.then_some((node, task))
-}
-
-/// Longest node name the panel shows.
-const NODE_NAME_MAX: usize = 64;
+/// Longest node name (and task, hardware id) the panel shows.
+const NODE_NAME_MAX: usize = ros_plumbing::diagnostics::NODE_NAME_MAX;
 /// Most nodes the panel tracks; a new one beyond them replaces one gone silent, if any.
 pub const MAX_TRACKED_NODES: usize = 16;
 /// A node heard within this is up.
@@ -274,7 +222,7 @@ impl NodeHealth {
                 let reason = s
                     .values
                     .iter()
-                    .find(|kv| kv.key == "last_rejection")
+                    .find(|kv| kv.key == LAST_REJECTION_KEY)
                     .map_or(kv.value.as_str(), |r| r.value.as_str());
                 self.last_rejection = Some(shorten(reason, web::REASON_MAX).into_owned());
             }
@@ -349,10 +297,20 @@ impl NodeHealth {
 }
 
 /// Arrival time − stamp of `servo_state` replies to our own targets.
-#[derive(Default)]
 struct Latency {
+    /// stamps of our last 200 targets, ns
     ours: VecDeque<i64>,
-    ms: VecDeque<f64>,
+    /// the last 50 latencies, ms
+    ms: LatencyWindow,
+}
+
+impl Default for Latency {
+    fn default() -> Self {
+        Latency {
+            ours: VecDeque::new(),
+            ms: LatencyWindow::new(50),
+        }
+    }
 }
 
 impl Latency {
@@ -366,14 +324,9 @@ impl Latency {
         let i = self.ours.iter().position(|s| *s == stamp.to_nanos())?;
         self.ours.remove(i);
         let ms = (Time::now().to_nanos() - stamp.to_nanos()) as f64 / 1e6;
-        if self.ms.len() == 50 {
-            self.ms.pop_front();
-        }
-        self.ms.push_back(ms);
-        let mut sorted: Vec<f64> = self.ms.iter().copied().collect();
-        sorted.sort_by(f64::total_cmp);
+        self.ms.push(ms);
         Some(
-            json!({"t": "latency", "ms": ms, "median_ms": sorted[sorted.len() / 2], "n": sorted.len()}),
+            json!({"t": "latency", "ms": ms, "median_ms": self.ms.percentile(0.5), "n": self.ms.len()}),
         )
     }
 }
@@ -535,23 +488,23 @@ fn publish_due(
                 outputs.xyz_target(*xyz, stamp);
                 latency.sent(stamp);
                 send(
-                    json!({"t": "sent", "topic": "xyz_target", "xyz": xyz, "stamp_ns": stamp.to_nanos()}),
+                    json!({"t": "sent", "topic": topics::XYZ_TARGET.name, "xyz": xyz, "stamp_ns": stamp.to_nanos()}),
                 );
             }
             Command::Gripper(g) => {
                 outputs.gripper_target(*g);
-                send(json!({"t": "sent", "topic": "gripper_target", "value": g}));
+                send(json!({"t": "sent", "topic": topics::GRIPPER_TARGET.name, "value": g}));
             }
             Command::Joints(q) => {
                 outputs.joint_target(q, stamp);
                 latency.sent(stamp);
                 send(
-                    json!({"t": "sent", "topic": "joint_target", "q": q, "stamp_ns": stamp.to_nanos()}),
+                    json!({"t": "sent", "topic": topics::JOINT_TARGET.name, "q": q, "stamp_ns": stamp.to_nanos()}),
                 );
             }
             Command::Estop(on) => {
                 outputs.estop(*on);
-                send(json!({"t": "sent", "topic": "estop", "on": on}));
+                send(json!({"t": "sent", "topic": topics::ESTOP.name, "on": on}));
             }
         }
     }
@@ -696,7 +649,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                             }
                         }
                     }
-                    Input::RobotDescription(text) => match RobotModel::from_urdf_str(&text, "robot_description") {
+                    Input::RobotDescription(text) => match RobotModel::from_urdf_str(&text, topics::ROBOT_DESCRIPTION.name) {
                         Ok(m) => {
                             log::info!("robot_description: {} ({} links)", m.name, m.links.len());
                             // the joint mode's sliders come from the URDF, for any arm

@@ -4,10 +4,8 @@
 
 use crate::teleop::{format_waypoint, Waypoint, WAYPOINT_HEADER};
 use anyhow::Context as _;
-use eezybot_msgs::geometry_msgs::PointStamped;
-use eezybot_msgs::std_msgs::Float64;
 use futures::StreamExt;
-use ros_plumbing::{qos, RosNode};
+use ros_plumbing::{topics, RosNode};
 use std::future::Future;
 use std::io::Write as _;
 use std::path::Path;
@@ -22,12 +20,12 @@ pub async fn record(
     let shown = path.display();
     let mut file = std::fs::File::create(path).with_context(|| format!("cannot create {shown}"))?;
     writeln!(file, "{WAYPOINT_HEADER}")?;
-    let targets = node.subscription::<PointStamped>("xyz_target", qos::COMMANDS)?;
-    let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
+    let targets = node.subscribe_to(&topics::XYZ_TARGET)?;
+    let gripper = node.subscribe_to(&topics::GRIPPER_TARGET)?;
     println!(
         "recording {} and {} into {shown}; Ctrl-C to stop",
-        node.resolver().resolve("xyz_target")?,
-        node.resolver().resolve("gripper_target")?
+        node.resolve(&topics::XYZ_TARGET)?,
+        node.resolve(&topics::GRIPPER_TARGET)?
     );
     let (t, g) = (targets.async_stream(), gripper.async_stream());
     tokio::pin!(t, g, shutdown);

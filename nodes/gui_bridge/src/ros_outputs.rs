@@ -6,17 +6,16 @@ use eezybot_msgs::geometry_msgs::{Point, PointStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64, Header};
 use eezybot_msgs::Time;
-use ros2_client::Publisher;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
-use ros_plumbing::{qos, PlumbingError, RosNode};
+use ros_plumbing::{topics, PlumbingError, RosNode, TopicPublisher};
 
 /// The node's publishers.
 pub struct RosOutputs {
     /// `xyz_target`
-    pub xyz: Publisher<PointStamped>,
-    gripper: Publisher<Float64>,
-    joints: Publisher<JointState>,
-    estop: Publisher<Bool>,
+    pub xyz: TopicPublisher<PointStamped>,
+    gripper: TopicPublisher<Float64>,
+    joints: TopicPublisher<JointState>,
+    estop: TopicPublisher<Bool>,
     diagnostics: DiagnosticsPublisher,
     frame: String,
 }
@@ -29,10 +28,10 @@ impl RosOutputs {
             .string("base_frame")
             .unwrap_or_else(|| "base_link".into());
         Ok(RosOutputs {
-            xyz: node.publisher("xyz_target", qos::COMMANDS)?,
-            gripper: node.publisher("gripper_target", qos::COMMANDS)?,
-            joints: node.publisher("joint_target", qos::COMMANDS)?,
-            estop: node.publisher("estop", qos::ESTOP)?,
+            xyz: node.publish_on(&topics::XYZ_TARGET)?,
+            gripper: node.publish_on(&topics::GRIPPER_TARGET)?,
+            joints: node.publish_on(&topics::JOINT_TARGET)?,
+            estop: node.publish_on(&topics::ESTOP)?,
             diagnostics: node.diagnostics()?,
             frame,
         })
@@ -52,14 +51,10 @@ impl Outputs for RosOutputs {
                 z: xyz[2],
             },
         };
-        if let Err(e) = self.xyz.publish(msg) {
-            log::warn!("could not publish xyz_target: {e:?}");
-        }
+        self.xyz.publish(msg);
     }
     fn gripper_target(&self, opening: f64) {
-        if let Err(e) = self.gripper.publish(Float64 { data: opening }) {
-            log::warn!("could not publish gripper_target: {e:?}");
-        }
+        self.gripper.publish(Float64 { data: opening });
     }
     fn joint_target(&self, positions: &[(String, f64)], stamp: Time) {
         let msg = JointState {
@@ -72,14 +67,10 @@ impl Outputs for RosOutputs {
             velocity: vec![],
             effort: vec![],
         };
-        if let Err(e) = self.joints.publish(msg) {
-            log::warn!("could not publish joint_target: {e:?}");
-        }
+        self.joints.publish(msg);
     }
     fn estop(&self, engaged: bool) {
-        if let Err(e) = self.estop.publish(Bool { data: engaged }) {
-            log::warn!("could not publish estop: {e:?}");
-        }
+        self.estop.publish(Bool { data: engaged });
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);

@@ -6,12 +6,9 @@ use crate::teleop::Teleop;
 use crate::web::{Limits, WebState};
 use crate::Input;
 use anyhow::Context as _;
-use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
-use eezybot_msgs::sensor_msgs::JointState;
-use eezybot_msgs::std_msgs::{Bool, String as StringMsg};
 use futures::StreamExt;
 use ros_plumbing::peers::PeerWatch;
-use ros_plumbing::{qos, ParameterValue, RosNode};
+use ros_plumbing::{topics, ParameterValue, RosNode};
 use std::future::Future;
 use std::io::Write as _;
 use std::net::{IpAddr, SocketAddr};
@@ -25,14 +22,13 @@ pub async fn serve(
 ) -> anyhow::Result<()> {
     let params = node.params().clone();
     let outputs = RosOutputs::new(node)?;
-    let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
-    let diagnostics = node.subscription::<DiagnosticArray>("diagnostics", qos::DIAGNOSTICS)?;
+    let joint_states = node.subscribe_to(&topics::JOINT_STATES)?;
+    let diagnostics = node.subscribe_to(&topics::DIAGNOSTICS)?;
     let rate = params.f64("rate").unwrap_or(50.0);
     let teleop = Arc::new(Mutex::new(Teleop::new(arm, rate)));
-    let description =
-        node.subscription::<StringMsg>("robot_description", qos::ROBOT_DESCRIPTION)?;
-    let servo_state = node.subscription::<JointState>("servo_state", qos::COMMANDS)?;
-    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
+    let description = node.subscribe_to(&topics::ROBOT_DESCRIPTION)?;
+    let servo_state = node.subscribe_to(&topics::SERVO_STATE)?;
+    let estop = node.subscribe_to(&topics::ESTOP)?;
     let (to_browsers, _) = tokio::sync::broadcast::channel(256);
     let limits = Limits::default();
     let (req_tx, req_rx) = crate::web::request_channels(&limits);
@@ -79,7 +75,7 @@ pub async fn serve(
             TokenSource::Generated => "token required, generated",
             TokenSource::Parameter => "token required, from the token parameter",
         },
-        node.resolver().resolve("xyz_target")?
+        node.resolve(&topics::XYZ_TARGET)?
     );
     print_panel_urls(local, token.as_ref());
     let server = tokio::spawn(async move {
@@ -98,35 +94,35 @@ pub async fn serve(
             .async_stream()
             .map(move |r| match r {
                 Ok((m, _)) => Input::JointStates(m),
-                Err(e) => unreadable("joint_states", &e),
+                Err(e) => unreadable(topics::JOINT_STATES.name, &e),
             })
             .boxed(),
         description
             .async_stream()
             .map(move |r| match r {
                 Ok((m, _)) => Input::RobotDescription(m.data),
-                Err(e) => unreadable("robot_description", &e),
+                Err(e) => unreadable(topics::ROBOT_DESCRIPTION.name, &e),
             })
             .boxed(),
         diagnostics
             .async_stream()
             .map(move |r| match r {
                 Ok((m, _)) => Input::Diagnostics(m),
-                Err(e) => unreadable("diagnostics", &e),
+                Err(e) => unreadable(topics::DIAGNOSTICS.name, &e),
             })
             .boxed(),
         servo_state
             .async_stream()
             .map(move |r| match r {
                 Ok((m, _)) => Input::ServoState(m),
-                Err(e) => unreadable("servo_state", &e),
+                Err(e) => unreadable(topics::SERVO_STATE.name, &e),
             })
             .boxed(),
         estop
             .async_stream()
             .map(move |r| match r {
                 Ok((m, _)) => Input::Estop(m.data),
-                Err(e) => unreadable("estop", &e),
+                Err(e) => unreadable(topics::ESTOP.name, &e),
             })
             .boxed(),
     ]);
@@ -134,8 +130,8 @@ pub async fn serve(
         name: format!("{}: operator panel", node.resolver().node_name()),
         url,
         peers: PeerWatch::new(&crate::watched_topics(
-            &node.resolver().resolve("xyz_target")?,
-            &node.resolver().resolve("servo_state")?,
+            &node.resolve(&topics::XYZ_TARGET)?,
+            &node.resolve(&topics::SERVO_STATE)?,
         )),
         counts: || {
             vec![
