@@ -15,7 +15,9 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use ros_plumbing::diagnostics::{stamp_text, LAST_REJECTION_KEY, REJECTED_STAMP_KEY};
 use ros_plumbing::logging::{shorten, NAME_MAX};
+use ros_plumbing::topics;
 use std::fmt;
 
 /// The EezyBot's URDF (`urdf/eezybot.urdf`), whose chain the numerical solvers drive.
@@ -38,10 +40,10 @@ impl Source {
     /// The topic name.
     pub fn topic(self) -> &'static str {
         match self {
-            Source::XyzTarget => "xyz_target",
-            Source::GripperTarget => "gripper_target",
-            Source::JointTarget => "joint_target",
-            Source::PoseTarget => "pose_target",
+            Source::XyzTarget => topics::XYZ_TARGET.name,
+            Source::GripperTarget => topics::GRIPPER_TARGET.name,
+            Source::JointTarget => topics::JOINT_TARGET.name,
+            Source::PoseTarget => topics::POSE_TARGET.name,
         }
     }
 }
@@ -300,20 +302,6 @@ pub struct Rejection {
     pub reason: Reason,
     /// The stamp of the refused input.
     pub stamp: Time,
-}
-
-impl Rejection {
-    /// The refused input's stamp as `SEC.NANOSEC` (nine digits of nanoseconds), the
-    /// `last_rejection_stamp` diagnostics value: a sender knows its target was refused
-    /// when it reads its target's stamp there.
-    pub fn stamp_text(&self) -> String {
-        let ns = self.stamp.to_nanos();
-        format!(
-            "{}.{:09}",
-            ns.div_euclid(1_000_000_000),
-            ns.rem_euclid(1_000_000_000)
-        )
-    }
 }
 
 impl fmt::Display for Rejection {
@@ -1217,11 +1205,11 @@ impl IkCore {
             ),
         ];
         if let Some(r) = &self.last_rejection {
-            values.push(("last_rejection", r.reason.to_string()));
+            values.push((LAST_REJECTION_KEY, r.reason.to_string()));
             values.push(("last_rejection_code", r.reason.code()));
             values.push(("last_rejection_topic", r.source.topic().to_string()));
-            // the refusal signal `gui_bridge once/play` wait for (gui_bridge::REJECTED_STAMP_KEY)
-            values.push(("last_rejection_stamp", r.stamp_text()));
+            // the refusal signal `gui_bridge once/play` wait for
+            values.push((REJECTED_STAMP_KEY, stamp_text(r.stamp)));
         }
         let mut more: Vec<(String, String)> = vec![(
             "solver".into(),

@@ -45,7 +45,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .constraints("empty, or an arm_config YAML file that loads")
             .validator(|v| match v {
-                ParameterValue::String(p) => load_config(p).map(|_| ()).map_err(|e| e.to_string()),
+                ParameterValue::String(p) => ArmConfig::load_or_shipped(p).map(|_| ()).map_err(|e| e.to_string()),
                 _ => Ok(()),
             }),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame xyz_target must be given in")
@@ -54,8 +54,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                     ParameterValue::String(s) if s.is_empty() => Err("must not be empty".into()),
                     _ => Ok(()),
                 }),
-            ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
-                .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+            ros_plumbing::diagnostics::diagnostics_period_param(),
             ParamSpec::new(
                 "motion",
                 ParameterValue::String("joint".into()),
@@ -175,7 +174,7 @@ impl Core {
     /// The core the parameters describe: the EezyBot unless `urdf` names another arm
     /// (an EezyBot URDF with tip `tool0` is the EezyBot). Errors name the problem.
     pub fn from_params(params: &Params) -> Result<Core, String> {
-        let config = load_config(&params.string("arm_config").unwrap_or_default())
+        let config = ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default())
             .map_err(|e| format!("arm_config: {e}"))?;
         let base_frame = params
             .string("base_frame")
@@ -259,7 +258,7 @@ impl Core {
         match self {
             Core::EezyBot(c) => {
                 // Values were validated before they were stored; a file that vanished since is reported.
-                match load_config(&params.string("arm_config").unwrap_or_default()) {
+                match ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default()) {
                     Ok(config) => c.set_config(&config),
                     Err(e) => log::error!("keeping the previous arm configuration: {e}"),
                 }
@@ -383,11 +382,6 @@ impl Core {
     }
 }
 
-/// Load the arm configuration named by the `arm_config` parameter.
-pub fn load_config(path: &str) -> Result<ArmConfig, eezybot_kinematics::ConfigError> {
-    ArmConfig::load_or_shipped(path)
-}
-
 /// The motion settings the parameters say.
 pub fn motion_settings(params: &Params) -> MotionSettings {
     MotionSettings {
@@ -486,7 +480,7 @@ pub async fn run(
     mut peers: PeerWatch,
     shutdown: impl Future<Output = ()>,
 ) {
-    let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
+    let period = ros_plumbing::diagnostics::diagnostics_period;
     let mut ticker = tokio::time::interval(period(&params));
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut param_changes = params.subscribe();

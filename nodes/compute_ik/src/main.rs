@@ -3,37 +3,32 @@
 use compute_ik::core::Source;
 use compute_ik::{Core, Input, Outputs};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
-use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
+use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
-use eezybot_msgs::std_msgs::{Bool, Float64};
 use eezybot_msgs::Time;
 use futures::StreamExt;
-use ros2_client::{Publisher, Subscription};
+use ros2_client::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
-use ros_plumbing::{qos, RosNode};
+use ros_plumbing::{topics, RosNode, TopicPublisher};
 use std::process::ExitCode;
 
 struct RosOutputs<'a> {
     node: &'a ros2_client::Node,
     xyz: &'a Subscription<PointStamped>,
-    joint_states: Publisher<JointState>,
+    joint_states: TopicPublisher<JointState>,
     /// the EezyBot's servos; an arm without a servo mapping has none
-    servo_angles: Option<Publisher<JointState>>,
+    servo_angles: Option<TopicPublisher<JointState>>,
     diagnostics: DiagnosticsPublisher,
 }
 
 impl Outputs for RosOutputs<'_> {
     fn joint_states(&self, msg: JointState) {
-        if let Err(e) = self.joint_states.publish(msg) {
-            log::warn!("could not publish joint_states: {e:?}");
-        }
+        self.joint_states.publish(msg);
     }
     fn servo_angles(&self, msg: JointState) {
         if let Some(p) = &self.servo_angles {
-            if let Err(e) = p.publish(msg) {
-                log::warn!("could not publish servo_angles: {e:?}");
-            }
+            p.publish(msg);
         }
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
@@ -59,22 +54,22 @@ async fn main_async() -> anyhow::Result<()> {
     let params = node.params().clone();
     let core = Core::from_params(&params).map_err(anyhow::Error::msg)?;
 
-    let xyz = node.subscription::<PointStamped>("xyz_target", qos::COMMANDS)?;
-    let gripper = node.subscription::<Float64>("gripper_target", qos::COMMANDS)?;
-    let joints = node.subscription::<JointState>("joint_target", qos::COMMANDS)?;
-    let pose = node.subscription::<PoseStamped>("pose_target", qos::COMMANDS)?;
-    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
-    let joint_states = node.publisher("joint_states", qos::COMMANDS)?;
+    let xyz = node.subscribe_to(&topics::XYZ_TARGET)?;
+    let gripper = node.subscribe_to(&topics::GRIPPER_TARGET)?;
+    let joints = node.subscribe_to(&topics::JOINT_TARGET)?;
+    let pose = node.subscribe_to(&topics::POSE_TARGET)?;
+    let estop = node.subscribe_to(&topics::ESTOP)?;
+    let joint_states = node.publish_on(&topics::JOINT_STATES)?;
     let servo_angles = if core.has_servos() {
-        Some(node.publisher("servo_angles", qos::COMMANDS)?)
+        Some(node.publish_on(&topics::SERVO_ANGLES)?)
     } else {
         None
     };
     let diagnostics = node.diagnostics()?;
     let peers = PeerWatch::new(&compute_ik::watched_topics(
-        &node.resolver().resolve("servo_angles")?,
-        &node.resolver().resolve("joint_states")?,
-        &node.resolver().resolve("xyz_target")?,
+        &node.resolve(&topics::SERVO_ANGLES)?,
+        &node.resolve(&topics::JOINT_STATES)?,
+        &node.resolve(&topics::XYZ_TARGET)?,
     ));
     let outputs = RosOutputs {
         node: node.node(),
@@ -131,10 +126,10 @@ async fn main_async() -> anyhow::Result<()> {
         "{} ready in ROS domain {}: {} -> {}{}; arm: {}",
         node.resolver().node_fqn(),
         node.domain_id(),
-        node.resolver().resolve("xyz_target")?,
-        node.resolver().resolve("joint_states")?,
+        node.resolve(&topics::XYZ_TARGET)?,
+        node.resolve(&topics::JOINT_STATES)?,
         if core.has_servos() {
-            format!(", {}", node.resolver().resolve("servo_angles")?)
+            format!(", {}", node.resolve(&topics::SERVO_ANGLES)?)
         } else {
             String::new()
         },

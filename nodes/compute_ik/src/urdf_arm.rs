@@ -21,6 +21,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use nalgebra::{Isometry3, Translation3, Vector3};
+use ros_plumbing::diagnostics::{stamp_text, LAST_REJECTION_KEY, REJECTED_STAMP_KEY};
 use std::f64::consts::PI;
 
 /// Velocity limit (rad/s or m/s) of a joint whose URDF gives none (or zero).
@@ -907,10 +908,10 @@ impl UrdfCore {
             values.push(("last_pose_target".into(), t.clone()));
         }
         if let Some(r) = &self.last_rejection {
-            values.push(("last_rejection".into(), r.reason.to_string()));
+            values.push((LAST_REJECTION_KEY.into(), r.reason.to_string()));
             values.push(("last_rejection_code".into(), r.reason.code()));
             values.push(("last_rejection_topic".into(), r.source.topic().to_string()));
-            values.push(("last_rejection_stamp".into(), r.stamp_text()));
+            values.push((REJECTED_STAMP_KEY.into(), stamp_text(r.stamp)));
         }
         let refs: Vec<(&str, String)> = values
             .iter()

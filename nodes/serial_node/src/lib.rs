@@ -12,18 +12,18 @@ pub mod link;
 
 use crate::core::{angles_to_ticks, ticks_to_angles};
 use crate::link::{Link, LinkEvent, SendStats};
-use eezybot_kinematics::{ServoCalibrations, ServoId};
+use eezybot_kinematics::{ArmConfig, ServoCalibrations, ServoId};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
 use ros_plumbing::burst;
+use ros_plumbing::diagnostics::p50_p99;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use servo_protocol::DeviceState;
-use std::collections::VecDeque;
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedReceiver;
@@ -78,21 +78,16 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String(p) => load_calibration(p).map(|_| ()),
                 _ => Ok(()),
             }),
-            ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
-                .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+            ros_plumbing::diagnostics::diagnostics_period_param(),
         ],
     }
 }
 
-/// The arm configuration (calibration, motion limits) from the `arm_config` file
-/// (empty: the shipped one).
-pub fn load_arm_config(path: &str) -> Result<eezybot_kinematics::ArmConfig, String> {
-    eezybot_kinematics::ArmConfig::load_or_shipped(path).map_err(|e| e.to_string())
-}
-
 /// The servo calibration from the `arm_config` file (empty: the shipped one).
 pub fn load_calibration(path: &str) -> Result<ServoCalibrations, String> {
-    load_arm_config(path).map(|c| c.servos)
+    ArmConfig::load_or_shipped(path)
+        .map(|c| c.servos)
+        .map_err(|e| e.to_string())
 }
 
 /// One event for the loop.
@@ -165,15 +160,6 @@ pub struct LinkStatus {
 
 fn time_s(t: Time) -> f64 {
     t.to_nanos() as f64 * 1e-9
-}
-
-fn percentile(v: &VecDeque<f64>, p: f64) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let mut s: Vec<f64> = v.iter().copied().collect();
-    s.sort_by(f64::total_cmp);
-    Some(s[((s.len() - 1) as f64 * p).round() as usize])
 }
 
 impl LinkStatus {
@@ -358,13 +344,10 @@ impl LinkStatus {
         if let Some(r) = &self.last_rejection {
             values.push(("last_rejection", r.clone()));
         }
-        if let (Some(p50), Some(p99)) = (
-            percentile(&sent.latency_us, 0.5),
-            percentile(&sent.latency_us, 0.99),
-        ) {
-            values.push(("send_latency_us_p50", format!("{p50:.1}")));
-            values.push(("send_latency_us_p99", format!("{p99:.1}")));
-        }
+        values.extend(p50_p99(
+            sent.latency_us.iter().copied(),
+            ["send_latency_us_p50", "send_latency_us_p99"],
+        ));
         ros_plumbing::diagnostics::status(level, name, port, &message, &values)
     }
 }
@@ -383,11 +366,11 @@ pub async fn run(
     mut peers: PeerWatch,
     shutdown: impl Future<Output = ()>,
 ) {
-    let config =
-        load_arm_config(&params.string("arm_config").unwrap_or_default()).unwrap_or_default();
+    let config = ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default())
+        .unwrap_or_default();
     let mut cal = config.servos;
     link.set_velocity_limits(config.motion.ticks_per_s(&cal));
-    let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
+    let period = ros_plumbing::diagnostics::diagnostics_period;
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
     let mut status = LinkStatus {
@@ -444,7 +427,7 @@ pub async fn run(
                 }
             }
             Ok(()) = param_changes.changed() => {
-                match load_arm_config(&params.string("arm_config").unwrap_or_default()) {
+                match ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default()) {
                     Ok(c) => {
                         cal = c.servos;
                         link.set_velocity_limits(c.motion.ticks_per_s(&cal));

@@ -2,12 +2,11 @@
 
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
-use eezybot_msgs::std_msgs::Bool;
 use futures::StreamExt;
-use ros2_client::{Publisher, Subscription};
+use ros2_client::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
-use ros_plumbing::{qos, RosNode};
+use ros_plumbing::{topics, RosNode, TopicPublisher};
 use serial_node::link::{self, Link};
 use serial_node::{Input, Outputs};
 use servo_protocol::host::HostConfig;
@@ -18,15 +17,13 @@ use std::time::{Duration, Instant};
 struct RosOutputs<'a> {
     node: &'a ros2_client::Node,
     angles: &'a Subscription<JointState>,
-    servo_state: Publisher<JointState>,
+    servo_state: TopicPublisher<JointState>,
     diagnostics: DiagnosticsPublisher,
 }
 
 impl Outputs for RosOutputs<'_> {
     fn servo_state(&self, msg: JointState) {
-        if let Err(e) = self.servo_state.publish(msg) {
-            log::warn!("could not publish servo_state: {e:?}");
-        }
+        self.servo_state.publish(msg);
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
@@ -71,13 +68,13 @@ async fn main_async() -> anyhow::Result<()> {
     let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
     let link = Link::start(opener, config, tx)?;
 
-    let angles = node.subscription::<JointState>("servo_angles", qos::COMMANDS)?;
-    let estop = node.subscription::<Bool>("estop", qos::ESTOP)?;
-    let servo_state = node.publisher("servo_state", qos::COMMANDS)?;
+    let angles = node.subscribe_to(&topics::SERVO_ANGLES)?;
+    let estop = node.subscribe_to(&topics::ESTOP)?;
+    let servo_state = node.publish_on(&topics::SERVO_STATE)?;
     let diagnostics = node.diagnostics()?;
     let peers = PeerWatch::new(&serial_node::watched_topics(
-        &node.resolver().resolve("servo_angles")?,
-        &node.resolver().resolve("servo_state")?,
+        &node.resolve(&topics::SERVO_ANGLES)?,
+        &node.resolve(&topics::SERVO_STATE)?,
     ));
     let outputs = RosOutputs {
         node: node.node(),
@@ -104,7 +101,7 @@ async fn main_async() -> anyhow::Result<()> {
         "{} ready in ROS domain {}: {} -> {} ({}), replies on {}",
         node.resolver().node_fqn(),
         node.domain_id(),
-        node.resolver().resolve("servo_angles")?,
+        node.resolve(&topics::SERVO_ANGLES)?,
         if port == "mock" {
             "the virtual Arduino".to_string()
         } else {
@@ -114,7 +111,7 @@ async fn main_async() -> anyhow::Result<()> {
             "{:.0} frames/s at most",
             1.0 / config.send_period.as_secs_f64()
         ),
-        node.resolver().resolve("servo_state")?,
+        node.resolve(&topics::SERVO_STATE)?,
     );
     let diag_name = format!("{}: servo link", node.resolver().node_name());
     let shutdown = ros_plumbing::shutdown_logged();

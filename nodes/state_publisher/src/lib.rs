@@ -15,10 +15,11 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::Time;
 use futures::{Stream, StreamExt};
+use ros_plumbing::diagnostics::LatencyWindow;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::future::Future;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -54,8 +55,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "most tf messages a second for movable joints (latest wins); 0 = one per joint_states",
             )
             .range(ParamRange::Double { min: 0.0, max: 10_000.0 }),
-            ParamSpec::new("diagnostics_period", ParameterValue::Double(1.0), "seconds between diagnostics reports")
-                .range(ParamRange::Double { min: 0.05, max: 60.0 }),
+            ros_plumbing::diagnostics::diagnostics_period_param(),
         ],
     }
 }
@@ -117,31 +117,6 @@ pub enum Input {
     Unreadable(String),
 }
 
-/// Latencies (µs) from taking a `joint_states` sample to having published its tf.
-#[derive(Default)]
-struct LatencyWindow(VecDeque<f64>);
-
-impl LatencyWindow {
-    fn push(&mut self, us: f64) {
-        if self.0.len() == 1000 {
-            self.0.pop_front();
-        }
-        self.0.push_back(us);
-    }
-    fn percentiles(&self) -> Vec<(&'static str, String)> {
-        if self.0.is_empty() {
-            return vec![];
-        }
-        let mut v: Vec<f64> = self.0.iter().copied().collect();
-        v.sort_by(f64::total_cmp);
-        let at = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
-        vec![
-            ("tf_latency_us_p50", format!("{:.1}", at(0.5))),
-            ("tf_latency_us_p99", format!("{:.1}", at(0.99))),
-        ]
-    }
-}
-
 /// The loop: runs until `shutdown` resolves or `inputs` ends.
 pub async fn run(
     description: Description,
@@ -158,14 +133,15 @@ pub async fn run(
     let mut core = TfCore::new(description.model, &prefix(&params));
     outputs.robot_description(description.text);
     outputs.tf_static(core.static_transforms(Time::now()));
-    let period = |p: &Params| Duration::from_secs_f64(p.f64("diagnostics_period").unwrap_or(1.0));
+    let period = ros_plumbing::diagnostics::diagnostics_period;
     let min_interval = |p: &Params| {
         let f = p.f64("publish_frequency").unwrap_or(0.0);
         (f > 0.0).then(|| Duration::from_secs_f64(1.0 / f))
     };
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
-    let mut latency = LatencyWindow::default();
+    // µs from taking a `joint_states` sample to having published its tf
+    let mut latency = LatencyWindow::new(1000);
     let mut last_tf = Instant::now() - Duration::from_secs(3600);
     let mut pending: BTreeMap<String, TransformStamped> = BTreeMap::new();
     let mut pending_since: Option<Instant> = None;
@@ -181,7 +157,7 @@ pub async fn run(
         tokio::select! {
             _ = &mut shutdown => break,
             _ = ticker.tick() => {
-                let mut extra = latency.percentiles();
+                let mut extra = latency.p50_p99(["tf_latency_us_p50", "tf_latency_us_p99"]);
                 extra.push(("unreadable_samples", unreadable.to_string()));
                 let mut status = core.diagnostic_status(&diag_name, &extra);
                 peers.annotate(&mut status, Instant::now());

@@ -6,9 +6,9 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::String as StringMsg;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use futures::StreamExt;
-use ros2_client::{Publisher, Subscription};
+use ros2_client::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
-use ros_plumbing::{qos, RosNode};
+use ros_plumbing::{topics, RosNode, TopicPublisher};
 use state_publisher::{load_urdf, urdf_origin, Input, Outputs};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -16,27 +16,21 @@ use std::time::Instant;
 struct RosOutputs<'a> {
     node: &'a ros2_client::Node,
     joint_states: &'a Subscription<JointState>,
-    tf: Publisher<TFMessage>,
-    tf_static: Publisher<TFMessage>,
-    robot_description: Publisher<StringMsg>,
+    tf: TopicPublisher<TFMessage>,
+    tf_static: TopicPublisher<TFMessage>,
+    robot_description: TopicPublisher<StringMsg>,
     diagnostics: DiagnosticsPublisher,
 }
 
 impl Outputs for RosOutputs<'_> {
     fn tf(&self, msg: TFMessage) {
-        if let Err(e) = self.tf.publish(msg) {
-            log::warn!("could not publish tf: {e:?}");
-        }
+        self.tf.publish(msg);
     }
     fn tf_static(&self, msg: TFMessage) {
-        if let Err(e) = self.tf_static.publish(msg) {
-            log::warn!("could not publish tf_static: {e:?}");
-        }
+        self.tf_static.publish(msg);
     }
     fn robot_description(&self, urdf: String) {
-        if let Err(e) = self.robot_description.publish(StringMsg { data: urdf }) {
-            log::warn!("could not publish robot_description: {e:?}");
-        }
+        self.robot_description.publish(StringMsg { data: urdf });
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
@@ -57,10 +51,10 @@ async fn main_async() -> anyhow::Result<()> {
     let description = load_urdf(&path)
         .map_err(anyhow::Error::msg)
         .context("urdf")?;
-    let joint_states = node.subscription::<JointState>("joint_states", qos::COMMANDS)?;
-    let tf = node.publisher("tf", qos::TF)?;
-    let tf_static = node.publisher("tf_static", qos::TF_STATIC)?;
-    let robot_description = node.publisher("robot_description", qos::ROBOT_DESCRIPTION)?;
+    let joint_states = node.subscribe_to(&topics::JOINT_STATES)?;
+    let tf = node.publish_on(&topics::TF)?;
+    let tf_static = node.publish_on(&topics::TF_STATIC)?;
+    let robot_description = node.publish_on(&topics::ROBOT_DESCRIPTION)?;
     let diagnostics = node.diagnostics()?;
     let outputs = RosOutputs {
         node: node.node(),
@@ -80,13 +74,13 @@ async fn main_async() -> anyhow::Result<()> {
         node.domain_id(),
         urdf_origin(&path),
         description.model.links.len(),
-        node.resolver().resolve("robot_description")?,
-        node.resolver().resolve("tf_static")?,
-        node.resolver().resolve("tf")?
+        node.resolve(&topics::ROBOT_DESCRIPTION)?,
+        node.resolve(&topics::TF_STATIC)?,
+        node.resolve(&topics::TF)?
     );
     let diag_name = format!("{}: robot state", node.resolver().node_name());
     let shutdown = ros_plumbing::shutdown_logged();
-    let topic = node.resolver().resolve("joint_states")?;
+    let topic = node.resolve(&topics::JOINT_STATES)?;
     state_publisher::run(
         description,
         inputs,
