@@ -239,7 +239,10 @@ fn nodes_text(nodes: &[&str]) -> String {
     } else {
         nodes
             .iter()
-            .map(|n| format!("`{n}`"))
+            .map(|n| match n.split_once(' ') {
+                Some((node, how)) => format!("`{node}` {how}"),
+                None => format!("`{n}`"),
+            })
             .collect::<Vec<_>>()
             .join(", ")
     }
