@@ -1,28 +1,4 @@
-//! The standard ROS 2 message types that the EezyBot graph puts on the wire.
-//!
-//! Every struct mirrors its `.msg` definition field by field, in the same order,
-//! so that serde's CDR serialization (what `ros2-client` uses) produces exactly
-//! the bytes that `rclcpp`/`rclpy` produce. `builtin_interfaces/Time` comes from
-//! `ros2-client` ([`Time`]).
-//!
-//! The [`cdr`] module encodes and decodes a message exactly as a ROS 2 DataWriter
-//! and DataReader do (4-byte encapsulation header, little-endian CDR), which is
-//! what the interop tests compare against real rclpy.
-//!
-//! # Examples
-//! ```
-//! use eezybot_msgs::{cdr, geometry_msgs::{Point, PointStamped}, std_msgs::Header};
-//! let m = PointStamped {
-//!     header: Header { stamp: eezybot_msgs::Time::ZERO, frame_id: "base_link".into() },
-//!     point: Point { x: 0.2, y: 0.0, z: 0.15 },
-//! };
-//! let bytes = cdr::encode(&m)?;
-//! assert_eq!(&bytes[..4], &[0x00, 0x01, 0x00, 0x00]); // CDR little endian
-//! let back: PointStamped = cdr::decode(&bytes)?;
-//! assert_eq!(back, m);
-//! # Ok::<(), eezybot_msgs::cdr::CdrError>(())
-//! ```
-
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub use ros2_client::builtin_interfaces::Time;

@@ -1,26 +1,4 @@
-//! Kinematics of the EezyBotArm Mk2 (see `shared/ROBOT.md`), with no ROS in sight.
-//!
-//! * [`Arm::forward`] and [`Arm::solve_position`]: the closed-form FK and IK of the
-//!   tool point `tool0` in `base_link`, every reach and joint limit checked; a failed
-//!   solve returns a [`KinematicsError`] naming the limit and the values.
-//! * [`PassiveJoints`]: the angles of the linkage joints the URDF models as an
-//!   open-chain equivalent of the closed parallelograms.
-//! * [`ServoCalibration`]: joint values → servo horn angles (the Servo library's
-//!   0–180°) and pulse widths, from a configuration file.
-//!
-//! # Examples
-//! ```
-//! use eezybot_kinematics::{Arm, ArmJoints};
-//! let arm = Arm::default();
-//! let home = ArmJoints::HOME;
-//! let p = arm.forward(&home);
-//! // main arm vertical, forearm horizontal: tool at L3 + tool_dx forward, H + L2 high
-//! assert!((p.x - (0.147 + 0.0393)).abs() < 1e-12);
-//! assert!((p.z - (0.094 + 0.135)).abs() < 1e-12);
-//! let q = arm.solve_position(&p, 0.0).unwrap();
-//! assert!((q.shoulder_rad - home.shoulder_rad).abs() < 1e-12);
-//! ```
-
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod assess;
@@ -33,7 +11,10 @@ pub mod rng;
 mod servo;
 pub mod urdf;
 
-pub use config::{ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LimitDeg};
+pub use config::{
+    ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LimitDeg, MAX_CONFIG_BYTES,
+    MAX_FLOW_COLLECTIONS,
+};
 pub use error::{Joint, KinematicsError};
 pub use motion::{MotionLimits, ServoMotionLimits};
 pub use servo::{ServoAngles, ServoCalibration, ServoCalibrations, ServoId};

@@ -1,34 +1,4 @@
-//! Motion limits for hobby-servo arms, as pure logic (no ROS, no I/O, time passed in).
-//!
-//! * [`track`]: one axis moving toward a target within its velocity and acceleration
-//!   limits, one fixed time step at a time (time-optimal in discrete time: it brakes
-//!   so as to stop on the target, never overshooting it from rest);
-//! * [`Planner`]: several axes, re-planned from their current position and velocity
-//!   whenever a new goal arrives: a joint move (axes starting at rest arrive together,
-//!   on a straight line in joint space), a [`JointPath`] to follow (e.g. a straight
-//!   Cartesian line), or an immediate stop;
-//! * [`straight_line`]: samples a Cartesian segment, solves IK at every sample and
-//!   refuses the whole move, with the reason and the place, if any sample is
-//!   unreachable or the joint motion jumps.
-//!
-//! A planner stepped at a fixed rate gives the stream of intermediate positions a
-//! node publishes; each step changes every axis' velocity by at most
-//! `max_acceleration · dt` and keeps it within `max_velocity`.
-//!
-//! # Examples
-//! ```
-//! use eezybot_motion::{AxisLimits, Planner};
-//! let limits = vec![AxisLimits::new(1.0, 4.0).unwrap(); 2];
-//! let mut p = Planner::new(limits, &[0.0, 0.0], 0.02).unwrap();
-//! p.move_to(&[0.5, -0.25]).unwrap();
-//! let mut steps = 0;
-//! while let Some(q) = p.step() {
-//!     steps += 1;
-//!     assert!(q[0] >= 0.0 && q[0] <= 0.5);
-//! }
-//! assert_eq!(p.position(), vec![0.5, -0.25]);
-//! assert!(steps > 10 && steps < 60, "{steps}");
-//! ```
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 mod line;

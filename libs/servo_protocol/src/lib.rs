@@ -1,15 +1,4 @@
-//! The servo link between `serial_node` and the Arduino (`firmware/servo_control/`):
-//! a framed binary protocol sized for an 8-bit Uno at 115200 baud (a 4-servo command is
-//! 12 bytes, 1.04 ms on the wire). See `firmware/servo_control/PROTOCOL.md`.
-//!
-//! * [`encode`] / [`decode`]: pure, no I/O; `decode` tells *incomplete* (`Ok(None)`)
-//!   from *invalid* (`Err`, bytes dropped so decoding goes on);
-//! * [`FrameReader`]: owns the receive buffer of any `Read` (a serial port, a pty, the
-//!   virtual device);
-//! * [`device`]: the device side as the firmware implements it, with the servos'
-//!   motion modelled: the virtual Arduino;
-//! * [`host`]: the host side as a pure state machine (handshake, latest-wins
-//!   commands with a velocity guard, heartbeats, e-stop, reconnection).
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod device;

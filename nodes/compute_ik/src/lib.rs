@@ -1,12 +1,4 @@
-//! `compute_ik`: targets → joint states and servo angles.
-//!
-//! Subscribes `xyz_target`, `pose_target`, `gripper_target`, `joint_target` and
-//! `estop`; publishes `joint_states`, `servo_angles` (the EezyBot only) and
-//! `diagnostics` (see `shared/INTERFACES.md`). The logic is [`core::IkCore`] for the
-//! EezyBot and [`urdf_arm::UrdfCore`] for any other arm given by its URDF, behind
-//! [`Core`]; [`run`] is the event loop, handed its inputs and outputs so that tests can
-//! drive it without ROS.
-
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod core;

@@ -1,10 +1,4 @@
-//! `serial_node`: `servo_angles` → the Arduino over a serial port; device feedback → ROS.
-//!
-//! Subscribes `servo_angles` and `estop`, converts angles to pulse widths with the
-//! calibration, and hands the newest command to the [`link::Link`] (latest wins, at most
-//! one frame per servo refresh period). Publishes `servo_state` from the device's
-//! replies and `diagnostics` (port, connection, frame counters, round-trip time).
-//! `port:=mock` uses the built-in virtual Arduino.
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod core;

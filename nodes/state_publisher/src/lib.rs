@@ -1,8 +1,4 @@
-//! `state_publisher`: a robot_state_publisher for our stack.
-//!
-//! Publishes `robot_description` and `tf_static` (both transient-local) once per URDF,
-//! and `tf` for the movable joints of every `joint_states` message, mimic joints
-//! included. Works for any URDF tree. [`core::TfCore`] is the logic; [`run`] the loop.
+#![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod core;
