@@ -18,4 +18,4 @@ launch_scripts/cross_build.sh aarch64
 # the IK properties with 25 cases each under emulation (200 natively, above)
 PROPTEST_CASES=25 cargo test --target aarch64-unknown-linux-gnu -p eezybot_kinematics -p servo_protocol -p eezybot_msgs
 echo "== integration tests (real ROS 2)"
-"$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider "$@"
+"$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider --durations=15 "$@"
