@@ -25,8 +25,8 @@ pub const EXIT_USAGE: u8 = 2;
     about = "gui_bridge: operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
     override_usage = "gui_bridge [serve]                                  [--ros-args ...]\n       \
                       gui_bridge once X Y Z [--gripper G] [--line] [--timeout S] [--ros-args ...]\n       \
-                      gui_bridge play FILE.csv [--line] [--timeout S]      [--ros-args ...]\n       \
-                      gui_bridge record FILE.csv                          [--ros-args ...]\n       \
+                      gui_bridge play FILE.csv|FILE.mcap [--line] [--timeout S] [--ros-args ...]\n       \
+                      gui_bridge record FILE.csv|FILE.mcap                 [--ros-args ...]\n       \
                       (the commands are also flags: --once X Y Z, --play FILE, --record FILE)"
 )]
 pub struct Cli {
@@ -81,8 +81,9 @@ impl OnceArgs {
 /// `play FILE`
 #[derive(Debug, Args)]
 pub struct PlayArgs {
-    /// CSV file of x,y,z,gripper,dwell rows (as `record` writes)
-    #[arg(value_name = "FILE.csv")]
+    /// CSV file of x,y,z,gripper,dwell rows (as `record` writes), or an MCAP recording
+    /// (`.mcap`: its targets are published again at their recorded times)
+    #[arg(value_name = "FILE.csv|FILE.mcap")]
     pub file: PathBuf,
     /// How to deliver
     #[command(flatten)]
@@ -92,8 +93,9 @@ pub struct PlayArgs {
 /// `record FILE`
 #[derive(Debug, Args)]
 pub struct RecordArgs {
-    /// CSV file to write (replaced)
-    #[arg(value_name = "FILE.csv")]
+    /// CSV file to write (replaced); `.mcap`: an MCAP recording of the targets,
+    /// joint_states, tf, tf_static, robot_description and servo_state
+    #[arg(value_name = "FILE.csv|FILE.mcap")]
     pub file: PathBuf,
 }
 

@@ -4,6 +4,7 @@
 pub mod access;
 pub mod cli;
 pub mod delivery;
+pub mod foxglove;
 pub mod record;
 pub mod ros_outputs;
 pub mod serve;
@@ -38,7 +39,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
         name: "gui_bridge",
         description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
-        usage: "[serve | once X Y Z [--gripper G] [--line] [--timeout S] | play WAYPOINTS.csv [--line] [--timeout S] | record OUT.csv]",
+        usage: "[serve | once X Y Z [--gripper G] [--line] [--timeout S] | play WAYPOINTS.csv|RUN.mcap [--line] [--timeout S] | record OUT.csv|OUT.mcap]",
         params: vec![
             ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
             ParamSpec::new(
@@ -63,6 +64,25 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 _ => Ok(()),
             }),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
+            ParamSpec::new(
+                "foxglove_bind",
+                ParameterValue::String(foxglove_bridge::DEFAULT_BIND.into()),
+                "address:port of the Foxglove WebSocket server (every topic, ros2msg schemas, CDR); empty = off",
+            )
+            .read_only()
+            .validator(|v| match v {
+                ParameterValue::String(b) if !b.trim().is_empty() => b
+                    .parse::<std::net::SocketAddr>()
+                    .map(|_| ())
+                    .map_err(|_| format!("{b:?} is not an address like 127.0.0.1:8765 or [::1]:8765")),
+                _ => Ok(()),
+            }),
+            ParamSpec::new(
+                "foxglove_publish",
+                ParameterValue::Boolean(false),
+                "let Foxglove clients publish xyz_target, pose_target, gripper_target, joint_target (only without a panel token: the Foxglove server cannot check Origin, Host or a token)",
+            )
+            .read_only(),
         ],
     }
 }

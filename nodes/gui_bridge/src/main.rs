@@ -7,7 +7,7 @@
 
 use gui_bridge::cli::{self, Cli, Command, EXIT_REFUSED, EXIT_USAGE};
 use gui_bridge::delivery::{self, NotDelivered};
-use gui_bridge::{record, serve};
+use gui_bridge::{foxglove, record, serve};
 use ros_plumbing::RosNode;
 use std::process::ExitCode;
 
@@ -50,7 +50,13 @@ async fn run(cli: Cli, argv: Vec<String>) -> anyhow::Result<()> {
     let result = match cli.command.unwrap_or(Command::Serve) {
         Command::Serve => serve::serve(&mut node, arm, shutdown).await,
         Command::Once(args) => delivery::once(&mut node, &arm, args, shutdown).await,
+        Command::Play(args) if foxglove::is_mcap(&args.file) => {
+            foxglove::play_mcap(&mut node, &args.file, args.delivery.timeout, shutdown).await
+        }
         Command::Play(args) => delivery::play(&mut node, &arm, args, shutdown).await,
+        Command::Record(args) if foxglove::is_mcap(&args.file) => {
+            foxglove::record_mcap(&mut node, &args.file, shutdown).await
+        }
         Command::Record(args) => record::record(&mut node, &args.file, shutdown).await,
     };
     node.shutdown().await;

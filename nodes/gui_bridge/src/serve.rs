@@ -53,6 +53,7 @@ pub async fn serve(
         },
     )?;
     hide_token_parameter(node, &params, source);
+    let foxglove = crate::foxglove::serve(node, token.is_some()).await?;
     let state = WebState::new(
         to_browsers.clone(),
         req_tx,
@@ -141,7 +142,7 @@ pub async fn serve(
         },
         web: web_stats,
     };
-    crate::run(
+    let panel = crate::run(
         teleop,
         inputs,
         req_rx,
@@ -150,8 +151,17 @@ pub async fn serve(
         params,
         reporting,
         shutdown,
-    )
-    .await;
+    );
+    match foxglove {
+        // the Foxglove forwarding never ends by itself: the panel's shutdown ends both
+        Some(foxglove) => {
+            tokio::select! {
+                _ = panel => {}
+                _ = foxglove => {}
+            }
+        }
+        None => panel.await,
+    }
     server.abort();
     Ok(())
 }

@@ -1,0 +1,319 @@
+//! Foxglove and MCAP for gui_bridge: the graph's samples as CDR (for the Foxglove
+//! WebSocket server of `foxglove_bind`, and for `record FILE.mcap`), targets from
+//! Foxglove panels onto ROS, and `play FILE.mcap`. The protocol and file work is
+//! [`foxglove_bridge`]'s; this module is the ROS side.
+//!
+//! ros2-client hands a subscription deserialized messages, not the wire's bytes, so each
+//! sample is serialized again with the serializer the messages are published with
+//! (`eezybot_msgs::cdr`): the same bytes as any little-endian ROS 2 writer's for these
+//! types (Fast DDS' too; a big-endian writer's samples come out little-endian).
+
+use anyhow::{anyhow, Context as _};
+use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Float64;
+use eezybot_msgs::{RosMessage, Time};
+use foxglove_bridge::{
+    now_ns, ClientPublish, ClientSample, FoxgloveBridge, McapRecorder, McapTargets, TopicNames,
+};
+use futures::future::{FutureExt, LocalBoxFuture};
+use futures::stream::{LocalBoxStream, StreamExt};
+use ros_plumbing::{topics, RosNode, TopicPublisher};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use std::future::Future;
+use std::path::Path;
+use std::time::Duration;
+
+/// One sample: the topic (relative name) and its CDR bytes.
+pub type RawSample = (&'static str, Vec<u8>);
+
+/// Is `path` an MCAP file (by its extension, `.mcap`, any case)?
+pub fn is_mcap(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+}
+
+/// The topic names as this node has them (namespace and remaps).
+pub fn topic_names(node: &RosNode) -> TopicNames {
+    TopicNames::default().resolved_by(|t| node.resolver().resolve(t).ok())
+}
+
+fn tap<M>(
+    node: &mut RosNode,
+    topic: &topics::Topic<M>,
+) -> anyhow::Result<LocalBoxStream<'static, RawSample>>
+where
+    M: RosMessage + Serialize + DeserializeOwned + 'static,
+{
+    let sub = node.subscribe_to(topic)?;
+    let name = topic.name;
+    Ok(futures::stream::unfold(sub, |sub| async move {
+        let r = sub.async_take().await;
+        Some((r, sub))
+    })
+    .filter_map(move |r| async move {
+        match r {
+            Ok((m, _)) => match eezybot_msgs::cdr::encode(&m) {
+                Ok(bytes) => Some((name, bytes)),
+                Err(e) => {
+                    log::warn!("{name}: cannot serialize a sample again: {e}");
+                    None
+                }
+            },
+            Err(e) => {
+                log::debug!("{name}: unreadable sample: {e:?}");
+                None
+            }
+        }
+    })
+    .boxed_local())
+}
+
+/// The samples of every topic of the graph for which `wanted(relative name)` holds, as
+/// they arrive.
+pub fn taps(
+    node: &mut RosNode,
+    wanted: impl Fn(&str) -> bool,
+) -> anyhow::Result<LocalBoxStream<'static, RawSample>> {
+    let mut streams = Vec::new();
+    macro_rules! add {
+        ($($t:expr),*) => {$(
+            if wanted($t.name) {
+                streams.push(tap(node, &$t)?);
+            }
+        )*};
+    }
+    add!(
+        topics::ROBOT_DESCRIPTION,
+        topics::TF_STATIC,
+        topics::TF,
+        topics::JOINT_STATES,
+        topics::SERVO_ANGLES,
+        topics::SERVO_STATE,
+        topics::DIAGNOSTICS,
+        topics::XYZ_TARGET,
+        topics::POSE_TARGET,
+        topics::GRIPPER_TARGET,
+        topics::JOINT_TARGET,
+        topics::ESTOP
+    );
+    Ok(futures::stream::select_all(streams).boxed_local())
+}
+
+/// Publishers of the four target topics, publishing samples given as CDR.
+pub struct TargetPublishers {
+    xyz: TopicPublisher<PointStamped>,
+    pose: TopicPublisher<PoseStamped>,
+    gripper: TopicPublisher<Float64>,
+    joints: TopicPublisher<JointState>,
+}
+
+impl TargetPublishers {
+    /// Create them.
+    pub fn new(node: &mut RosNode) -> anyhow::Result<TargetPublishers> {
+        Ok(TargetPublishers {
+            xyz: node.publish_on(&topics::XYZ_TARGET)?,
+            pose: node.publish_on(&topics::POSE_TARGET)?,
+            gripper: node.publish_on(&topics::GRIPPER_TARGET)?,
+            joints: node.publish_on(&topics::JOINT_TARGET)?,
+        })
+    }
+
+    /// Publish the CDR sample `cdr` of the target topic `topic`; with `restamp`, its
+    /// `header.stamp` becomes now (a replayed target is a new request, not an old one
+    /// that compute_ik's `max_target_age` would refuse).
+    pub fn publish(&self, topic: &str, cdr: &[u8], restamp: bool) -> anyhow::Result<()> {
+        let stamp = |t: &mut Time| {
+            if restamp {
+                *t = Time::now();
+            }
+        };
+        let bad = |e| anyhow!("{topic}: unreadable sample: {e}");
+        match topic {
+            "xyz_target" => {
+                let mut m: PointStamped = eezybot_msgs::cdr::decode(cdr).map_err(bad)?;
+                stamp(&mut m.header.stamp);
+                self.xyz.publish(m);
+            }
+            "pose_target" => {
+                let mut m: PoseStamped = eezybot_msgs::cdr::decode(cdr).map_err(bad)?;
+                stamp(&mut m.header.stamp);
+                self.pose.publish(m);
+            }
+            "gripper_target" => {
+                self.gripper
+                    .publish(eezybot_msgs::cdr::decode(cdr).map_err(bad)?);
+            }
+            "joint_target" => {
+                let mut m: JointState = eezybot_msgs::cdr::decode(cdr).map_err(bad)?;
+                stamp(&mut m.header.stamp);
+                self.joints.publish(m);
+            }
+            other => return Err(anyhow!("{other} is not a target topic")),
+        }
+        Ok(())
+    }
+}
+
+/// The Foxglove WebSocket server of the `foxglove_bind` parameter (`None` when empty),
+/// forwarding every topic until the returned future is dropped.
+///
+/// Foxglove panels may publish targets only with `foxglove_publish:=true`, and only when
+/// the web panel needs no token: the Foxglove SDK shows no request headers, so neither
+/// the `Origin`/`Host` rules nor the token can be checked for its clients.
+pub async fn serve(
+    node: &mut RosNode,
+    token_required: bool,
+) -> anyhow::Result<Option<LocalBoxFuture<'static, ()>>> {
+    let params = node.params().clone();
+    let bind = params.string("foxglove_bind").unwrap_or_default();
+    if bind.trim().is_empty() {
+        log::info!("Foxglove WebSocket server off (foxglove_bind is empty)");
+        return Ok(None);
+    }
+    let wants_publish = params.bool("foxglove_publish").unwrap_or(false);
+    let publish = if wants_publish && token_required {
+        log::warn!(
+            "foxglove_publish ignored: the web panel needs a token, and the Foxglove server cannot check one; Foxglove clients only watch"
+        );
+        ClientPublish::Off
+    } else if wants_publish {
+        ClientPublish::Targets { queue: 64 }
+    } else {
+        ClientPublish::Off
+    };
+    let names = topic_names(node);
+    let mut bridge =
+        match FoxgloveBridge::start(&bind, &names, publish, node.resolver().node_name()).await {
+            Ok(bridge) => bridge,
+            Err(e) => {
+                // the web panel goes on: a second gui_bridge on this host, or a Foxglove
+                // bridge of another kind, may hold the default port
+                log::warn!("Foxglove WebSocket server not started: {e}");
+                return Ok(None);
+            }
+        };
+    let samples = taps(node, |_| true)?;
+    let targets = match publish {
+        ClientPublish::Off => None,
+        ClientPublish::Targets { .. } => Some(TargetPublishers::new(node)?),
+    };
+    log::info!(
+        "Foxglove WebSocket server on ws://{} ({})",
+        bridge.local_addr(),
+        if targets.is_some() {
+            "clients may publish targets"
+        } else {
+            "watch only"
+        }
+    );
+    let from_clients = bridge.take_client_samples();
+    Ok(Some(
+        forward(bridge, samples, from_clients, targets).boxed_local(),
+    ))
+}
+
+async fn forward(
+    bridge: FoxgloveBridge,
+    mut samples: LocalBoxStream<'static, RawSample>,
+    from_clients: Option<tokio::sync::mpsc::Receiver<ClientSample>>,
+    targets: Option<TargetPublishers>,
+) {
+    let from_panels = async {
+        if let (Some(mut rx), Some(targets)) = (from_clients, targets.as_ref()) {
+            while let Some(s) = rx.recv().await {
+                if let Err(e) = targets.publish(s.topic, &s.cdr, false) {
+                    log::warn!("from a Foxglove client: {e:#}");
+                }
+            }
+        }
+        futures::future::pending::<()>().await
+    };
+    let to_clients = async {
+        while let Some((topic, cdr)) = samples.next().await {
+            if let Err(e) = bridge.log(topic, &cdr, now_ns()) {
+                log::warn!("Foxglove: {e}");
+            }
+        }
+    };
+    futures::future::join(from_panels, to_clients).await;
+}
+
+/// `record FILE.mcap`: the targets and what it takes to view the session again
+/// (`joint_states`, `tf`, `tf_static`, `robot_description`, `servo_state`) into an MCAP
+/// file, until `shutdown`.
+pub async fn record_mcap(
+    node: &mut RosNode,
+    path: &Path,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let shown = path.display().to_string();
+    let names = topic_names(node);
+    let mut recorder = McapRecorder::create(path, &names)
+        .with_context(|| format!("cannot record into {shown}"))?;
+    let samples = taps(node, |t| recorder.records(t))?;
+    println!("recording the targets, joint_states, tf, tf_static, robot_description and servo_state into {shown}; Ctrl-C to stop");
+    tokio::pin!(samples, shutdown);
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            Some((topic, cdr)) = samples.next() => {
+                recorder.write(topic, &cdr, now_ns()).with_context(|| format!("writing {shown}"))?;
+            }
+        }
+    }
+    let n = recorder
+        .finish()
+        .with_context(|| format!("finishing {shown}"))?;
+    println!("recorded {n} messages into {shown}");
+    Ok(())
+}
+
+/// `play FILE.mcap`: publish the recording's targets at their recorded times relative to
+/// the first (compute_ik applies its motion limits as to live targets), each stamped
+/// now; waits up to `timeout` for compute_ik to subscribe `xyz_target`.
+pub async fn play_mcap(
+    node: &mut RosNode,
+    path: &Path,
+    timeout: Duration,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let shown = path.display().to_string();
+    let recording = McapTargets::open(path).with_context(|| format!("cannot play {shown}"))?;
+    if recording.is_empty() {
+        return Err(anyhow!("{shown} has no targets to play"));
+    }
+    let publishers = TargetPublishers::new(node)?;
+    let node = &*node;
+    let work = async {
+        let deadline = tokio::time::Instant::now() + timeout;
+        while publishers.xyz.get_subscription_count(node.node()) == 0 {
+            if tokio::time::Instant::now() > deadline {
+                return Err(anyhow!(
+                    "nobody subscribes {} (is compute_ik running in this ROS domain?)",
+                    node.resolve(&topics::XYZ_TARGET)?
+                ));
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        // the subscriber's reader may match ours a moment later
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let first = recording.targets()[0].log_time_ns;
+        let start = tokio::time::Instant::now();
+        let n = recording.len();
+        for t in recording.targets() {
+            let at = start + Duration::from_nanos(t.log_time_ns.saturating_sub(first));
+            tokio::time::sleep_until(at).await;
+            publishers.publish(t.topic, &t.cdr, true)?;
+        }
+        // let the last samples leave before the node shuts down
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        println!("played {n} targets from {shown}");
+        anyhow::Ok(())
+    };
+    tokio::select! {
+        r = work => r,
+        _ = shutdown => Ok(()),
+    }
+}

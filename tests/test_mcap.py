@@ -1,0 +1,113 @@
+"""gui_bridge's MCAP recordings (`record FILE.mcap`, `play FILE.mcap`), read with the
+`mcap` and `mcap-ros2-support` packages: the profile, every channel's ros2msg schema
+and CDR encoding, message counts; and a recording played back at its recorded pace."""
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+from geometry_msgs.msg import PointStamped
+from std_msgs.msg import Float64
+
+from conftest import bin_path
+
+mcap_reader = pytest.importorskip("mcap.reader")
+mcap_ros2_decoder = pytest.importorskip("mcap_ros2.decoder")
+
+RECORDED = {
+    "/xyz_target": "geometry_msgs/msg/PointStamped",
+    "/pose_target": "geometry_msgs/msg/PoseStamped",
+    "/gripper_target": "std_msgs/msg/Float64",
+    "/joint_target": "sensor_msgs/msg/JointState",
+    "/joint_states": "sensor_msgs/msg/JointState",
+    "/tf": "tf2_msgs/msg/TFMessage",
+    "/tf_static": "tf2_msgs/msg/TFMessage",
+    "/robot_description": "std_msgs/msg/String",
+    "/servo_state": "sensor_msgs/msg/JointState",
+}
+TARGETS = [(0.20, 0.00, 0.15), (0.18, 0.05, 0.12), (0.22, -0.04, 0.18)]
+GAPS_S = [0.0, 0.6, 0.9]
+
+
+def read(path):
+    with open(path, "rb") as f:
+        reader = mcap_reader.make_reader(f, decoder_factories=[mcap_ros2_decoder.DecoderFactory()])
+        header, summary = reader.get_header(), reader.get_summary()
+        messages = [(channel.topic, schema.name, message.log_time, ros)
+                    for schema, channel, message, ros in reader.iter_decoded_messages()]
+    return header, summary, messages
+
+
+def record_session(launch, observer, domain, path):
+    launch("compute_ik")
+    launch("state_publisher")
+    observer.wait_publisher("/joint_states")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    rec = subprocess.Popen([bin_path("gui_bridge"), "record", str(path)], stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, env=env)
+    xyz = observer.pub("/xyz_target", PointStamped)
+    grip = observer.pub("/gripper_target", Float64)
+    observer.wait_matched(xyz)
+    observer.wait_matched(grip)
+    time.sleep(1.0)  # the recorder's subscriptions discovered by compute_ik's publishers too
+    for (x, y, z), gap in zip(TARGETS, GAPS_S):
+        observer.spin_for(gap)
+        m = PointStamped()
+        m.header.frame_id = "base_link"
+        m.point.x, m.point.y, m.point.z = x, y, z
+        xyz.publish(m)
+    grip.publish(Float64(data=0.5))
+    observer.spin_for(1.5)
+    rec.send_signal(signal.SIGINT)
+    out, _ = rec.communicate(timeout=15)
+    assert rec.returncode == 0, out
+    return out
+
+
+def test_record_writes_ros2msg_schemas_and_cdr_that_the_mcap_packages_read(launch, observer, domain, tmp_path):
+    path = tmp_path / "run.mcap"
+    record_session(launch, observer, domain, path)
+    header, summary, messages = read(path)
+    assert header.profile == "ros2"
+    channels = {c.topic: c for c in summary.channels.values()}
+    assert set(channels) == set(RECORDED)
+    for topic, type_name in RECORDED.items():
+        c = channels[topic]
+        schema = summary.schemas[c.schema_id]
+        assert (c.message_encoding, schema.name, schema.encoding) == ("cdr", type_name, "ros2msg"), topic
+    counts = {}
+    for topic, _, _, _ in messages:
+        counts[topic] = counts.get(topic, 0) + 1
+    assert counts["/xyz_target"] == len(TARGETS)
+    assert counts["/gripper_target"] == 1
+    assert counts["/robot_description"] == 1
+    assert counts["/tf_static"] >= 1
+    assert counts["/joint_states"] > 10 and counts["/tf"] > 10
+    assert summary.statistics.message_count == len(messages)
+    xyz = [(round(m.point.x, 4), round(m.point.y, 4), round(m.point.z, 4))
+           for topic, _, _, m in messages if topic == "/xyz_target"]
+    assert xyz == TARGETS
+    urdf = next(m for topic, _, _, m in messages if topic == "/robot_description")
+    assert "<robot" in urdf.data
+
+
+def test_play_republishes_the_recorded_targets_at_their_recorded_pace(launch, observer, domain, tmp_path):
+    path = tmp_path / "run.mcap"
+    record_session(launch, observer, domain, path)
+    _, _, messages = read(path)
+    recorded_times = [t for topic, _, t, _ in messages if topic == "/xyz_target"]
+
+    got = observer.sub("/xyz_target", PointStamped)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    play = subprocess.Popen([bin_path("gui_bridge"), "play", str(path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=env)
+    observer.spin_until(lambda: play.poll() is not None, 60)  # spinning: arrival times are real
+    out, _ = play.communicate(timeout=10)
+    assert play.returncode == 0, out
+    observer.spin_until(lambda: len(got) >= len(TARGETS), 5)
+    assert [(round(m.point.x, 4), round(m.point.y, 4), round(m.point.z, 4)) for _, m in got] == TARGETS
+    played = [t - got[0][0] for t, _ in got]
+    recorded = [(t - recorded_times[0]) / 1e9 for t in recorded_times]
+    for p, want in zip(played, recorded):
+        assert abs(p - want) < 0.25, (played, recorded)
