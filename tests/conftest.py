@@ -1,6 +1,8 @@
 """Shared fixtures: binaries, a private ROS_DOMAIN_ID per test, real rclpy observers,
 and launching our nodes as real processes."""
 import fcntl
+import importlib
+import json
 import os
 import signal
 import subprocess
@@ -21,8 +23,37 @@ import twohost  # noqa: E402  (after the path insert)
 
 OUTPUT = Path(os.environ.get("EEZYBOT_TEST_OUTPUT", REPO / "test-output"))
 
-COMMANDS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# The topic contract, declared once in libs/ros_plumbing/src/topics.rs; this file is
+# generated from it and checked against it by libs/ros_plumbing/tests/contract.rs.
+TOPICS = {t["name"]: t for t in json.loads((REPO / "tests" / "data" / "topics.json").read_text())["topics"]}
+
+
+def topic_entry(topic):
+    """Our topic `topic` (`/arm2/estop` or `estop`) in the contract, or None."""
+    return TOPICS.get(topic.rsplit("/", 1)[-1])
+
+
+def qos(topic):
+    """The QoS of one of our topics as the contract declares it."""
+    t = topic_entry(topic)
+    if t is None:
+        raise KeyError(f"{topic} is not a topic of the contract (tests/data/topics.json)")
+    return QoSProfile(
+        depth=t["depth"],
+        reliability={"reliable": ReliabilityPolicy.RELIABLE, "best effort": ReliabilityPolicy.BEST_EFFORT}[t["reliability"]],
+        durability={"volatile": DurabilityPolicy.VOLATILE, "transient-local": DurabilityPolicy.TRANSIENT_LOCAL}[t["durability"]],
+    )
+
+
+def msg_type(topic):
+    """The rclpy message class of one of our topics (`std_msgs/msg/Bool` -> Bool)."""
+    package, _, name = topic_entry(topic)["type"].split("/")
+    return getattr(importlib.import_module(f"{package}.msg"), name)
+
+
+# the two profiles of the contract, for topics that are not ours (`/rosout`) and old call sites
+COMMANDS = qos("xyz_target")  # reliable, volatile, keep last 10
+LATCHED = qos("estop")  # reliable, transient-local, keep last 1
 
 
 def bin_path(rel):
@@ -86,15 +117,22 @@ class Observer:
             self.executor = SingleThreadedExecutor(context=self.context)
             self.executor.add_node(self.node)
 
-    def sub(self, topic, msg_type, qos=COMMANDS):
+    @staticmethod
+    def _qos(topic, profile):
+        """`profile` if given, else the contract's for our topics, else COMMANDS."""
+        if profile is not None:
+            return profile
+        return qos(topic) if topic_entry(topic) else COMMANDS
+
+    def sub(self, topic, msg_type, qos=None):
         got = []
         with twohost.netns(self.netns):
-            self.node.create_subscription(msg_type, topic, lambda m: got.append((time.monotonic(), m)), qos)
+            self.node.create_subscription(msg_type, topic, lambda m: got.append((time.monotonic(), m)), self._qos(topic, qos))
         return got
 
-    def pub(self, topic, msg_type, qos=COMMANDS):
+    def pub(self, topic, msg_type, qos=None):
         with twohost.netns(self.netns):
-            return self.node.create_publisher(msg_type, topic, qos)
+            return self.node.create_publisher(msg_type, topic, self._qos(topic, qos))
 
     def spin_for(self, seconds):
         end = time.monotonic() + seconds
@@ -205,8 +243,10 @@ class TfListener:
         from interop.idl import TFMessage
 
         self.participant = DomainParticipant(domain_id)
-        reliable = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(100))
-        latched = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.TransientLocal, Policy.History.KeepLast(1))
+        # the contract's QoS of tf (volatile) and tf_static (transient-local)
+        reliable = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(TOPICS["tf"]["depth"]))
+        latched = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.TransientLocal,
+                      Policy.History.KeepLast(TOPICS["tf_static"]["depth"]))
         self.tf_reader = DataReader(self.participant, Topic(self.participant, f"rt{ns}/tf", TFMessage), qos=reliable)
         self.static_reader = DataReader(self.participant, Topic(self.participant, f"rt{ns}/tf_static", TFMessage), qos=latched)
         self.dynamic = {}   # child -> TransformStamped

@@ -18,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
-from conftest import LATCHED, REPO
+from conftest import REPO
 from interop.servo_link import ESTOP, SET_PULSES, Decoder, SimulatedUno
 
 FIRMWARE = REPO / "firmware" / "servo_control"
@@ -141,7 +141,7 @@ class Rig:
         self.state = observer.sub("/servo_state", JointState)
         self.diags = observer.sub("/diagnostics", DiagnosticArray)
         self.angles = observer.pub("/servo_angles", JointState)
-        self.estop = observer.pub("/estop", Bool, LATCHED)
+        self.estop = observer.pub("/estop", Bool)  # the contract's QoS: latched
         observer.wait_matched(self.angles)
         observer.wait_publisher("/diagnostics")
         self.target = None

@@ -61,7 +61,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, String
 
-from conftest import LATCHED, OUTPUT, REPO, DomainLease, NodeProcess, Observer
+from conftest import OUTPUT, REPO, DomainLease, NodeProcess, Observer, qos
 from interop.servo_link import SET_PULSES, STATE, Decoder, SimulatedUno, parse_state, pulses
 
 SEED = int(os.environ.get("EEZYBOT_BAD_INPUTS_SEED", "9007"))
@@ -77,7 +77,7 @@ ACTUATED = ["base_joint", "shoulder_joint", "elbow_joint", "gripper_joint"]
 # Our publishers keep what they sent until it is acknowledged (the nodes' readers are
 # reliable, keep last 10); estop and robot_description are latched as the nodes expect.
 SEND = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-DESCRIPTION = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DESCRIPTION = qos("robot_description")  # the contract: reliable, transient-local, keep last 1
 # and we count every message on the nodes' topics
 COUNT = QoSProfile(depth=100000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                    durability=DurabilityPolicy.VOLATILE)
@@ -982,7 +982,7 @@ class Graph:
             "servo_state": node.create_publisher(JointState, "/servo_state", SEND),
             "diagnostics": node.create_publisher(DiagnosticArray, "/diagnostics", SEND),
             "robot_description": node.create_publisher(String, "/robot_description", DESCRIPTION),
-            "estop": node.create_publisher(Bool, "/estop", LATCHED),
+            "estop": node.create_publisher(Bool, "/estop", qos("estop")),
         }
         # what went over each topic (ours and the nodes'), counted as it arrives
         self.counts = Counter()

@@ -12,7 +12,7 @@ from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 
-from conftest import LATCHED, Observer, bin_path
+from conftest import Observer, bin_path
 
 # ROBOT.md, written out again here so the test does not trust the code under test.
 H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
@@ -66,7 +66,7 @@ class IkRig:
         self.xyz = observer.pub(f"{ns}/xyz_target", PointStamped)
         self.gripper = observer.pub(f"{ns}/gripper_target", Float64)
         self.joints = observer.pub(f"{ns}/joint_target", JointState)
-        self.estop = observer.pub(f"{ns}/estop", Bool, LATCHED)
+        self.estop = observer.pub(f"{ns}/estop", Bool)  # the contract's QoS: latched
         for p in (self.xyz, self.gripper, self.joints, self.estop):
             observer.wait_matched(p)
         for topic in ("joint_states", "servo_angles", "diagnostics"):

@@ -9,7 +9,7 @@ import time
 import pytest
 from std_msgs.msg import Bool
 
-from conftest import LATCHED, OUTPUT
+from conftest import OUTPUT
 from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, Rig, engaged_estop_frames, pulse_us,
                         sent_ticks, set_pulses_cycles, step_allowed_us, velocity_limits_us_per_s,
                         velocity_violations)
@@ -89,7 +89,7 @@ def test_estop_stops_the_arm_mid_move_and_a_release_moves_nothing(launch, observ
 
 
 def test_a_serial_node_started_during_an_estop_moves_nothing(launch, observer, tmp_path):
-    estop = observer.pub("/estop", Bool, LATCHED)
+    estop = observer.pub("/estop", Bool)  # the contract's QoS: latched
     estop.publish(Bool(data=True))
     rig = Rig(launch, observer, tmp_path)
     try:

@@ -69,7 +69,7 @@ class Panel:
         self.xyz = observer.sub("/xyz_target", PointStamped)
         self.gripper = observer.sub("/gripper_target", Float64)
         self.joints = observer.sub("/joint_target", JointState)
-        self.estop = observer.sub("/estop", Bool, LATCHED)
+        self.estop = observer.sub("/estop", Bool)  # the contract's QoS: latched
         observer.wait_publisher("/xyz_target")
         deadline = time.monotonic() + 15
         while True:
@@ -366,7 +366,7 @@ def test_once_knows_taken_and_refused_from_stamps_under_any_node_name(launch, ob
     r = run_cli(domain, "--once", "0.5", "0", "0.15", "--timeout", "10")
     assert r.returncode == 1 and "out of reach" in r.stderr, r.stderr
     # refused by ik2 (the emergency stop is engaged): 1 with its reason, at once, not at the timeout
-    estop = observer.pub("/estop", Bool, LATCHED)
+    estop = observer.pub("/estop", Bool)
     observer.wait_matched(estop)
     estop.publish(Bool(data=True))
     observer.spin_for(0.5)
@@ -830,7 +830,7 @@ def flood(port, n):
 
 
 def test_flooding_client_neither_grows_memory_nor_delays_another_clients_estop(launch, observer):
-    estop = observer.sub("/estop", Bool, LATCHED)
+    estop = observer.sub("/estop", Bool)
     proc, port = start_panel(launch, observer)
     pid = proc.proc.pid
     operator = RawWs(port)

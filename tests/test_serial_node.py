@@ -13,7 +13,7 @@ from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
-from conftest import LATCHED, REPO, bin_path
+from conftest import REPO, bin_path
 from interop.servo_link import HELLO, HELLO_ACK, STATE, Decoder, SimulatedUno, frame, pulses
 import struct
 
@@ -39,7 +39,7 @@ class SerialRig:
         self.state = observer.sub("/servo_state", JointState)
         self.diags = observer.sub("/diagnostics", DiagnosticArray)
         self.angles = observer.pub("/servo_angles", JointState)
-        self.estop = observer.pub("/estop", Bool, LATCHED)
+        self.estop = observer.pub("/estop", Bool)  # the contract's QoS: latched
         observer.wait_matched(self.angles)
         observer.wait_publisher("/diagnostics")
 

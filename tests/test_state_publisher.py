@@ -12,7 +12,7 @@ from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from conftest import LATCHED, REPO, TfListener, bin_path, compose_chain
+from conftest import REPO, TfListener, bin_path, compose_chain
 
 ARM_URDF = REPO / "urdf" / "eezybot.urdf"
 TEST_URDF = REPO / "tests" / "data" / "test_robot.urdf"
@@ -72,7 +72,7 @@ def test_late_subscriber_gets_description_and_static(launch, observer, domain):
     proc = launch("state_publisher")
     observer.spin_until(lambda: ("state_publisher", "/") in observer.node.get_node_names_and_namespaces(), 15)
     observer.spin_for(2.0)  # the node has published long before anyone listens
-    description = observer.sub("/robot_description", String, LATCHED)
+    description = observer.sub("/robot_description", String)  # the contract's QoS: latched
     assert observer.spin_until(lambda: description, 15), "no robot_description for a late subscriber"
     assert description[-1][1].data == ARM_URDF.read_text()
     tf = TfListener(domain)
