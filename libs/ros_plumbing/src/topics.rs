@@ -95,42 +95,56 @@ const GUI: &str = "gui_bridge";
 const IK: &str = "compute_ik";
 const SERIAL: &str = "serial_node";
 const STATE: &str = "state_publisher";
-/// `gui_bridge record` subscribes the targets it saves.
+/// `gui_bridge record` subscribes what it saves (the targets; with an MCAP file also
+/// what replays and views the session).
 const RECORD: &str = "gui_bridge (record)";
+/// gui_bridge's Foxglove server (`foxglove_bind`, on by default) subscribes every topic
+/// of the graph, to forward it to Foxglove.
+const FOXGLOVE: &str = "gui_bridge (Foxglove)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.
 pub const XYZ_TARGET: Topic<PointStamped> =
-    Topic::new("xyz_target", qos::COMMANDS, &[GUI], &[IK, RECORD]);
+    Topic::new("xyz_target", qos::COMMANDS, &[GUI], &[IK, RECORD, FOXGLOVE]);
 /// Desired pose of the tip link (arms with orientation, `ros2 topic pub`).
-pub const POSE_TARGET: Topic<PoseStamped> = Topic::new("pose_target", qos::COMMANDS, &[], &[IK]);
+pub const POSE_TARGET: Topic<PoseStamped> =
+    Topic::new("pose_target", qos::COMMANDS, &[], &[IK, RECORD, FOXGLOVE]);
 /// Claw opening, 0.0 closed … 1.0 open.
-pub const GRIPPER_TARGET: Topic<Float64> =
-    Topic::new("gripper_target", qos::COMMANDS, &[GUI], &[IK, RECORD]);
+pub const GRIPPER_TARGET: Topic<Float64> = Topic::new(
+    "gripper_target",
+    qos::COMMANDS,
+    &[GUI],
+    &[IK, RECORD, FOXGLOVE],
+);
 /// Joint mode: positions of named actuated joints, rad.
-pub const JOINT_TARGET: Topic<JointState> =
-    Topic::new("joint_target", qos::COMMANDS, &[GUI], &[IK]);
+pub const JOINT_TARGET: Topic<JointState> = Topic::new(
+    "joint_target",
+    qos::COMMANDS,
+    &[GUI],
+    &[IK, RECORD, FOXGLOVE],
+);
 /// Emergency stop, latched: `true` = no servo moves until `false`.
 pub const ESTOP: Topic<Bool> = Topic::new("estop", qos::ESTOP, &[GUI], &[IK, SERIAL, GUI]);
 /// Every non-fixed URDF joint, rad.
 pub const JOINT_STATES: Topic<JointState> =
-    Topic::new("joint_states", qos::COMMANDS, &[IK], &[STATE, GUI]);
+    Topic::new("joint_states", qos::COMMANDS, &[IK], &[STATE, GUI, RECORD]);
 /// Servo horn angles after calibration, rad.
 pub const SERVO_ANGLES: Topic<JointState> =
-    Topic::new("servo_angles", qos::COMMANDS, &[IK], &[SERIAL]);
+    Topic::new("servo_angles", qos::COMMANDS, &[IK], &[SERIAL, FOXGLOVE]);
 /// What the Arduino reports it applied, rad.
 pub const SERVO_STATE: Topic<JointState> =
-    Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI]);
+    Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI, RECORD]);
 /// The URDF text, latched.
 pub const ROBOT_DESCRIPTION: Topic<StringMsg> = Topic::new(
     "robot_description",
     qos::ROBOT_DESCRIPTION,
     &[STATE],
-    &[GUI],
+    &[GUI, RECORD],
 );
 /// Transforms of the movable joints.
-pub const TF: Topic<TFMessage> = Topic::new("tf", qos::TF, &[STATE], &[]);
+pub const TF: Topic<TFMessage> = Topic::new("tf", qos::TF, &[STATE], &[RECORD, FOXGLOVE]);
 /// Transforms of the fixed joints, latched.
-pub const TF_STATIC: Topic<TFMessage> = Topic::new("tf_static", qos::TF_STATIC, &[STATE], &[]);
+pub const TF_STATIC: Topic<TFMessage> =
+    Topic::new("tf_static", qos::TF_STATIC, &[STATE], &[RECORD, FOXGLOVE]);
 /// Each node's health.
 pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
     "diagnostics",
