@@ -1905,7 +1905,10 @@ impl Discovery {
     let writer_data = match db.get_local_topic_writer(guid) {
       Some(d) => d,
       None => {
-        warn!("Did not find a local writer {guid:?}");
+        // Removed again before this thread announced it (an endpoint dropped right
+        // after it was created, e.g. a node stopping while it starts): nothing to
+        // announce, and nothing wrong.
+        debug!("Did not find a local writer {guid:?}: removed before it was announced");
         return;
       }
     };
@@ -1929,7 +1932,10 @@ impl Discovery {
     let reader_data = match db.get_local_topic_reader(guid) {
       Some(d) => d,
       None => {
-        warn!("Did not find a local reader {guid:?}");
+        // Removed again before this thread announced it (an endpoint dropped right
+        // after it was created, e.g. a node stopping while it starts): nothing to
+        // announce, and nothing wrong.
+        debug!("Did not find a local reader {guid:?}: removed before it was announced");
         return;
       }
     };
