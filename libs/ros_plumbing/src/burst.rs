@@ -61,8 +61,14 @@ pub fn latest_wins<T, K: PartialEq>(
 /// Longer than the gap between two DDS repair rounds (about 10 ms).
 pub const HOLD_LATE: Duration = Duration::from_millis(30);
 
-/// A command whose stamp is this much older than usual arrives late.
-pub const LATE_BY: Duration = Duration::from_millis(250);
+/// A command whose stamp is this much older than usual arrives late. Shorter than the
+/// span of what DDS repairs after an outage (a keep-last-10 history at 50 Hz: the last
+/// 200 ms before the link returned), so that only the newest repaired commands, stamped
+/// within ~60 ms of the link's return, can go out before the rest of the burst is in:
+/// with 250 ms the oldest repaired ones were not late yet, and after 4 of 40 three-second
+/// outages serial_node sent two commands from the outage before the newest (outage soak).
+/// Longer than a Wi-Fi link's usual jitter, so live commands are not held.
+pub const LATE_BY: Duration = Duration::from_millis(60);
 
 /// How long the usual delay (receive time minus stamp) is remembered.
 const WINDOW: Duration = Duration::from_secs(10);
