@@ -400,27 +400,36 @@ where
     }
 }
 
-/// [`shutdown_signal`], logging which signal it was.
-pub async fn shutdown_logged() {
-    let signal = shutdown_signal().await;
-    log::info!("{signal}: shutting down");
+/// [`shutdown_signal`], logging which signal it was. Like it, the handlers are
+/// installed when this is called, not when the future is first polled.
+pub fn shutdown_logged() -> impl std::future::Future<Output = ()> {
+    let signal = shutdown_signal();
+    async move {
+        let signal = signal.await;
+        log::info!("{signal}: shutting down");
+    }
 }
 
-/// Resolves on SIGINT or SIGTERM, with the signal's name.
-pub async fn shutdown_signal() -> &'static str {
+/// Resolves on SIGINT or SIGTERM, with the signal's name. The handlers are installed
+/// when this is called (inside the runtime), so a signal that comes before the future
+/// is first polled (while the node is still starting) is not lost: before, it found no
+/// handler and killed the node with the default action (exit by SIGINT, not 0).
+pub fn shutdown_signal() -> impl std::future::Future<Output = &'static str> {
     use tokio::signal::unix::{signal, SignalKind};
     let (int, term) = (
         signal(SignalKind::interrupt()),
         signal(SignalKind::terminate()),
     );
-    match (int, term) {
-        (Ok(mut int), Ok(mut term)) => tokio::select! {
-            _ = int.recv() => "SIGINT",
-            _ = term.recv() => "SIGTERM",
-        },
-        _ => {
-            log::error!("cannot install signal handlers; stop with SIGKILL");
-            std::future::pending().await
+    async move {
+        match (int, term) {
+            (Ok(mut int), Ok(mut term)) => tokio::select! {
+                _ = int.recv() => "SIGINT",
+                _ = term.recv() => "SIGTERM",
+            },
+            _ => {
+                log::error!("cannot install signal handlers; stop with SIGKILL");
+                std::future::pending().await
+            }
         }
     }
 }

@@ -47,6 +47,8 @@ impl Outputs for RosOutputs<'_> {
 
 async fn main_async() -> anyhow::Result<()> {
     let spec = compute_ik::spec();
+    // signal handlers first: Ctrl-C while the node starts stops it cleanly
+    let shutdown = ros_plumbing::shutdown_logged();
     let mut node = RosNode::start(&spec)?;
     if let Some(extra) = node.user_args().first() {
         anyhow::bail!("unexpected argument `{extra}` (see --help)");
@@ -135,7 +137,6 @@ async fn main_async() -> anyhow::Result<()> {
         },
         core.describe()
     );
-    let shutdown = ros_plumbing::shutdown_logged();
     compute_ik::run(core, inputs, &outputs, params, diag_name, peers, shutdown).await;
     drop(outputs);
     drop((xyz, gripper, joints, pose, estop));

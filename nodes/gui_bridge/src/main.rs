@@ -42,11 +42,12 @@ fn main() -> ExitCode {
 
 /// Start the node (ROS arguments, `ROS_DOMAIN_ID`, parameters) and run the command.
 async fn run(cli: Cli, argv: Vec<String>) -> anyhow::Result<()> {
+    // signal handlers first: Ctrl-C while the node starts stops it cleanly
+    let shutdown = ros_plumbing::shutdown_logged();
     let domain = std::env::var("ROS_DOMAIN_ID").ok();
     let mut node = RosNode::start_with(&gui_bridge::spec(), argv, domain.as_deref())?;
     let arm_config = node.params().string("arm_config").unwrap_or_default();
     let arm = gui_bridge::load_arm(&arm_config).map_err(anyhow::Error::msg)?;
-    let shutdown = ros_plumbing::shutdown_logged();
     let result = match cli.command.unwrap_or(Command::Serve) {
         Command::Serve => serve::serve(&mut node, arm, shutdown).await,
         Command::Once(args) => delivery::once(&mut node, &arm, args, shutdown).await,

@@ -38,6 +38,8 @@ impl Outputs for RosOutputs<'_> {
 
 async fn main_async() -> anyhow::Result<()> {
     let spec = serial_node::spec();
+    // signal handlers first: Ctrl-C while the node starts stops it cleanly
+    let shutdown = ros_plumbing::shutdown_logged();
     let mut node = RosNode::start(&spec)?;
     if let Some(extra) = node.user_args().first() {
         anyhow::bail!("unexpected argument `{extra}` (see --help)");
@@ -114,7 +116,6 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolve(&topics::SERVO_STATE)?,
     );
     let diag_name = format!("{}: servo link", node.resolver().node_name());
-    let shutdown = ros_plumbing::shutdown_logged();
     serial_node::run(
         &link, inputs, rx, &outputs, params, diag_name, port, peers, shutdown,
     )

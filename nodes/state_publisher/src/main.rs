@@ -42,6 +42,8 @@ impl Outputs for RosOutputs<'_> {
 
 async fn main_async() -> anyhow::Result<()> {
     let spec = state_publisher::spec();
+    // signal handlers first: Ctrl-C while the node starts stops it cleanly
+    let shutdown = ros_plumbing::shutdown_logged();
     let mut node = RosNode::start(&spec)?;
     if let Some(extra) = node.user_args().first() {
         anyhow::bail!("unexpected argument `{extra}` (see --help)");
@@ -79,7 +81,6 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolve(&topics::TF)?
     );
     let diag_name = format!("{}: robot state", node.resolver().node_name());
-    let shutdown = ros_plumbing::shutdown_logged();
     let topic = node.resolve(&topics::JOINT_STATES)?;
     state_publisher::run(
         description,
