@@ -98,7 +98,7 @@ const STATE: &str = "state_publisher";
 /// `gui_bridge record` subscribes what it saves (the targets; with an MCAP file also
 /// what replays and views the session).
 const RECORD: &str = "gui_bridge (record)";
-/// gui_bridge's Foxglove server (`foxglove_bind`, on by default) subscribes every topic
+/// gui_bridge's Foxglove server (`foxglove_bind`, off by default) subscribes every topic
 /// of the graph, to forward it to Foxglove.
 const FOXGLOVE: &str = "gui_bridge (Foxglove)";
 
