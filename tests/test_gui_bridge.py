@@ -240,7 +240,7 @@ def test_page_is_small_local_and_shows_the_live_arm(launch, observer, browser):
         p.set_slider("z", 0.12)
         p.page.wait_for_function("() => document.getElementById('latency').textContent.includes('ms')", timeout=20000)
         p.page.wait_for_function(
-            "() => ['compute_ik','state_publisher','serial_node'].every(n => document.querySelector('#status-' + n + ' .dot').className.includes('up'))",
+            "() => ['compute_ik','state_publisher','serial_node'].every(n => { const d = document.querySelector('#status-' + n + ' .dot'); return d && d.className.includes('up'); })",
             timeout=20000)
         time.sleep(1.0)
         OUTPUT.mkdir(parents=True, exist_ok=True)
