@@ -4,10 +4,19 @@
 //! ports: a thin I/O shell (`serial_node`'s link thread) opens the port, writes what
 //! [`HostLink::next`] says, and feeds back what it reads.
 //!
-//! The link is latest-wins: a new command replaces the one being sent, at most one
-//! SET_PULSES goes out per send period, and each servo's pulse moves by at most its
+//! The link is latest-wins: a new command replaces the one being sent, SET_PULSES go
+//! out at most at the send rate on average, and each servo's pulse moves by at most its
 //! velocity limit per second (the last guard against anything that publishes servo
-//! angles directly), starting from where the device says the servos are. The e-stop
+//! angles directly), starting from where the device says the servos are.
+//!
+//! The send rate (100/s by default) is above the rate of any command stream (a planner
+//! sends 50/s), so a command never waits for a frame slot: at a rate equal to the
+//! command rate, one command that waited made every later one wait as long. The
+//! velocity guard judges motion per servo frame ([`SERVO_FRAME`], the 20 ms in which a
+//! servo sees one pulse): a frame may move a servo by its limit times the time since
+//! the last frame, at most one servo frame's worth; when it had to cut a step short,
+//! the rest follows one servo frame later, so a ramp moves at the limit and a planned
+//! stream that arrives early now and then is cut by the early part only. The e-stop
 //! lives here only: while engaged, commands are dropped; after its release nothing
 //! moves until a new command, which ramps from where the arm is.
 //!
@@ -52,15 +61,18 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 /// How many SET_PULSES frames may go out back to back: the send rate is an average
-/// (a token bucket of this size), so a command stream at the send rate never waits for
-/// the previous frame's period.
+/// (a token bucket of this size).
 pub const SEND_BURST: f64 = 2.0;
+
+/// A servo's refresh period: it sees one pulse every 20 ms, so this is the time step of
+/// the velocity guard.
+pub const SERVO_FRAME: Duration = Duration::from_millis(20);
 
 /// Link settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HostConfig {
     /// One over the most SET_PULSES frames a second, on average ([`SEND_BURST`] may go
-    /// back to back): the servo refresh period, 20 ms.
+    /// back to back): 10 ms, twice a planner's command rate, so commands never queue.
     pub send_period: Duration,
     /// Send a HEARTBEAT when nothing was sent for this long.
     pub heartbeat_period: Duration,
@@ -86,7 +98,7 @@ pub struct HostConfig {
 impl Default for HostConfig {
     fn default() -> Self {
         HostConfig {
-            send_period: Duration::from_millis(20),
+            send_period: Duration::from_millis(10),
             heartbeat_period: Duration::from_millis(100),
             hello_period: Duration::from_millis(250),
             handshake_timeout: Duration::from_secs(4),
@@ -533,18 +545,23 @@ impl<T: Clone> HostLink<T> {
         (self.credit + refill).min(SEND_BURST)
     }
 
-    /// When the next SET_PULSES may go.
+    /// When the next SET_PULSES may go: when the token bucket holds a frame, and for
+    /// the rest of a step the guard cut short, one servo frame after the last pulses.
     fn pulses_due(&self, now: Instant) -> Instant {
         let credit = self.credit(now);
-        if credit >= 1.0 {
+        let slot = if credit >= 1.0 {
             now
         } else {
             now + self.config.send_period.mul_f64(1.0 - credit)
+        };
+        match (&self.command, self.last_pulses_sent) {
+            (Some(c), Some(last)) if c.started => slot.max(last + SERVO_FRAME),
+            _ => slot,
         }
     }
 
     /// The next SET_PULSES toward the command: each servo at most its velocity limit
-    /// times the time since the last pulses (at most one send period) away from where
+    /// times the time since the last pulses (at most one servo frame) away from where
     /// it is.
     fn send_pulses(&mut self, now: Instant) -> Next {
         let (Some(command), Some(at)) = (self.command.clone(), self.at) else {
@@ -552,10 +569,8 @@ impl<T: Clone> HostLink<T> {
         };
         let dt = self
             .last_pulses_sent
-            .map_or(self.config.send_period, |t| {
-                now.saturating_duration_since(t)
-            })
-            .min(self.config.send_period)
+            .map_or(SERVO_FRAME, |t| now.saturating_duration_since(t))
+            .min(SERVO_FRAME)
             .as_secs_f64();
         let mut ticks = [0u16; SERVOS];
         let mut limited = false;
@@ -734,12 +749,12 @@ mod tests {
         }
         r.run_until(600);
         let pulses = r.pulses_sent();
-        // 50 frames/s on average: never three within one period
+        // 100 frames/s on average: never three within one send period
         assert!(
-            pulses.windows(3).all(|w| w[2].0 - w[0].0 >= ms(20)),
+            pulses.windows(3).all(|w| w[2].0 - w[0].0 >= ms(10)),
             "{pulses:?}"
         );
-        assert!((10..=13).contains(&pulses.len()), "{}", pulses.len());
+        assert!((20..=24).contains(&pulses.len()), "{}", pulses.len());
         assert_eq!(
             pulses.last().unwrap().1,
             [2099; 4],
@@ -755,6 +770,119 @@ mod tests {
             hb.len() >= 2 && r.device.state() == DeviceState::Running,
             "{hb:?}"
         );
+    }
+
+    /// A 50 Hz stream, each command 20 ms ± 3 ms after its slot (a planner over DDS),
+    /// after a burst of three 5 ms apart. `step` ticks per command. Returns the
+    /// rig, the commands' arrival times (ms since start) and their ticks.
+    fn jittered_stream(config: HostConfig, step: u16) -> (Rig, Vec<(Duration, [u16; SERVOS])>) {
+        let mut r = Rig::new(config);
+        r.link.command(HOLD_TICKS, 0, r.now);
+        r.run_until(100);
+        let mut seed = 12345u32;
+        let mut jitter = move || {
+            seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+            Duration::from_micros(u64::from((seed >> 16) % 6000))
+        };
+        let mut pose = HOLD_TICKS;
+        let mut commands = vec![];
+        for k in 0..3u32 {
+            pose = pose.map(|p| p + step);
+            r.link.command(pose, k, r.now);
+            commands.push((r.t(), pose));
+            r.run_until(r.t().as_millis() as u64 + 5);
+        }
+        let mut due = r.now;
+        for k in 3..153u32 {
+            due += ms(20);
+            let at = due - ms(3) + jitter();
+            let until = (at - r.t0).as_micros() as u64;
+            // run to the arrival, 100 µs resolution
+            while r.now + Duration::from_micros(100) < r.t0 + Duration::from_micros(until) {
+                let next = r.now + Duration::from_micros(100);
+                r.run_until((next - r.t0).as_millis() as u64);
+                if r.now < next {
+                    r.now = next;
+                }
+            }
+            pose = pose.map(|p| p + step);
+            r.link.command(pose, k, r.now);
+            commands.push((r.t(), pose));
+            r.run_until(r.t().as_millis() as u64 + 1);
+        }
+        r.run_until(r.t().as_millis() as u64 + 500);
+        (r, commands)
+    }
+
+    /// For each command: how long after its arrival its first frame went out.
+    fn send_delays(r: &Rig, commands: &[(Duration, [u16; SERVOS])]) -> Vec<Duration> {
+        let pulses = r.pulses_sent();
+        commands
+            .iter()
+            .zip(commands.iter().skip(1).map(|c| c.0).chain([Duration::MAX]))
+            .filter_map(|(&(t, _), next)| {
+                pulses
+                    .iter()
+                    .find(|(sent, _)| *sent >= t && *sent < next)
+                    .map(|(sent, _)| *sent - t)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_jittered_50_hz_stream_after_a_burst_goes_out_on_arrival() {
+        let (r, commands) = jittered_stream(HostConfig::default(), 1);
+        let delays = send_delays(&r, &commands);
+        assert_eq!(delays.len(), commands.len(), "every command was sent");
+        assert!(
+            delays[3..].iter().all(|d| *d < ms(1)),
+            "a command waited for a frame slot: {delays:?}"
+        );
+        assert_eq!(
+            r.pulses_sent().last().unwrap().1,
+            commands.last().unwrap().1
+        );
+        // at a send rate equal to the command rate, the burst leaves a wait behind that
+        // the stream never drains (why the default is twice the command rate)
+        let slow = HostConfig {
+            send_period: ms(20),
+            ..HostConfig::default()
+        };
+        let (r, commands) = jittered_stream(slow, 1);
+        let delays = send_delays(&r, &commands);
+        let waited = delays.iter().filter(|d| **d >= ms(1)).count();
+        assert!(waited > delays.len() / 2, "{waited} of {}", delays.len());
+    }
+
+    #[test]
+    fn a_stream_at_the_velocity_limit_moves_at_the_limit_without_waiting() {
+        // 1000 ticks/s: 20 ticks a servo frame, and the planner sends 20-tick steps
+        let config = HostConfig {
+            max_ticks_per_s: [1000.0; SERVOS],
+            ..HostConfig::default()
+        };
+        let (r, commands) = jittered_stream(config, 20);
+        let pulses = r.pulses_sent();
+        for w in pulses.windows(2) {
+            let dt = (w[1].0 - w[0].0).min(SERVO_FRAME).as_secs_f64();
+            for i in 0..SERVOS {
+                assert!(
+                    f64::from(w[1].1[i].abs_diff(w[0].1[i])) <= 1000.0 * dt + 1.0,
+                    "faster than the limit: {w:?}"
+                );
+            }
+        }
+        let delays = send_delays(&r, &commands);
+        assert!(delays[3..].iter().all(|d| *d < ms(1)), "{delays:?}");
+        // commands that came early were cut (the guard judged them), and the rest of a
+        // step cut short followed one servo frame later: few extra frames
+        let ramped = r.link.stats().ramped;
+        assert!(
+            ramped > 0 && pulses.len() <= 2 * commands.len(),
+            "{} {ramped}",
+            pulses.len()
+        );
+        assert_eq!(pulses.last().unwrap().1, commands.last().unwrap().1);
     }
 
     #[test]

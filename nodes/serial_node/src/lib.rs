@@ -41,7 +41,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .read_only(),
             int("baud", 115_200, 1_200, 4_000_000, "serial speed"),
-            ParamSpec::new("send_rate", ParameterValue::Double(50.0), "most SET_PULSES frames a second (latest wins)")
+            ParamSpec::new("send_rate", ParameterValue::Double(100.0), "most SET_PULSES frames a second on average (latest wins; above the command rate, so commands never wait)")
                 .range(ParamRange::Double { min: 1.0, max: 500.0 })
                 .read_only(),
             int("watchdog_ms", 500, 20, 60_000, "device holds/detaches after this much silence"),
