@@ -4,6 +4,7 @@
 pub mod assess;
 pub mod chain;
 mod config;
+pub mod envelope;
 mod error;
 pub mod ik;
 mod motion;
