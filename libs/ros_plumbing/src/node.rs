@@ -356,6 +356,12 @@ impl RosNode {
         self.subscription(topic.name, topic.qos.clone())
     }
 
+    /// Delete a subscription: its reader leaves the DDS graph, and the node stops
+    /// listing it in `ros_discovery_info` (for a node that subscribes on demand).
+    pub fn unsubscribe<M: 'static>(&mut self, subscription: Subscription<M>) {
+        self.node.remove_subscription(subscription);
+    }
+
     /// A topic of the contract as this node names it (namespace, remaps):
     /// `/arm2/xyz_target`.
     pub fn resolve<M: RosMessage>(&self, topic: &Topic<M>) -> Result<String, PlumbingError> {

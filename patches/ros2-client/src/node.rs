@@ -1158,6 +1158,28 @@ impl Node {
     Ok(sub)
   }
 
+  /// Deletes a subscription made with [`Self::create_subscription`]: its reader
+  /// leaves the DDS graph, and the node stops listing it in `ros_discovery_info`.
+  /// (Dropping a `Subscription` deletes the reader, but the node went on listing it,
+  /// one more entry for every subscription a node makes and drops.)
+  pub fn remove_subscription<D: 'static>(&mut self, subscription: Subscription<D>) {
+    let reader = Gid::from(subscription.guid());
+    drop(subscription);
+    if self.readers.remove(&reader) && !self.suppress_node_info_updates {
+      self.ros_context.update_node(self.generate_node_info());
+    }
+  }
+
+  /// Deletes a publisher made with [`Self::create_publisher`], as
+  /// [`Self::remove_subscription`] does a subscription.
+  pub fn remove_publisher<D: Serialize>(&mut self, publisher: Publisher<D>) {
+    let writer = Gid::from(publisher.guid());
+    drop(publisher);
+    if self.writers.remove(&writer) && !self.suppress_node_info_updates {
+      self.ros_context.update_node(self.generate_node_info());
+    }
+  }
+
   /// Creates ROS2 Publisher
   ///
   /// # Arguments
@@ -1781,6 +1803,33 @@ mod tests {
 
     assert!(node.has_parameter("rate_hz"));
     assert!(node.spinner().is_ok());
+  }
+
+  #[test]
+  fn removed_endpoints_leave_the_node_info() {
+    use crate::{MessageTypeName, Name};
+    let mut node = Node::new(
+      NodeName::new("/", "removals").unwrap(),
+      NodeOptions::new().enable_rosout(false),
+      Context::new().unwrap(),
+    )
+    .unwrap();
+    let topic = node
+      .create_topic(
+        &Name::new("/", "removal_test").unwrap(),
+        MessageTypeName::new("std_msgs", "String"),
+        &crate::DEFAULT_SUBSCRIPTION_QOS,
+      )
+      .unwrap();
+    let before = node.generate_node_info();
+    let sub = node.create_subscription::<String>(&topic, None).unwrap();
+    let publisher = node.create_publisher::<String>(&topic, None).unwrap();
+    let with = node.generate_node_info();
+    assert_ne!(with, before);
+    node.remove_subscription(sub);
+    assert_ne!(node.generate_node_info(), before);
+    node.remove_publisher(publisher);
+    assert_eq!(node.generate_node_info(), before);
   }
 
   #[test]
