@@ -90,6 +90,9 @@ def test_a_foxglove_client_sees_every_topic_and_decodes_tf_and_joint_states(laun
 
         pub = observer.pub("/xyz_target", PointStamped)
         observer.wait_matched(pub)
+        # compute_ik and gui_bridge's Foxglove tap, made when the client subscribed
+        observer._wait_discovery(lambda: pub.get_subscription_count() >= 2, "no Foxglove tap on /xyz_target")
+        observer.spin_for(0.3)
         target = PointStamped()
         target.header.frame_id = "base_link"
         target.point.x, target.point.y, target.point.z = 0.18, 0.04, 0.14
@@ -152,3 +155,48 @@ def test_foxglove_clients_only_watch_by_default_and_empty_bind_is_off(launch, ob
     while "ready in ROS domain" not in off.output() and time.monotonic() < deadline:
         time.sleep(0.1)
     assert "Foxglove WebSocket server off" in off.output()
+
+
+def test_a_topic_is_subscribed_only_while_a_foxglove_client_watches_it(launch, observer):
+    """An idle Foxglove server changes nothing in the graph: gui_bridge subscribes
+    servo_angles (say) only while a client subscribes its channel, so compute_ik still sees
+    serial_node's subscription go when the link to the Pi goes."""
+    gui, port = start_graph(launch, observer)
+
+    def tapped(topic):
+        """gui_bridge subscribes `topic`: by topic (DDS endpoints), and by node."""
+        observer.spin_for(0.1)
+        by_topic = "gui_bridge" in [i.node_name for i in observer.node.get_subscriptions_info_by_topic(topic)]
+        by_node = topic in [t for t, _ in observer.node.get_subscriber_names_and_types_by_node("gui_bridge", "/")]
+        return by_topic, by_node
+
+    def wait_for(want, topic="/servo_angles", timeout=10):
+        deadline = time.monotonic() + timeout
+        while (got := tapped(topic)) != want and time.monotonic() < deadline:
+            pass
+        return got
+
+    assert wait_for((True, True), "/tf_static") == (True, True), "latched topics are always subscribed"
+    assert tapped("/servo_angles") == (False, False), "subscribed with no Foxglove client"
+    for round_ in range(2):  # and again: nothing is left behind by the first round
+        fox = FoxgloveClient(port)
+        try:
+            assert fox.pump_until(lambda: fox.info and len(fox.channels) == len(TOPIC_TYPES))
+            fox.subscribe("/servo_angles")
+            assert wait_for((True, True)) == (True, True), f"round {round_}: no tap after the client subscribed"
+        finally:
+            fox.close()
+        assert wait_for((False, False)) == (False, False), f"round {round_}: the tap outlived the client"
+    assert "Foxglove WebSocket server on ws://127.0.0.1:" in gui.output()
+
+
+def test_the_foxglove_server_is_on_by_default_on_foxglove_s_port(launch, observer):
+    web = free_port()
+    gui = launch("gui_bridge", "--ros-args", "-p", f"bind:=127.0.0.1:{web}")
+    deadline = time.monotonic() + 10
+    while "ready in ROS domain" not in gui.output() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    out = gui.output()
+    # another program (a Foxglove bridge, a second panel) may hold the port: then it says so
+    assert ("Foxglove WebSocket server on ws://127.0.0.1:8765" in out
+            or "Foxglove WebSocket server not started" in out), out

@@ -681,7 +681,7 @@ def main():
     ap.add_argument("--burst-rate", type=float, default=1000.0)
     ap.add_argument("--burst-gap", type=float, default=2.0, help="seconds at --rate between bursts")
     ap.add_argument("--seed-cap", choices=["loop", "gate"], default="loop", help="how the seed node caps at 10 Hz")
-    ap.add_argument("--send-rate", type=float, help="serial_node's send_rate (default: the node's own, 50 Hz); "
+    ap.add_argument("--send-rate", type=float, help="serial_node's send_rate (default: the node's own, 100 Hz); "
                     "for experiments only, the cases' targets are for the defaults")
     ap.add_argument("--path", choices=["smooth", "random"], default="smooth",
                     help="the targets (e2e_analysis.TargetPath): a smooth sweep within the motion limits (default), "

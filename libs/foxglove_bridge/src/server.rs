@@ -1,16 +1,18 @@
 //! The Foxglove WebSocket server: every topic of the graph advertised as a channel with
 //! its `ros2msg` schema and message encoding `cdr`; samples logged as the raw bytes
 //! received from DDS; the last sample of each latched topic given to every client that
-//! subscribes later; targets published by Foxglove panels handed to the node.
+//! subscribes later; targets published by Foxglove panels handed to the node; and
+//! which topics some client subscribes ([`FoxgloveBridge::watched`]), so that the node
+//! subscribes a ROS topic only while a client watches it.
 
 use crate::schemas::{ros2msg_schema, TopicSpec, TOPICS};
 use crate::{FoxgloveBridgeError, TopicNames};
 use foxglove::websocket::{Capability, ChannelView, Client, ClientChannel, ServerListener, Status};
 use foxglove::{ChannelBuilder, ChannelId, Context, PartialMetadata, RawChannel, Schema};
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 
 /// The default `foxglove_bind`: loopback only, Foxglove's usual port.
 pub const DEFAULT_BIND: &str = "127.0.0.1:8765";
@@ -58,6 +60,33 @@ struct Shared {
     by_shown: HashMap<String, &'static TopicSpec>,
     latched: Mutex<HashMap<&'static str, LastSample>>,
     to_node: Option<mpsc::Sender<ClientSample>>,
+    /// subscriptions per topic, over every client
+    subscriptions: Mutex<HashMap<&'static str, usize>>,
+    /// the topics with at least one subscription
+    watched: watch::Sender<BTreeSet<&'static str>>,
+}
+
+impl Shared {
+    /// Count one subscription more (`+1`) or less (`-1`) to `topic`; the watched set
+    /// changes when the first one comes or the last one goes.
+    fn count(&self, topic: &'static str, delta: isize) {
+        let Ok(mut subs) = self.subscriptions.lock() else {
+            return;
+        };
+        let n = subs.entry(topic).or_default();
+        *n = n.saturating_add_signed(delta);
+        let watched = *n > 0;
+        if !watched {
+            subs.remove(topic);
+        }
+        self.watched.send_if_modified(|set| {
+            if watched {
+                set.insert(topic)
+            } else {
+                set.remove(topic)
+            }
+        });
+    }
 }
 
 /// A running Foxglove WebSocket server for the graph's topics.
@@ -130,6 +159,8 @@ impl FoxgloveBridge {
             by_shown,
             latched: Mutex::new(HashMap::new()),
             to_node,
+            subscriptions: Mutex::new(HashMap::new()),
+            watched: watch::Sender::new(BTreeSet::new()),
         });
         let mut server = foxglove::WebSocketServer::new()
             .name(server_name)
@@ -195,6 +226,12 @@ impl FoxgloveBridge {
             );
         }
         Ok(())
+    }
+
+    /// The topics (relative names) that at least one client subscribes, now and as
+    /// they change: a node subscribes a ROS topic only while a client watches it.
+    pub fn watched(&self) -> watch::Receiver<BTreeSet<&'static str>> {
+        self.shared.watched.subscribe()
     }
 
     /// How many clients are connected.
@@ -264,6 +301,7 @@ impl ServerListener for Listener {
         let Some(topic) = self.0.by_channel.get(&channel.id()) else {
             return;
         };
+        self.0.count(topic, 1);
         let last = match self.0.latched.lock() {
             Ok(latched) => latched.get(topic).cloned(),
             Err(_) => None,
@@ -276,6 +314,12 @@ impl ServerListener for Listener {
                 },
                 client.sink_id(),
             );
+        }
+    }
+
+    fn on_unsubscribe(&self, _client: Client, channel: ChannelView) {
+        if let Some(topic) = self.0.by_channel.get(&channel.id()) {
+            self.0.count(topic, -1);
         }
     }
 

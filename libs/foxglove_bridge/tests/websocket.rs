@@ -224,3 +224,69 @@ async fn foxglove_panels_publish_targets_and_nothing_else() {
     assert!(samples.try_recv().is_err());
     bridge.stop().await;
 }
+
+#[tokio::test]
+async fn the_watched_topics_follow_the_clients_subscriptions() {
+    let bridge = FoxgloveBridge::start(
+        "127.0.0.1:0",
+        &TopicNames::default(),
+        ClientPublish::Off,
+        "test",
+    )
+    .await
+    .unwrap();
+    let mut watched = bridge.watched();
+    assert!(
+        watched.borrow().is_empty(),
+        "nothing watched before a client"
+    );
+    let wait_for = |watched: &mut tokio::sync::watch::Receiver<_>, want: Vec<&'static str>| {
+        let mut watched = watched.clone();
+        async move {
+            tokio::time::timeout(
+                WAIT,
+                watched.wait_for(|set: &std::collections::BTreeSet<&str>| {
+                    set.iter().copied().eq(want.iter().copied())
+                }),
+            )
+            .await
+            .expect("the watched set did not change in time")
+            .unwrap();
+        }
+    };
+
+    let mut a = connect(bridge.local_addr()).await;
+    let mut b = connect(bridge.local_addr()).await;
+    let chans = channels(&mut a).await;
+    let id = |topic: &str| chans[topic]["id"].as_u64().unwrap();
+    let subscribe = |sub: u32, topic: &str| {
+        Message::text(
+            json!({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": id(topic)}]})
+                .to_string(),
+        )
+    };
+    a.send(subscribe(1, "/joint_states")).await.unwrap();
+    a.send(subscribe(2, "/tf")).await.unwrap();
+    wait_for(&mut watched, vec!["joint_states", "tf"]).await;
+    // a second client on the same topic: still watched after the first lets go
+    channels(&mut b).await;
+    b.send(subscribe(9, "/joint_states")).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    a.send(Message::text(
+        json!({"op": "unsubscribe", "subscriptionIds": [1, 2]}).to_string(),
+    ))
+    .await
+    .unwrap();
+    wait_for(&mut watched, vec!["joint_states"]).await;
+    // a client that goes away ends its subscriptions
+    a.send(subscribe(3, "/tf")).await.unwrap();
+    wait_for(&mut watched, vec!["joint_states", "tf"]).await;
+    a.close(None).await.unwrap();
+    drop(a);
+    wait_for(&mut watched, vec!["joint_states"]).await;
+    b.close(None).await.unwrap();
+    drop(b);
+    wait_for(&mut watched, vec![]).await;
+    watched.mark_unchanged();
+    bridge.stop().await;
+}

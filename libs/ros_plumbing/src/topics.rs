@@ -98,8 +98,9 @@ const STATE: &str = "state_publisher";
 /// `gui_bridge record` subscribes what it saves (the targets; with an MCAP file also
 /// what replays and views the session).
 const RECORD: &str = "gui_bridge (record)";
-/// gui_bridge's Foxglove server (`foxglove_bind`, off by default) subscribes every topic
-/// of the graph, to forward it to Foxglove.
+/// gui_bridge's Foxglove server (`foxglove_bind`) subscribes a topic of the graph while
+/// a Foxglove client watches it, to forward it to Foxglove (`robot_description` and
+/// `tf_static` as long as it runs).
 const FOXGLOVE: &str = "gui_bridge (Foxglove)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.

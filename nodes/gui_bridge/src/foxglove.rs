@@ -21,8 +21,11 @@ use futures::stream::{LocalBoxStream, StreamExt};
 use ros_plumbing::{topics, RosNode, TopicPublisher};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
+use std::cell::RefCell;
+use std::collections::{BTreeSet, HashMap};
 use std::future::Future;
 use std::path::Path;
+use std::rc::Rc;
 use std::time::Duration;
 
 /// One sample: the topic (relative name) and its CDR bytes.
@@ -39,16 +42,20 @@ pub fn topic_names(node: &RosNode) -> TopicNames {
     TopicNames::default().resolved_by(|t| node.resolver().resolve(t).ok())
 }
 
+/// Gives a tap's subscription back to the node when the tap is no longer wanted (after
+/// its stream was dropped).
+type Untap = Box<dyn FnOnce(&mut RosNode)>;
+
 fn tap<M>(
     node: &mut RosNode,
     topic: &topics::Topic<M>,
-) -> anyhow::Result<LocalBoxStream<'static, RawSample>>
+) -> anyhow::Result<(LocalBoxStream<'static, RawSample>, Untap)>
 where
     M: RosMessage + Serialize + DeserializeOwned + 'static,
 {
-    let sub = node.subscribe_to(topic)?;
+    let sub = Rc::new(node.subscribe_to(topic)?);
     let name = topic.name;
-    Ok(futures::stream::unfold(sub, |sub| async move {
+    let stream = futures::stream::unfold(sub.clone(), |sub| async move {
         let r = sub.async_take().await;
         Some((r, sub))
     })
@@ -67,24 +74,46 @@ where
             }
         }
     })
-    .boxed_local())
+    .boxed_local();
+    let untap: Untap = Box::new(move |node: &mut RosNode| {
+        // the stream holds the other reference until it is dropped
+        if let Ok(sub) = Rc::try_unwrap(sub) {
+            node.unsubscribe(sub);
+        }
+    });
+    Ok((stream, untap))
 }
 
-/// The samples of every topic of the graph for which `wanted(relative name)` holds, as
-/// they arrive.
-pub fn taps(
+/// Every topic of the graph the Foxglove server and MCAP recordings know, by relative
+/// name.
+const TAPPED: [&str; 12] = [
+    topics::ROBOT_DESCRIPTION.name,
+    topics::TF_STATIC.name,
+    topics::TF.name,
+    topics::JOINT_STATES.name,
+    topics::SERVO_ANGLES.name,
+    topics::SERVO_STATE.name,
+    topics::DIAGNOSTICS.name,
+    topics::XYZ_TARGET.name,
+    topics::POSE_TARGET.name,
+    topics::GRIPPER_TARGET.name,
+    topics::JOINT_TARGET.name,
+    topics::ESTOP.name,
+];
+
+/// A tap on the topic of the graph named `name` (relative), if it is one of [`TAPPED`].
+fn tap_named(
     node: &mut RosNode,
-    wanted: impl Fn(&str) -> bool,
-) -> anyhow::Result<LocalBoxStream<'static, RawSample>> {
-    let mut streams = Vec::new();
-    macro_rules! add {
+    name: &str,
+) -> anyhow::Result<Option<(LocalBoxStream<'static, RawSample>, Untap)>> {
+    macro_rules! by_name {
         ($($t:expr),*) => {$(
-            if wanted($t.name) {
-                streams.push(tap(node, &$t)?);
+            if name == $t.name {
+                return tap(node, &$t).map(Some);
             }
         )*};
     }
-    add!(
+    by_name!(
         topics::ROBOT_DESCRIPTION,
         topics::TF_STATIC,
         topics::TF,
@@ -98,8 +127,100 @@ pub fn taps(
         topics::JOINT_TARGET,
         topics::ESTOP
     );
+    Ok(None)
+}
+
+/// The samples of every topic of the graph for which `wanted(relative name)` holds, as
+/// they arrive.
+pub fn taps(
+    node: &mut RosNode,
+    wanted: impl Fn(&str) -> bool,
+) -> anyhow::Result<LocalBoxStream<'static, RawSample>> {
+    let mut streams = Vec::new();
+    for name in TAPPED.into_iter().filter(|t| wanted(t)) {
+        if let Some((stream, _)) = tap_named(node, name)? {
+            streams.push(stream);
+        }
+    }
     Ok(futures::stream::select_all(streams).boxed_local())
 }
+
+/// One topic's samples, with its name, among the Foxglove server's taps.
+struct Keyed {
+    topic: &'static str,
+    samples: LocalBoxStream<'static, RawSample>,
+}
+
+impl futures::Stream for Keyed {
+    type Item = RawSample;
+    fn poll_next(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<Option<RawSample>> {
+        self.samples.poll_next_unpin(cx)
+    }
+}
+
+/// The Foxglove server's subscriptions: a ROS topic is subscribed only while a Foxglove
+/// client subscribes its channel (so that, say, compute_ik sees serial_node's
+/// `servo_angles` subscription go when the link to the Pi goes, not a Foxglove tap's
+/// stay), except the latched topics, kept for clients that come later.
+struct Taps {
+    streams: futures::stream::SelectAll<Keyed>,
+    untaps: HashMap<&'static str, Untap>,
+}
+
+impl Taps {
+    fn new() -> Taps {
+        Taps {
+            streams: futures::stream::SelectAll::new(),
+            untaps: HashMap::new(),
+        }
+    }
+
+    /// Subscribe what `wanted` has and is not subscribed yet; unsubscribe what it no
+    /// longer has.
+    fn follow(&mut self, node: &RefCell<&mut RosNode>, wanted: &BTreeSet<&'static str>) {
+        for &topic in wanted {
+            if self.untaps.contains_key(topic) {
+                continue;
+            }
+            match tap_named(&mut node.borrow_mut(), topic) {
+                Ok(Some((samples, untap))) => {
+                    log::debug!("Foxglove: subscribed {topic}");
+                    self.streams.push(Keyed { topic, samples });
+                    self.untaps.insert(topic, untap);
+                }
+                Ok(None) => {}
+                Err(e) => log::warn!("Foxglove: cannot subscribe {topic}: {e:#}"),
+            }
+        }
+        let gone: Vec<&'static str> = self
+            .untaps
+            .keys()
+            .copied()
+            .filter(|t| !wanted.contains(t) && !LATCHED.contains(t))
+            .collect();
+        if gone.is_empty() {
+            return;
+        }
+        let kept: Vec<Keyed> = std::mem::take(&mut self.streams)
+            .into_iter()
+            .filter(|k| !gone.contains(&k.topic))
+            .collect();
+        self.streams = kept.into_iter().collect();
+        for topic in gone {
+            if let Some(untap) = self.untaps.remove(topic) {
+                untap(&mut node.borrow_mut());
+                log::debug!("Foxglove: unsubscribed {topic}");
+            }
+        }
+    }
+}
+
+/// Topics subscribed as long as the Foxglove server runs: latched ones, whose last
+/// sample every client gets when it subscribes.
+const LATCHED: [&str; 2] = [topics::ROBOT_DESCRIPTION.name, topics::TF_STATIC.name];
 
 /// Publishers of the four target topics, publishing samples given as CDR.
 pub struct TargetPublishers {
@@ -157,16 +278,16 @@ impl TargetPublishers {
 }
 
 /// The Foxglove WebSocket server of the `foxglove_bind` parameter (`None` when empty),
-/// forwarding every topic until the returned future is dropped.
+/// forwarding every topic a client subscribes until the returned future is dropped.
 ///
 /// Foxglove panels may publish targets only with `foxglove_publish:=true`, and only when
 /// the web panel needs no token: the Foxglove SDK shows no request headers, so neither
 /// the `Origin`/`Host` rules nor the token can be checked for its clients.
-pub async fn serve(
-    node: &mut RosNode,
+pub async fn serve<'a>(
+    node: &'a RefCell<&mut RosNode>,
     token_required: bool,
-) -> anyhow::Result<Option<LocalBoxFuture<'static, ()>>> {
-    let params = node.params().clone();
+) -> anyhow::Result<Option<LocalBoxFuture<'a, ()>>> {
+    let params = node.borrow().params().clone();
     let bind = params.string("foxglove_bind").unwrap_or_default();
     if bind.trim().is_empty() {
         log::info!("Foxglove WebSocket server off (foxglove_bind is empty)");
@@ -183,21 +304,20 @@ pub async fn serve(
     } else {
         ClientPublish::Off
     };
-    let names = topic_names(node);
-    let mut bridge =
-        match FoxgloveBridge::start(&bind, &names, publish, node.resolver().node_name()).await {
-            Ok(bridge) => bridge,
-            Err(e) => {
-                // the web panel goes on: a second gui_bridge on this host, or a Foxglove
-                // bridge of another kind, may hold the default port
-                log::warn!("Foxglove WebSocket server not started: {e}");
-                return Ok(None);
-            }
-        };
-    let samples = taps(node, |_| true)?;
+    let names = topic_names(&node.borrow());
+    let server_name = node.borrow().resolver().node_name().to_string();
+    let mut bridge = match FoxgloveBridge::start(&bind, &names, publish, &server_name).await {
+        Ok(bridge) => bridge,
+        Err(e) => {
+            // the web panel goes on: a second gui_bridge on this host, or a Foxglove
+            // bridge of another kind, may hold the default port
+            log::warn!("Foxglove WebSocket server not started: {e}");
+            return Ok(None);
+        }
+    };
     let targets = match publish {
         ClientPublish::Off => None,
-        ClientPublish::Targets { .. } => Some(TargetPublishers::new(node)?),
+        ClientPublish::Targets { .. } => Some(TargetPublishers::new(&mut node.borrow_mut())?),
     };
     log::info!(
         "Foxglove WebSocket server on ws://{} ({})",
@@ -210,13 +330,13 @@ pub async fn serve(
     );
     let from_clients = bridge.take_client_samples();
     Ok(Some(
-        forward(bridge, samples, from_clients, targets).boxed_local(),
+        forward(bridge, node, from_clients, targets).boxed_local(),
     ))
 }
 
 async fn forward(
     bridge: FoxgloveBridge,
-    mut samples: LocalBoxStream<'static, RawSample>,
+    node: &RefCell<&mut RosNode>,
     from_clients: Option<tokio::sync::mpsc::Receiver<ClientSample>>,
     targets: Option<TargetPublishers>,
 ) {
@@ -231,9 +351,24 @@ async fn forward(
         futures::future::pending::<()>().await
     };
     let to_clients = async {
-        while let Some((topic, cdr)) = samples.next().await {
-            if let Err(e) = bridge.log(topic, &cdr, now_ns()) {
-                log::warn!("Foxglove: {e}");
+        let mut watched = bridge.watched();
+        let mut taps = Taps::new();
+        let mut wanted: BTreeSet<&'static str> = LATCHED.into_iter().collect();
+        taps.follow(node, &wanted);
+        loop {
+            tokio::select! {
+                changed = watched.changed() => {
+                    if changed.is_err() {
+                        break; // the server is gone
+                    }
+                    wanted = watched.borrow_and_update().iter().copied().chain(LATCHED).collect();
+                    taps.follow(node, &wanted);
+                }
+                Some((topic, cdr)) = taps.streams.next() => {
+                    if let Err(e) = bridge.log(topic, &cdr, now_ns()) {
+                        log::warn!("Foxglove: {e}");
+                    }
+                }
             }
         }
     };

@@ -66,13 +66,8 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
             ParamSpec::new(
                 "foxglove_bind",
-                // Off by default for now: the server subscribes every topic of the graph
-                // as soon as it starts, so compute_ik's servo_angles kept a subscriber on
-                // the PC when the link to the Pi went down and its lost/regained peer
-                // report never fired (the two-host outage test). Subscribing a topic only
-                // while a Foxglove client subscribes its channel will allow it on by default.
-                ParameterValue::String(String::new()),
-                "address:port of the Foxglove WebSocket server (every topic, ros2msg schemas, CDR), e.g. 127.0.0.1:8765 (Foxglove's default); empty = off",
+                ParameterValue::String(foxglove_bridge::DEFAULT_BIND.into()),
+                "address:port of the Foxglove WebSocket server (every topic, ros2msg schemas, CDR; a topic is subscribed only while a Foxglove client watches it); empty = off",
             )
             .read_only()
             .validator(|v| match v {

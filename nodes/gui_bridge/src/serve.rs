@@ -53,7 +53,9 @@ pub async fn serve(
         },
     )?;
     hide_token_parameter(node, &params, source);
-    let foxglove = crate::foxglove::serve(node, token.is_some()).await?;
+    // from here on shared with the Foxglove server, which subscribes topics on demand
+    let node = std::cell::RefCell::new(node);
+    let foxglove = crate::foxglove::serve(&node, token.is_some()).await?;
     let state = WebState::new(
         to_browsers.clone(),
         req_tx,
@@ -67,17 +69,26 @@ pub async fn serve(
     );
     let web_stats = state.stats.clone();
     let url = format!("http://{local}/");
-    log::info!(
-        "{} ready in ROS domain {}: web panel on {url} ({}) -> {}",
-        node.resolver().node_fqn(),
-        node.domain_id(),
-        match source {
-            TokenSource::None => "loopback only, no token",
-            TokenSource::Generated => "token required, generated",
-            TokenSource::Parameter => "token required, from the token parameter",
-        },
-        node.resolve(&topics::XYZ_TARGET)?
-    );
+    // no borrow of the node may live across an await: the Foxglove server borrows it
+    let (panel_name, xyz_target, servo_state_topic) = {
+        let ros = node.borrow();
+        let xyz_target = ros.resolve(&topics::XYZ_TARGET)?;
+        log::info!(
+            "{} ready in ROS domain {}: web panel on {url} ({}) -> {xyz_target}",
+            ros.resolver().node_fqn(),
+            ros.domain_id(),
+            match source {
+                TokenSource::None => "loopback only, no token",
+                TokenSource::Generated => "token required, generated",
+                TokenSource::Parameter => "token required, from the token parameter",
+            },
+        );
+        (
+            format!("{}: operator panel", ros.resolver().node_name()),
+            xyz_target,
+            ros.resolve(&topics::SERVO_STATE)?,
+        )
+    };
     print_panel_urls(local, token.as_ref());
     let server = tokio::spawn(async move {
         let app = crate::web::router(state).into_make_service_with_connect_info::<SocketAddr>();
@@ -128,16 +139,14 @@ pub async fn serve(
             .boxed(),
     ]);
     let reporting = crate::Reporting {
-        name: format!("{}: operator panel", node.resolver().node_name()),
+        name: panel_name,
         url,
-        peers: PeerWatch::new(&crate::watched_topics(
-            &node.resolve(&topics::XYZ_TARGET)?,
-            &node.resolve(&topics::SERVO_STATE)?,
-        )),
+        peers: PeerWatch::new(&crate::watched_topics(&xyz_target, &servo_state_topic)),
         counts: || {
+            let ros = node.borrow();
             vec![
-                outputs.xyz.get_subscription_count(node.node()),
-                servo_state.get_publisher_count(node.node()),
+                outputs.xyz.get_subscription_count(ros.node()),
+                servo_state.get_publisher_count(ros.node()),
             ]
         },
         web: web_stats,
