@@ -43,7 +43,7 @@ pub enum Command {
     /// Publish one target; exit 0 once compute_ik took it, 1 if it was refused
     #[command(long_flag = "once", allow_negative_numbers = true)]
     Once(OnceArgs),
-    /// Play x,y,z,gripper,dwell rows: move, arrive, set the claw, dwell
+    /// Play x,y,z,gripper,dwell(,mode,name) rows: move, arrive, set the claw, dwell
     #[command(long_flag = "play")]
     Play(PlayArgs),
     /// Save every target the operator sends as such rows, until Ctrl-C
@@ -81,8 +81,9 @@ impl OnceArgs {
 /// `play FILE`
 #[derive(Debug, Args)]
 pub struct PlayArgs {
-    /// CSV file of x,y,z,gripper,dwell rows (as `record` writes), or an MCAP recording
-    /// (`.mcap`: its targets are published again at their recorded times)
+    /// CSV file of x,y,z,gripper,dwell rows (as `record` writes), optionally with
+    /// mode (joint/line: compute_ik's `motion` for that move) and name columns; or an MCAP
+    /// recording (`.mcap`: its targets are published again at their recorded times)
     #[arg(value_name = "FILE.csv|FILE.mcap")]
     pub file: PathBuf,
     /// How to deliver
@@ -102,7 +103,8 @@ pub struct RecordArgs {
 /// How `once` and `play` deliver targets.
 #[derive(Debug, Args, Clone)]
 pub struct DeliveryArgs {
-    /// Straight Cartesian lines: compute_ik's `motion` set to `line` meanwhile, then put back
+    /// Straight Cartesian lines: compute_ik's `motion` set to `line` meanwhile (for the
+    /// points of a program that name no mode), then put back
     #[arg(long)]
     pub line: bool,
     /// Seconds to wait for each answer (compute_ik listening, taking, arriving)

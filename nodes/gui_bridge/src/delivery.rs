@@ -3,10 +3,13 @@
 //! (the first step of the motion it starts carries the target's `header.stamp`), and
 //! **refused** when a `diagnostics` status carries [`REJECTED_STAMP_KEY`] with that
 //! stamp; it **arrived** when `joint_states` has the arm at its joints.
+//!
+//! compute_ik's `motion` parameter (`joint` / `line`) is set for `--line` and for the
+//! program points that name a mode, and put back as it was at the end.
 
 use crate::cli::{DeliveryArgs, OnceArgs, PlayArgs};
+use crate::program::{MoveMode, Program};
 use crate::ros_outputs::RosOutputs;
-use crate::teleop::parse_waypoints;
 use crate::Outputs;
 use anyhow::{anyhow, Context as _};
 use eezybot_kinematics::Arm;
@@ -74,7 +77,7 @@ pub async fn once(
 ) -> anyhow::Result<()> {
     let xyz = args.xyz();
     check(arm, xyz)?;
-    let line = LineMotion::engage_for(node, &args.delivery).await?;
+    let motion = MotionSwitch::engage(node, &args.delivery, false).await?;
     let mut d = Delivery::new(node, &args.delivery)?;
     let node = &*node;
     let work = async {
@@ -90,11 +93,14 @@ pub async fn once(
         println!("delivered {xyz:?}");
         Ok(())
     };
-    finish(work, shutdown, line).await
+    let result = until_shutdown(work, shutdown).await;
+    MotionSwitch::restore(motion).await;
+    result
 }
 
-/// `play FILE`: each row in turn: move, arrive, set the claw, dwell; the first refusal
-/// stops with its waypoint's number.
+/// `play FILE`: each point of the program in turn: set compute_ik's `motion` if the
+/// point names a mode (else `line` with `--line`, or as it was), move, arrive, set the
+/// claw, dwell; the first refusal stops with its waypoint's number.
 pub async fn play(
     node: &mut RosNode,
     arm: &Arm,
@@ -104,8 +110,11 @@ pub async fn play(
     let path = args.file.display().to_string();
     let text =
         std::fs::read_to_string(&args.file).with_context(|| format!("cannot read {path}"))?;
-    let waypoints = parse_waypoints(&text).map_err(|e| anyhow!("{path}: {e}"))?;
-    let line = LineMotion::engage_for(node, &args.delivery).await?;
+    let waypoints = Program::parse(&text)
+        .map_err(|e| anyhow!("{path}: {e}"))?
+        .points;
+    let modes = waypoints.iter().any(|w| w.mode.is_some());
+    let mut motion = MotionSwitch::engage(node, &args.delivery, modes).await?;
     let mut d = Delivery::new(node, &args.delivery)?;
     let node = &*node;
     let work = async {
@@ -114,6 +123,9 @@ pub async fn play(
             // move, arrive, then set the claw there: the order `record` writes rows in
             let at = || format!("waypoint {}", i + 1);
             check(arm, w.xyz).with_context(at)?;
+            if let Some(m) = motion.as_mut() {
+                m.set(w.mode).await.with_context(at)?;
+            }
             d.send(w.xyz).await.with_context(at)?;
             d.arrival(arm, w.xyz).await.with_context(at)?;
             if let Some(g) = w.gripper {
@@ -131,24 +143,20 @@ pub async fn play(
         }
         Ok(())
     };
-    finish(work, shutdown, line).await
+    let result = until_shutdown(work, shutdown).await;
+    MotionSwitch::restore(motion).await;
+    result
 }
 
-/// Run `work` until it ends or `shutdown` (Ctrl-C: exit 0), then put compute_ik's
-/// `motion` back.
-async fn finish(
+/// Run `work` until it ends or `shutdown` (Ctrl-C: exit 0).
+async fn until_shutdown(
     work: impl Future<Output = anyhow::Result<()>>,
     shutdown: impl Future<Output = ()>,
-    line: Option<LineMotion>,
 ) -> anyhow::Result<()> {
-    let result = tokio::select! {
+    tokio::select! {
         r = work => r,
         _ = shutdown => Ok(()),
-    };
-    if let Some(l) = line {
-        l.restore().await;
     }
-    result
 }
 
 /// The local reachability check (the closed form compute_ik uses for the EezyBot).
@@ -256,19 +264,29 @@ impl Delivery {
     }
 }
 
-/// compute_ik's `motion` set to `line` for a delivery, and put back afterwards.
-struct LineMotion {
+/// compute_ik's `motion` during a delivery: `line` with `--line`, each program point's
+/// mode before its move, and put back as it was afterwards.
+struct MotionSwitch {
     client: RemoteParameters,
-    previous: ParameterValue,
+    /// its value before we touched it
+    original: ParameterValue,
+    /// what we set it to last (or `original`)
+    current: ParameterValue,
+    /// for points without a mode: `line` with `--line`, else `original`
+    default: ParameterValue,
+    /// whether we tried to set it (a failed set may still have taken)
+    touched: bool,
 }
 
-impl LineMotion {
-    /// With `--line`: set the `motion` of `--ik-node` to `line`.
-    async fn engage_for(
+impl MotionSwitch {
+    /// With `--line` or `modes` (the program names a mode for some point): connect to
+    /// the `motion` of `--ik-node`, and with `--line` set it to `line` now.
+    async fn engage(
         node: &mut RosNode,
         args: &DeliveryArgs,
-    ) -> anyhow::Result<Option<LineMotion>> {
-        if !args.line {
+        modes: bool,
+    ) -> anyhow::Result<Option<MotionSwitch>> {
+        if !args.line && !modes {
             return Ok(None);
         }
         let client = RemoteParameters::new(node, &args.ik_node)?;
@@ -276,7 +294,7 @@ impl LineMotion {
             .wait(node, args.timeout)
             .await
             .map_err(|e| anyhow!(e))?;
-        let previous = client
+        let original = client
             .get("motion")
             .await
             .map_err(|e| anyhow!(e))?
@@ -286,26 +304,74 @@ impl LineMotion {
                     client.node_name()
                 )
             })?;
-        client
-            .set("motion", ParameterValue::String("line".into()))
-            .await
-            .map_err(|e| anyhow!(e))?;
-        log::info!("{} motion:=line for this delivery", client.node_name());
-        Ok(Some(LineMotion { client, previous }))
+        let default = if args.line {
+            mode_value(MoveMode::Line)
+        } else {
+            original.clone()
+        };
+        let mut switch = MotionSwitch {
+            client,
+            current: original.clone(),
+            original,
+            default,
+            touched: false,
+        };
+        switch.set(None).await?;
+        Ok(Some(switch))
     }
 
-    async fn restore(self) {
-        match self.client.set("motion", self.previous.clone()).await {
-            Ok(()) => log::info!(
-                "{} motion back to {:?}",
+    /// Set `motion` for the next move: `mode`, or the default for none; nothing if it
+    /// is that already.
+    async fn set(&mut self, mode: Option<MoveMode>) -> anyhow::Result<()> {
+        let want = mode.map_or_else(|| self.default.clone(), mode_value);
+        if want == self.current {
+            return Ok(());
+        }
+        self.touched = true;
+        self.client.set("motion", want.clone()).await.map_err(|e| {
+            anyhow!(
+                "cannot set {}'s motion to {}: {e}",
                 self.client.node_name(),
-                self.previous
+                shown(&want)
+            )
+        })?;
+        log::info!("{} motion:={}", self.client.node_name(), shown(&want));
+        self.current = want;
+        Ok(())
+    }
+
+    /// Put `motion` back as it was (if we changed it).
+    async fn restore(switch: Option<MotionSwitch>) {
+        let Some(s) = switch else {
+            return;
+        };
+        if !s.touched {
+            return;
+        }
+        match s.client.set("motion", s.original.clone()).await {
+            Ok(()) => log::info!(
+                "{} motion back to {}",
+                s.client.node_name(),
+                shown(&s.original)
             ),
             Err(e) => log::error!(
-                "could not put {}'s motion back to {:?}: {e}",
-                self.client.node_name(),
-                self.previous
+                "could not put {}'s motion back to {}: {e}",
+                s.client.node_name(),
+                shown(&s.original)
             ),
         }
     }
+}
+
+/// A parameter value as written on the command line (`line`, not `String("line")`).
+fn shown(value: &ParameterValue) -> String {
+    match value {
+        ParameterValue::String(s) => s.clone(),
+        other => format!("{other:?}"),
+    }
+}
+
+/// compute_ik's `motion` value for `mode`.
+fn mode_value(mode: MoveMode) -> ParameterValue {
+    ParameterValue::String(mode.as_str().into())
 }

@@ -4,7 +4,9 @@
 pub mod access;
 pub mod cli;
 pub mod delivery;
+pub mod desk;
 pub mod foxglove;
+pub mod program;
 pub mod record;
 pub mod ros_outputs;
 pub mod serve;
@@ -64,6 +66,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 _ => Ok(()),
             }),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
+            ParamSpec::new(
+                "program_dir",
+                ParameterValue::String(String::new()),
+                "where the panel saves and loads waypoint programs (NAME.csv, which `gui_bridge play` runs too); empty = $ROS_HOME/eezybot_programs, else ~/.ros/eezybot_programs",
+            )
+            .read_only(),
             ParamSpec::new(
                 "foxglove_bind",
                 ParameterValue::String(foxglove_bridge::DEFAULT_BIND.into()),
@@ -355,6 +363,23 @@ fn joints_json(q: &ArmJoints) -> serde_json::Value {
     json!({"base_joint": q.base_rad, "shoulder_joint": q.shoulder_rad, "elbow_joint": q.elbow_rad})
 }
 
+/// The panel's program directory: the `program_dir` parameter, else
+/// `$ROS_HOME/eezybot_programs`, else `~/.ros/eezybot_programs` (ROS 2's own default for
+/// `ROS_HOME`), else `./eezybot_programs`.
+pub fn program_dir(param: &str) -> std::path::PathBuf {
+    if !param.trim().is_empty() {
+        return param.into();
+    }
+    let home = |v: &str| std::env::var_os(v).filter(|s| !s.is_empty());
+    match (home("ROS_HOME"), home("HOME")) {
+        (Some(ros), _) => std::path::Path::new(&ros).join("eezybot_programs"),
+        (None, Some(h)) => std::path::Path::new(&h)
+            .join(".ros")
+            .join("eezybot_programs"),
+        (None, None) => "eezybot_programs".into(),
+    }
+}
+
 /// The arm as the page needs it: its name, whether it is the EezyBot, the joint
 /// mode's sliders (from the URDF once `robot_description` arrived) and its reach.
 pub fn robot_json(teleop: &Teleop) -> serde_json::Value {
@@ -363,6 +388,8 @@ pub fn robot_json(teleop: &Teleop) -> serde_json::Value {
         .iter()
         .map(|j| json!({"name": j.name, "lower": j.lower, "upper": j.upper}))
         .collect();
+    let scene = teleop.scene();
+    let field = |k: &str| scene.and_then(|s| s.get(k)).cloned();
     match teleop.robot() {
         Some(RobotView {
             name,
@@ -373,6 +400,7 @@ pub fn robot_json(teleop: &Teleop) -> serde_json::Value {
         }) => json!({
             "name": name, "eezybot": eezybot, "joints": sliders, "reach": reach_m,
             "tool_link": tool_link, "from_urdf": true,
+            "urdf": field("urdf"), "envelope": field("envelope"),
         }),
         None => json!({
             "name": "eezybot", "eezybot": true, "joints": sliders, "reach": 0.33,
@@ -392,6 +420,7 @@ pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
         "pose": teleop.last_pose(),
         "rate": rate,
         "robot": robot_json(teleop),
+        "program": teleop.program(),
         "limits": {
             "base_joint": [l.base_rad.0, l.base_rad.1],
             "shoulder_joint": [l.shoulder_rad.0, l.shoulder_rad.1],
@@ -403,6 +432,29 @@ pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
     })
     .to_string()
 }
+
+/// The page's 3D view of `model` (its URDF `text`): the text itself, up to
+/// [`SCENE_URDF_MAX`] bytes (a larger one is drawn in 2D only), and the reachable
+/// workspace: for the EezyBot the solid of revolution of its closed form's limits, for
+/// any other arm a cloud of its tool's positions at random configurations.
+fn scene_json(text: &str, model: &RobotModel, teleop: &Teleop) -> serde_json::Value {
+    use eezybot_kinematics::envelope::{chain_envelope, eezybot_envelope};
+    let envelope = match teleop.robot() {
+        Some(r) if !r.eezybot => r.tool_link.as_ref().and_then(|tip| {
+            eezybot_kinematics::chain::SerialChain::from_model(model, &model.root, tip)
+                .ok()
+                .map(|chain| chain_envelope(&chain, 3000, 1))
+        }),
+        _ => Some(eezybot_envelope(teleop.arm(), 0.004)),
+    };
+    json!({
+        "urdf": (text.len() <= SCENE_URDF_MAX).then_some(text),
+        "envelope": envelope,
+    })
+}
+
+/// The largest URDF the page's 3D view is given (its hello goes to every browser).
+pub const SCENE_URDF_MAX: usize = 1 << 20;
 
 /// Segments (parent origin → child origin, child link name) of every joint of the URDF
 /// for these joint positions, for the page's side and top views.
@@ -453,6 +505,8 @@ fn serve_request(teleop: &std::sync::Mutex<Teleop>, from: FromClient, stats: &We
             positions: q.into_iter().collect(),
         },
         ClientRequest::Estop { on } => Event::Estop { engaged: on },
+        // the run loop's desk takes these
+        ClientRequest::Program(_) => return,
     };
     let result = teleop
         .lock()
@@ -492,10 +546,11 @@ fn publish_due(
     sent: &mut u64,
     latency: &mut Latency,
     to_browsers: &broadcast::Sender<String>,
-) {
+) -> Option<Time> {
     let send = |v: serde_json::Value| {
         let _ = to_browsers.send(v.to_string());
     };
+    let mut xyz_stamp = None;
     let commands = teleop
         .lock()
         .map(|mut t| t.take_due(Instant::now()))
@@ -505,6 +560,7 @@ fn publish_due(
         match &c {
             Command::Target(xyz) => {
                 *sent += 1;
+                xyz_stamp = Some(stamp);
                 outputs.xyz_target(*xyz, stamp);
                 latency.sent(stamp);
                 send(
@@ -528,6 +584,7 @@ fn publish_due(
             }
         }
     }
+    xyz_stamp
 }
 
 /// The loop between browsers and ROS; runs until `shutdown` resolves.
@@ -544,6 +601,8 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     outputs: &impl Outputs,
     params: Params,
     mut reporting: Reporting<F>,
+    mut desk: desk::Desk,
+    motion: &dyn desk::MotionControl,
     shutdown: impl Future<Output = ()>,
 ) {
     let mut sent = 0u64;
@@ -602,22 +661,83 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     };
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
+    // the waypoint program: where the tool and the claw are (teach, arrival), and
+    // compute_ik's `motion` being set (Some: for a point's move mode) or put back (None)
+    let mut last_tool: Option<[f64; 3]> = None;
+    let mut last_gripper: Option<f64> = None;
+    let mut motion_job: Option<futures::future::LocalBoxFuture<'_, Option<Result<(), String>>>> =
+        None;
+    if let Ok(mut t) = teleop.lock() {
+        t.set_program(desk.json());
+    }
+    macro_rules! desk_outcome {
+        ($out:expr) => {{
+            let out: desk::DeskOutcome = $out;
+            if let Some(mode) = out.set_mode {
+                motion_job = Some(Box::pin(async move { Some(motion.set(mode).await) }));
+            } else if out.restore_mode {
+                motion_job = Some(Box::pin(async move {
+                    motion.restore().await;
+                    None
+                }));
+            }
+            if out.changed || out.set_mode.is_some() || out.restore_mode {
+                let v = desk.json();
+                if let Ok(mut t) = teleop.lock() {
+                    t.set_program(v.clone());
+                }
+                send(v);
+            }
+        }};
+    }
+    macro_rules! desk_step {
+        () => {{
+            let out = match teleop.lock() {
+                Ok(mut t) => desk.play_step(&mut t, Instant::now(), last_tool),
+                Err(_) => desk::DeskOutcome::default(),
+            };
+            desk_outcome!(out);
+        }};
+    }
     loop {
         let now = Instant::now();
+        let desk_wake = desk.next_wakeup();
         let due = teleop.lock().ok().and_then(|t| t.next_due(now));
         if due.is_some_and(|d| d <= now) {
             // Due now: publish before anything else. (A sleep until a past instant ends
             // only when the timer next runs, which a loop kept busy by requests would put
             // off for as long as they keep coming.)
-            publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers);
+            if let Some(stamp) =
+                publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers)
+            {
+                desk.published_target(stamp);
+            }
             continue;
         }
         tokio::select! {
             biased;
             _ = &mut shutdown => break,
-            Some(from) = requests.estops.recv() => serve_request(&teleop, from, &reporting.web),
+            Some(from) = requests.estops.recv() => {
+                let engaged = matches!(from.request, ClientRequest::Estop { on: true });
+                serve_request(&teleop, from, &reporting.web);
+                if engaged && desk.playing() {
+                    desk_outcome!(desk::DeskOutcome { restore_mode: desk.stop(), changed: true, set_mode: None });
+                }
+            }
             _ = async { if let Some(d) = due { tokio::time::sleep_until(d.into()).await } }, if due.is_some() => {
-                publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers);
+                if let Some(stamp) = publish_due(&teleop, outputs, &mut sent, &mut latency, &to_browsers) {
+                    desk.published_target(stamp);
+                }
+            }
+            _ = async { if let Some(w) = desk_wake { tokio::time::sleep_until(w.into()).await } }, if desk_wake.is_some() => {
+                desk_step!();
+            }
+            done = async { match motion_job.as_mut() { Some(job) => job.await, None => futures::future::pending().await } }, if motion_job.is_some() => {
+                motion_job = None;
+                if let Some(result) = done {
+                    desk.mode_set(result);
+                    desk_step!();
+                }
             }
             _ = status_tick.tick() => send(health.json()),
             _ = diag_tick.tick() => report(&reporting.peers, sent, &unreadable),
@@ -635,6 +755,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
             }
             input = inputs.next() => {
                 let Some(input) = input else { break };
+                let joint_states = matches!(input, Input::JointStates(_));
                 match input {
                     Input::JointStates(js) if !teleop.lock().map(|t| t.is_eezybot()).unwrap_or(true) => {
                         // any other arm: every joint, the links' segments and its tool
@@ -644,6 +765,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                             let refs: Vec<(&str, f64)> = finite.iter().map(|(n, v)| (n.as_str(), *v)).collect();
                             let tool_link = teleop.lock().ok().and_then(|t| t.robot().and_then(|r| r.tool_link.clone()));
                             let tool = tool_link.and_then(|l| m.link_poses(&refs).get(&l).map(|p| p.translation.vector));
+                            last_tool = tool.map(|p| [p.x, p.y, p.z]);
                             let joints: serde_json::Map<String, serde_json::Value> =
                                 finite.iter().map(|(n, v)| (n.clone(), json!(v))).collect();
                             send_pose(json!({
@@ -659,9 +781,17 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                             if b.is_finite() && s.is_finite() && e.is_finite() {
                                 let q = ArmJoints { base_rad: b, shoulder_rad: s, elbow_rad: e };
                                 let tool = teleop.lock().map(|mut t| { t.observe_joints(q); t.arm().forward(&q) });
+                                last_tool = tool.as_ref().ok().map(|p| [p.x, p.y, p.z]);
+                                let open_rad = teleop.lock().map(|t| t.arm().geometry.gripper_open_rad).unwrap_or(0.0);
+                                if let Some(g) = get(ACTUATED_JOINTS[3]).filter(|g| g.is_finite() && open_rad > 0.0) {
+                                    last_gripper = Some((g / open_rad).clamp(0.0, 1.0));
+                                }
                                 let segs = model.as_ref().map(|m| segments(m, &js)).unwrap_or_default();
+                                // every joint, passive linkage ones included, for the 3D view
+                                let all: serde_json::Map<String, serde_json::Value> = js.name.iter().zip(js.position.iter())
+                                    .filter(|(_, v)| v.is_finite()).map(|(n, v)| (n.clone(), json!(v))).collect();
                                 send_pose(json!({
-                                    "t": "pose", "joints": joints_json(&q),
+                                    "t": "pose", "joints": joints_json(&q), "all": all,
                                     "gripper": get(ACTUATED_JOINTS[3]),
                                     "tool": tool.map(|p| [p.x, p.y, p.z]).ok(),
                                     "segments": segs,
@@ -673,25 +803,60 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                         Ok(m) => {
                             log::info!("robot_description: {} ({} links)", m.name, m.links.len());
                             // the joint mode's sliders come from the URDF, for any arm
-                            if let Ok(robot) = teleop.lock().map(|mut t| { t.set_robot(&m); robot_json(&t) }) {
+                            if let Ok(robot) = teleop.lock().map(|mut t| {
+                                t.set_robot(&m);
+                                let scene = scene_json(&text, &m, &t);
+                                t.set_scene(scene);
+                                robot_json(&t)
+                            }) {
                                 send(json!({"t": "robot", "robot": robot}));
                             }
                             model = Some(m);
                         }
                         Err(e) => log::warn!("robot_description not usable for the live view: {e}"),
                     },
-                    Input::Diagnostics(d) => health.update(&d),
+                    Input::Diagnostics(d) => {
+                        health.update(&d);
+                        if desk.playing() {
+                            let value = |s: &DiagnosticStatus, k: &str| s.values.iter().find(|v| v.key == k).map(|v| v.value.clone());
+                            for st in &d.status {
+                                if let Some(stamp) = value(st, REJECTED_STAMP_KEY) {
+                                    let reason = value(st, LAST_REJECTION_KEY).unwrap_or_else(|| st.message.clone());
+                                    desk.refused(&stamp, &reason);
+                                }
+                            }
+                            desk_step!();
+                        }
+                    }
                     Input::ServoState(s) => {
                         if let Some(v) = latency.reply(s.header.stamp) {
                             send(v);
                         }
                     }
-                    Input::Estop(on) => send(json!({"t": "estop", "on": on})),
+                    Input::Estop(on) => {
+                        send(json!({"t": "estop", "on": on}));
+                        if on && desk.playing() {
+                            desk_outcome!(desk::DeskOutcome { restore_mode: desk.stop(), changed: true, set_mode: None });
+                        }
+                    }
                     Input::Unreadable { topic, error } => unreadable.note(topic, &error),
+                }
+                if joint_states && desk.playing() {
+                    desk_step!(); // arrival is judged on where the tool is now
                 }
             }
             Some(from) = requests.others.recv() => {
-                serve_request(&teleop, from, &reporting.web);
+                match from.request {
+                    ClientRequest::Program(op) => {
+                        let out = match teleop.lock() {
+                            Ok(t) => desk.request(op, &t, last_tool, last_gripper, Instant::now()),
+                            Err(_) => desk::DeskOutcome::default(),
+                        };
+                        desk_outcome!(out);
+                        desk_step!();
+                    }
+                    _ => serve_request(&teleop, from, &reporting.web),
+                }
                 // one request at a time, then let the other tasks run (on this node's
                 // one thread: another client's handler with an e-stop in hand)
                 tokio::task::yield_now().await;

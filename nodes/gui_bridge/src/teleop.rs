@@ -319,6 +319,8 @@ pub struct Teleop {
     joint_target: Slot<Vec<(String, f64)>>,
     estop: Option<bool>,
     robot: Option<RobotView>,
+    scene: Option<serde_json::Value>,
+    program: Option<serde_json::Value>,
     last_pose: Option<serde_json::Value>,
 }
 
@@ -336,6 +338,8 @@ impl Teleop {
             joint_target: Slot::default(),
             estop: None,
             robot: None,
+            scene: None,
+            program: None,
             last_pose: None,
         }
     }
@@ -343,6 +347,27 @@ impl Teleop {
     /// The arm `robot_description` describes: joint mode and checks follow it.
     pub fn set_robot(&mut self, model: &RobotModel) -> &RobotView {
         self.robot.insert(RobotView::of(model, &self.arm))
+    }
+
+    /// What the page's 3D view draws besides the pose (the URDF text, the workspace
+    /// envelope), kept for browsers that connect later.
+    pub fn set_scene(&mut self, scene: serde_json::Value) {
+        self.scene = Some(scene);
+    }
+
+    /// The waypoint program as the page shows it, kept for browsers that connect later.
+    pub fn set_program(&mut self, program: serde_json::Value) {
+        self.program = Some(program);
+    }
+
+    /// See [`Teleop::set_program`].
+    pub fn program(&self) -> Option<&serde_json::Value> {
+        self.program.as_ref()
+    }
+
+    /// See [`Teleop::set_scene`].
+    pub fn scene(&self) -> Option<&serde_json::Value> {
+        self.scene.as_ref()
     }
 
     /// The arm from `robot_description`, if one arrived.

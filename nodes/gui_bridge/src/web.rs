@@ -35,6 +35,14 @@ pub const INDEX_HTML: &str = include_str!("../web/index.html");
 /// page refused for its token still gets it (no console error for a missing icon).
 pub const FAVICON_SVG: &str = include_str!("../web/favicon.svg");
 
+/// The 3D live view: `three` and `urdf-loader` from the npm registry, bundled by
+/// `web/viewer3d/build.sh` (checked in with its lockfile, so building the node needs no
+/// network), served at `/viewer3d.js` to anyone (public code, like the icon).
+pub const VIEWER3D_JS: &str = include_str!("../web/viewer3d.js");
+/// The same, gzip-compressed at build time (`gzip -9 -n`): what goes over the wire to
+/// any client that accepts gzip.
+pub const VIEWER3D_JS_GZ: &[u8] = include_bytes!("../web/viewer3d.js.gz");
+
 /// A message from a browser.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(tag = "t", rename_all = "snake_case")]
@@ -68,6 +76,67 @@ pub enum ClientRequest {
     Check {
         /// m
         xyz: [f64; 3],
+    },
+    /// The waypoint program: teach, edit, play, save, load.
+    Program(ProgramOp),
+}
+
+/// What a browser does with the waypoint program (`{"t": "program", "op": …}`).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "op", rename_all = "snake_case")]
+pub enum ProgramOp {
+    /// Append where the arm is now (its tool, and the claw as last set).
+    Teach,
+    /// Rename point `i`.
+    Rename {
+        /// index
+        i: usize,
+        /// new name
+        name: String,
+    },
+    /// Move point `from` to index `to`.
+    Move {
+        /// index
+        from: usize,
+        /// index
+        to: usize,
+    },
+    /// Delete point `i`.
+    Remove {
+        /// index
+        i: usize,
+    },
+    /// Dwell at point `i` for `s` seconds.
+    Dwell {
+        /// index
+        i: usize,
+        /// seconds
+        s: f64,
+    },
+    /// How to move to point `i`: `joint`, `line`, or null (compute_ik's setting).
+    Mode {
+        /// index
+        i: usize,
+        /// `joint`, `line` or none
+        mode: Option<String>,
+    },
+    /// Play the program, once or in a loop.
+    Play {
+        /// start over after the last point
+        #[serde(default, rename = "loop")]
+        looping: bool,
+    },
+    /// Stop playing.
+    Stop,
+    /// Save the program under this name on the node's host.
+    Save {
+        /// `[A-Za-z0-9_-]{1,64}`
+        name: String,
+    },
+    /// Load a saved program.
+    Load {
+        /// `[A-Za-z0-9_-]{1,64}`
+        name: String,
     },
 }
 
@@ -581,7 +650,41 @@ pub fn router(state: WebState) -> Router {
         .route("/ws", get(ws_handler))
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .route("/favicon.ico", get(favicon))
+        .route("/viewer3d.js", get(viewer3d))
         .with_state(state)
+}
+
+/// Whether `Accept-Encoding` lists gzip (with a non-zero q).
+fn accepts_gzip(headers: &HeaderMap) -> bool {
+    headers
+        .get_all(header::ACCEPT_ENCODING)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|coding| {
+            let mut parts = coding.split(';').map(str::trim);
+            let name = parts.next().unwrap_or_default();
+            let q_zero = parts.any(|p| {
+                p.strip_prefix("q=")
+                    .and_then(|q| q.parse::<f64>().ok())
+                    .is_some_and(|q| q == 0.0)
+            });
+            (name.eq_ignore_ascii_case("gzip") || name == "*") && !q_zero
+        })
+}
+
+async fn viewer3d(headers: HeaderMap) -> Response {
+    let common = [
+        (header::CONTENT_TYPE, "text/javascript; charset=utf-8"),
+        (header::CACHE_CONTROL, "max-age=3600"),
+        (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        (header::VARY, "Accept-Encoding"),
+    ];
+    if accepts_gzip(&headers) {
+        (common, [(header::CONTENT_ENCODING, "gzip")], VIEWER3D_JS_GZ).into_response()
+    } else {
+        (common, VIEWER3D_JS).into_response()
+    }
 }
 
 async fn favicon() -> impl IntoResponse {

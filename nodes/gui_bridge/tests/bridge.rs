@@ -38,6 +38,13 @@ impl Outputs for Fake {
     fn diagnostics(&self, _: DiagnosticStatus) {}
 }
 
+use gui_bridge::desk::{Desk, NoMotionControl};
+
+/// A desk whose program files would go to a directory of this test's own.
+fn desk() -> Desk {
+    Desk::new(std::env::temp_dir().join(format!("gui_bridge_bridge_{}", std::process::id())))
+}
+
 fn teleop() -> Arc<Mutex<Teleop>> {
     let arm = gui_bridge::load_arm("").unwrap();
     Arc::new(Mutex::new(Teleop::new(arm, 50.0)))
@@ -95,6 +102,8 @@ async fn an_estop_is_served_before_a_thousand_queued_requests() {
         &fake,
         Params::new(BTreeMap::new()),
         reporting(stats),
+        desk(),
+        &NoMotionControl,
         async {
             let _ = done_rx.await;
         },
@@ -153,6 +162,8 @@ async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
         &fake,
         Params::new(BTreeMap::new()),
         reporting(stats.clone()),
+        desk(),
+        &NoMotionControl,
         through,
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
@@ -230,6 +241,8 @@ async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published()
         &recorder,
         Params::new(BTreeMap::new()),
         reporting(stats.clone()),
+        desk(),
+        &NoMotionControl,
         counted,
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)

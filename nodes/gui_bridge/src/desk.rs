@@ -1,0 +1,302 @@
+//! The web panel's waypoint program ("the desk"): the one program every browser sees
+//! and edits, its files on the node's host, and its playback. Editing and the player are
+//! [`crate::program`]'s (pure); this module applies browser requests to them, turns the
+//! player's actions into the operator state's events (so a played target goes out as a
+//! slider move does: rate, e-stop and reachability rules included), and sets
+//! compute_ik's `motion` for points with a move mode through a [`MotionControl`].
+
+use crate::program::{
+    list_programs, load, save, MoveMode, Player, PlayerAction, Program, ProgramPoint,
+};
+use crate::teleop::{Event, Teleop};
+use crate::web::ProgramOp;
+use eezybot_msgs::Time;
+use futures::future::LocalBoxFuture;
+use serde_json::json;
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::time::Instant;
+
+/// Sets compute_ik's `motion` parameter for program moves.
+pub trait MotionControl {
+    /// Set `motion` to `mode` (the first call remembers what it was).
+    fn set(&self, mode: MoveMode) -> LocalBoxFuture<'_, Result<(), String>>;
+    /// Put `motion` back as it was before the first [`MotionControl::set`], if any.
+    fn restore(&self) -> LocalBoxFuture<'_, ()>;
+}
+
+/// No compute_ik to set: a program whose points name a move mode fails with the reason.
+pub struct NoMotionControl;
+
+impl MotionControl for NoMotionControl {
+    fn set(&self, _mode: MoveMode) -> LocalBoxFuture<'_, Result<(), String>> {
+        Box::pin(async { Err("no compute_ik parameters to set the move mode".to_string()) })
+    }
+    fn restore(&self) -> LocalBoxFuture<'_, ()> {
+        Box::pin(async {})
+    }
+}
+
+/// What the run loop must do after the desk handled something.
+#[derive(Debug, Default, PartialEq)]
+pub struct DeskOutcome {
+    /// Set compute_ik's `motion` to this, then call [`Desk::mode_set`].
+    pub set_mode: Option<MoveMode>,
+    /// The player ended: put `motion` back.
+    pub restore_mode: bool,
+    /// The desk changed: send [`Desk::json`] to every browser.
+    pub changed: bool,
+}
+
+/// The panel's program, its files and its player.
+pub struct Desk {
+    dir: PathBuf,
+    name: String,
+    program: Program,
+    player: Option<Player>,
+    message: String,
+    /// the stamp of the last target the player published (compute_ik names it when it
+    /// refuses it)
+    target_stamp: Option<Time>,
+    /// the player sent a target that has not been published yet
+    awaiting_stamp: bool,
+    /// a move mode was set while playing: put it back at the end
+    mode_touched: bool,
+}
+
+impl Desk {
+    /// An empty program; files live in `dir`.
+    pub fn new(dir: PathBuf) -> Desk {
+        Desk {
+            dir,
+            name: String::new(),
+            program: Program::default(),
+            player: None,
+            message: String::new(),
+            target_stamp: None,
+            awaiting_stamp: false,
+            mode_touched: false,
+        }
+    }
+
+    /// The directory of the program files.
+    pub fn dir(&self) -> &std::path::Path {
+        &self.dir
+    }
+
+    /// Whether a program is playing.
+    pub fn playing(&self) -> bool {
+        self.player.as_ref().is_some_and(Player::is_running)
+    }
+
+    /// `{"t": "program", "program": …, "player": …, "files": […], "name": …, "message": …}`
+    /// for the browsers.
+    pub fn json(&self) -> serde_json::Value {
+        json!({
+            "t": "program",
+            "program": self.program,
+            "player": self.player.as_ref().map(Player::state),
+            "files": list_programs(&self.dir),
+            "name": self.name,
+            "message": self.message,
+            "dir": self.dir.display().to_string(),
+        })
+    }
+
+    /// Apply a browser's request (after `play`, run [`Desk::play_step`]). `tool`: where
+    /// the arm's tool is (for `teach`), else the current target is taught; `gripper`: the
+    /// claw's opening as last seen.
+    pub fn request(
+        &mut self,
+        op: ProgramOp,
+        teleop: &Teleop,
+        tool: Option<[f64; 3]>,
+        gripper: Option<f64>,
+        now: Instant,
+    ) -> DeskOutcome {
+        let mut out = DeskOutcome {
+            changed: true,
+            ..DeskOutcome::default()
+        };
+        let editing = !matches!(op, ProgramOp::Play { .. } | ProgramOp::Stop);
+        if editing && self.playing() && !matches!(op, ProgramOp::Save { .. }) {
+            self.message = "stop the program before changing it".into();
+            return out;
+        }
+        let result: Result<String, String> = match op {
+            ProgramOp::Teach => {
+                let xyz = tool.unwrap_or_else(|| teleop.target());
+                let mut p = ProgramPoint::at(xyz);
+                p.gripper = gripper.map(|g| g.clamp(0.0, 1.0));
+                // a name that stays with the point when the list is reordered
+                let taken = |k: usize| {
+                    self.program
+                        .points
+                        .iter()
+                        .any(|q| q.name == format!("P{k}"))
+                };
+                let k = (self.program.points.len() + 1..)
+                    .find(|k| !taken(*k))
+                    .unwrap_or(1);
+                p.name = format!("P{k}");
+                self.program.teach(p).map(|()| {
+                    format!(
+                        "taught P{k} at ({:.3}, {:.3}, {:.3}) m",
+                        xyz[0], xyz[1], xyz[2]
+                    )
+                })
+            }
+            ProgramOp::Rename { i, name } => self.program.rename(i, &name).map(|()| String::new()),
+            ProgramOp::Move { from, to } => self.program.move_to(from, to).map(|()| String::new()),
+            ProgramOp::Remove { i } => self.program.remove(i).map(|()| String::new()),
+            ProgramOp::Dwell { i, s } => self.program.set_dwell(i, s).map(|()| String::new()),
+            ProgramOp::Mode { i, mode } => {
+                match mode.as_deref().map(MoveMode::from_str).transpose() {
+                    Ok(m) => self.program.set_mode(i, m).map(|()| String::new()),
+                    Err(_) => Err("the move mode is joint or line".into()),
+                }
+            }
+            ProgramOp::Play { looping } => match Player::start(&self.program, looping, now) {
+                Ok(p) => {
+                    // the caller runs the first step ([`Desk::play_step`])
+                    self.player = Some(p);
+                    self.target_stamp = None;
+                    Ok(if looping {
+                        "playing in a loop"
+                    } else {
+                        "playing"
+                    }
+                    .into())
+                }
+                Err(e) => Err(e),
+            },
+            ProgramOp::Stop => {
+                out.restore_mode = self.stop();
+                Ok("stopped".into())
+            }
+            ProgramOp::Save { name } => save(&self.dir, &name, &self.program).map(|()| {
+                self.name = name.trim_end_matches(".csv").to_string();
+                format!(
+                    "saved {} points as {}",
+                    self.program.points.len(),
+                    self.name
+                )
+            }),
+            ProgramOp::Load { name } => load(&self.dir, &name).map(|p| {
+                self.program = p;
+                self.name = name.trim_end_matches(".csv").to_string();
+                format!(
+                    "loaded {} ({} points)",
+                    self.name,
+                    self.program.points.len()
+                )
+            }),
+        };
+        self.message = match result {
+            Ok(m) => m,
+            Err(e) => e,
+        };
+        out
+    }
+
+    /// Stop playing (the e-stop, a stop request). Returns whether `motion` is to be put
+    /// back.
+    pub fn stop(&mut self) -> bool {
+        if let Some(p) = self.player.as_mut() {
+            if p.is_running() {
+                p.stop();
+            }
+        }
+        self.awaiting_stamp = false;
+        std::mem::take(&mut self.mode_touched)
+    }
+
+    /// When [`Desk::step`] is due again even without news (a dwell ends, a timeout).
+    pub fn next_wakeup(&self) -> Option<Instant> {
+        self.player
+            .as_ref()
+            .filter(|p| p.is_running())
+            .and_then(Player::next_wakeup)
+    }
+
+    /// Run the player: `tool` is where the arm's tool is now. The targets and claw
+    /// settings it plays go to `teleop` as a slider's would.
+    pub fn play_step(
+        &mut self,
+        teleop: &mut Teleop,
+        now: Instant,
+        tool: Option<[f64; 3]>,
+    ) -> DeskOutcome {
+        let Some(player) = self.player.as_mut() else {
+            return DeskOutcome::default();
+        };
+        if !player.is_running() {
+            return DeskOutcome::default();
+        }
+        let mut out = DeskOutcome::default();
+        for action in player.step(now, tool) {
+            out.changed = true;
+            match action {
+                PlayerAction::SetMode(mode) => {
+                    self.mode_touched = true;
+                    out.set_mode = Some(mode);
+                }
+                PlayerAction::Target { index, xyz } => {
+                    match teleop.handle_event(Event::SetTarget { xyz }) {
+                        Ok(_) => self.awaiting_stamp = true,
+                        Err(refusal) => {
+                            player.refused(&format!("point {}: {refusal}", index + 1));
+                        }
+                    }
+                }
+                PlayerAction::Gripper(opening) => {
+                    // the claw is best effort: an arm without one ignores it
+                    let _ = teleop.handle_event(Event::Gripper { opening });
+                }
+                PlayerAction::Arrived { index } => {
+                    if let Some(p) = self.program.points.get(index) {
+                        self.message = format!("at {}", p.label(index));
+                    }
+                }
+                PlayerAction::Finished => {
+                    self.message = "finished".into();
+                    out.restore_mode |= std::mem::take(&mut self.mode_touched);
+                }
+                PlayerAction::Failed { index, reason } => {
+                    self.message = format!("stopped at point {}: {reason}", index + 1);
+                    out.restore_mode |= std::mem::take(&mut self.mode_touched);
+                }
+            }
+        }
+        out
+    }
+
+    /// compute_ik took the move mode (or not, with the reason).
+    pub fn mode_set(&mut self, result: Result<(), String>) {
+        if let Some(p) = self.player.as_mut() {
+            if let Err(e) = &result {
+                self.message = e.clone();
+            }
+            p.mode_set(result.is_ok());
+        }
+    }
+
+    /// A target was published with `stamp`: if the player sent it, remember the stamp.
+    pub fn published_target(&mut self, stamp: Time) {
+        if self.awaiting_stamp {
+            self.awaiting_stamp = false;
+            self.target_stamp = Some(stamp);
+        }
+    }
+
+    /// compute_ik refused the target stamped `stamp` (its diagnostics say so).
+    pub fn refused(&mut self, stamp: &str, reason: &str) {
+        let ours = self
+            .target_stamp
+            .is_some_and(|t| ros_plumbing::diagnostics::stamp_text(t) == stamp);
+        if let (true, Some(p)) = (ours, self.player.as_mut()) {
+            self.target_stamp = None;
+            p.refused(reason);
+        }
+    }
+}

@@ -1,0 +1,71 @@
+"""`gui_bridge play` of a waypoint program (nodes/gui_bridge/src/program.rs: rows of
+x,y,z,gripper,dwell,mode,name): compute_ik's `motion` set for each point that names a
+mode, as it was for those that do not, and put back at the end."""
+import math
+import os
+import subprocess
+
+from sensor_msgs.msg import JointState
+
+from conftest import bin_path
+from test_gui_bridge import motion_param, run_cli, tool_of
+
+
+def row(xyz, rest):
+    return ",".join(map(str, xyz)) + "," + rest
+
+
+def test_play_sets_each_points_mode_then_puts_compute_ik_back(launch, observer, domain, tmp_path):
+    launch("compute_ik")
+    states = observer.sub("/joint_states", JointState)
+    observer.wait_publisher("/joint_states")
+    assert motion_param(observer) == "joint"
+    a, b, c = (0.2, -0.06, 0.12), (0.17, 0.07, 0.2), (0.2, 0.0, 0.15)
+    script = tmp_path / "program.csv"
+    script.write_text("x,y,z,gripper,dwell,mode,name\n"
+                      f"{row(a, ',0.2,joint,start')}\n"
+                      f"{row(b, ',0.2,line,draw, straight')}\n"  # a comma in a name: part of it
+                      f"{row(c, '0.5,0,,home')}\n")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    cli = subprocess.Popen([bin_path("gui_bridge"), "play", str(script), "--timeout", "20"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    seen = set()
+    while cli.poll() is None:
+        observer.spin_for(0.05)
+        seen.add(motion_param(observer))
+    out, err = cli.communicate()
+    assert cli.returncode == 0, err
+    assert out.count("waypoint ") == 3, out
+    assert "line" in seen, seen
+    assert motion_param(observer) == "joint"
+    # a to b (mode line): on the straight segment; b to c (no mode: joint, as compute_ik
+    # was): off it
+    tools = [tool_of(m) for _, m in states]
+    start = max(i for i, t in enumerate(tools) if math.dist(t, a) < 1e-9)
+    end = next(i for i, t in enumerate(tools) if i > start and math.dist(t, b) < 1e-9)
+    assert end - start > 5
+
+    def off_segment(t, p, q):
+        pq = [qi - pi for pi, qi in zip(p, q)]
+        n = math.sqrt(sum(v * v for v in pq))
+        s = sum((ti - pi) * v for ti, pi, v in zip(t, p, pq)) / n
+        return math.dist(t, [pi + s * v / n for pi, v in zip(p, pq)])
+
+    assert max(off_segment(t, a, b) for t in tools[start:end + 1]) < 1e-4
+    last_b = max(i for i, t in enumerate(tools) if math.dist(t, b) < 1e-9)
+    assert math.dist(tools[-1], c) < 1e-9
+    assert max(off_segment(t, b, c) for t in tools[last_b:]) > 5e-4
+    # a line through the base axis named by the program (no --line): refused before the
+    # move, with the reason and the waypoint's number; motion put back all the same
+    bad = tmp_path / "through_the_base.csv"
+    bad.write_text("x,y,z,gripper,dwell,mode,name\n0.08,0.075,0.15,,0,,\n0.08,-0.075,0.15,,0,line,across\n")
+    r = run_cli(domain, "play", str(bad), "--timeout", "20", timeout=60)
+    assert r.returncode == 1 and "waypoint 2" in r.stderr and "along the line" in r.stderr, r.stderr
+    assert motion_param(observer) == "joint"
+
+
+def test_play_names_the_line_of_a_bad_program(domain, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y,z,gripper,dwell,mode,name\n0.2,0,0.15,,0,line,a\n0.2,0,0.15,,0,fly,b\n")
+    r = run_cli(domain, "play", str(bad))
+    assert r.returncode == 2 and "line 3" in r.stderr and "fly" in r.stderr, r.stderr
