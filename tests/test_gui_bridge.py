@@ -1093,12 +1093,12 @@ def test_phone_layout_touch_joystick_moves_only_while_move_is_held(launch, obser
         p.set_slider("tz", 0.12)
         assert p.spin_until(lambda: abs(p.xyz[-1][1].point.z - 0.12) < 1e-9, 3)
         touch(cdp, "touchEnd", [])
-        # the e-stop, tapped
-        page.locator("#estop").tap()
-        assert p.spin_until(lambda: p.estop and p.estop[-1][1].data is True)
         OUTPUT.mkdir(parents=True, exist_ok=True)
         page.evaluate("() => window.scrollTo(0, 0)")
         page.screenshot(path=str(OUTPUT / "gui_panel_phone.png"))
+        # the e-stop, tapped
+        page.locator("#estop").tap()
+        assert p.spin_until(lambda: p.estop and p.estop[-1][1].data is True)
         p.assert_quiet_console()
     finally:
         p.close()
@@ -1171,7 +1171,10 @@ def test_teach_three_points_edit_play_save_and_load_a_program(launch, observer, 
         page.select_option("#prog-files", "three")
         page.wait_for_function("() => document.querySelectorAll('#prog-list li').length === 3", timeout=5000)
         OUTPUT.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(OUTPUT / "gui_panel.png"), full_page=True)
+        page.set_viewport_size({"width": 1280, "height": 1080})
+        page.evaluate("() => { document.activeElement.blur(); window.scrollTo(0, 0); }")
+        time.sleep(0.5)
+        page.screenshot(path=str(OUTPUT / "gui_panel.png"))
         p.assert_quiet_console()
     finally:
         p.close()
