@@ -154,7 +154,7 @@ impl ProgramPoint {
     }
 
     /// Its CSV row (the columns of [`PROGRAM_HEADER`]).
-    fn to_row(&self) -> String {
+    pub fn to_row(&self) -> String {
         format!(
             "{:.5},{:.5},{:.5},{},{:.3},{},{}",
             self.xyz[0],
@@ -945,19 +945,11 @@ mod tests {
             (p.points[0].label(0), p.points[1].label(1)),
             ("P1".into(), "P2".into())
         );
-        // what `record` writes (teleop's format), without a header, mixed with new rows
-        let w = crate::teleop::Waypoint {
-            xyz: [0.2, -0.04, 0.18],
-            gripper: Some(1.0),
-            dwell_s: 0.25,
-        };
-        let text = format!(
-            "{}\n{}\n0.2,0,0.15,,0,line\n0.2,0,0.15,,0,,named\n",
-            crate::teleop::WAYPOINT_HEADER,
-            crate::teleop::format_waypoint(&w)
-        );
-        let p = Program::parse(&text).unwrap();
-        assert_eq!(p.points[0], point("", w.xyz, w.gripper, w.dwell_s, None));
+        // the old five columns with their header, mixed with new rows
+        let text = "x,y,z,gripper,dwell\n0.20000,-0.04000,0.18000,1.000,0.250\n0.2,0,0.15,,0,line\n0.2,0,0.15,,0,,named\n";
+        let w = point("", [0.2, -0.04, 0.18], Some(1.0), 0.25, None);
+        let p = Program::parse(text).unwrap();
+        assert_eq!(p.points[0], w);
         assert_eq!(p.points[1].mode, Some(MoveMode::Line));
         assert_eq!(
             (p.points[2].mode, p.points[2].name.as_str()),

@@ -1,8 +1,8 @@
 //! `record FILE`: every target an operator sends (from the panel or anything else on
-//! `xyz_target` / `gripper_target`) as `x,y,z,gripper,dwell` rows, dwell = the time
-//! until the next one; until Ctrl-C / SIGTERM.
+//! `xyz_target` / `gripper_target`) as rows of a waypoint program
+//! ([`crate::program`]), dwell = the time until the next one; until Ctrl-C / SIGTERM.
 
-use crate::teleop::{format_waypoint, Waypoint, WAYPOINT_HEADER};
+use crate::program::{ProgramPoint, MAX_DWELL_S, PROGRAM_HEADER};
 use anyhow::Context as _;
 use futures::StreamExt;
 use ros_plumbing::{topics, RosNode};
@@ -19,7 +19,7 @@ pub async fn record(
 ) -> anyhow::Result<()> {
     let shown = path.display();
     let mut file = std::fs::File::create(path).with_context(|| format!("cannot create {shown}"))?;
-    writeln!(file, "{WAYPOINT_HEADER}")?;
+    writeln!(file, "{PROGRAM_HEADER}")?;
     let targets = node.subscribe_to(&topics::XYZ_TARGET)?;
     let gripper = node.subscribe_to(&topics::GRIPPER_TARGET)?;
     println!(
@@ -29,7 +29,7 @@ pub async fn record(
     );
     let (t, g) = (targets.async_stream(), gripper.async_stream());
     tokio::pin!(t, g, shutdown);
-    let mut pending: Option<(Waypoint, Instant)> = None;
+    let mut pending: Option<(ProgramPoint, Instant)> = None;
     let mut opening: Option<f64> = None;
     let mut rows = 0;
     loop {
@@ -37,14 +37,18 @@ pub async fn record(
             _ = &mut shutdown => break,
             Some(Ok((m, _))) = t.next() => {
                 if let Some((mut w, at)) = pending.take() {
-                    w.dwell_s = at.elapsed().as_secs_f64();
-                    writeln!(file, "{}", format_waypoint(&w))?;
+                    // what `play` takes: an hour at most
+                    w.dwell_s = at.elapsed().as_secs_f64().min(MAX_DWELL_S);
+                    writeln!(file, "{}", w.to_row())?;
                     rows += 1;
                 }
-                pending = Some((Waypoint { xyz: [m.point.x, m.point.y, m.point.z], gripper: opening, dwell_s: 0.0 }, Instant::now()));
+                let mut w = ProgramPoint::at([m.point.x, m.point.y, m.point.z]);
+                w.gripper = opening;
+                pending = Some((w, Instant::now()));
             }
             Some(Ok((m, _))) = g.next() => {
-                opening = Some(m.data);
+                // compute_ik clamps an opening to 0 … 1 likewise
+                opening = m.data.is_finite().then(|| m.data.clamp(0.0, 1.0));
                 if let Some((w, _)) = pending.as_mut() {
                     w.gripper = opening;
                 }
@@ -52,7 +56,7 @@ pub async fn record(
         }
     }
     if let Some((w, _)) = pending {
-        writeln!(file, "{}", format_waypoint(&w))?;
+        writeln!(file, "{}", w.to_row())?;
         rows += 1;
     }
     file.flush()?;

@@ -102,34 +102,6 @@ fn joint_mode_checks_limits() {
 }
 
 #[test]
-fn waypoints_roundtrip_and_name_bad_lines() {
-    let w = vec![
-        Waypoint {
-            xyz: [0.2, 0.0, 0.15],
-            gripper: Some(0.5),
-            dwell_s: 1.0,
-        },
-        Waypoint {
-            xyz: [0.18, 0.05, 0.12],
-            gripper: None,
-            dwell_s: 0.0,
-        },
-    ];
-    let text = format!(
-        "{WAYPOINT_HEADER}\n{}\n{}\n",
-        format_waypoint(&w[0]),
-        format_waypoint(&w[1])
-    );
-    assert_eq!(parse_waypoints(&text).unwrap(), w);
-    assert!(parse_waypoints("0.2,0,0.15,2,0")
-        .unwrap_err()
-        .contains("line 1"));
-    assert!(parse_waypoints("x,y,z,gripper,dwell\n0.2,zero,0.15,,0")
-        .unwrap_err()
-        .contains("line 2"));
-}
-
-#[test]
 fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
     let jaco = eezybot_kinematics::urdf::RobotModel::load(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
