@@ -228,7 +228,10 @@ def test_streaming_over_an_impaired_link(domain, tmp_path):
     print(f"longest gap between servo_state replies {longest_gap * 1e3:.0f} ms")
     assert longest_gap < 1.0, f"streaming stalled for {longest_gap:.2f} s on the impaired link"
     assert len(answered) >= 0.8 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
-    assert max(s for _, s in replies) == last, "the newest target was not the last one applied"
+    # the newest target's motion reached the device: its first step (stamped with the
+    # target's stamp), or a later planner step toward it (stamped when planned, so newer)
+    # when that one overtook the first step on the lossy link and superseded it
+    assert max(s for _, s in g.replies_after(t0)) >= last, "the newest target's motion never reached the device"
     stamps = [s for _, s in replies]
     assert stamps == sorted(stamps), "an older target was applied after a newer one"
 
