@@ -1567,7 +1567,7 @@ def print_report(r):
 
 def test_the_campaign_is_10k_inputs_on_every_subscriber(campaign):
     r = campaign
-    assert r["total"] == TOTAL, (r["total"], dict(r["sent"]))
+    assert r["total"] == TOTAL, (r["total"], dict(r["sent"]), r["problems"][:3])
     for channel in ["xyz_target", "gripper_target", "joint_target", "estop", "joint_states", "servo_angles",
                     "servo_state", "diagnostics", "robot_description", "set_parameters", "ws"]:
         assert r["sent"][channel] > 0, channel

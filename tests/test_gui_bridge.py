@@ -269,7 +269,11 @@ def test_page_is_small_local_and_shows_the_live_arm(launch, observer, browser):
         # the 3D view: the URDF from robot_description, posed, with the workspace envelope
         p.page.wait_for_function("() => window.__view3d && window.__view3d.stats().frames > 0", timeout=10000)
         assert p.page.evaluate("() => !document.getElementById('view3d').hidden")
-        assert p.page.evaluate("() => robot.urdf && robot.urdf.includes('<robot') && robot.envelope.kind === 'lathe'")
+        assert p.page.evaluate("() => robot.urdf.startsWith('robot.urdf?rev=') && robot.envelope.kind === 'lathe'")
+        p.page.wait_for_function("() => urdf3d && urdf3d.includes('<robot name=\"eezybot')", timeout=10000)
+        # the URDF is served behind the panel's access rules, like the page
+        status, headers, body = http_get(p.port, "/robot.urdf")
+        assert status == 200 and "<robot" in body and headers["content-type"][0].startswith("application/xml"), status
         foreign = [u for u in p.requests if not u.startswith(p.url.rstrip("/")) and not u.startswith(f"ws://127.0.0.1:{p.port}")]
         assert not foreign, foreign
         # the icon the page links is served (bundled in the binary), and nothing went to the console

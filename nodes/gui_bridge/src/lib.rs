@@ -400,7 +400,9 @@ pub fn robot_json(teleop: &Teleop) -> serde_json::Value {
         }) => json!({
             "name": name, "eezybot": eezybot, "joints": sliders, "reach": reach_m,
             "tool_link": tool_link, "from_urdf": true,
-            "urdf": field("urdf"), "envelope": field("envelope"),
+            // the page fetches the text (it can be larger than a WebSocket client's buffer)
+            "urdf": teleop.urdf().map(|(_, rev)| format!("robot.urdf?rev={rev}")),
+            "envelope": field("envelope"),
         }),
         None => json!({
             "name": "eezybot", "eezybot": true, "joints": sliders, "reach": 0.33,
@@ -433,28 +435,41 @@ pub fn hello_json(teleop: &Teleop, rate: f64) -> String {
     .to_string()
 }
 
-/// The page's 3D view of `model` (its URDF `text`): the text itself, up to
-/// [`SCENE_URDF_MAX`] bytes (a larger one is drawn in 2D only), and the reachable
-/// workspace: for the EezyBot the solid of revolution of its closed form's limits, for
-/// any other arm a cloud of its tool's positions at random configurations.
-fn scene_json(text: &str, model: &RobotModel, teleop: &Teleop) -> serde_json::Value {
+/// The page's 3D view of `model`: the reachable workspace, for the EezyBot the solid of
+/// revolution of its closed form's limits, for any other arm a cloud of its tool's
+/// positions at random configurations.
+///
+/// The EezyBot's envelope depends on the arm's configuration only: computed once, into
+/// `eezybot`. Another arm's is computed for each new description, within the node's loop,
+/// so only for a chain of at most [`ENVELOPE_MAX_JOINTS`] joints (a description of
+/// thousands of links would hold the loop for seconds).
+fn scene_json(
+    model: &RobotModel,
+    teleop: &Teleop,
+    eezybot: &std::cell::OnceCell<eezybot_kinematics::envelope::Envelope>,
+) -> serde_json::Value {
     use eezybot_kinematics::envelope::{chain_envelope, eezybot_envelope};
     let envelope = match teleop.robot() {
-        Some(r) if !r.eezybot => r.tool_link.as_ref().and_then(|tip| {
-            eezybot_kinematics::chain::SerialChain::from_model(model, &model.root, tip)
-                .ok()
-                .map(|chain| chain_envelope(&chain, 3000, 1))
-        }),
-        _ => Some(eezybot_envelope(teleop.arm(), 0.004)),
+        Some(r) if !r.eezybot => r
+            .tool_link
+            .as_ref()
+            .filter(|_| model.joints.len() <= ENVELOPE_MAX_JOINTS)
+            .and_then(|tip| {
+                eezybot_kinematics::chain::SerialChain::from_model(model, &model.root, tip)
+                    .ok()
+                    .map(|chain| chain_envelope(&chain, 2000, 1))
+            }),
+        _ => Some(
+            eezybot
+                .get_or_init(|| eezybot_envelope(teleop.arm(), 0.004))
+                .clone(),
+        ),
     };
-    json!({
-        "urdf": (text.len() <= SCENE_URDF_MAX).then_some(text),
-        "envelope": envelope,
-    })
+    json!({ "envelope": envelope })
 }
 
-/// The largest URDF the page's 3D view is given (its hello goes to every browser).
-pub const SCENE_URDF_MAX: usize = 1 << 20;
+/// The most joints a URDF may have for the 3D view to get its workspace envelope.
+pub const ENVELOPE_MAX_JOINTS: usize = 64;
 
 /// Segments (parent origin → child origin, child link name) of every joint of the URDF
 /// for these joint positions, for the page's side and top views.
@@ -647,6 +662,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     let mut unreadable = UnreadableSamples::default();
     let mut latency = Latency::default();
     let mut model: Option<RobotModel> = None;
+    let eezybot_envelope = std::cell::OnceCell::new();
     let mut status_tick = tokio::time::interval(Duration::from_millis(500));
     let mut param_changes = params.subscribe();
     let send = |v: serde_json::Value| {
@@ -766,8 +782,9 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                             let tool_link = teleop.lock().ok().and_then(|t| t.robot().and_then(|r| r.tool_link.clone()));
                             let tool = tool_link.and_then(|l| m.link_poses(&refs).get(&l).map(|p| p.translation.vector));
                             last_tool = tool.map(|p| [p.x, p.y, p.z]);
-                            let joints: serde_json::Map<String, serde_json::Value> =
-                                finite.iter().map(|(n, v)| (n.clone(), json!(v))).collect();
+                            let joints: serde_json::Map<String, serde_json::Value> = finite.iter()
+                                .filter(|(n, _)| m.joint_index(n).is_some())
+                                .map(|(n, v)| (n.clone(), json!(v))).collect();
                             send_pose(json!({
                                 "t": "pose", "joints": joints, "gripper": null,
                                 "tool": tool.map(|p| [p.x, p.y, p.z]),
@@ -788,8 +805,11 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                                 }
                                 let segs = model.as_ref().map(|m| segments(m, &js)).unwrap_or_default();
                                 // every joint, passive linkage ones included, for the 3D view
+                                // (the URDF's joints only: a joint_states of thousands of names
+                                // must not become a message of megabytes to every browser)
                                 let all: serde_json::Map<String, serde_json::Value> = js.name.iter().zip(js.position.iter())
-                                    .filter(|(_, v)| v.is_finite()).map(|(n, v)| (n.clone(), json!(v))).collect();
+                                    .filter(|(n, v)| v.is_finite() && model.as_ref().is_some_and(|m| m.joint_index(n).is_some()))
+                                    .map(|(n, v)| (n.clone(), json!(v))).collect();
                                 send_pose(json!({
                                     "t": "pose", "joints": joints_json(&q), "all": all,
                                     "gripper": get(ACTUATED_JOINTS[3]),
@@ -805,7 +825,8 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                             // the joint mode's sliders come from the URDF, for any arm
                             if let Ok(robot) = teleop.lock().map(|mut t| {
                                 t.set_robot(&m);
-                                let scene = scene_json(&text, &m, &t);
+                                let scene = scene_json(&m, &t, &eezybot_envelope);
+                                t.set_urdf(text.as_str().into());
                                 t.set_scene(scene);
                                 robot_json(&t)
                             }) {

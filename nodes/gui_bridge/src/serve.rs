@@ -75,7 +75,15 @@ pub async fn serve(
         }),
         AccessPolicy::new(token.clone(), local.port()),
         limits,
-    );
+    )
+    .with_urdf({
+        let t = teleop.clone();
+        Arc::new(move || {
+            t.lock()
+                .ok()
+                .and_then(|t| t.urdf().map(|(text, _)| text.clone()))
+        })
+    });
     let web_stats = state.stats.clone();
     let url = format!("http://{local}/");
     // no borrow of the node may live across an await: the Foxglove server borrows it

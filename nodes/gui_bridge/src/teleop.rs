@@ -320,6 +320,7 @@ pub struct Teleop {
     estop: Option<bool>,
     robot: Option<RobotView>,
     scene: Option<serde_json::Value>,
+    urdf: Option<(std::sync::Arc<str>, u64)>,
     program: Option<serde_json::Value>,
     last_pose: Option<serde_json::Value>,
 }
@@ -339,6 +340,7 @@ impl Teleop {
             estop: None,
             robot: None,
             scene: None,
+            urdf: None,
             program: None,
             last_pose: None,
         }
@@ -353,6 +355,18 @@ impl Teleop {
     /// envelope), kept for browsers that connect later.
     pub fn set_scene(&mut self, scene: serde_json::Value) {
         self.scene = Some(scene);
+    }
+
+    /// The URDF text of `robot_description`, for the page's 3D view; each new one gets
+    /// the next revision number.
+    pub fn set_urdf(&mut self, text: std::sync::Arc<str>) {
+        let rev = self.urdf.as_ref().map_or(1, |(_, r)| r + 1);
+        self.urdf = Some((text, rev));
+    }
+
+    /// See [`Teleop::set_urdf`]: the text and its revision.
+    pub fn urdf(&self) -> Option<(&std::sync::Arc<str>, u64)> {
+        self.urdf.as_ref().map(|(t, r)| (t, *r))
     }
 
     /// The waypoint program as the page shows it, kept for browsers that connect later.

@@ -617,6 +617,9 @@ pub struct WebState {
     pub stats: Arc<WebStats>,
     /// Room for [`Limits::max_clients`] clients.
     pub slots: Arc<Semaphore>,
+    /// The URDF the page's 3D view loads from `/robot.urdf` (None: not known yet). Over
+    /// HTTP, not in a WebSocket message: a URDF can be larger than a client's write buffer.
+    pub urdf: Arc<dyn Fn() -> Option<Arc<str>> + Send + Sync>,
 }
 
 impl WebState {
@@ -636,7 +639,14 @@ impl WebState {
             slots: Arc::new(Semaphore::new(limits.max_clients)),
             limits,
             stats: Arc::new(WebStats::default()),
+            urdf: Arc::new(|| None),
         }
+    }
+
+    /// Where `/robot.urdf` gets the URDF from.
+    pub fn with_urdf(mut self, urdf: Arc<dyn Fn() -> Option<Arc<str>> + Send + Sync>) -> WebState {
+        self.urdf = urdf;
+        self
     }
 }
 
@@ -648,6 +658,7 @@ pub fn router(state: WebState) -> Router {
     Router::new()
         .route("/", get(page))
         .route("/ws", get(ws_handler))
+        .route("/robot.urdf", get(robot_urdf))
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .route("/favicon.ico", get(favicon))
         .route("/viewer3d.js", get(viewer3d))
@@ -696,6 +707,22 @@ async fn favicon() -> impl IntoResponse {
         ],
         FAVICON_SVG,
     )
+}
+
+/// The URDF of `robot_description`, for the page's 3D view.
+async fn robot_urdf(State(state): State<WebState>) -> Response {
+    match (state.urdf)() {
+        Some(text) => (
+            [
+                (header::CONTENT_TYPE, "application/xml; charset=utf-8"),
+                (header::CACHE_CONTROL, "no-store"),
+                (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+            ],
+            text.to_string(),
+        )
+            .into_response(),
+        None => (StatusCode::NOT_FOUND, "no robot_description yet\n").into_response(),
+    }
 }
 
 async fn page() -> impl IntoResponse {
