@@ -29,14 +29,13 @@ def test_play_sets_each_points_mode_then_puts_compute_ik_back(launch, observer, 
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     cli = subprocess.Popen([bin_path("gui_bridge"), "play", str(script), "--timeout", "20"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    seen = set()
     while cli.poll() is None:
         observer.spin_for(0.05)
-        seen.add(motion_param(observer))
     out, err = cli.communicate()
     assert cli.returncode == 0, err
     assert out.count("waypoint ") == 3, out
-    assert "line" in seen, seen
+    # `line` was set for the a-to-b move (the straight segment below proves it; sampling the
+    # parameter while it plays can miss a short move), and put back after
     assert motion_param(observer) == "joint"
     # a to b (mode line): on the straight segment; b to c (no mode: joint, as compute_ik
     # was): off it
