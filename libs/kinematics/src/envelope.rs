@@ -129,18 +129,9 @@ fn sample_plane(arm: &Arm, step_m: f64, mut visit: impl FnMut(f64, f64)) {
     let g = &arm.geometry;
     // a base angle within its limits for the check; the FK is taken at yaw 0 (x = r)
     let base_rad = 0f64.max(l.base_rad.0).min(l.base_rad.1);
-    // shoulder angles for which some elbow angle satisfies both elbow rows
-    let s_lo = l
-        .shoulder_rad
-        .0
-        .max(l.forearm_elevation_rad.0 - l.elbow_rad.1);
-    let s_hi = l
-        .shoulder_rad
-        .1
-        .min(l.forearm_elevation_rad.1 - l.elbow_rad.0);
-    if s_lo.is_nan() || s_hi.is_nan() || s_lo > s_hi {
+    let Some((s_lo, s_hi)) = l.feasible_shoulder_rad() else {
         return;
-    }
+    };
     // The tool moves by at most |shoulder → wrist| ≤ L2 + L3 per radian of shoulder (the
     // elbow held) and by L3 per radian of elbow.
     let (l2, l3) = (g.main_arm_m.abs(), g.forearm_m.abs());

@@ -144,6 +144,21 @@ impl JointLimits {
         Ok(())
     }
 
+    /// The shoulder angles for which some elbow angle satisfies both elbow rows (its own
+    /// limits and the forearm's elevation), within the shoulder's limits; None when no
+    /// shoulder angle has one.
+    pub fn feasible_shoulder_rad(&self) -> Option<(f64, f64)> {
+        let lo = self
+            .shoulder_rad
+            .0
+            .max(self.forearm_elevation_rad.0 - self.elbow_rad.1);
+        let hi = self
+            .shoulder_rad
+            .1
+            .min(self.forearm_elevation_rad.1 - self.elbow_rad.0);
+        (lo <= hi).then_some((lo, hi))
+    }
+
     /// Joints within every limit row, near `q`: base clamped into its range, the
     /// shoulder into its range where some elbow angle satisfies the forearm elevation
     /// too, the elbow into its own range intersected with what the forearm elevation
@@ -166,16 +181,7 @@ impl JointLimits {
     /// ```
     pub fn clamp(&self, q: &ArmJoints) -> ArmJoints {
         let base_rad = q.base_rad.clamp(self.base_rad.0, self.base_rad.1);
-        // shoulder angles for which an elbow angle within both elbow rows exists
-        let s_lo = self
-            .shoulder_rad
-            .0
-            .max(self.forearm_elevation_rad.0 - self.elbow_rad.1);
-        let s_hi = self
-            .shoulder_rad
-            .1
-            .min(self.forearm_elevation_rad.1 - self.elbow_rad.0);
-        let shoulder_rad = if s_lo <= s_hi {
+        let shoulder_rad = if let Some((s_lo, s_hi)) = self.feasible_shoulder_rad() {
             q.shoulder_rad.clamp(s_lo, s_hi)
         } else {
             q.shoulder_rad

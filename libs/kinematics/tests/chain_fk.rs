@@ -3,23 +3,15 @@
 //! differences, builder errors name the problem.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+use common::load;
 use eezybot_kinematics::chain::{ChainBuilder, SerialChain};
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{Arm, ArmJoints, ArmState, KinematicsError};
 use nalgebra::{Isometry3, Matrix4, Vector3};
 use proptest::prelude::*;
 use std::f64::consts::PI;
-use std::path::Path;
 use std::sync::LazyLock;
-
-fn load(file: &str) -> RobotModel {
-    RobotModel::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../urdf")
-            .join(file),
-    )
-    .unwrap()
-}
 
 static JACO: LazyLock<SerialChain> = LazyLock::new(|| {
     SerialChain::from_model(&load("jaco.urdf"), "base_link", "jaco_end_effector").unwrap()

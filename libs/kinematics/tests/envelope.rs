@@ -4,27 +4,18 @@
 //! point cloud is deterministic and made of FK of configurations within the limits.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+use common::load;
 use eezybot_kinematics::chain::SerialChain;
 use eezybot_kinematics::envelope::{
     chain_envelope, eezybot_envelope, Envelope, MAX_PROFILE_POINTS, MIN_CELL_M,
 };
 use eezybot_kinematics::rng::SplitMix64;
-use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{Arm, ArmJoints, JointLimitsDeg};
 use nalgebra::Vector3;
-use std::path::Path;
 use std::time::Instant;
 
 const CELL_M: f64 = 0.004;
-
-fn load(file: &str) -> RobotModel {
-    RobotModel::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../urdf")
-            .join(file),
-    )
-    .unwrap()
-}
 
 fn profile(arm: &Arm, cell_m: f64) -> Vec<[f64; 2]> {
     match eezybot_envelope(arm, cell_m) {

@@ -4,16 +4,16 @@
 //! nearest reachable points against brute force, undesirable-configuration directions.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+use common::load;
 use eezybot_kinematics::assess::{assess, nearest_reachable, AssessOptions, Concern, ToolAxisAway};
 use eezybot_kinematics::chain::{ChainBuilder, SerialChain};
 use eezybot_kinematics::ik::{IkAlgorithm, IkSolver, Stopwatch, Target};
 use eezybot_kinematics::rng::SplitMix64;
-use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{Arm, ArmJoints, KinematicsError};
 use nalgebra::{Isometry3, Vector3};
 use proptest::prelude::*;
 use std::f64::consts::PI;
-use std::path::Path;
 use std::sync::LazyLock;
 use std::time::Duration;
 
@@ -24,15 +24,6 @@ fn cases(n: u32) -> u32 {
         .ok()
         .and_then(|v| v.parse().ok())
         .map_or(n, |cap: u32| cap.min(n))
-}
-
-fn load(file: &str) -> RobotModel {
-    RobotModel::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../urdf")
-            .join(file),
-    )
-    .unwrap()
 }
 
 static JACO: LazyLock<SerialChain> = LazyLock::new(|| {

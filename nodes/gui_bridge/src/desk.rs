@@ -62,12 +62,16 @@ pub struct Desk {
     awaiting_stamp: bool,
     /// a move mode was set while playing: put it back at the end
     mode_touched: bool,
+    /// the program files in `dir`, read again on each browser request (not on each
+    /// player step: the directory is no business of the playback)
+    files: Vec<String>,
 }
 
 impl Desk {
     /// An empty program; files live in `dir`.
     pub fn new(dir: PathBuf) -> Desk {
         Desk {
+            files: list_programs(&dir),
             dir,
             name: String::new(),
             program: Program::default(),
@@ -96,7 +100,7 @@ impl Desk {
             "t": "program",
             "program": self.program,
             "player": self.player.as_ref().map(Player::state),
-            "files": list_programs(&self.dir),
+            "files": self.files,
             "name": self.name,
             "message": self.message,
             "dir": self.dir.display().to_string(),
@@ -196,6 +200,7 @@ impl Desk {
             Ok(m) => m,
             Err(e) => e,
         };
+        self.files = list_programs(&self.dir);
         out
     }
 

@@ -47,8 +47,10 @@ pub async fn record(
                 pending = Some((w, Instant::now()));
             }
             Some(Ok((m, _))) = g.next() => {
-                // compute_ik clamps an opening to 0 … 1 likewise
-                opening = m.data.is_finite().then(|| m.data.clamp(0.0, 1.0));
+                // compute_ik refuses an opening outside 0 … 1: the claw stays as it was
+                if (0.0..=1.0).contains(&m.data) {
+                    opening = Some(m.data);
+                }
                 if let Some((w, _)) = pending.as_mut() {
                     w.gripper = opening;
                 }
