@@ -364,8 +364,11 @@ impl<T: Clone> HostLink<T> {
         self.events.push(LinkEvent::Garbage { error });
     }
 
-    /// A frame from the device.
-    pub fn received(&mut self, frame: Frame, now: Instant) {
+    /// A frame from the device. Returns whether what [`HostLink::next`] says may have
+    /// changed (the handshake's answer, the first pose, the device's e-stop differing
+    /// from ours), so a shell sleeping until its last `Wait` must ask again; the
+    /// acknowledgements of a running stream return `false`.
+    pub fn received(&mut self, frame: Frame, now: Instant) -> bool {
         match frame.msg {
             Message::HelloAck {
                 version,
@@ -374,7 +377,7 @@ impl<T: Clone> HostLink<T> {
                 ..
             } => {
                 if !matches!(self.phase, Phase::Handshake { .. }) {
-                    return; // a late answer to a repeated HELLO
+                    return false; // a late answer to a repeated HELLO
                 }
                 if version != PROTOCOL_VERSION {
                     self.events
@@ -383,7 +386,7 @@ impl<T: Clone> HostLink<T> {
                         format!("device speaks protocol {version}, this node {PROTOCOL_VERSION}");
                     // a firmware upgrade is needed: no point in trying every 100 ms
                     self.close(reason, now, self.config.retry_max);
-                    return;
+                    return true;
                 }
                 self.phase = Phase::Connected { config_sent: false };
                 if self.connected_once && !self.estop {
@@ -401,6 +404,7 @@ impl<T: Clone> HostLink<T> {
                 self.events.push(LinkEvent::Connected {
                     firmware: (firmware_major, firmware_minor),
                 });
+                true
             }
             Message::State {
                 ack_seq,
@@ -410,17 +414,20 @@ impl<T: Clone> HostLink<T> {
                 ticks,
             } => {
                 if !self.is_connected() {
-                    return;
+                    return false;
                 }
+                let mut replan = false;
                 // the pose the device reports is where the next pulses start, until we
                 // have sent pulses of our own this session
                 if self.last_pulses_sent.is_none() {
+                    replan |= self.at != Some(ticks);
                     self.at = Some(ticks);
                 }
                 // the device's e-stop differs from ours (reset, or engaged before a
                 // reconnection): tell it again
                 let device_estop = state == DeviceState::Estop;
                 if self.device_estop.is_some() && device_estop != self.estop {
+                    replan |= self.device_estop != Some(device_estop);
                     self.device_estop = Some(device_estop);
                 }
                 let answered = self
@@ -437,10 +444,14 @@ impl<T: Clone> HostLink<T> {
                     ticks,
                     answered,
                 });
+                replan
             }
-            other => self.events.push(LinkEvent::Garbage {
-                error: format!("unexpected {:?} from the device", other.msg_type()),
-            }),
+            other => {
+                self.events.push(LinkEvent::Garbage {
+                    error: format!("unexpected {:?} from the device", other.msg_type()),
+                });
+                false
+            }
         }
     }
 
@@ -665,11 +676,20 @@ mod tests {
             self.now - self.t0
         }
 
-        /// Run the shell's loop until `until` (ms since start).
+        /// Run the shell's loop until `until` (ms since start). Like serial_node's link
+        /// thread, it asks [`HostLink::next`] again only when its `Wait` is over, after
+        /// an input (every call starts with one: the tests hand commands in between) or
+        /// when [`HostLink::received`] says a frame changed the plan.
         fn run_until(&mut self, until_ms: u64) {
             let until = self.t0 + ms(until_ms);
+            let mut asleep_until: Option<Instant> = None;
             while self.now < until {
-                match self.link.next(self.now) {
+                let action = match asleep_until {
+                    Some(t) if self.now < t => Next::Wait(t),
+                    _ => self.link.next(self.now),
+                };
+                asleep_until = None;
+                match action {
                     Next::Open => {
                         if self.plugged {
                             self.link.opened(self.now)
@@ -687,6 +707,7 @@ mod tests {
                         }
                     }
                     Next::Wait(t) => {
+                        asleep_until = Some(t);
                         // the device may speak up meanwhile (watchdog): 1 ms steps
                         self.now = t
                             .min(self.now + ms(1))
@@ -694,9 +715,14 @@ mod tests {
                         self.device.tick(self.t());
                     }
                 }
+                if asleep_until.is_none() {
+                    continue; // the device answers while the shell waits, not at once
+                }
                 let mut out = self.device.take_output();
                 while let Ok(Some(f)) = decode(&mut out) {
-                    self.link.received(f, self.now);
+                    if self.link.received(f, self.now) {
+                        asleep_until = None;
+                    }
                 }
                 let t = self.t();
                 self.events

@@ -58,4 +58,77 @@ impl<R: Read> FrameReader<R> {
         }
         Ok(out)
     }
+
+    /// Bytes still to come before the partial frame held since the last read is whole
+    /// (0 when none is held). A reader of a port that delivers bytes one at a time as
+    /// they come off the wire (a UART behind a pseudo-terminal, some USB adapters) can
+    /// wait for that many byte times instead of waking for each byte.
+    pub fn missing(&self) -> usize {
+        match self.buf.as_slice() {
+            [] => 0,
+            [_] => OVERHEAD - 1,
+            [_, type_len, ..] => {
+                (usize::from(type_len & 0x0F) + OVERHEAD).saturating_sub(self.buf.len())
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stream that hands out its bytes in the given chunks, one per read.
+    struct Chunks(Vec<Vec<u8>>);
+
+    impl Read for Chunks {
+        fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
+            if self.0.is_empty() {
+                return Err(io::ErrorKind::TimedOut.into());
+            }
+            let c = self.0.remove(0);
+            out[..c.len()].copy_from_slice(&c);
+            Ok(c.len())
+        }
+    }
+
+    #[test]
+    fn missing_counts_the_bytes_a_partial_frame_still_needs() {
+        let state = encode(&Frame {
+            seq: 7,
+            msg: Message::State {
+                ack_seq: 6,
+                state: DeviceState::Running,
+                clamped: false,
+                rx_errors: 0,
+                ticks: [3000; SERVOS],
+            },
+        });
+        assert_eq!(state.len(), 16);
+        // garbage, then the frame a byte at a time, then two bytes of the next one
+        let mut chunks = vec![vec![0x00, 0x11]];
+        chunks.extend(state.iter().map(|b| vec![*b]));
+        chunks.push(state[..2].to_vec());
+        let mut r = FrameReader::new(Chunks(chunks));
+        assert!(r.read_frames().unwrap().iter().all(Result::is_err));
+        assert_eq!(r.missing(), 0, "garbage is dropped, not waited for");
+        assert!(r.read_frames().unwrap().is_empty());
+        assert_eq!(
+            r.missing(),
+            OVERHEAD - 1,
+            "the start byte alone: at least an empty frame"
+        );
+        for held in 2..state.len() {
+            assert!(r.read_frames().unwrap().is_empty());
+            assert_eq!(r.missing(), state.len() - held);
+        }
+        let frames = r.read_frames().unwrap();
+        assert_eq!(frames.len(), 1);
+        assert!(frames[0].is_ok());
+        assert_eq!(r.missing(), 0);
+        assert!(r.read_frames().unwrap().is_empty());
+        assert_eq!(r.missing(), 14);
+        assert!(r.read_frames().unwrap().is_empty(), "a timeout");
+        assert_eq!(r.missing(), 14);
+    }
 }

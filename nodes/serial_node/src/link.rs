@@ -25,11 +25,23 @@ pub type LinkEvent = servo_protocol::host::LinkEvent<Time>;
 pub trait Port: Read + Write + Send {
     /// A second handle on the same port.
     fn try_clone_port(&self) -> io::Result<Box<dyn Port>>;
+
+    /// How long one byte takes on the wire, for a port whose bytes may arrive as they
+    /// come off it; `None` for one that delivers whole frames.
+    fn byte_time(&self) -> Option<Duration> {
+        None
+    }
 }
 
 impl Port for Box<dyn serialport::SerialPort> {
     fn try_clone_port(&self) -> io::Result<Box<dyn Port>> {
         Ok(Box::new(self.try_clone().map_err(io::Error::other)?))
+    }
+
+    fn byte_time(&self) -> Option<Duration> {
+        // 8N1: ten bits a byte
+        let baud = self.baud_rate().ok().filter(|b| *b > 0)?;
+        Some(Duration::from_secs_f64(10.0 / f64::from(baud)))
     }
 }
 
@@ -237,8 +249,10 @@ fn link_loop(mut opener: PortOpener, shared: SharedLock) {
             Next::Send(frame) => {
                 drop(s);
                 let bytes = encode(&frame);
+                // No flush: on a serial port it is tcdrain(), which blocks until the
+                // bytes have left the UART (1 ms a frame) and gains nothing.
                 let written = match &mut port {
-                    Some((p, _)) => p.write_all(&bytes).and_then(|()| p.flush()),
+                    Some((p, _)) => p.write_all(&bytes),
                     None => Err(io::Error::new(io::ErrorKind::NotConnected, "no port")),
                 };
                 if let Err(e) = written {
@@ -252,13 +266,23 @@ fn link_loop(mut opener: PortOpener, shared: SharedLock) {
     }
 }
 
+/// The longest a reader waits for the rest of a partial frame before reading again
+/// (the protocol drops a partial frame after 5 ms without a byte).
+const MAX_FRAME_WAIT: Duration = Duration::from_millis(2);
+
 /// Reads the device's frames into the machine until the port breaks or a newer
 /// session starts.
+///
+/// A UART's bytes can reach the port one at a time, 87 us apart at 115200 baud (a
+/// 16-byte STATE woke this thread 10-16 times): with part of a frame in hand, the
+/// reader waits the rest's time on the wire before reading again. The link thread is
+/// woken only when a frame changes what it is waiting for.
 fn spawn_reader(
     port: Box<dyn Port>,
     shared: SharedLock,
     session: u64,
 ) -> io::Result<JoinHandle<()>> {
+    let byte_time = port.byte_time();
     std::thread::Builder::new()
         .name("serial reader".into())
         .spawn(move || {
@@ -270,16 +294,19 @@ fn spawn_reader(
                     return;
                 }
                 let now = Instant::now();
+                let mut replan = false;
                 match result {
-                    Ok(frames) if frames.is_empty() => continue,
                     Ok(frames) => {
+                        let any = !frames.is_empty();
                         for item in frames {
                             match item {
-                                Ok(frame) => s.machine.received(frame, now),
+                                Ok(frame) => replan |= s.machine.received(frame, now),
                                 Err(e) => s.machine.garbage(e.to_string()),
                             }
                         }
-                        s.forward();
+                        if any {
+                            s.forward();
+                        }
                     }
                     Err(e) => {
                         s.machine.lost(format!("read: {e}"), now);
@@ -290,7 +317,15 @@ fn spawn_reader(
                     }
                 }
                 drop(s);
-                shared.1.notify_all();
+                if replan {
+                    shared.1.notify_all();
+                }
+                if let Some(byte_time) = byte_time {
+                    let missing = u32::try_from(reader.missing()).unwrap_or(u32::MAX);
+                    if missing > 0 {
+                        std::thread::sleep(byte_time.saturating_mul(missing).min(MAX_FRAME_WAIT));
+                    }
+                }
             }
         })
 }
