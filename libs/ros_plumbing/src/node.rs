@@ -192,8 +192,13 @@ impl RosNode {
             Ok(())
         }));
 
+        // User data by unicast only, as Fast DDS does by default: with the multicast
+        // group advertised, a Fast DDS writer (rclpy's xyz_target) sent every sample to
+        // the group too, and every other node on the host, or across the Wi-Fi link,
+        // woke to parse and drop it (patches/README.md, rustdds entry 15).
         let participant = rustdds::DomainParticipantBuilder::new(domain_id)
             .spdp_publish_period(SPDP_PUBLISH_PERIOD)
+            .user_traffic_multicast(false)
             .build()
             .map_err(|e| PlumbingError::Ros(format!("cannot create the DDS participant: {e:?}")))?;
         let context = Context::from_domain_participant(participant)

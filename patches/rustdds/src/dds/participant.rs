@@ -78,6 +78,8 @@ pub struct DomainParticipantBuilder {
 
   same_host_loopback: bool, // prefer loopback for same-host peers + localhost SPDP discovery peers
 
+  user_traffic_multicast: bool, // join and advertise the user-data multicast group
+
   socket_receive_buffer_size: usize,
   socket_send_buffer_size: usize,
 
@@ -95,6 +97,7 @@ impl DomainParticipantBuilder {
       domain_id,
       only_networks: None,
       same_host_loopback: true,
+      user_traffic_multicast: true,
       socket_receive_buffer_size: Self::DEFAULT_SOCKET_RECEIVE_BUFFER_SIZE,
       socket_send_buffer_size: Self::DEFAULT_SOCKET_SEND_BUFFER_SIZE,
       spdp_publish_period: Self::DEFAULT_SPDP_PUBLISH_PERIOD,
@@ -129,6 +132,19 @@ impl DomainParticipantBuilder {
   /// `src/rtps/loopback_same_host_design.md`.
   pub fn same_host_loopback(mut self, enabled: bool) -> Self {
     self.same_host_loopback = enabled;
+    self
+  }
+
+  /// Join the user-data multicast group and advertise it in discovery (default:
+  /// enabled). A remote writer may then send user data to that group, which every
+  /// participant of the domain on the network receives, interested or not. Disable
+  /// to receive user data by unicast only (Fast DDS' default): with it enabled, a
+  /// Fast DDS writer whose readers advertise the group sends each sample to the group
+  /// as well as to the readers' unicast locators, and every other participant on the
+  /// host (or across a Wi-Fi link) wakes to parse and drop it. Discovery (SPDP)
+  /// multicast is not affected.
+  pub fn user_traffic_multicast(mut self, enabled: bool) -> Self {
+    self.user_traffic_multicast = enabled;
     self
   }
 
@@ -360,6 +376,7 @@ impl DomainParticipantBuilder {
       self.socket_send_buffer_size,
       self.only_networks,
       self.same_host_loopback,
+      self.user_traffic_multicast,
       dp_waker,
       discovery_sample_sender,
     )?;
@@ -995,6 +1012,7 @@ impl DomainParticipantDisc {
     socket_send_buffer_size: usize,
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
+    user_traffic_multicast: bool,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
   ) -> CreateResult<Self> {
@@ -1012,6 +1030,7 @@ impl DomainParticipantDisc {
       socket_send_buffer_size,
       only_networks,
       same_host_loopback,
+      user_traffic_multicast,
       dp_waker,
       discovery_sample_sender,
     )?;
@@ -1254,6 +1273,7 @@ impl DomainParticipantInner {
     socket_send_buffer_size: usize,
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
+    user_traffic_multicast: bool,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
   ) -> CreateResult<Self> {
@@ -1306,17 +1326,19 @@ impl DomainParticipantInner {
 
     // Now the user traffic listeners
 
-    match UDPListener::new_multicast_with_buf_size(
-      "0.0.0.0",
-      user_traffic_multicast_port(domain_id),
-      Ipv4Addr::new(239, 255, 0, 1),
-      socket_receive_buffer_size,
-      only_networks.as_deref(),
-    ) {
-      Ok(l) => {
-        listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, l);
+    if user_traffic_multicast {
+      match UDPListener::new_multicast_with_buf_size(
+        "0.0.0.0",
+        user_traffic_multicast_port(domain_id),
+        Ipv4Addr::new(239, 255, 0, 1),
+        socket_receive_buffer_size,
+        only_networks.as_deref(),
+      ) {
+        Ok(l) => {
+          listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, l);
+        }
+        Err(e) => warn!("Cannot get multicast user traffic listener: {e:?}"),
       }
-      Err(e) => warn!("Cannot get multicast user traffic listener: {e:?}"),
     }
 
     let user_traffic_listener = UDPListener::new_unicast_with_buf_size(
@@ -1795,6 +1817,39 @@ mod tests {
     test::{random_data::RandomData, test_domain::test_domain_id},
   };
   use super::DomainParticipant;
+
+  #[test]
+  fn without_user_traffic_multicast_no_multicast_locator_is_advertised() {
+    use crate::{
+      discovery::spdp_participant_data::SpdpDiscoveredParticipantData,
+      rtps::constant::{USER_TRAFFIC_LISTENER_TOKEN, USER_TRAFFIC_MUL_LISTENER_TOKEN},
+      DomainParticipantBuilder,
+    };
+    let spdp = |dp: &DomainParticipant| {
+      SpdpDiscoveredParticipantData::from_local_participant(
+        dp,
+        &None,
+        crate::Duration::from_secs(5),
+      )
+    };
+    let with = DomainParticipantBuilder::new(test_domain_id(17))
+      .build()
+      .unwrap();
+    assert!(!with.self_locators()[&USER_TRAFFIC_MUL_LISTENER_TOKEN].is_empty());
+    assert!(!spdp(&with).default_multicast_locators.is_empty());
+
+    let without = DomainParticipantBuilder::new(test_domain_id(17))
+      .user_traffic_multicast(false)
+      .build()
+      .unwrap();
+    let locators = without.self_locators();
+    assert!(!locators.contains_key(&USER_TRAFFIC_MUL_LISTENER_TOKEN));
+    assert!(!locators[&USER_TRAFFIC_LISTENER_TOKEN].is_empty());
+    let data = spdp(&without);
+    assert!(data.default_multicast_locators.is_empty());
+    assert!(!data.default_unicast_locators.is_empty());
+    assert!(!data.metatraffic_multicast_locators.is_empty(), "discovery multicast is kept");
+  }
 
   // TODO: improve basic test when more or the structure is known
   #[test]
