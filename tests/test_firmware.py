@@ -1,16 +1,25 @@
 """The real servo_control ELF in simavr: pulse widths on PB0..PB3 timed to the cycle,
-malformed frames, clamping, the watchdog, the handshake."""
+when a command reaches each pulse, malformed frames, clamping, the watchdog, the handshake."""
+import bisect
+import os
+import random
 import statistics
 import struct
+import time
 
 import pytest
 
 from conftest import REPO
-from interop.servo_link import (CONFIG, ESTOP, HEARTBEAT, HELLO, HELLO_ACK, STATE, SimulatedUno, config, frame,
-                                parse_state, pulses, set_pulses)
+from interop.servo_link import (CONFIG, ESTOP, HEARTBEAT, HELLO, HELLO_ACK, STATE, SimulatedUno, config, crc8,
+                                frame, parse_state, pulses, set_pulses)
 
 FIRMWARE = REPO / "firmware" / "servo_control"
 CYCLES_PER_MS = 16_000
+CYCLES_PER_TICK = 8  # Timer1 ticks of 0.5 us
+# Every edge falls on its timer tick: the ISR polls TCNT1 in a 9-cycle loop, so an edge
+# comes 0..8 cycles after its tick (plus a constant). A width or a period between two
+# edges is therefore exact to within 8 cycles, half a microsecond, one tick.
+EDGE_SPREAD_CYCLES = 8
 
 
 @pytest.fixture
@@ -74,9 +83,17 @@ def test_each_commanded_pulse_width_appears_on_its_pin(uno, us):
     uno.send(set_pulses(1, ticks))
     st = state_reply(uno, 1)
     assert st["state"] == "running" and st["ticks"] == ticks and not st["clamped"]
-    got = medians(uno, last_rx_cycle(uno))
+    after = last_rx_cycle(uno)
+    got = medians(uno, after)
     for pin, (want, have) in enumerate(zip(us, got)):
         assert have == pytest.approx(want, abs=2.0), f"pin {8 + pin}: {have} us, commanded {want} us"
+    # and every single pulse to the tick, not only the median
+    edges, _ = uno.events()
+    for pin, want in enumerate(us):
+        widths = [w for _, w in pulses(edges, pin, after)]
+        assert len(widths) >= 5
+        off = [w for w in widths if abs(w - want) > EDGE_SPREAD_CYCLES / 16]
+        assert not off, f"pin {8 + pin}: {len(off)} of {len(widths)} pulses off {want} us by more than a tick: {off[:5]}"
 
 
 def test_every_servo_is_refreshed_every_20_ms(uno):
@@ -87,7 +104,188 @@ def test_every_servo_is_refreshed_every_20_ms(uno):
     for pin in range(4):
         rises = [c for c, _ in pulses(edges, pin)]
         periods = [(b - a) / CYCLES_PER_MS for a, b in zip(rises, rises[1:])]
+        assert len(periods) >= 10
         assert statistics.median(periods) == pytest.approx(20.0, abs=0.01)
+        # every period, to the tick: frames do not drift
+        off = [p for p in periods if abs(p * CYCLES_PER_MS - 20 * CYCLES_PER_MS) > EDGE_SPREAD_CYCLES]
+        assert not off, f"pin {8 + pin}: {len(off)} of {len(periods)} periods off 20 ms by more than a tick: {off[:5]}"
+
+
+# When a command reaches the pulses. servo_pwm.cpp reads a channel's width when the ISR
+# for the edge that starts its pulse is entered: the compare match comes 20 us before the
+# edge (later only if another interrupt delays the ISR). So a command stored by then is in
+# that very pulse, whatever the channel, and one stored later is in the next frame's.
+READ_LEAD_CYCLES = 20 * 16 + 16  # 20 us, and 1 us for where the edge falls after its tick
+# A byte is complete in the AVR's UART no sooner than its 10 bits at 115200 baud after it
+# was delivered or after the byte before it was complete (simavr takes 93 us a byte).
+UART_BYTE_CYCLES = 16_000_000 * 10 // 115_200
+
+
+def tx_frames(uno):
+    """(cycle of the first byte, type, payload) of every frame the AVR sent."""
+    tx = []
+    for line in uno.events_path.read_text().splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == "t":
+            tx.append((int(parts[1]), int(parts[2])))
+    out, i = [], 0
+    while i + 2 <= len(tx):
+        assert tx[i][1] == 0xA5, f"the AVR sent {tx[i][1]:#x} where a frame starts"
+        n = (tx[i + 1][1] & 0x0F) + 4
+        if i + n > len(tx):
+            break
+        body = bytes(b for _, b in tx[i + 1:i + n - 1])
+        assert crc8(body) == tx[i + n - 1][1]
+        out.append((tx[i][0], body[0] >> 4, body[2:]))
+        i += n
+    return out
+
+
+def unmistakable_commands(rng, n):
+    """`n` commands of 4 widths, each width 64+ ticks from that channel's width in the three
+    commands before it and different in both bytes (the low ones by 4+), so that a pulse
+    names the command it shows, and a width torn between two commands (one byte of each)
+    would be none of them. Pins 8 and 9 pulse for 1.5 ms or more: commands often arrive
+    while one of theirs is high."""
+    lo, hi = [3000, 3000, 1088, 1088], [4800] * 4
+    out = []
+    for _ in range(n):
+        cmd = []
+        for ch in range(4):
+            prev = [c[ch] for c in out[-3:]]
+            while True:
+                w = rng.randint(lo[ch], hi[ch])
+                if all(w >> 8 != p >> 8 and abs((w & 0xFF) - (p & 0xFF)) >= 4 and abs(w - p) >= 64 for p in prev):
+                    break
+            cmd.append(w)
+        out.append(cmd)
+    return out
+
+
+def test_a_command_reaches_every_pulse_that_starts_20_us_after_it(uno):
+    """250 SET_PULSES at random times (1.5-4.5 ms apart), each with new widths. Every
+    command is bracketed from the events: its last byte cannot be complete in the UART
+    before `arrived` (wire time from the byte deliveries), and its widths are stored
+    before `stored` (the first byte of its STATE reply). Then for every pulse on every pin:
+    - it shows the width of exactly one command, to the tick (never a mix of two): the
+      newest one stored 20 us or more before its rise, or one that arrived later but
+      before the rise (the read of the width may fall inside that command's bracket: such
+      commands in flight at a read, near the edge, are whole in or whole out too);
+    - so a command that arrived while pin 8's (9's) pulse was high and was stored 20 us
+      before pin 9's (10's) rise is in pin 9's (10's) pulse of that same frame, and in the
+      next pins' (it used to wait a whole frame: the width was read a pulse earlier);
+    - every edge of every frame falls within one tick of its schedule: each pulse's
+      width as the command says, the next pulse starting at the same write, each frame
+      exactly 20 ms after the previous one."""
+    rng = random.Random(20)
+    cmds = unmistakable_commands(rng, 250)
+    for seq, ticks in enumerate(cmds, 1):
+        uno.send(set_pulses(seq, ticks))
+        time.sleep(rng.uniform(0.0015, 0.0045))
+        try:
+            while os.read(uno.fd, 4096):  # the replies: keep the pty from filling
+                pass
+        except BlockingIOError:
+            pass
+    uno.receive(0.15)
+    edges, rx = uno.events()
+
+    assert len(rx) == 12 * len(cmds)
+    complete, t = [], 0
+    for cycle, _ in rx:
+        t = max(t, cycle) + UART_BYTE_CYCLES
+        complete.append(t)
+    arrived = complete[11::12]
+    replies = [(c, p) for c, kind, p in tx_frames(uno) if kind == STATE]
+    stored, k = [], 0
+    for seq, ticks in enumerate(cmds, 1):
+        while replies[k][1][0] != seq:
+            k += 1
+        st = parse_state(replies[k][1])
+        assert st["ticks"] == ticks and not st["clamped"], (seq, st)
+        stored.append(replies[k][0])
+    assert all(a < s for a, s in zip(arrived, stored))
+    in_by = [s + READ_LEAD_CYCLES for s in stored]  # stored this long before a rise: in it
+
+    # every pulse on every pin: which command it shows
+    shown = []  # per pin: {rise: (fall, command index)}
+    in_flight = 0  # (pulse, command) pairs where the command may have been stored after the read
+    for pin in range(4):
+        per_pin = {}
+        for rise, w in pulses(edges, pin, in_by[0]):
+            fall = rise + round(w * 16)
+            newest_in = bisect.bisect_left(in_by, rise) - 1
+            newest_arrived = bisect.bisect_left(arrived, rise) - 1
+            may = range(newest_in, newest_arrived + 1)
+            fits = [i for i in may if abs(fall - rise - CYCLES_PER_TICK * cmds[i][pin]) <= EDGE_SPREAD_CYCLES]
+            if len(fits) != 1:
+                older = [i for i in range(max(0, newest_in - 3), newest_in)
+                         if abs(fall - rise - CYCLES_PER_TICK * cmds[i][pin]) <= EDGE_SPREAD_CYCLES]
+                why = (f"it shows SET_PULSES {older[-1] + 1}, though {newest_in + 1} was stored "
+                       f"{(rise - stored[newest_in]) / 16} us before its rise" if older else "")
+                raise AssertionError(f"pin {8 + pin}, pulse at cycle {rise}: {(fall - rise) / 16} us is not the width of "
+                                     f"exactly one of the commands that may apply "
+                                     f"{[(i + 1, cmds[i][pin] / 2) for i in may]}; {why}")
+            in_flight += len(may) - 1
+            per_pin[rise] = (fall, fits[0])
+        shown.append(per_pin)
+
+    # commands that arrived while the pulse before was high: in the next pulses of that frame
+    same_frame = [0, 0, 0, 0]
+    for pin in (1, 2):
+        before = {fall: rise for rise, (fall, _) in shown[pin - 1].items()}
+        for rise, (fall, j) in shown[pin].items():
+            if rise not in before:
+                continue  # the log starts inside this frame
+            during = [i for i in range(len(cmds)) if arrived[i] > before[rise] and in_by[i] < rise]
+            for i in during:
+                assert j >= i, (f"SET_PULSES {i + 1} arrived while pin {7 + pin} was high (from cycle {before[rise]}) "
+                                f"and was stored by {stored[i]}, yet pin {8 + pin}'s pulse at {rise} shows "
+                                f"command {j + 1}'s width")
+                # and the pins after it, in the same frame
+                nxt = fall
+                for later in range(pin + 1, 4):
+                    if nxt not in shown[later]:
+                        break  # the log ends inside this frame
+                    nfall, nj = shown[later][nxt]
+                    assert nj >= i, f"SET_PULSES {i + 1}: pin {8 + later} at {nxt} shows command {nj + 1}"
+                    nxt = nfall
+            same_frame[pin] += len(during)
+    assert same_frame[1] >= 5 and same_frame[2] >= 5, same_frame
+    assert in_flight >= 3  # pulses read while a command was in flight: whole all the same
+
+    # the schedule: each frame starts 20 ms after the previous one, each pulse where the one
+    # before ends, each as long as its command says; every edge within one tick of its place
+    frames = []
+    for rise0 in sorted(shown[0]):
+        frame_edges, t, ok = [], rise0, True
+        for pin in range(4):
+            if t not in shown[pin]:
+                ok = False  # the log ends inside this frame
+                break
+            fall, j = shown[pin][t]
+            frame_edges.append((t, fall, cmds[j][pin]))
+            t = fall
+        if ok:
+            frames.append(frame_edges)
+    assert len(frames) >= 20
+    anchor = frames[0][0][0]
+    offsets = []
+    for edges_of_frame in frames:
+        n = round((edges_of_frame[0][0] - anchor) / (20 * CYCLES_PER_MS))
+        place = n * 40_000  # ticks
+        for rise, fall, ticks in edges_of_frame:
+            offsets.append(rise - anchor - CYCLES_PER_TICK * place)
+            place += ticks
+            offsets.append(fall - anchor - CYCLES_PER_TICK * place)
+    assert max(offsets) - min(offsets) <= EDGE_SPREAD_CYCLES, (min(offsets), max(offsets))
+
+    # what the operator gets: the shortest time from a command's last byte to a rise that
+    # shows it (at most: `arrived` is a lower bound), per pin
+    shortest = [min(rise - arrived[j] for rise, (_, j) in shown[pin].items()) / 16 for pin in range(4)]
+    print(f"{len(frames)} whole frames, {sum(len(s) for s in shown)} pulses; commands that arrived during the "
+          f"pulse before and are in the next: pin 9 {same_frame[1]}, pin 10 {same_frame[2]}; {in_flight} pulses "
+          f"read with a command in flight; shortest time from a last byte to a rise showing it, us (at most): {shortest}")
 
 
 def test_out_of_range_commands_are_clamped_to_the_firmware_table(uno):
