@@ -55,7 +55,12 @@ compared with itself.
       byte leaving the host / entering the UART; what lies between (the second pty, the
       harness reading it every 250 us of simulated time, its pacing to wall time) is left
       out, as a real board's USB transfer would be. `clock_map` reports the spread and
-      drift of (tap time - cycle time) so the harness can be judged. simavr models the
+      drift of (tap time - cycle time) so the harness can be judged; the drift is the
+      simulated board's clock error, set (--avr-clock-ppm) so that the servo frame's
+      phase against the 50 Hz commands sweeps the whole 20 ms once per run, as a real
+      Uno's resonator (+-0.5 %) sweeps it every few seconds; paced exactly, the phase
+      stayed where the run started it, and (c)'s p50 was that phase: 12.3, 18.2 and
+      20.2 ms in three runs of the same build. simavr models the
       UART's byte time (86.8 us at 115200): the frame's 1.04 ms on the wire is inside.
   Loss: a target is lost at a stage when no sample with its stamp (or its widths) got
   there. The nodes are newest-wins (a newer command waiting replaces an older one), so
@@ -93,6 +98,19 @@ def ms(ns_values):
 
 
 # ---------------------------------------------------------------- one graph run
+SERVO_FRAME_S = 0.020
+
+
+def clock_ppm(args):
+    """simavr's clock error for a run: by default the one that slides the firmware's 20 ms
+    servo frame once past the operator's clock in --seconds, so that every phase between
+    a command and the frame is met equally often, as with a real Uno's resonator
+    (+-0.5 %, a whole frame every 4 s or faster)."""
+    if args.avr_clock_ppm is not None:
+        return args.avr_clock_ppm
+    return SERVO_FRAME_S / args.seconds * 1e6
+
+
 def graph_run(name, args, layout="same", nodes="graph", seed_cap="loop", drive="rclpy"):
     log = lambda s: print(s, flush=True)  # noqa: E731
     log(f"--- run `{name}`: layout {layout}, nodes {nodes}, device {args.device if nodes == 'graph' else '-'}, "
@@ -101,7 +119,8 @@ def graph_run(name, args, layout="same", nodes="graph", seed_cap="loop", drive="
     serial_args = ["-p", f"send_rate:={args.send_rate:g}"] if args.send_rate else []
     path = A.TargetPath(args.path)
     run = GraphRun(name, path, layout=layout, device=args.device, nodes=nodes, impairment=IMPAIRMENT,
-                   seed_cap=seed_cap, serial_args=serial_args, firmware=args.firmware, log=log)
+                   seed_cap=seed_cap, serial_args=serial_args, firmware=args.firmware,
+                   clock_ppm=clock_ppm(args), log=log)
     t_start = time.time()
     ws = None
     try:
@@ -309,17 +328,20 @@ def analyze(r, args):
                            "longer the previous command's (this command's width, or a newer one's that superseded it)",
                 "frames_paired_tap_to_simavr": [len(pair), len(frames)]}
     if offsets:
-        base = min(o for _, o in offsets)
         tt = [t for t, _ in offsets]
         oo = [o for _, o in offsets]
         n = len(tt)
         mt, mo = sum(tt) / n, sum(oo) / n
         var = sum((t - mt) ** 2 for t in tt)
         slope = sum((t - mt) * (o - mo) for t, o in zip(tt, oo)) / var if var > 0 else 0.0
+        resid = [o - (mo + slope * (t - mt)) for t, o in zip(tt, oo)]
+        base = min(resid)
         out["c"]["clock_map"] = {
-            "what": "tap time of a frame's first byte minus its simavr cycle time; spread = harness pickup + pacing",
-            "spread_ms": ms(o - base for o in oo),
+            "what": "tap time of a frame's first byte minus its simavr cycle time, less its linear drift (the "
+                    "simulated board's clock error, --avr-clock-ppm); spread = harness pickup + pacing",
+            "spread_ms": ms(r - base for r in resid),
             "drift_ppm": slope * 1e6,
+            "avr_clock_ppm_set": run.clock_ppm,
         }
     out["end_to_end_50hz"] = {"sent": len(sent), "servo_angles": len(got), "on_wire": len(on_wire_with_angles),
                               "acknowledged": out["b"]["acknowledged"],
@@ -558,7 +580,8 @@ def print_cases(cases, res, args):
             if "clock_map" in c:
                 cm = c["clock_map"]
                 print(f"      clock map (tap - cycle time) spread p50 {cm['spread_ms']['p50']:.3f} p99 "
-                      f"{cm['spread_ms']['p99']:.3f} ms, drift {cm['drift_ppm']:.0f} ppm")
+                      f"{cm['spread_ms']['p99']:.3f} ms, drift {cm['drift_ppm']:.0f} ppm "
+                      f"(simulated board's clock set {cm['avr_clock_ppm_set']:.0f} ppm fast)")
             print(f"      of {c['pin_changes']} pin changes: {c['pin_changes_superseded']} superseded by a newer command "
                   f"before their slot, {c['pin_changes_not_seen']} not seen, {c['pulses_with_an_unexplained_width']} "
                   f"unexplained, {c['pin_changes_not_timed_width_seen_before']} not timed (width seen shortly before)")
@@ -676,6 +699,9 @@ def main():
     ap.add_argument("--rate", type=float, default=50.0, help="target rate (default 50 Hz)")
     ap.add_argument("--device", choices=["simavr", "virtual"], default="simavr",
                     help="the Arduino: the firmware in simavr (default; needed for c) or virtual_arduino")
+    ap.add_argument("--avr-clock-ppm", type=float,
+                    help="simavr's clock error against wall time, ppm (default: 20 ms / --seconds, one sweep of "
+                         "the servo frame's phase per run; 0 = paced exactly, the phase fixed for the run)")
     ap.add_argument("--bursts", type=int, default=5)
     ap.add_argument("--burst-seconds", type=float, default=2.0)
     ap.add_argument("--burst-rate", type=float, default=1000.0)

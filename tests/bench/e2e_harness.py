@@ -198,8 +198,9 @@ class GraphRun:
     """
 
     def __init__(self, name, path, layout="same", device="simavr", nodes="graph", impairment=None, seed_cap="loop",
-                 serial_args=(), firmware=FIRMWARE, log=print):
+                 serial_args=(), firmware=FIRMWARE, clock_ppm=0.0, log=print):
         self.name, self.layout, self.device, self.nodes = name, layout, device, nodes
+        self.clock_ppm = clock_ppm  # simavr's clock error (servo_sim --clock-ppm)
         self.impairment = impairment
         self.seed_cap = seed_cap
         self.serial_args = list(serial_args)  # extra ROS arguments for serial_node (pi.sh)
@@ -252,7 +253,7 @@ class GraphRun:
             for f in ("servo_sim", "servo_control.elf"):
                 if not (self.firmware / "build" / f).exists():
                     raise FileNotFoundError(f"{self.firmware / 'build' / f} is missing: make -C {self.firmware} all sim")
-            self.uno = SimulatedUno(self.workdir, self.firmware)
+            self.uno = SimulatedUno(self.workdir, self.firmware, clock_ppm=self.clock_ppm)
             device_path = str(self.uno.tty_path)
         else:
             path = self.workdir / "arduino"

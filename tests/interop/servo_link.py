@@ -74,9 +74,10 @@ def parse_state(payload):
 class SimulatedUno:
     """The servo_control ELF in simavr (firmware/servo_control/build/servo_sim)."""
 
-    def __init__(self, workdir, firmware_dir, boot=0):
+    def __init__(self, workdir, firmware_dir, boot=0, clock_ppm=0.0):
         """`boot` > 0: the same board reset (a new simavr process on the same pty link),
-        with its own events file."""
+        with its own events file. `clock_ppm`: the board's clock error against wall time
+        (servo_sim --clock-ppm)."""
         self.workdir = Path(workdir)
         self.tty_path = self.workdir / "tty"
         tag = f"-{boot}" if boot else ""
@@ -84,8 +85,10 @@ class SimulatedUno:
         self.log = open(self.workdir / f"servo_sim{tag}.log", "w")
         sim = Path(firmware_dir) / "build" / "servo_sim"
         elf = Path(firmware_dir) / "build" / "servo_control.elf"
-        self.proc = subprocess.Popen([str(sim), str(elf), "--pty-link", str(self.tty_path), "--events", str(self.events_path)],
-                                     stdout=self.log, stderr=subprocess.STDOUT)
+        args = [str(sim), str(elf), "--pty-link", str(self.tty_path), "--events", str(self.events_path)]
+        if clock_ppm:
+            args += ["--clock-ppm", repr(float(clock_ppm))]
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + 10
         while not self.tty_path.exists():
             assert time.monotonic() < deadline, "servo_sim did not create its pty"

@@ -3,7 +3,13 @@
 // serial port), every edge on PB0..PB3 (pins 8..11) and every UART byte written to an
 // event file with the simulated cycle count, and simulated time paced to wall time.
 //
-//   servo_sim FIRMWARE.elf --pty-link /tmp/x/tty --events /tmp/x/events.txt
+//   servo_sim FIRMWARE.elf --pty-link /tmp/x/tty --events /tmp/x/events.txt [--clock-ppm PPM]
+//
+// --clock-ppm: the board's clock runs PPM parts per million fast (negative: slow) of
+// 16 MHz against wall time. An Uno's ceramic resonator is within +-0.5 % (5000 ppm),
+// so a host sending at 50 Hz meets the firmware's 20 ms servo frame at a phase that
+// sweeps the whole frame every few seconds; paced exactly (the default, 0), the phase
+// stays where the run happened to start it.
 //
 // Event lines:  e CYCLE PIN LEVEL   (pin 0..3 = PB0..PB3)
 //               r CYCLE BYTE        (byte delivered to the AVR's UART, host -> AVR)
@@ -128,17 +134,23 @@ static void unplug(const char *link_path) {
 }
 
 static void usage(void) {
-  fprintf(stderr, "usage: servo_sim FIRMWARE.elf --pty-link PATH --events PATH [--no-realtime]\n");
+  fprintf(stderr, "usage: servo_sim FIRMWARE.elf --pty-link PATH --events PATH [--no-realtime] [--clock-ppm PPM]\n");
   exit(2);
 }
 
 int main(int argc, char **argv) {
   const char *elf = NULL, *link_path = NULL, *events_path = NULL;
   int realtime = 1;
+  double clock_ppm = 0.0;
   for (int i = 1; i < argc; i++) {
     if (!strcmp(argv[i], "--pty-link") && i + 1 < argc) link_path = argv[++i];
     else if (!strcmp(argv[i], "--events") && i + 1 < argc) events_path = argv[++i];
     else if (!strcmp(argv[i], "--no-realtime")) realtime = 0;
+    else if (!strcmp(argv[i], "--clock-ppm") && i + 1 < argc) {
+      char *end;
+      clock_ppm = strtod(argv[++i], &end);
+      if (*end || clock_ppm <= -1e6) usage();
+    }
     else if (argv[i][0] != '-' && !elf) elf = argv[i];
     else usage();
   }
@@ -221,7 +233,7 @@ int main(int argc, char **argv) {
       avr_raise_irq(uart_in, pending[next++]);
     }
     if (realtime) {
-      uint64_t sim_ns = avr->cycle * 1000000000ull / avr->frequency;
+      uint64_t sim_ns = (uint64_t)((double)avr->cycle * 1e9 / ((double)avr->frequency * (1.0 + clock_ppm * 1e-6)));
       uint64_t wall_ns = now_ns() - t0;
       if (sim_ns > wall_ns + 1000000ull) usleep((useconds_t)((sim_ns - wall_ns) / 1000));
     }
