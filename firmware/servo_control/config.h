@@ -20,8 +20,17 @@ static const uint16_t SERVO_MAX_TICKS[SERVO_COUNT] = {4800, 4800, 4800, 4800};
 // 1472 us) with the claw closed (60 deg, 1163 us). Must lie within the limits above.
 static const uint16_t HOLD_TICKS[SERVO_COUNT] = {2944, 2944, 2944, 2325};
 
-// Refresh period of every servo, as the Servo library: 20 ms.
+// Refresh period of every servo while no command brings a new width, as the Servo
+// library: 20 ms.
 #define REFRESH_TICKS 40000U
+// Frame sync (servo_pwm.h): a new width starts the next frame as soon as the frame
+// before is SYNC_MIN_TICKS old (14 ms), and a frame started so waits up to
+// SYNC_MAX_TICKS (22.5 ms) for the next new width: a 50 Hz command stream starts the
+// frames itself. 14-22.5 ms are the frame periods RC receivers give analog servos
+// (Futaba's 14 ms, the classic 22.5 ms PPM frame). 0: every frame 20 ms after the last.
+#define FRAME_SYNC 1
+#define SYNC_MIN_TICKS 28000U
+#define SYNC_MAX_TICKS 45000U
 
 // Silence after which the watchdog acts, and what it does (host can change both).
 #define WATCHDOG_MS_DEFAULT 500

@@ -3,10 +3,11 @@
 // Speaks the framed binary protocol of PROTOCOL.md with serial_node over USB at
 // 115200 baud and drives the servos on pins 8 (base), 9 (shoulder), 10 (elbow) and
 // 11 (gripper) with its own Timer1 pulse driver (servo_pwm.cpp: the Servo library's
-// timing, 544-2400 us every 20 ms). Malformed frames are ignored and counted; every
-// command is clamped to the limits in config.h; on silence longer than the watchdog
-// timeout it holds (or stops) the pulses and says so; the e-stop holds (or stops) them
-// and ignores commands until released. No pulses go out before the first command; until
+// pulses, 544-2400 us every 20 ms; a new command starts the next frame early, 14 ms or
+// more after the last). Malformed frames are ignored and counted; every command is
+// clamped to the limits in config.h; on silence longer than the watchdog timeout it
+// holds (or stops) the pulses and says so; the e-stop holds (or stops) them and ignores
+// commands until released. No pulses go out before the first command; until
 // then it reports its hold pose (config.h), where the host's first command starts.
 //
 // Builds in the Arduino IDE (board: Arduino Uno) and with `make` (avr-gcc + Debian's
@@ -69,6 +70,7 @@ static void send_state() {
 static void output_pulses(bool on) {
   output = on;
   for (uint8_t i = 0; i < SERVO_COUNT; i++) servo_pwm_set(i, on ? applied[i] : 0);
+  servo_pwm_sync();  // a new width starts the next frame early (servo_pwm.h)
 }
 
 static void handle(const Frame *f) {

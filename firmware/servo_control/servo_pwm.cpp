@@ -11,18 +11,29 @@
 // match is due (the UART's, ~5-10 us) delays the ISR's entry, and so the read, but not
 // the edge.
 #define EDGE_LEAD_TICKS 40
+// A frame started early by servo_pwm_sync() begins this long after the call (40 us): the
+// compare match, EDGE_LEAD_TICKS before it, is still ahead when it is armed.
+#define SYNC_LEAD_TICKS 80
+// The shortest gap between the last pulse of a frame and the next frame.
+#define MIN_GAP_TICKS 200
 
 static const uint8_t MASK[SERVO_COUNT] = {_BV(0), _BV(1), _BV(2), _BV(3)};
 static volatile uint16_t width[SERVO_COUNT];
-// Slots: 0..3 a channel's pulse, SERVO_COUNT the rest of the 20 ms frame. `slot` is the
-// one the next edge begins. Its width is read when the ISR for that edge is entered
+// Channels whose width changed since their pulse of the current frame read it: they
+// have something new to show.
+static volatile uint8_t fresh;
+// Slots: 0..3 a channel's pulse, SERVO_COUNT the rest of the frame. `slot` is the one
+// the next edge begins. Its width is read when the ISR for that edge is entered
 // (EDGE_LEAD_TICKS before the edge, or later if another interrupt delays the entry), and
 // everything that depends on it is worked out before the ISR waits for the edge's tick:
 // the fall of one pulse and the rise of the next happen in the same write, on the tick,
 // and only the scheduling of the following edge comes after it.
-static uint8_t slot;
-static uint16_t frame_start;
-static uint16_t edge;  // the tick of the next edge; the compare match is EDGE_LEAD_TICKS earlier
+static volatile uint8_t slot;
+static volatile uint16_t frame_start;  // the tick the current (or last) frame began
+static volatile uint16_t edge;  // the tick of the next edge; the compare match is EDGE_LEAD_TICKS earlier
+// The next frame / the current one was started early for a new width: the frame after
+// it may wait SYNC_MAX_TICKS for the next one.
+static volatile uint8_t next_synced, synced;
 
 void servo_pwm_begin() {
   DDRB |= 0x0F;     // PB0..PB3 = pins 8..11 as outputs
@@ -31,8 +42,8 @@ void servo_pwm_begin() {
     TCCR1A = 0;             // normal mode: TCNT1 runs 0..65535 freely
     TCCR1B = _BV(CS11);     // prescaler 8: 0.5 us a tick
     slot = 0;               // the first edge begins a frame (without pulses yet)
-    frame_start = TCNT1 + 200;
-    edge = frame_start;
+    edge = TCNT1 + 200;
+    frame_start = edge - REFRESH_TICKS;  // as if a frame had begun a period before
     OCR1A = edge - EDGE_LEAD_TICKS;
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
@@ -41,7 +52,33 @@ void servo_pwm_begin() {
 
 void servo_pwm_set(uint8_t i, uint16_t ticks) {
   if (i >= SERVO_COUNT) return;
-  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { width[i] = ticks; }
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    if (width[i] != ticks) {
+      width[i] = ticks;
+      fresh |= MASK[i];
+    }
+  }
+}
+
+void servo_pwm_sync() {
+#if FRAME_SYNC
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    // During the pulses the end of the last one schedules the next frame (the ISR);
+    // in the gap after them, start it now, or once the frame is SYNC_MIN_TICKS old.
+    if (slot != 0 || !fresh) return;
+    const uint16_t start = frame_start;
+    const uint16_t now = TCNT1;
+    uint16_t at = start + SYNC_MIN_TICKS;
+    if ((uint16_t)(now - start) > SYNC_MIN_TICKS - SYNC_LEAD_TICKS) at = now + SYNC_LEAD_TICKS;
+    // only ever earlier: once the compare match for the frame's start has come
+    // (EDGE_LEAD_TICKS before it), `at` is later than `edge` and nothing changes
+    if ((uint16_t)(at - start) < (uint16_t)(edge - start)) {
+      edge = at;
+      OCR1A = at - EDGE_LEAD_TICKS;
+      next_synced = 1;
+    }
+  }
+#endif
 }
 
 uint16_t servo_pwm_get(uint8_t i) {
@@ -58,6 +95,7 @@ ISR(TIMER1_COMPA_vect) {
   uint8_t out = 0;
   if (s < SERVO_COUNT) {
     w = width[s];
+    fresh &= ~MASK[s];
     if (w) out = MASK[s];
   }
   // `out` in a register before the wait: the compiler may not sink its computation past
@@ -67,11 +105,28 @@ ISR(TIMER1_COMPA_vect) {
   }
   PORTB = (PORTB & 0xF0) | out;  // end the previous pulse, start this slot's
   if (s < SERVO_COUNT) {
+    if (s == 0) {
+      frame_start = due;
+      synced = next_synced;
+      next_synced = 0;
+    }
     edge = due + (w ? w : IDLE_SLOT_TICKS);
     slot = s + 1;
   } else {
-    frame_start += REFRESH_TICKS;  // each frame starts 20 ms after the previous one
-    edge = frame_start;
+    // The pulses are over. A channel with a width it has not shown yet (set while the
+    // frame's pulses went out) pulls the next frame in; one started so waits longer for
+    // the next command; otherwise the Servo library's 20 ms.
+    uint16_t period = REFRESH_TICKS;
+#if FRAME_SYNC
+    if (fresh) {
+      period = SYNC_MIN_TICKS;
+      next_synced = 1;
+    } else if (synced) {
+      period = SYNC_MAX_TICKS;
+    }
+#endif
+    edge = frame_start + period;
+    if ((uint16_t)(edge - frame_start) < (uint16_t)(due - frame_start) + MIN_GAP_TICKS) edge = due + MIN_GAP_TICKS;
     slot = 0;
   }
   OCR1A = edge - EDGE_LEAD_TICKS;

@@ -66,6 +66,7 @@ void servo_pwm_set(uint8_t i, uint16_t ticks) {
              SERVO_MIN_TICKS[i], SERVO_MAX_TICKS[i]);
   width[i] = ticks;
 }
+void servo_pwm_sync() {}  // frame timing only: no width changes
 uint16_t servo_pwm_get(uint8_t i) { return i < SERVO_COUNT ? width[i] : 0; }
 
 extern "C" int LLVMFuzzerInitialize(int *, char ***) {
