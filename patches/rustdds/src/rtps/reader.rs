@@ -1230,13 +1230,17 @@ impl Reader {
   // notifies DataReaders (or any listeners that history cache has changed for
   // this reader) likely use of mio channel
   pub fn notify_cache_change(&mut self) {
-    // async notify mechanism
-    self
+    // async notify mechanism. The waker is taken out first and woken after the
+    // lock is released: the woken task stores its next waker under this lock at
+    // once, and would otherwise block on it (a futex wait and wake per sample).
+    let waker = self
       .data_reader_waker
       .lock()
       .unwrap() // TODO: unwrap
-      .take() // Take to nullify the reference
-      .map(|w| w.wake_by_ref()); // If Some, call wake_by_ref
+      .take(); // Take to nullify the reference
+    if let Some(w) = waker {
+      w.wake();
+    }
 
     // mio-0.8 / mio-1.2 notify for a caller-owned poll.
     self.poll_event_sender.send();
@@ -1628,6 +1632,75 @@ mod tests {
     );
     // TODO: Should the other notification mechanisms (mio-0.8 & async) be also
     // checked?
+  }
+
+  // The async reader's waker is woken after its slot is unlocked: the woken task
+  // stores its next waker in that slot at once, and found it locked by the event
+  // loop (a futex wait and wake on both threads for every sample).
+  #[test]
+  fn the_async_reader_is_woken_with_its_waker_slot_unlocked() {
+    use std::{
+      sync::atomic::{AtomicU8, Ordering},
+      task::{Wake, Waker},
+    };
+    // 0: not woken, 1: woken with the slot unlocked, 2: woken with it locked
+    struct Probe {
+      slot: std::sync::Weak<Mutex<Option<Waker>>>,
+      woken: AtomicU8,
+    }
+    impl Wake for Probe {
+      fn wake(self: Arc<Self>) {
+        let unlocked = self.slot.upgrade().is_some_and(|s| s.try_lock().is_ok());
+        self
+          .woken
+          .store(if unlocked { 1 } else { 2 }, Ordering::SeqCst);
+      }
+    }
+    let dds_cache = Arc::new(RwLock::new(DDSCache::new()));
+    let qos_policy = QosPolicies::qos_none();
+    let topic_cache_handle = dds_cache.write().unwrap().add_new_topic(
+      "t".to_string(),
+      TypeDesc::new("test_type".to_string()),
+      &qos_policy,
+    );
+    let (notification_sender, _notification_receiver) =
+      crate::mio_source::notification_channel(100);
+    let (_notification_event_source, notification_event_sender) =
+      mio_source::make_poll_channel().unwrap();
+    let data_reader_waker = Arc::new(Mutex::new(None));
+    let probe = Arc::new(Probe {
+      slot: Arc::downgrade(&data_reader_waker),
+      woken: AtomicU8::new(0),
+    });
+    *data_reader_waker.lock().unwrap() = Some(Waker::from(probe.clone()));
+    let (status_sender, _status_receiver) = sync_status_channel::<DataReaderStatus>(4).unwrap();
+    let (participant_status_sender, _participant_status_receiver) =
+      sync_status_channel(16).unwrap();
+    let (_reader_command_sender, reader_command_receiver) =
+      wake_channel::<ReaderCommand>(10, &LoopWaker::new());
+    let reader_guid = GUID::dummy_test_guid(EntityKind::READER_NO_KEY_USER_DEFINED);
+    let mut reader = Reader::new(
+      ReaderIngredients {
+        guid: reader_guid,
+        notification_sender,
+        status_sender,
+        topic_name: "t".to_string(),
+        topic_cache_handle,
+        like_stateless: false,
+        qos_policy,
+        data_reader_command_receiver: reader_command_receiver,
+        data_reader_waker: data_reader_waker.clone(),
+        poll_event_sender: notification_event_sender,
+        security_plugins: None,
+        discovery_notify: None,
+      },
+      Rc::new(UDPSender::new(0).unwrap()),
+      new_shared_timer(),
+      participant_status_sender,
+    );
+    reader.notify_cache_change();
+    assert_eq!(probe.woken.load(Ordering::SeqCst), 1);
+    assert!(data_reader_waker.lock().unwrap().is_none(), "the waker is used once");
   }
 
   #[test]
