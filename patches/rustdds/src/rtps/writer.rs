@@ -165,6 +165,10 @@ pub(crate) struct Writer {
   /// Faster Heartbeat period used while some matched reader still has
   /// unacknowledged samples. `None` for BestEffort (no periodic Heartbeat).
   pub heartbeat_period_fast: Option<Duration>,
+  /// When the last sample went out (with its piggybacked HEARTBEAT): a KEEP_LAST
+  /// writer defers its periodic HEARTBEAT until the fast period has passed without
+  /// one (see `handle_timed_event`).
+  last_push: Option<std::time::Instant>,
   /// duration to launch cache change remove from DDSCache
   pub cache_cleaning_period: Duration,
   /// Protocol tuning parameter that
@@ -347,6 +351,7 @@ impl Writer {
       push_mode: true,
       heartbeat_period,
       heartbeat_period_fast,
+      last_push: None,
       cache_cleaning_period,
       nack_response_delay: NACK_RESPONSE_DELAY, // default value from dp_event_loop
       nackfrag_response_delay: NACK_RESPONSE_DELAY, // default value from dp_event_loop
@@ -492,6 +497,23 @@ impl Writer {
   pub fn handle_timed_event(&mut self, event: TimedEvent) {
     match event {
       TimedEvent::Heartbeat => {
+        // Every sample of a reliable writer carries a HEARTBEAT (final: a reader that
+        // misses one asks for it at once, from the next sample). While samples keep
+        // coming, a periodic HEARTBEAT only makes every reader acknowledge what it
+        // has: one datagram each way per reader, at the fast period for as long as
+        // the stream lasts, since readers acknowledge only when asked. A KEEP_LAST
+        // writer (which keeps its newest samples whether acknowledged or not) so waits
+        // until the stream pauses for the fast period, then announces its last
+        // samples, so a lost last one is still repaired within that period. KEEP_ALL
+        // writers need the acknowledgements to free their window: unchanged.
+        if let (Some(fast), Some(pushed)) = (self.heartbeat_period_fast, self.last_push) {
+          let fast = std::time::Duration::from(fast);
+          let quiet = pushed.elapsed();
+          if quiet < fast && !matches!(self.qos_policies.history, Some(History::KeepAll)) {
+            self.schedule_timed_event(fast - quiet, TimedEvent::Heartbeat);
+            return;
+          }
+        }
         let readers_behind = self.handle_heartbeat_tick(false);
         // ^^ false = This is automatic heartbeat by timer, not manual by application
         // call.
@@ -806,6 +828,7 @@ impl Writer {
       {
         match self.try_send_aggregated_batch(sequence_number, last_available) {
           Some(BatchOutcome::Sent { last_seq }) | Some(BatchOutcome::Dropped { last_seq }) => {
+            self.last_push = Some(std::time::Instant::now());
             // Coalesced samples are multicast-to-all, so per-reader `unsent`
             // bookkeeping is a no-op (notify + mark_sent cancel out); just
             // advance the frontier. Leaves `unsent_changes` empty on the push
@@ -894,6 +917,7 @@ impl Writer {
         };
         match progress {
           SendProgress::Complete => {
+            self.last_push = Some(std::time::Instant::now());
             self.last_sent = sequence_number;
             self.sample_cursor = SampleCursor::Fresh;
             self.send_buffer.set_sent_frontier(sequence_number);
@@ -3169,6 +3193,60 @@ mod tests {
       assert!(f.reader_proxy().repair_frags_requested());
       f.writer.handle_repair_frags_send(reader);
       assert!(!f.reader_proxy().repair_frags_requested());
+    }
+
+    // A KEEP_LAST writer whose samples keep coming (each carries a HEARTBEAT with
+    // the final flag) does not also send its periodic HEARTBEAT, which would only
+    // make every reader acknowledge what it has; once the stream has paused for the
+    // fast period it does, so a lost last sample is still repaired. A KEEP_ALL
+    // writer, which needs the acknowledgements to free its window, sends it at
+    // every tick, as before.
+    #[test]
+    fn a_streaming_keep_last_writer_defers_its_periodic_heartbeat() {
+      for keep_all in [false, true] {
+        let qos = QosPolicyBuilder::new()
+          .reliability(Reliability::Reliable {
+            max_blocking_time: Duration::from_millis(100),
+          })
+          .history(if keep_all {
+            History::KeepAll
+          } else {
+            History::KeepLast { depth: 10 }
+          })
+          .build();
+        let mut f = Fixture::new(
+          EntityId::new([0, 0, 1], EntityKind::WRITER_WITH_KEY_USER_DEFINED),
+          qos.clone(),
+          EntityId::new([0, 0, 2], EntityKind::READER_WITH_KEY_USER_DEFINED),
+          &qos,
+          1,
+          8,
+          Some(SocketAddr::from(([192, 0, 2, 1], 9))),
+        );
+        let heartbeats =
+          |f: &Fixture| f.writer.heartbeat_message_counter.load(atomic::Ordering::Relaxed);
+        f.writer.process_pending(); // the sample goes out, with its HEARTBEAT
+        let streaming = heartbeats(&f);
+        f.writer.handle_timed_event(TimedEvent::Heartbeat);
+        assert_eq!(
+          heartbeats(&f) != streaming,
+          keep_all,
+          "keep_all {keep_all}: a HEARTBEAT at the tick right after a sample"
+        );
+        if keep_all {
+          continue;
+        }
+        // the tick comes again once the stream has paused for the fast period
+        let fast = StdDuration::from(f.writer.heartbeat_period_fast.unwrap());
+        assert!(f
+          .timer
+          .borrow()
+          .next_deadline()
+          .is_some_and(|t| t <= Instant::now() + fast));
+        std::thread::sleep(fast + StdDuration::from_millis(20));
+        f.writer.handle_timed_event(TimedEvent::Heartbeat);
+        assert_ne!(heartbeats(&f), streaming, "no HEARTBEAT after the stream paused");
+      }
     }
 
     // While the reader's send socket has queued control datagrams, a round
