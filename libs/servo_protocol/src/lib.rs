@@ -59,6 +59,11 @@ impl<R: Read> FrameReader<R> {
         Ok(out)
     }
 
+    /// Bytes held since the last read: a partial frame, or the start of one.
+    pub fn buffered(&self) -> usize {
+        self.buf.len()
+    }
+
     /// Bytes still to come before the partial frame held since the last read is whole
     /// (0 when none is held). A reader of a port that delivers bytes one at a time as
     /// they come off the wire (a UART behind a pseudo-terminal, some USB adapters) can
@@ -118,9 +123,11 @@ mod tests {
             OVERHEAD - 1,
             "the start byte alone: at least an empty frame"
         );
+        assert_eq!(r.buffered(), 1);
         for held in 2..state.len() {
             assert!(r.read_frames().unwrap().is_empty());
             assert_eq!(r.missing(), state.len() - held);
+            assert_eq!(r.buffered(), held);
         }
         let frames = r.read_frames().unwrap();
         assert_eq!(frames.len(), 1);
