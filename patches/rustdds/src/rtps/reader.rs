@@ -43,7 +43,9 @@ use crate::{
   polling::{ReadySender, SharedTimer, WakeReceiver},
   rtps::{
     fragment_assembler::FragmentAssembler, message_receiver::MessageReceiverState,
-    rtps_writer_proxy::RtpsWriterProxy, timed_event::DpTimerEvent, Message,
+    rtps_writer_proxy::{NackRepeat, RtpsWriterProxy},
+    timed_event::DpTimerEvent,
+    Message,
   },
   structure::{
     cache_change::{CacheChange, ChangeKind},
@@ -66,7 +68,21 @@ use crate::no_security::SecurityPluginsHandle;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum TimedEvent {
   DeadlineMissedCheck,
+  /// Ask `writer` again for the samples an ACKNACK requested, if they have not come.
+  RepeatNack { writer: GUID },
 }
+
+/// How long after an ACKNACK that requests samples the reader asks again if none came,
+/// doubled for each repetition up to [`NACK_REPEAT_LAST`]. A writer may ignore a
+/// request that comes right after it sent the samples: Fast DDS does for a change it
+/// has not yet marked as sent (UNDERWAY, for up to its `nack_supression_duration`, 0
+/// ms for user writers but on its event thread, 10 ms for discovery writers), and asks
+/// again only with its next periodic HEARTBEAT (3 s, 1 s for discovery). A sample
+/// published right after matching, by a publisher that leaves soon after (`ros2 topic
+/// pub --once`), was so lost about once in 100 under load.
+const NACK_REPEAT_FIRST: std::time::Duration = std::time::Duration::from_millis(25);
+/// The last wait before the request is left to the writer's HEARTBEATs.
+const NACK_REPEAT_LAST: std::time::Duration = std::time::Duration::from_millis(200);
 
 // Some pieces necessary to construct a reader.
 // These can be sent between threads, whereas a Reader cannot.
@@ -324,7 +340,96 @@ impl Reader {
         self.handle_requested_deadline_event();
         self.set_requested_deadline_check_timer(); // re-prime timer
       }
+      TimedEvent::RepeatNack { writer } => self.repeat_nack(writer),
     }
+  }
+
+  /// After an ACKNACK that requested samples: ask again in `wait`, unless a repetition
+  /// is already due.
+  fn arm_nack_repeat(&self, writer_proxy: &mut RtpsWriterProxy, announced_last: SequenceNumber) {
+    let armed = writer_proxy.nack_repeat.is_some();
+    writer_proxy.nack_repeat = Some(NackRepeat {
+      announced_last,
+      wait: writer_proxy
+        .nack_repeat
+        .map_or(NACK_REPEAT_FIRST, |r| r.wait),
+    });
+    if !armed {
+      self.timed_event_timer.borrow_mut().set_timeout(
+        NACK_REPEAT_FIRST,
+        DpTimerEvent::Reader {
+          entity_id: self.my_guid.entity_id,
+          event: TimedEvent::RepeatNack {
+            writer: writer_proxy.remote_writer_guid,
+          },
+        },
+      );
+    }
+  }
+
+  /// Ask `writer` again for what it announced and we still miss (whole samples; a
+  /// partly received one is left to the HEARTBEAT exchange).
+  fn repeat_nack(&mut self, writer: GUID) {
+    if !self.matched_writers.contains_key(&writer) {
+      return; // the writer has gone
+    }
+    self.with_mutable_writer_proxy(writer, |this, writer_proxy| {
+      let Some(repeat) = writer_proxy.nack_repeat else {
+        return;
+      };
+      let missing: Vec<SequenceNumber> = writer_proxy
+        .missing_seqnums(writer_proxy.all_ackable_before(), repeat.announced_last)
+        .into_iter()
+        .filter(|sn| !this.is_frag_partially_received(writer, *sn))
+        .collect();
+      let Some(&first_missing) = missing.first() else {
+        writer_proxy.nack_repeat = None; // all came
+        return;
+      };
+      debug!(
+        "Repeating a request for {} samples from {:?} topic={:?}",
+        missing.len(),
+        writer,
+        this.topic_name
+      );
+      let ack_nack = AckNack {
+        reader_id: this.entity_id(),
+        writer_id: writer.entity_id,
+        reader_sn_state: SequenceNumberSet::from_base_and_set(
+          first_missing,
+          &missing
+            .iter()
+            .copied()
+            .take_while(|sn| sn < &(first_missing + SequenceNumber::new(256)))
+            .collect(),
+        ),
+        count: writer_proxy.next_ack_nack_sequence_number(),
+      };
+      let flags = BitFlags::<ACKNACK_Flags>::from_flag(ACKNACK_Flags::Endianness)
+        | BitFlags::<ACKNACK_Flags>::from_flag(ACKNACK_Flags::Final);
+      this.send_acknack_to(
+        flags,
+        ack_nack,
+        InfoDestination {
+          guid_prefix: writer.prefix,
+        },
+        &writer_proxy.unicast_locator_list,
+        writer,
+      );
+      let wait = repeat.wait * 2;
+      if wait > NACK_REPEAT_LAST {
+        writer_proxy.nack_repeat = None;
+      } else {
+        writer_proxy.nack_repeat = Some(NackRepeat { wait, ..repeat });
+        this.timed_event_timer.borrow_mut().set_timeout(
+          wait,
+          DpTimerEvent::Reader {
+            entity_id: this.my_guid.entity_id,
+            event: TimedEvent::RepeatNack { writer },
+          },
+        );
+      }
+    });
   }
 
   pub fn process_command(&mut self) {
@@ -1067,6 +1172,11 @@ impl Reader {
             reply_locators,
             writer_guid,
           );
+          if missing_seqnums.is_empty() {
+            writer_proxy.nack_repeat = None;
+          } else {
+            this.arm_nack_repeat(writer_proxy, heartbeat.last_sn);
+          }
 
           return true;
         }
@@ -1920,6 +2030,107 @@ mod tests {
       .matched_writer(writer_guid)
       .expect("Did not find a matched writer");
     assert_eq!(writer_proxy.sent_ack_nack_count, 3);
+  }
+
+  // A request for missing samples is repeated, with a fresh count and a doubling
+  // wait, until they come: a writer may ignore one that comes right after it sent
+  // them (Fast DDS, for a change still UNDERWAY), and ask for it again only with its
+  // next periodic HEARTBEAT, seconds later. Once the samples are in, nothing more is
+  // sent; without them the reader stops repeating after NACK_REPEAT_LAST and leaves it
+  // to the writer's HEARTBEATs.
+  #[test]
+  fn a_request_for_missing_samples_is_repeated_until_they_come() {
+    let reliable_qos = QosPolicyBuilder::new()
+      .reliability(Reliability::Reliable {
+        max_blocking_time: Duration::from_millis(100),
+      })
+      .build();
+    let make_reader = |timer: &SharedTimer<DpTimerEvent>| {
+      let dds_cache = Arc::new(RwLock::new(DDSCache::new()));
+      let topic_cache_handle = dds_cache.write().unwrap().add_new_topic(
+        "t".to_string(),
+        TypeDesc::new("test_type".to_string()),
+        &reliable_qos,
+      );
+      let (notification_sender, _notification_receiver) =
+        crate::mio_source::notification_channel(100);
+      let (_notification_event_source, notification_event_sender) =
+        mio_source::make_poll_channel().unwrap();
+      let (status_sender, _status_receiver) =
+        sync_status_channel::<DataReaderStatus>(4).unwrap();
+      let (participant_status_sender, _participant_status_receiver) =
+        sync_status_channel(16).unwrap();
+      let (_reader_command_sender, reader_command_receiver) =
+        wake_channel::<ReaderCommand>(10, &LoopWaker::new());
+      Reader::new(
+        ReaderIngredients {
+          guid: GUID::dummy_test_guid(EntityKind::READER_NO_KEY_USER_DEFINED),
+          notification_sender,
+          status_sender,
+          topic_name: "t".to_string(),
+          topic_cache_handle,
+          like_stateless: false,
+          qos_policy: reliable_qos.clone(),
+          data_reader_command_receiver: reader_command_receiver,
+          data_reader_waker: Arc::new(Mutex::new(None)),
+          poll_event_sender: notification_event_sender,
+          security_plugins: None,
+          discovery_notify: None,
+        },
+        Rc::new(UDPSender::new(0).unwrap()),
+        Rc::clone(timer),
+        participant_status_sender,
+      )
+    };
+    // the reader's timed events due within `window`, handled as the event loop does;
+    // returns how many ACKNACKs they sent
+    let run_timer = |reader: &mut Reader, timer: &SharedTimer<DpTimerEvent>, window: u64| {
+      let before = reader.matched_writers.values().next().unwrap().sent_ack_nack_count;
+      let end = std::time::Instant::now() + std::time::Duration::from_millis(window);
+      while std::time::Instant::now() < end {
+        let fired = timer.borrow_mut().poll();
+        match fired {
+          Some(DpTimerEvent::Reader { event, .. }) => reader.handle_timed_event(event),
+          Some(_) => {}
+          None => std::thread::sleep(std::time::Duration::from_millis(1)),
+        }
+      }
+      reader.matched_writers.values().next().unwrap().sent_ack_nack_count - before
+    };
+    for data_comes in [true, false] {
+      let timer = new_shared_timer();
+      let mut reader = make_reader(&timer);
+      let writer_guid = GUID::dummy_test_guid(EntityKind::WRITER_NO_KEY_USER_DEFINED);
+      let mr_state = MessageReceiverState {
+        source_guid_prefix: writer_guid.prefix,
+        ..Default::default()
+      };
+      reader.matched_writer_add(writer_guid, EntityId::UNKNOWN, vec![], vec![], &reliable_qos);
+      let heartbeat = Heartbeat {
+        reader_id: reader.entity_id(),
+        writer_id: writer_guid.entity_id,
+        first_sn: SequenceNumber::new(1),
+        last_sn: SequenceNumber::new(1),
+        count: 1,
+      };
+      assert!(reader.handle_heartbeat_msg(&heartbeat, false, &mr_state)); // the NACK of SN 1
+      assert_eq!(run_timer(&mut reader, &timer, 40), 1, "asked again after 25 ms");
+      if data_comes {
+        let data = Data {
+          reader_id: reader.entity_id(),
+          writer_id: writer_guid.entity_id,
+          writer_sn: SequenceNumber::new(1),
+          ..Data::default()
+        };
+        reader.handle_data_msg(data, BitFlags::<DATA_Flags>::from_flag(DATA_Flags::Data), &mr_state);
+        assert_eq!(run_timer(&mut reader, &timer, 400), 0, "the sample came: no more requests");
+      } else {
+        // at 75, 175 and 375 ms, then left to the writer
+        assert_eq!(run_timer(&mut reader, &timer, 500), 3);
+        assert_eq!(run_timer(&mut reader, &timer, 300), 0);
+      }
+      assert!(reader.matched_writers.values().next().unwrap().nack_repeat.is_none());
+    }
   }
 
   #[test]

@@ -79,6 +79,19 @@ pub(crate) struct RtpsWriterProxy {
   // These are used for quick tracking of
   last_received_sequence_number: SequenceNumber,
   last_received_timestamp: Timestamp,
+
+  /// A request for missing samples the reader repeats unless they come (see
+  /// `Reader::repeat_nack`); `None` when nothing is pending.
+  pub(crate) nack_repeat: Option<NackRepeat>,
+}
+
+/// What a repeated request asks for, and when.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct NackRepeat {
+  /// The last sequence number the writer had announced when we asked.
+  pub announced_last: SequenceNumber,
+  /// The wait before this repetition.
+  pub wait: std::time::Duration,
 }
 
 impl RtpsWriterProxy {
@@ -102,6 +115,7 @@ impl RtpsWriterProxy {
       ack_base: SequenceNumber::new(1),
       last_received_sequence_number: SequenceNumber::new(0),
       last_received_timestamp: Timestamp::INVALID,
+      nack_repeat: None,
     }
   }
 
@@ -345,6 +359,7 @@ impl RtpsWriterProxy {
       ack_base: SequenceNumber::default(),
       last_received_sequence_number: SequenceNumber::new(0),
       last_received_timestamp: Timestamp::INVALID,
+      nack_repeat: None,
     }
   } // fn
 
