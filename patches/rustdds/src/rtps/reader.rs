@@ -377,8 +377,13 @@ impl Reader {
       let Some(repeat) = writer_proxy.nack_repeat else {
         return;
       };
+      let have_before = writer_proxy.all_ackable_before();
+      if have_before > repeat.announced_last {
+        writer_proxy.nack_repeat = None; // all came (or were declared gone by a GAP)
+        return;
+      }
       let missing: Vec<SequenceNumber> = writer_proxy
-        .missing_seqnums(writer_proxy.all_ackable_before(), repeat.announced_last)
+        .missing_seqnums(have_before, repeat.announced_last)
         .into_iter()
         .filter(|sn| !this.is_frag_partially_received(writer, *sn))
         .collect();
@@ -2116,13 +2121,17 @@ mod tests {
       assert!(reader.handle_heartbeat_msg(&heartbeat, false, &mr_state)); // the NACK of SN 1
       assert_eq!(run_timer(&mut reader, &timer, 40), 1, "asked again after 25 ms");
       if data_comes {
-        let data = Data {
-          reader_id: reader.entity_id(),
-          writer_id: writer_guid.entity_id,
-          writer_sn: SequenceNumber::new(1),
-          ..Data::default()
-        };
-        reader.handle_data_msg(data, BitFlags::<DATA_Flags>::from_flag(DATA_Flags::Data), &mr_state);
+        // the missing sample and newer ones, as from a streaming writer: what the reader
+        // has is then past what the HEARTBEAT announced
+        for sn in 1..=3 {
+          let data = Data {
+            reader_id: reader.entity_id(),
+            writer_id: writer_guid.entity_id,
+            writer_sn: SequenceNumber::new(sn),
+            ..Data::default()
+          };
+          reader.handle_data_msg(data, BitFlags::<DATA_Flags>::from_flag(DATA_Flags::Data), &mr_state);
+        }
         assert_eq!(run_timer(&mut reader, &timer, 400), 0, "the sample came: no more requests");
       } else {
         // at 75, 175 and 375 ms, then left to the writer
