@@ -367,7 +367,10 @@ mod tests {
 
     #[test]
     fn the_reader_waits_for_the_rest_of_a_frame_a_state_when_only_its_start_is_in() {
-        assert_eq!(STATE_FRAME_LEN, servo_protocol::OVERHEAD + MsgType::State.payload_len());
+        assert_eq!(
+            STATE_FRAME_LEN,
+            servo_protocol::OVERHEAD + MsgType::State.payload_len()
+        );
         let state = encode(&Frame {
             seq: 1,
             msg: Message::State {
@@ -389,7 +392,11 @@ mod tests {
         // the start byte: a STATE's 15 more, and a byte's time for the way here
         assert_eq!(rest_of_frame(&r, byte), Some(byte * 16));
         r.read_frames().unwrap();
-        assert_eq!(rest_of_frame(&r, byte), Some(byte * 13), "the length is known");
+        assert_eq!(
+            rest_of_frame(&r, byte),
+            Some(byte * 13),
+            "the length is known"
+        );
         assert_eq!(r.read_frames().unwrap().len(), 1);
         assert_eq!(rest_of_frame(&r, byte), None);
         // never longer than the protocol keeps a partial frame
