@@ -202,6 +202,7 @@ class NodeProcess:
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
+                self.dump_stacks()
                 self.proc.kill()
                 self.proc.wait()
         self.log.close()
@@ -210,6 +211,18 @@ class NodeProcess:
     def output(self):
         self.log.flush()
         return self.log_path.read_text()
+
+    def dump_stacks(self):
+        """A process that ignored the stop signal: append what it is (`info proc`: a
+        binary of ours, or the harness's forked child before exec) and every thread's
+        stack to its log, before it is killed."""
+        self.log.write(f"\n--- did not stop within the timeout; pid {self.proc.pid}:\n")
+        self.log.flush()
+        try:
+            subprocess.run(["gdb", "-p", str(self.proc.pid), "-batch", "-ex", "info proc", "-ex", "thread apply all bt"],
+                           stdout=self.log, stderr=subprocess.STDOUT, timeout=60)
+        except (OSError, subprocess.TimeoutExpired) as e:
+            self.log.write(f"(no stacks: {e})\n")
 
 
 @pytest.fixture

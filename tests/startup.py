@@ -109,7 +109,9 @@ def trial(domain, order="together", hosts=None, deadline=20.0):
         if o is not None:
             o.close()
         if any(c != 0 for c in codes):
-            raise AssertionError(f"nodes did not exit cleanly: {codes}")
+            raise AssertionError(f"nodes did not exit cleanly: {codes}; logs (a node killed after "
+                                 f"ignoring SIGINT has its stacks there): "
+                                 f"{[str(p.log_path) for p, c in zip(procs, codes) if c != 0]}")
 
 
 def run_in_subprocess(domain, order="together", split=False, deadline=20.0):
