@@ -1903,7 +1903,7 @@ impl Discovery {
     // Get writer data from db
     let db = discovery_db_read(&self.discovery_db);
     let writer_data = match db.get_local_topic_writer(guid) {
-      Some(d) => d,
+      Some(d) => d.clone(),
       None => {
         // Removed again before this thread announced it (an endpoint dropped right
         // after it was created, e.g. a node stopping while it starts): nothing to
@@ -1913,15 +1913,25 @@ impl Discovery {
       }
     };
 
+    let existing_readers: Vec<_> = db
+      .readers_on_topic(writer_data.publication_topic_data.topic_name())
+      .into_iter()
+      .cloned()
+      .collect();
+    // Unlocked before publishing and notifying: the notification channel is bounded,
+    // and the event loop that drains it reads the DB. Holding the read lock while
+    // blocked on a full channel deadlocked as soon as another thread (a new endpoint)
+    // queued for the write lock, because a waiting writer keeps new readers out.
+    drop(db);
+
     // Publish it to SEDP (if needed)
-    self.sedp_publish_single_user_writer(writer_data);
+    self.sedp_publish_single_user_writer(&writer_data);
 
     // Send the ReaderUpdated notification on any existing readers on the writer's
     // topic This will result in matching the endpoints if possible
-    let existing_readers = db.readers_on_topic(writer_data.publication_topic_data.topic_name());
     for reader in existing_readers {
       self.send_discovery_notification(DiscoveryNotificationType::ReaderUpdated {
-        discovered_reader_data: reader.clone(),
+        discovered_reader_data: reader,
       });
     }
   }
@@ -1930,7 +1940,7 @@ impl Discovery {
     // Get reader data from db
     let db = discovery_db_read(&self.discovery_db);
     let reader_data = match db.get_local_topic_reader(guid) {
-      Some(d) => d,
+      Some(d) => d.clone(),
       None => {
         // Removed again before this thread announced it (an endpoint dropped right
         // after it was created, e.g. a node stopping while it starts): nothing to
@@ -1940,15 +1950,25 @@ impl Discovery {
       }
     };
 
+    let existing_writers: Vec<_> = db
+      .writers_on_topic(reader_data.subscription_topic_data.topic_name())
+      .into_iter()
+      .cloned()
+      .collect();
+    // Unlocked before publishing and notifying: the notification channel is bounded,
+    // and the event loop that drains it reads the DB. Holding the read lock while
+    // blocked on a full channel deadlocked as soon as another thread (a new endpoint)
+    // queued for the write lock, because a waiting writer keeps new readers out.
+    drop(db);
+
     // Publish it to SEDP (if needed)
-    self.sedp_publish_single_user_reader(reader_data);
+    self.sedp_publish_single_user_reader(&reader_data);
 
     // Send the WriterUpdated notification on any existing writers on the readers's
     // topic This will result in matching the endpoints if possible
-    let existing_writers = db.writers_on_topic(reader_data.subscription_topic_data.topic_name());
     for writer in existing_writers {
       self.send_discovery_notification(DiscoveryNotificationType::WriterUpdated {
-        discovered_writer_data: writer.clone(),
+        discovered_writer_data: writer,
       });
     }
   }
