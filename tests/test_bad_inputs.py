@@ -750,6 +750,7 @@ WS_PROTOCOL_JUNK = [
     ("binary_1mb", lambda: ws_frame(2, bytes(ONE_MB))),
     ("fragmented_1mb", lambda: b"".join(ws_frame(1 if i == 0 else 0, b"z" * (1 << 16), fin=(i == 15)) for i in range(16))),
 ]
+OVER_THE_LIMIT = {"text_1mb", "nested_json_200kb", "binary_1mb", "fragmented_1mb"}
 # Valid framing, junk content: answered `refused`, the connection stays.
 WS_ODD_FRAMING = [
     ("fragmented_60kb", lambda: b"".join(ws_frame(1 if i == 0 else 0, b"z" * 15_000, fin=(i == 3)) for i in range(4))),
@@ -1365,28 +1366,30 @@ def campaign(tmp_path_factory):
         r["ws_protocol"] = []
         for name, make in WS_PROTOCOL_JUNK:
             c = WsClient(g.port, name)
-            try:
-                c.sock.sendall(make())
-            except OSError as e:
-                r["ws_protocol"].append((name, f"send failed: {e}"))
-                continue
-            closed = c.closed.wait(5)
-            r["ws_protocol"].append((name, "closed" if closed else "open", c.close_reason))
-            c.sock.close()
             r["sent"]["ws"] += 1
-        for name, make in WS_ODD_FRAMING:
-            c = WsClient(g.port, name)
             try:
                 c.sock.sendall(make())
             except OSError as e:
                 r["ws_protocol"].append((name, f"send failed: {e!r}", c.close_reason))
+                c.sock.close()
+                continue
+            closed = c.closed.wait(5)
+            r["ws_protocol"].append((name, "closed" if closed else "open", c.close_reason))
+            c.sock.close()
+        for name, make in WS_ODD_FRAMING:
+            c = WsClient(g.port, name)
+            r["sent"]["ws"] += 1
+            try:
+                c.sock.sendall(make())
+            except OSError as e:
+                r["ws_protocol"].append((name, f"send failed: {e!r}", c.close_reason))
+                c.sock.close()
                 continue
             answered = g.wait(lambda: c.answers(), 10)
             answer = c.answers()[0] if answered else None
             r["ws_protocol"].append((name, "refused" if answer and answer.get("t") == "refused" else f"answer {answer}",
                                      c.closed.is_set()))
             c.close()
-            r["sent"]["ws"] += 1
         for name, data in HTTP_JUNK:
             with socket.create_connection(("127.0.0.1", g.port), timeout=5) as s:
                 try:
@@ -1775,6 +1778,12 @@ def test_gui_bridge_survives_protocol_violations_and_junk_descriptions(campaign)
     r = campaign
     assert all(x[1] in ("closed", "http", "refused") for x in r["ws_protocol"]), \
         [x for x in r["ws_protocol"] if x[1] not in ("closed", "http", "refused")]
+    # a message over the 64 KB limit is refused after its header, the rest still on its
+    # way: the close frame with 1009 and the reason reaches the client all the same
+    oversized = {name: reason for name, _, reason in (x for x in r["ws_protocol"] if x[0] in OVER_THE_LIMIT)}
+    assert set(oversized) == OVER_THE_LIMIT and all(
+        isinstance(reason, bytes) and reason[:2] == (1009).to_bytes(2, "big") and b"larger than" in reason
+        for reason in oversized.values()), oversized
     assert all(code is None for _, code in r["descriptions"]), r["descriptions"]
 
 

@@ -6,6 +6,7 @@ pub mod cli;
 pub mod delivery;
 pub mod desk;
 pub mod foxglove;
+pub mod linger;
 pub mod program;
 pub mod record;
 pub mod ros_outputs;

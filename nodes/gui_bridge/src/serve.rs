@@ -1,11 +1,13 @@
 //! `serve` (the default): the web panel, wired to ROS, and the start line with its URL.
 
 use crate::access::{self, AccessPolicy, Token, TokenSource};
+use crate::linger::{self, LingeringListener};
 use crate::ros_outputs::RosOutputs;
 use crate::teleop::Teleop;
 use crate::web::{Limits, WebState};
 use crate::Input;
 use anyhow::Context as _;
+use axum::serve::ListenerExt as _;
 use futures::StreamExt;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{topics, ParameterValue, RosNode};
@@ -109,6 +111,7 @@ pub async fn serve(
     print_panel_urls(local, token.as_ref());
     let server = tokio::spawn(async move {
         let app = crate::web::router(state).into_make_service_with_connect_info::<SocketAddr>();
+        let listener = LingeringListener::new(listener, linger::LINGER).tap_io(|s| s.set_nodelay());
         if let Err(e) = axum::serve(listener, app).await {
             log::error!("web server stopped: {e}");
         }

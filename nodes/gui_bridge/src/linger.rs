@@ -1,0 +1,149 @@
+//! The web server's TCP connections, closed the way HTTP servers close them (a
+//! "lingering close", as Apache and nginx do).
+//!
+//! The server may drop a connection while its client is still sending: a WebSocket
+//! message over the size limit is refused after its frame header, with a close frame
+//! (code 1009 and the reason). A socket closed with unread data in it makes the kernel
+//! answer with a reset, which throws away what the client has not read yet, the close
+//! frame included: the client's send fails (`EPIPE`) and a browser reports 1006
+//! (abnormal closure) instead of the reason. So a dropped connection first sends its
+//! FIN after everything written, then reads and discards what still arrives until
+//! the client closes its side, for at most [`LINGER`]; only then is the socket closed.
+
+use axum::serve::Listener;
+use std::io;
+use std::net::SocketAddr;
+use std::pin::Pin;
+use std::task::{Context, Poll};
+use std::time::Duration;
+use tokio::io::{AsyncRead, AsyncReadExt as _, AsyncWrite, AsyncWriteExt as _, ReadBuf};
+use tokio::net::{TcpListener, TcpStream};
+
+/// How long a dropped connection keeps reading what its client still sends. A 1 MB
+/// message takes 0.4 s at 20 Mbit/s (a slow Wi-Fi link); a client still sending after
+/// this is reset.
+pub const LINGER: Duration = Duration::from_secs(2);
+
+/// A TCP listener whose connections close with a lingering close.
+pub struct LingeringListener {
+    tcp: TcpListener,
+    linger: Duration,
+}
+
+impl LingeringListener {
+    /// Serve the connections of `tcp`; each dropped one reads for at most `linger`.
+    pub fn new(tcp: TcpListener, linger: Duration) -> Self {
+        LingeringListener { tcp, linger }
+    }
+}
+
+impl Listener for LingeringListener {
+    type Io = LingeringStream;
+    type Addr = SocketAddr;
+
+    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
+        let (tcp, from) = Listener::accept(&mut self.tcp).await;
+        let stream = LingeringStream {
+            tcp: Some(tcp),
+            linger: self.linger,
+        };
+        (stream, from)
+    }
+
+    fn local_addr(&self) -> io::Result<Self::Addr> {
+        self.tcp.local_addr()
+    }
+}
+
+/// One accepted connection: a [`TcpStream`] that lingers when dropped.
+pub struct LingeringStream {
+    /// `None` only inside `drop`.
+    tcp: Option<TcpStream>,
+    linger: Duration,
+}
+
+impl LingeringStream {
+    fn tcp(&mut self) -> Pin<&mut TcpStream> {
+        #[allow(clippy::expect_used)] // taken only by `drop`
+        Pin::new(
+            self.tcp
+                .as_mut()
+                .expect("the stream is taken only when dropped"),
+        )
+    }
+
+    /// Send small writes at once (the panel's 50 Hz state messages; no Nagle delay).
+    pub fn set_nodelay(&mut self) {
+        if let Some(tcp) = &self.tcp {
+            if let Err(e) = tcp.set_nodelay(true) {
+                log::debug!("TCP_NODELAY not set: {e}");
+            }
+        }
+    }
+}
+
+impl AsyncRead for LingeringStream {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        self.get_mut().tcp().poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for LingeringStream {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        self.get_mut().tcp().poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        self.get_mut().tcp().poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.tcp.as_ref().is_some_and(|t| t.is_write_vectored())
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        self.get_mut().tcp().poll_flush(cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        self.get_mut().tcp().poll_shutdown(cx)
+    }
+}
+
+impl Drop for LingeringStream {
+    fn drop(&mut self) {
+        let Some(tcp) = self.tcp.take() else { return };
+        // outside a runtime (the server is gone): the socket just closes
+        if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+            runtime.spawn(linger(tcp, self.linger));
+        }
+    }
+}
+
+/// Send FIN after what is queued, then read and discard until the peer's FIN, an
+/// error or `within`; the socket closes when this returns.
+async fn linger(mut tcp: TcpStream, within: Duration) {
+    // fails harmlessly when hyper has shut the write side already
+    let _ = tcp.shutdown().await;
+    let mut sink = [0u8; 16 * 1024];
+    let _ = tokio::time::timeout(within, async {
+        while let Ok(n) = tcp.read(&mut sink).await {
+            if n == 0 {
+                break;
+            }
+        }
+    })
+    .await;
+}
