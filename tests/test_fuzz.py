@@ -49,8 +49,10 @@ def test_a_short_fuzz_run_finds_nothing(fuzzers, target, tmp_path):
 
 
 def test_the_strict_model_finds_no_frame_held_back(fuzzers, tmp_path):
-    """fuzz_firmware_strict: every frame is handled as soon as its last byte is in."""
-    code, out = run_fuzzer(fuzzers, "firmware_strict", 300_000, tmp_path)
+    """fuzz_firmware_strict: every frame is handled as soon as its last byte is in.
+    100,000 runs (about 20 s): the held-back frame this model caught took 19,000-43,000
+    runs to find; `make -C firmware/servo_control fuzz RUNS=1000000` is the soak."""
+    code, out = run_fuzzer(fuzzers, "firmware_strict", 100_000, tmp_path)
     assert code == 0, finding(out)
 
 
