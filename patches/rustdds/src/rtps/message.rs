@@ -278,7 +278,15 @@ impl MessageBuilder {
     match cache_change.data_value {
       DDSData::Data { .. } => (), // data sample, not dispose
 
-      DDSData::DisposeByKey { .. } => {
+      DDSData::DisposeByKey { key_hash, .. } => {
+        // the key hash too, when known: Fast DDS finds the disposed instance only
+        // through it (it ignores a serialized key longer than 16 bytes)
+        if let Some(key_hash) = key_hash {
+          param_list.push(Parameter {
+            parameter_id: ParameterId::PID_KEY_HASH,
+            value: key_hash.to_vec(),
+          });
+        }
         param_list.push(Parameter::create_pid_status_info_parameter(
           /* disposed */ true, /* unregistered */ true, /* filtered */ false,
         ));
@@ -994,5 +1002,91 @@ mod tests {
     let rtps = Message::read_from_buffer(&bits);
     info!("read_from_buffer() --> {rtps:?}");
     // if we get here without panic, the test passes
+  }
+
+  // A dispose carries the key hash in its inline QoS as well as the serialized key:
+  // Fast DDS takes the instance only from the key hash, or from a serialized key of at
+  // most 16 bytes, and a disposed SEDP endpoint's key (PL_CDR, PID_ENDPOINT_GUID) is
+  // 28. Without the hash Fast DDS kept listing a deleted reader of a live participant.
+  #[test]
+  fn a_dispose_by_key_sends_the_key_hash_too() {
+    use crate::{
+      dds::{key::Key, with_key::datawriter::WriteOptions},
+      discovery::sedp_messages::Endpoint_GUID,
+      messages::submessages::elements::{
+        inline_qos::InlineQos, serialized_payload::SerializedPayload,
+      },
+      serialization::pl_cdr_adapters::PlCdrSerialize,
+      structure::{cache_change::ChangeKind, guid::EntityKind},
+      RepresentationIdentifier,
+    };
+
+    let endpoint = GUID::dummy_test_guid(EntityKind::READER_NO_KEY_USER_DEFINED);
+    let key = Endpoint_GUID(endpoint);
+    let serialized_key = SerializedPayload::new_from_bytes(
+      RepresentationIdentifier::PL_CDR_LE,
+      key
+        .to_pl_cdr_bytes(RepresentationIdentifier::PL_CDR_LE)
+        .unwrap(),
+    );
+    assert!(
+      serialized_key.len_serialized() > 16,
+      "a key Fast DDS ignores"
+    );
+    let writer = GUID::dummy_test_guid(EntityKind::WRITER_WITH_KEY_BUILT_IN);
+    let built = |data| {
+      let change = CacheChange::new(
+        writer,
+        SequenceNumber::new(3),
+        WriteOptions::default(),
+        data,
+      );
+      let message = MessageBuilder::new()
+        .data_msg(
+          &change,
+          EntityId::UNKNOWN,
+          writer,
+          Endianness::LittleEndian,
+          None,
+        )
+        .add_header_and_build(writer.prefix);
+      let bytes = Bytes::from(
+        message
+          .write_to_vec_with_ctx(Endianness::LittleEndian)
+          .unwrap(),
+      );
+      let parsed = Message::read_from_buffer(&bytes).unwrap();
+      match &parsed.submessages[0].body {
+        SubmessageBody::Writer(WriterSubmessage::Data(d, flags)) => (d.clone(), *flags),
+        other => panic!("not a DATA: {other:?}"),
+      }
+    };
+
+    let (data, flags) = built(DDSData::new_disposed_by_key_and_hash(
+      ChangeKind::NotAliveDisposed,
+      serialized_key.clone(),
+      key.hash_key(false),
+    ));
+    assert!(flags.contains(DATA_Flags::Key) && flags.contains(DATA_Flags::InlineQos));
+    let qos = data.inline_qos.expect("inline QoS");
+    // the endpoint's GUID itself: what Fast DDS turns back into the GUID to remove
+    let hash = InlineQos::key_hash(&qos).unwrap().expect("PID_KEY_HASH");
+    assert_eq!(hash.to_vec(), endpoint.to_bytes().to_vec());
+    let status = InlineQos::status_info(&qos, RepresentationIdentifier::PL_CDR_LE).unwrap();
+    assert_eq!(status.change_kind(), ChangeKind::NotAliveDisposed);
+    assert!(
+      data.serialized_payload.is_some(),
+      "the serialized key is still sent"
+    );
+
+    // a received dispose, passed on as it came: no key hash is made up
+    let (data, _) = built(DDSData::new_disposed_by_key(
+      ChangeKind::NotAliveDisposed,
+      serialized_key,
+    ));
+    assert_eq!(
+      InlineQos::key_hash(&data.inline_qos.unwrap()).unwrap(),
+      None
+    );
   }
 }
