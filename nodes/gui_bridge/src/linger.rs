@@ -63,13 +63,12 @@ pub struct LingeringStream {
 }
 
 impl LingeringStream {
-    fn tcp(&mut self) -> Pin<&mut TcpStream> {
-        #[allow(clippy::expect_used)] // taken only by `drop`
-        Pin::new(
-            self.tcp
-                .as_mut()
-                .expect("the stream is taken only when dropped"),
-        )
+    /// The stream; gone only inside `drop`, where nothing polls it any more.
+    fn tcp(&mut self) -> io::Result<Pin<&mut TcpStream>> {
+        self.tcp
+            .as_mut()
+            .map(Pin::new)
+            .ok_or_else(|| io::ErrorKind::NotConnected.into())
     }
 
     /// Send small writes at once (the panel's 50 Hz state messages; no Nagle delay).
@@ -88,7 +87,7 @@ impl AsyncRead for LingeringStream {
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        self.get_mut().tcp().poll_read(cx, buf)
+        self.get_mut().tcp()?.poll_read(cx, buf)
     }
 }
 
@@ -98,7 +97,7 @@ impl AsyncWrite for LingeringStream {
         cx: &mut Context<'_>,
         buf: &[u8],
     ) -> Poll<io::Result<usize>> {
-        self.get_mut().tcp().poll_write(cx, buf)
+        self.get_mut().tcp()?.poll_write(cx, buf)
     }
 
     fn poll_write_vectored(
@@ -106,7 +105,7 @@ impl AsyncWrite for LingeringStream {
         cx: &mut Context<'_>,
         bufs: &[io::IoSlice<'_>],
     ) -> Poll<io::Result<usize>> {
-        self.get_mut().tcp().poll_write_vectored(cx, bufs)
+        self.get_mut().tcp()?.poll_write_vectored(cx, bufs)
     }
 
     fn is_write_vectored(&self) -> bool {
@@ -114,11 +113,11 @@ impl AsyncWrite for LingeringStream {
     }
 
     fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        self.get_mut().tcp().poll_flush(cx)
+        self.get_mut().tcp()?.poll_flush(cx)
     }
 
     fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        self.get_mut().tcp().poll_shutdown(cx)
+        self.get_mut().tcp()?.poll_shutdown(cx)
     }
 }
 
