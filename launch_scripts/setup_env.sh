@@ -8,8 +8,12 @@ _here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 _log() { echo "[setup] $*" >&2; }
 
 # Debian packages: the AVR toolchain and Arduino core for the firmware, simavr for its
-# tests, Chromium for the browser tests of the web panel.
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev}
+# tests, Chromium for the browser tests of the web panel; for DDS Security (SROS2):
+# OpenSSL's headers and pkg-config (the nodes' `security` build), Debian's Fast DDS 2.9
+# with its security plugins plus g++ (tests/interop/sros2_peer, the secured interop
+# peer: the PyPI Fast DDS and Cyclone wheels are built without security) and tcpdump
+# (the wire captures of tests/test_security.py).
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump}
 _missing=()
 for p in $EEZYBOT_APT_PACKAGES; do
   dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
