@@ -86,6 +86,7 @@ class SecurePeer:
         if netns:
             argv = ["ip", "netns", "exec", netns, *argv]
         self.lines = []  # (monotonic time, line)
+        self.published = []  # (topic, payload) in the order written
         self._cv = threading.Condition()
         self.proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.err,
                                      text=True, bufsize=1)
@@ -150,6 +151,7 @@ class SecurePeer:
     def publish(self, topic, payload):
         self.proc.stdin.write(f"{dds_topic(topic)} {bytes(payload).hex()}\n")
         self.proc.stdin.flush()
+        self.published.append((topic, bytes(payload)))
 
     def close(self, timeout=10):
         """EOF on stdin ends it: its exit status."""
@@ -357,3 +359,111 @@ class Capture:
         """How many packets tcpdump says it captured."""
         m = re.search(r"(\d+) packets captured", self.path.with_suffix(".log").read_text())
         return int(m.group(1)) if m else None
+
+
+# ---------------------------------------------------------------------------------------
+# a graph across two hosts, secured or not
+
+# ROBOT.md, written out again so the test does not trust the code under test
+# (test_two_hosts.py and test_compute_ik.py do the same).
+H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
+
+
+def servo_deg(x, y, z):
+    """The servo horn angles (degrees) of base, main arm and forearm at rest at (x, y, z):
+    ROBOT.md's closed-form IK and default servo mapping."""
+    import math
+
+    base = math.atan2(y, x)
+    r, h = math.hypot(x, y) - TOOL_DX, z - H
+    s2 = r * r + h * h
+    cos_e = (s2 - L2 * L2 - L3 * L3) / (2 * L2 * L3)
+    sin_e = -math.sqrt(((L2 + L3) ** 2 - s2) * (s2 - (L2 - L3) ** 2)) / (2 * L2 * L3)
+    elbow = math.atan2(sin_e, cos_e)
+    shoulder = math.atan2(h, r) - math.atan2(L3 * sin_e, L2 + L3 * cos_e)
+    d = math.degrees
+    return [90 - 2 * d(base), 180 - d(shoulder), 90 + d(shoulder + elbow)]
+
+
+class SecureGraph:
+    """compute_ik in namespace hosts.pc and serial_node (port:=mock) in hosts.pi, each
+    under its enclave of `keystore` given with `--ros-args --enclave` (or with no
+    security at all when keystore is None)."""
+
+    def __init__(self, hosts, domain, keystore=None, pc_enclave="/eezybot/pc", pi_enclave="/eezybot/pi"):
+        from conftest import NodeProcess
+
+        self.hosts, self.domain, self.keystore = hosts, domain, keystore
+        env = security_env(keystore) if keystore is not None else dict(NO_SECURITY)
+        ik_args = ["--ros-args", "--enclave", pc_enclave] if keystore is not None else []
+        serial_args = ["--ros-args", "-p", "port:=mock"] + (["--enclave", pi_enclave] if keystore is not None else [])
+        self.procs = []
+        self.ik = NodeProcess("compute_ik", ik_args, domain, env=env, netns=hosts.pc)
+        self.procs.append(self.ik)
+        self.serial = NodeProcess("serial_node", serial_args, domain, env=env, netns=hosts.pi)
+        self.procs.append(self.serial)
+
+    def operator(self, netns=None, enclave="default", pubs=("xyz_target",), subs=("servo_angles", "servo_state"),
+                 name="operator"):
+        """A SecurePeer under the pc enclave of the graph's keystore (or plain when the
+        graph is), in `netns` (default: the pc host)."""
+        if enclave == "default":
+            enclave = self.keystore.enclave("/eezybot/pc") if self.keystore is not None else None
+        return SecurePeer(self.domain, enclave=enclave, pubs=pubs, subs=subs,
+                          netns=self.hosts.pc if netns is None else netns, name=name)
+
+    def logs_tail(self, n=15):
+        out = []
+        for p in self.procs:
+            lines = p.output().splitlines()
+            out.append(f"--- {p.name} (last {n} lines)\n" + "\n".join(lines[-n:]))
+        return "\n".join(out)
+
+    def close(self):
+        """Stops the nodes (SIGINT): {name: exit status}."""
+        return {p.name: p.stop() for p in self.procs}
+
+
+def drive(peer, xyz, timeout=20.0, period=0.5):
+    """Publish a target stamped now every `period` until serial_node's servo_state
+    answers one of them (serial_node copies the command's stamp): returns
+    (sent stamps, the answered stamp) or (sent, None) after the timeout."""
+    sent = []
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        payload, st = point_target(*xyz)
+        peer.publish("xyz_target", payload)
+        sent.append(st)
+        if peer.wait(lambda: _answered(peer, sent), period):
+            return sent, _answered(peer, sent)
+    return sent, _answered(peer, sent)
+
+
+def _answered(peer, sent):
+    wanted = set(sent)
+    for _, payload in peer.received("servo_state"):
+        st = stamp(joint_state(payload))
+        if st in wanted:
+            return st
+    return None
+
+
+def wait_at_rest(peer, topic="servo_state", quiet=0.5, timeout=10.0):
+    """Until `topic`'s positions have not changed for `quiet` s (repeats of the same
+    state, as a heartbeat sends, count as no change): its last message, or None if none
+    came."""
+    end = time.monotonic() + timeout
+    while True:
+        got = [(t, joint_state(p)) for t, p in peer.received(topic)]
+        if got:
+            last = tuple(got[-1][1].position)
+            since = got[-1][0]
+            for t, m in reversed(got):
+                if tuple(m.position) != last:
+                    break
+                since = t
+            if time.monotonic() - since >= quiet:
+                return got[-1][1]
+        if time.monotonic() >= end:
+            return got[-1][1] if got else None
+        time.sleep(quiet / 4)
