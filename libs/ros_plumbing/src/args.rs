@@ -50,6 +50,9 @@ pub struct RosArgs {
     pub rosout_logs: Option<bool>,
     /// `--disable-stdout-logs` sets this to false (our logs go to stderr, as rcutils' do).
     pub stdout_logs: Option<bool>,
+    /// `--enclave /NAME` (or `-e /NAME`): the SROS2 enclave, a directory under the
+    /// keystore's `enclaves/` ([`crate::security`]).
+    pub enclave: Option<String>,
 }
 
 /// Split a program's arguments (without argv\[0\]) into the program's own and the ROS ones.
@@ -108,11 +111,12 @@ pub fn parse(
             "--enable-stdout-logs" => ros.stdout_logs = Some(true),
             "--disable-stdout-logs" => ros.stdout_logs = Some(false),
             "--enable-external-lib-logs" | "--disable-external-lib-logs" => {}
+            "-e" | "--enclave" => ros.enclave = Some(value_of(&arg)?),
             other => {
                 return Err(PlumbingError::BadArgument {
                     arg: other.to_string(),
                     why: "unknown ROS argument (supported: -r/--remap, -p/--param, --params-file, --log-level, \
-                          --enable/--disable-rosout-logs, --enable/--disable-stdout-logs)"
+                          --enable/--disable-rosout-logs, --enable/--disable-stdout-logs, -e/--enclave)"
                         .into(),
                 })
             }

@@ -44,6 +44,10 @@ pub enum PlumbingError {
         /// what is wrong
         why: String,
     },
+    /// SROS2 is on but cannot be used (under `ROS_SECURITY_STRATEGY=Enforce`), or
+    /// access control refused an endpoint.
+    #[error("security: {0}")]
+    Security(#[from] crate::security::SecurityError),
     /// ros2-client refused to create something.
     #[error("ROS 2: {0}")]
     Ros(String),

@@ -13,6 +13,7 @@ pub mod peers;
 pub mod publisher;
 pub mod qos;
 pub mod remote_params;
+pub mod security;
 pub mod topics;
 
 pub use error::PlumbingError;

@@ -8,6 +8,7 @@ use crate::logging;
 use crate::names::Resolver;
 use crate::params::{self, ParamSpec, Params};
 use crate::publisher::TopicPublisher;
+use crate::security::{self, SecurityEnv, SecurityError, SecurityPlan, Strategy};
 use crate::topics::{self, Topic};
 use eezybot_msgs::RosMessage;
 use ros2_client::{
@@ -29,10 +30,13 @@ pub struct NodeSpec {
 
 /// The ROS arguments every node takes, as `--help` shows them.
 pub const ROS_ARGS_USAGE: &str = "--ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] \
-     [-p NAME:=VALUE] [--params-file FILE] [--log-level LEVEL]";
+     [-p NAME:=VALUE] [--params-file FILE] [--log-level LEVEL] [--enclave /NAME]";
 
 /// The environment every node reads, as `--help` shows it.
-pub const ENVIRONMENT_HELP: &str = "ROS_DOMAIN_ID (0..232, default 0)";
+pub const ENVIRONMENT_HELP: &str = "ROS_DOMAIN_ID (0..232, default 0); SROS2: \
+     ROS_SECURITY_ENABLE (true: on), ROS_SECURITY_STRATEGY (Enforce | Permissive), \
+     ROS_SECURITY_KEYSTORE (keystore directory), ROS_SECURITY_ENCLAVE_OVERRIDE (instead of \
+     --enclave)";
 
 impl NodeSpec {
     /// The text `--help` prints.
@@ -94,6 +98,66 @@ pub fn domain_id_from_env(value: Option<&str>) -> Result<u16, PlumbingError> {
     }
 }
 
+/// Builds the node's DDS participant, secured with the enclave of `plan` if given.
+fn build_participant(
+    domain_id: u16,
+    plan: Option<&SecurityPlan>,
+) -> Result<rustdds::DomainParticipant, PlumbingError> {
+    // User data by unicast only, as Fast DDS does by default: with the multicast
+    // group advertised, a Fast DDS writer (rclpy's xyz_target) sent every sample to
+    // the group too, and every other node on the host, or across the Wi-Fi link,
+    // woke to parse and drop it (patches/README.md, rustdds entry 15).
+    let mut builder = rustdds::DomainParticipantBuilder::new(domain_id)
+        .spdp_publish_period(SPDP_PUBLISH_PERIOD)
+        .user_traffic_multicast(false);
+    if let Some(plan) = plan {
+        builder = builder.builtin_security(security::participant_files(plan));
+    }
+    builder
+        .build()
+        .map_err(|e| PlumbingError::Ros(format!("cannot create the DDS participant: {e}")))
+}
+
+/// rcl's security rules ([`crate::security`]): `None` runs unsecured (security off,
+/// or Permissive with an unusable enclave, after a warning); under Enforce an unusable
+/// enclave is an error naming the file.
+fn security_plan(
+    env: &SecurityEnv,
+    enclave_arg: Option<&str>,
+) -> Result<Option<SecurityPlan>, PlumbingError> {
+    let checked = env.plan(enclave_arg).and_then(|plan| match plan {
+        None => Ok(None),
+        Some(plan) => {
+            let keystore = std::path::PathBuf::from(env.keystore.clone().unwrap_or_default());
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX));
+            security::check_enclave(&plan, &keystore, now)
+                .map(|()| Some(plan.clone()))
+                .map_err(|e| (plan.strategy, e))
+        }
+    });
+    match checked {
+        Ok(Some(plan)) => {
+            log::info!(
+                "security: on, enclave {} ({}), strategy {}",
+                plan.enclave,
+                plan.dir.display(),
+                plan.strategy
+            );
+            Ok(Some(plan))
+        }
+        Ok(None) => Ok(None),
+        Err((Strategy::Enforce, e)) => Err(e.into()),
+        Err((Strategy::Permissive, e)) => {
+            log::warn!(
+                "security: {e}; ROS_SECURITY_STRATEGY is not Enforce: running WITHOUT security"
+            );
+            Ok(None)
+        }
+    }
+}
+
 /// A running node: the ros2-client node (spinner started), its name resolver and
 /// its parameters.
 pub struct RosNode {
@@ -102,6 +166,8 @@ pub struct RosNode {
     params: Params,
     user_args: Vec<String>,
     domain_id: u16,
+    /// The SROS2 enclave in use, `None` when unsecured.
+    enclave: Option<String>,
     spinner: Option<tokio::task::JoinHandle<()>>,
     // Dropped last: the DDS participant outlives the node's entities.
     _context: Context,
@@ -192,15 +258,26 @@ impl RosNode {
             Ok(())
         }));
 
-        // User data by unicast only, as Fast DDS does by default: with the multicast
-        // group advertised, a Fast DDS writer (rclpy's xyz_target) sent every sample to
-        // the group too, and every other node on the host, or across the Wi-Fi link,
-        // woke to parse and drop it (patches/README.md, rustdds entry 15).
-        let participant = rustdds::DomainParticipantBuilder::new(domain_id)
-            .spdp_publish_period(SPDP_PUBLISH_PERIOD)
-            .user_traffic_multicast(false)
-            .build()
-            .map_err(|e| PlumbingError::Ros(format!("cannot create the DDS participant: {e:?}")))?;
+        let plan = security_plan(&SecurityEnv::from_env(), ros.enclave.as_deref())?;
+        let participant = build_participant(domain_id, plan.as_ref());
+        let (participant, enclave) = match (participant, &plan) {
+            (Ok(p), plan) => (p, plan.as_ref().map(|p| p.enclave.clone())),
+            (Err(e), Some(plan)) => {
+                let refused = SecurityError::Refused {
+                    dir: plan.dir.clone(),
+                    why: e.to_string(),
+                };
+                if plan.strategy == Strategy::Enforce {
+                    return Err(refused.into());
+                }
+                log::warn!(
+                    "security: {refused}; ROS_SECURITY_STRATEGY is not Enforce: running WITHOUT \
+                     security"
+                );
+                (build_participant(domain_id, None)?, None)
+            }
+            (Err(e), None) => return Err(e),
+        };
         let context = Context::from_domain_participant(participant)
             .map_err(|e| PlumbingError::Ros(format!("cannot create the ROS context: {e:?}")))?;
         let node_name =
@@ -244,6 +321,7 @@ impl RosNode {
             params,
             user_args,
             domain_id,
+            enclave,
             spinner: Some(spinner),
             _context: context,
         })
@@ -318,6 +396,34 @@ impl RosNode {
         Ok((resolved, t))
     }
 
+    /// The SROS2 enclave this node runs in, `None` when unsecured.
+    pub fn enclave(&self) -> Option<&str> {
+        self.enclave.as_deref()
+    }
+
+    fn endpoint_error(
+        &self,
+        action: &'static str,
+        topic: String,
+        e: ros2_client::CreateError,
+    ) -> PlumbingError {
+        // ros2-client folds RustDDS' NotAllowedBySecurity into Middleware with this prefix
+        const DENIED: &str = "not allowed by security: ";
+        match e {
+            ros2_client::CreateError::Middleware { reason } if reason.starts_with(DENIED) => {
+                let reason = reason[DENIED.len()..].to_string();
+                SecurityError::Denied {
+                    action,
+                    topic,
+                    enclave: self.enclave.clone().unwrap_or_else(|| "/".into()),
+                    why: reason,
+                }
+                .into()
+            }
+            e => PlumbingError::Ros(format!("cannot {action} {topic}: {e:?}")),
+        }
+    }
+
     /// A publisher on `topic` (expanded in the node's namespace and remapped).
     pub fn publisher<M: RosMessage>(
         &mut self,
@@ -327,7 +433,7 @@ impl RosNode {
         let (resolved, t) = self.topic::<M>(topic, &qos)?;
         self.node
             .create_publisher::<M>(&t, Some(qos))
-            .map_err(|e| PlumbingError::Ros(format!("cannot publish on {resolved}: {e:?}")))
+            .map_err(|e| self.endpoint_error("publish on", resolved, e))
     }
 
     /// A subscription to `topic` (expanded in the node's namespace and remapped).
@@ -339,7 +445,7 @@ impl RosNode {
         let (resolved, t) = self.topic::<M>(topic, &qos)?;
         self.node
             .create_subscription::<M>(&t, Some(qos))
-            .map_err(|e| PlumbingError::Ros(format!("cannot subscribe to {resolved}: {e:?}")))
+            .map_err(|e| self.endpoint_error("subscribe to", resolved, e))
     }
 
     /// A publisher on a topic of the contract, with its name, type and QoS (expanded
