@@ -23,14 +23,14 @@
 //! use ros_plumbing::sros2::{permissions_xml, Domains, Grant, Role, Validity};
 //! let grant = Grant {
 //!     enclave: "/eezybot/pi".into(),
-//!     nodes: Role::Pi.nodes().iter().map(|n| n.to_string()).collect(),
+//!     role: Role::Pi,
 //!     namespace: "/".into(),
 //!     validity: Validity::new("2026-11-24T00:00:00", "2036-11-22T00:00:00").unwrap(),
 //!     domains: Domains::All,
 //! };
 //! let xml = permissions_xml(&grant).unwrap();
 //! assert!(xml.contains("<subject_name>CN=/eezybot/pi</subject_name>"));
-//! let rules = ros_plumbing::sros2::rules(&grant.nodes, &grant.namespace).unwrap();
+//! let rules = Role::Pi.rules("/").unwrap();
 //! assert!(rules.publish.contains("rt/servo_state"));
 //! assert!(!rules.publish.contains("rt/xyz_target"));
 //! ```
@@ -130,31 +130,56 @@ pub const GRAPH_PUBLISH: &[&str] = &["ros_discovery_info", "rt/parameter_events"
 /// See [`GRAPH_PUBLISH`].
 pub const GRAPH_SUBSCRIBE: &[&str] = &["ros_discovery_info", "rt/parameter_events", "rt/clock"];
 
-/// Which machine an enclave is for: it decides the enclave's nodes.
+/// What an enclave is for: it decides what its permissions allow.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Role {
-    /// The operator's PC: gui_bridge, compute_ik, state_publisher.
+    /// The operator's PC: what gui_bridge, compute_ik and state_publisher use.
     Pc,
-    /// The Raspberry Pi: serial_node.
+    /// The Raspberry Pi: what serial_node uses.
     Pi,
+    /// Stock ROS 2 tools (`ros2 topic echo`, `ros2 param set`, RViz2) on an operator's
+    /// machine: every contract topic published and subscribed, `/rosout` read, and every
+    /// service (`rq/*`, `rr/*`: a tool's node has a random name and parameter services
+    /// of its own, and `ros2 param` calls any node's).
+    Tools,
 }
 
 impl Role {
-    /// `pc` or `pi`.
+    /// `pc`, `pi` or `tools`.
     pub fn parse(s: &str) -> Option<Role> {
         match s {
             "pc" => Some(Role::Pc),
             "pi" => Some(Role::Pi),
+            "tools" => Some(Role::Tools),
             _ => None,
         }
     }
 
-    /// The nodes of this role.
+    /// Our nodes that run under this role (none for tools).
     pub fn nodes(self) -> &'static [&'static str] {
         match self {
             Role::Pc => PC_NODES,
             Role::Pi => PI_NODES,
+            Role::Tools => &[],
         }
+    }
+
+    /// What an enclave of this role in `namespace` may publish and subscribe.
+    pub fn rules(self, namespace: &str) -> Result<Rules, Sros2Error> {
+        let mut r = rules(self.nodes(), namespace)?;
+        if self == Role::Tools {
+            for t in topics::all() {
+                let dds = format!("rt/{}", in_namespace(namespace, t.name));
+                r.publish.insert(dds.clone());
+                r.subscribe.insert(dds);
+            }
+            for pattern in ["rq/*", "rr/*"] {
+                r.publish.insert(pattern.to_string());
+                r.subscribe.insert(pattern.to_string());
+            }
+            r.subscribe.insert("rt/rosout".to_string());
+        }
+        Ok(r)
     }
 
     /// The role of an enclave when none is given: the Pi's for `/eezybot/pi`, the
@@ -480,14 +505,14 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
     Ok(r)
 }
 
-/// One enclave's grant: who (`enclave`, the certificate's `CN`), which nodes in which
+/// One enclave's grant: who (`enclave`, the certificate's `CN`), for what in which
 /// namespace, when and in which domains.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Grant {
     /// The enclave path, also the subject `CN=<enclave>` of its certificate.
     pub enclave: String,
-    /// The nodes that run in it (`serial_node`).
-    pub nodes: Vec<String>,
+    /// What runs in it.
+    pub role: Role,
     /// Their namespace (`/`, or `/arm2` for `-r __ns:=/arm2`).
     pub namespace: String,
     /// The validity of the grant (sros2: the enclave certificate's).
@@ -551,7 +576,7 @@ fn topics_block(out: &mut String, what: &str, names: &BTreeSet<String>) {
 /// <subscribe>…</subscribe></allow_rule><default>DENY</default></grant></permissions></dds>`.
 pub fn permissions_xml(grant: &Grant) -> Result<String, Sros2Error> {
     check_enclave(&grant.enclave)?;
-    let r = rules(&grant.nodes, &grant.namespace)?;
+    let r = grant.role.rules(&grant.namespace)?;
     let enclave = xml_escape(&grant.enclave);
     let mut out = String::from(
         "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<dds xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd\">\n  <permissions>\n",
@@ -578,7 +603,7 @@ mod tests {
     fn grant(enclave: &str, role: Role, ns: &str) -> Grant {
         Grant {
             enclave: enclave.into(),
-            nodes: role.nodes().iter().map(|n| n.to_string()).collect(),
+            role,
             namespace: ns.into(),
             validity: Validity::new("2026-11-24T00:08:48", "2036-11-22T00:08:48").unwrap(),
             domains: Domains::All,
@@ -853,11 +878,34 @@ mod tests {
     }
 
     #[test]
+    fn tools_may_use_every_topic_and_service_but_are_still_denied_the_rest() {
+        let r = Role::Tools.rules("/arm2").unwrap();
+        for t in topics::all() {
+            let dds = format!("rt/arm2/{}", t.name);
+            assert!(
+                r.publish.contains(&dds) && r.subscribe.contains(&dds),
+                "{dds}"
+            );
+        }
+        assert!(r.subscribe.contains("rt/rosout") && r.publish.contains("rt/rosout"));
+        assert!(r.publish.contains("rq/*") && r.subscribe.contains("rr/*"));
+        assert!(!r.publish.contains("*") && !r.publish.contains("rt/*"));
+        assert!(
+            !r.publish.contains("rt/xyz_target"),
+            "not outside its namespace"
+        );
+        let xml = permissions_xml(&grant("/eezybot/tools", Role::Tools, "/")).unwrap();
+        assert!(xml.contains("<topic>rt/pose_target</topic>"));
+        assert!(xml.contains("<default>DENY</default>"));
+    }
+
+    #[test]
     fn roles() {
         assert_eq!(Role::of_enclave("/eezybot/pi"), Role::Pi);
         assert_eq!(Role::of_enclave("/eezybot/pc"), Role::Pc);
         assert_eq!(Role::of_enclave("/eezybot/pc2"), Role::Pc);
         assert_eq!(Role::parse("pi"), Some(Role::Pi));
+        assert_eq!(Role::parse("tools"), Some(Role::Tools));
         assert_eq!(Role::parse("PC"), None);
     }
 

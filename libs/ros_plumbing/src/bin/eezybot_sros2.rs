@@ -14,9 +14,9 @@ contract (libs/ros_plumbing/src/topics.rs), printed on stdout.
 
 usage:
   eezybot_sros2 governance [--domain N]
-  eezybot_sros2 permissions --enclave PATH [--role pc|pi] [--namespace NS] [--domain N]
+  eezybot_sros2 permissions --enclave PATH [--role pc|pi|tools] [--namespace NS] [--domain N]
                             [--cert CERT.PEM | --not-before T --not-after T]
-  eezybot_sros2 topics --enclave PATH [--role pc|pi] [--namespace NS]
+  eezybot_sros2 topics --enclave PATH [--role pc|pi|tools] [--namespace NS]
 
   governance    sros2's default governance: authentication required, discovery,
                 liveliness and data encrypted, RTPS signed, access control on every topic
@@ -27,8 +27,11 @@ usage:
 
 options:
   --enclave PATH   the enclave (/eezybot/pc, /eezybot/pi, /eezybot/tools ...)
-  --role pc|pi     whose nodes: pc = gui_bridge, compute_ik, state_publisher;
-                   pi = serial_node (default: pi for /eezybot/pi, else pc)
+  --role pc|pi|tools
+                   what runs in it: pc = gui_bridge, compute_ik, state_publisher;
+                   pi = serial_node; tools = stock ROS 2 tools (every contract topic
+                   both ways, /rosout, every service) (default: pi for /eezybot/pi,
+                   else pc)
   --namespace NS   the nodes' namespace, for -r __ns:=NS (default /)
   --domain N       only ROS domain N (default: every domain, 0 ... 232)
   --cert FILE      the enclave's certificate: the grant's validity is its validity
@@ -79,7 +82,7 @@ fn parse_options(args: &[String]) -> Result<Options, Failure> {
                 let v = value()?;
                 o.role = Some(
                     Role::parse(&v)
-                        .ok_or_else(|| Failure::Usage(format!("--role {v}: pc or pi")))?,
+                        .ok_or_else(|| Failure::Usage(format!("--role {v}: pc, pi or tools")))?,
                 );
             }
             "--namespace" => o.namespace = Some(value()?),
@@ -162,7 +165,7 @@ fn grant(o: &Options) -> Result<Grant, Failure> {
     let role = o.role.unwrap_or_else(|| Role::of_enclave(&enclave));
     let validity = validity(o, &enclave)?;
     Ok(Grant {
-        nodes: role.nodes().iter().map(|n| n.to_string()).collect(),
+        role,
         enclave,
         namespace,
         validity,
@@ -192,8 +195,10 @@ fn run(args: &[String]) -> Result<String, Failure> {
         "topics" => {
             let o = parse_options(rest)?;
             let g = grant(&o)?;
-            let r =
-                sros2::rules(&g.nodes, &g.namespace).map_err(|e| Failure::Usage(e.to_string()))?;
+            let r = g
+                .role
+                .rules(&g.namespace)
+                .map_err(|e| Failure::Usage(e.to_string()))?;
             let mut out = String::new();
             for t in &r.publish {
                 out.push_str(&format!("publish {t}\n"));

@@ -1,0 +1,238 @@
+#!/usr/bin/env bash
+# An SROS2 keystore for the EezyBot graph, without a ROS install: the layout and file
+# names of `ros2 security create_keystore` / `create_enclave`, made with the openssl
+# command and `eezybot_sros2` (the policy documents, generated from the topic contract).
+#
+#   launch_scripts/keystore.sh DIR                       CA, governance, /eezybot/pc, /eezybot/pi
+#   launch_scripts/keystore.sh DIR --enclave /eezybot/pc2   one more enclave (e.g. a second PC)
+#
+# Options:
+#   --enclave PATH    make this enclave (repeatable) instead of /eezybot/pc and /eezybot/pi
+#   --role pc|pi|tools  the permissions of the --enclave ones: pc = what gui_bridge,
+#                     compute_ik and state_publisher use (the operator PC: a second PC);
+#                     pi = what serial_node uses; tools = for stock ROS 2 tools (`ros2
+#                     topic echo`, `ros2 param set`, RViz2): every topic of the contract
+#                     both ways, /rosout, every service. Default: pi for /eezybot/pi, pc
+#                     for any other enclave.
+#   --namespace NS    the nodes run with -r __ns:=NS (their topics are rt/NS/...)
+#   --domain N        only ROS domain N in the governance and permissions (default: every
+#                     domain, 0 ... 232)
+#   --renew           rewrite and re-sign the permissions of the enclaves concerned (and the
+#                     governance), from the current topic contract and options; their
+#                     keys and certificates are kept
+#   -h, --help        this text
+#
+# Running it again keeps what exists: the CA, the governance and every enclave's key,
+# certificate and permissions (use --renew for new permissions). Keys are mode 0600 in
+# directories only the owner can enter (private/, each enclave).
+#
+# Layout (as sros2 makes it; the *_ca files are symbolic links, as sros2's):
+#   public/ca.cert.pem, identity_ca.cert.pem -> ca.cert.pem, permissions_ca.cert.pem -> ca.cert.pem
+#   private/ca.key.pem, identity_ca.key.pem -> ca.key.pem, permissions_ca.key.pem -> ca.key.pem
+#   enclaves/governance.xml, governance.p7s
+#   enclaves/eezybot/pi/cert.pem key.pem permissions.xml permissions.p7s
+#                      identity_ca.cert.pem permissions_ca.cert.pem governance.p7s (links)
+# Certificates: EC prime256v1 keys, SHA-256, CA subject CN=sros2CA, enclave subject
+# CN=<enclave path>, valid from a day ago (a clock a little behind still accepts them)
+# for ten years. Documents S/MIME-signed by the CA (openssl smime -sign -text).
+#
+# Exit status: 0 done, 1 a step failed, 2 usage error.
+set -euo pipefail
+EEZYBOT_SCRIPT=keystore.sh
+. "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+# no nodes here: lib.sh's signal handling is for them
+trap 'exit 130' INT
+trap 'exit 143' TERM
+trap - EXIT
+
+usage() { sed -n '2,/^# Exit status/s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; }
+bad_usage() {
+  eezybot_say "$*"
+  eezybot_say "usage: keystore.sh DIR [--enclave PATH]... [--role pc|pi|tools] [--namespace NS] [--domain N] [--renew] (--help)"
+  exit 2
+}
+
+DIR=""
+ENCLAVES=()
+ROLE=""
+NAMESPACE=/
+DOMAIN=""
+RENEW=0
+need_value() { [ $# -ge 2 ] && [ -n "$2" ] || bad_usage "$1 needs a value"; }
+while [ $# -gt 0 ]; do
+  case "$1" in
+    -h|--help) usage; exit 0 ;;
+    --enclave|-e) need_value "$@"; ENCLAVES+=("$2"); shift 2 ;;
+    --enclave=*) ENCLAVES+=("${1#*=}"); shift ;;
+    --role) need_value "$@"; ROLE=$2; shift 2 ;;
+    --role=*) ROLE=${1#*=}; shift ;;
+    --namespace) need_value "$@"; NAMESPACE=$2; shift 2 ;;
+    --namespace=*) NAMESPACE=${1#*=}; shift ;;
+    --domain) need_value "$@"; DOMAIN=$2; shift 2 ;;
+    --domain=*) DOMAIN=${1#*=}; shift ;;
+    --renew) RENEW=1; shift ;;
+    -*) bad_usage "unknown option $1" ;;
+    *) [ -z "$DIR" ] || bad_usage "one keystore directory only (got $DIR and $1)"
+       DIR=$1; shift ;;
+  esac
+done
+
+[ -n "$DIR" ] || bad_usage "the keystore directory is missing"
+[ ! -e "$DIR" ] || [ -d "$DIR" ] || bad_usage "$DIR exists and is not a directory"
+ROS_NAME='^(/[A-Za-z_][A-Za-z0-9_]*)+$'
+for e in "${ENCLAVES[@]}"; do
+  [[ $e =~ $ROS_NAME ]] || bad_usage "enclave '$e' is not an absolute ROS name such as /eezybot/pc2 (letters, digits, _)"
+done
+case "$ROLE" in
+  ""|pc|pi|tools) ;;
+  *) bad_usage "--role $ROLE: pc, pi or tools" ;;
+esac
+[ -z "$ROLE" ] || [ ${#ENCLAVES[@]} -gt 0 ] || bad_usage "--role applies to --enclave PATH"
+[ "$NAMESPACE" = / ] || [[ $NAMESPACE =~ $ROS_NAME ]] || bad_usage "namespace '$NAMESPACE' is not an absolute ROS namespace such as /arm2"
+if [ -n "$DOMAIN" ]; then
+  [[ $DOMAIN =~ ^[0-9]+$ ]] && [ "$DOMAIN" -le 232 ] || bad_usage "--domain $DOMAIN: a ROS domain id 0 ... 232"
+fi
+[ ${#ENCLAVES[@]} -gt 0 ] || ENCLAVES=(/eezybot/pc /eezybot/pi)
+command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }
+
+eezybot_find_binaries eezybot_sros2
+SROS2="$EEZYBOT_BIN/eezybot_sros2"
+POLICY_ARGS=()
+[ -z "$DOMAIN" ] || POLICY_ARGS+=(--domain "$DOMAIN")
+
+mkdir -p "$DIR"
+DIR=$(cd "$DIR" && pwd)
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+mkdir -p "$DIR/public" "$DIR/private" "$DIR/enclaves"
+chmod 700 "$DIR/private"
+
+# Validity: from a day ago (as sros2: a peer whose clock is a little behind still takes
+# the certificate) for 3650 days. openssl ca wants YYYYMMDDHHMMSSZ.
+NOW=$(date -u +%s)
+stamp() { date -u -d "@$1" +%Y%m%d%H%M%SZ; }
+START=$(stamp $((NOW - 86400)))
+END=$(stamp $((NOW + 3650 * 86400)))
+
+# A new EC prime256v1 key (PKCS#8 PEM, unencrypted, as sros2), owner-only.
+new_key() { (umask 077 && openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:prime256v1 \
+  -pkeyopt ec_param_enc:named_curve -out "$1" 2>"$WORK/err") || { cat "$WORK/err" >&2; return 1; }; }
+
+# issue CN KEY OUT EXTENSION [CA_CERT CA_KEY]: a certificate for KEY with subject CN=CN,
+# signed by the CA (self-signed without one), through `openssl ca` so that its start can
+# be back-dated.
+issue() {
+  local cn=$1 key=$2 out=$3 ext=$4 ca_cert=${5:-} ca_key=${6:-} w
+  w=$(mktemp -d "$WORK/ca.XXXXXX")
+  : >"$w/index.txt"
+  cat >"$w/ca.cnf" <<EOF
+[ca]
+default_ca = eezybot
+[eezybot]
+database = $w/index.txt
+new_certs_dir = $w
+rand_serial = yes
+default_md = sha256
+policy = policy_cn
+unique_subject = no
+copy_extensions = none
+email_in_dn = no
+[policy_cn]
+commonName = supplied
+[req]
+prompt = no
+distinguished_name = dn
+[dn]
+CN = $cn
+[ext_ca]
+basicConstraints = critical, CA:TRUE, pathlen:1
+[ext_enclave]
+basicConstraints = CA:FALSE
+EOF
+  openssl req -new -key "$key" -config "$w/ca.cnf" -out "$w/req.csr" 2>"$w/err" || { cat "$w/err" >&2; return 1; }
+  if [ -z "$ca_cert" ]; then
+    openssl ca -batch -config "$w/ca.cnf" -selfsign -keyfile "$key" -in "$w/req.csr" -out "$w/cert.pem" \
+      -startdate "$START" -enddate "$END" -extensions "$ext" -notext 2>"$w/err" || { cat "$w/err" >&2; return 1; }
+  else
+    openssl ca -batch -config "$w/ca.cnf" -cert "$ca_cert" -keyfile "$ca_key" -in "$w/req.csr" -out "$w/cert.pem" \
+      -startdate "$START" -enddate "$END" -extensions "$ext" -notext 2>"$w/err" || { cat "$w/err" >&2; return 1; }
+  fi
+  install -m 0644 "$w/cert.pem" "$out"
+}
+
+# sign XML P7S: S/MIME-sign with the permissions CA, as sros2 (text/plain, detached).
+sign() {
+  openssl smime -sign -text -md sha256 -in "$1" -out "$2.tmp" \
+    -signer "$DIR/public/permissions_ca.cert.pem" -inkey "$DIR/private/permissions_ca.key.pem" 2>"$WORK/err" \
+    || { cat "$WORK/err" >&2; return 1; }
+  chmod 0644 "$2.tmp"
+  mv "$2.tmp" "$2"
+}
+
+# link TARGET LINK: a relative symbolic link, as sros2's create_symlink.
+link() { ln -sfn "$1" "$2"; }
+
+# --- the CA
+CA_FILES=("$DIR/public/ca.cert.pem" "$DIR/private/ca.key.pem")
+if [ -f "$DIR/public/ca.cert.pem" ] && [ -f "$DIR/private/ca.key.pem" ]; then
+  eezybot_say "CA: kept $DIR/public/ca.cert.pem"
+elif [ -e "$DIR/public/ca.cert.pem" ] || [ -e "$DIR/private/ca.key.pem" ] \
+  || [ -n "$(find "$DIR/enclaves" -name cert.pem -print -quit 2>/dev/null)" ]; then
+  eezybot_say "$DIR has enclaves or half a CA (${CA_FILES[*]}): refusing to make a new CA over it"
+  eezybot_say "(a new CA would orphan every enclave: use a new directory, or restore the CA files)"
+  exit 1
+else
+  new_key "$DIR/private/ca.key.pem"
+  issue sros2CA "$DIR/private/ca.key.pem" "$DIR/public/ca.cert.pem" ext_ca
+  eezybot_say "CA: created $DIR/public/ca.cert.pem (CN=sros2CA, EC prime256v1, until $(openssl x509 -noout -enddate -in "$DIR/public/ca.cert.pem" | cut -d= -f2))"
+fi
+for which in identity permissions; do
+  [ -e "$DIR/public/${which}_ca.cert.pem" ] || link ca.cert.pem "$DIR/public/${which}_ca.cert.pem"
+  [ -e "$DIR/private/${which}_ca.key.pem" ] || link ca.key.pem "$DIR/private/${which}_ca.key.pem"
+done
+
+# --- the governance
+if [ -f "$DIR/enclaves/governance.p7s" ] && [ -f "$DIR/enclaves/governance.xml" ] && [ "$RENEW" = 0 ]; then
+  eezybot_say "governance: kept $DIR/enclaves/governance.p7s"
+else
+  "$SROS2" governance "${POLICY_ARGS[@]}" >"$WORK/governance.xml"
+  install -m 0644 "$WORK/governance.xml" "$DIR/enclaves/governance.xml"
+  sign "$DIR/enclaves/governance.xml" "$DIR/enclaves/governance.p7s"
+  eezybot_say "governance: signed $DIR/enclaves/governance.p7s (authentication required; discovery, liveliness and data encrypted)"
+fi
+
+# --- the enclaves
+for enclave in "${ENCLAVES[@]}"; do
+  d="$DIR/enclaves/${enclave#/}"
+  mkdir -p "$d"
+  chmod 700 "$d"
+  rel=$(realpath --relative-to="$d" "$DIR")
+  link "$rel/public/identity_ca.cert.pem" "$d/identity_ca.cert.pem"
+  link "$rel/public/permissions_ca.cert.pem" "$d/permissions_ca.cert.pem"
+  link "$(realpath --relative-to="$d" "$DIR/enclaves")/governance.p7s" "$d/governance.p7s"
+  what=kept
+  if [ ! -f "$d/cert.pem" ] || [ ! -f "$d/key.pem" ]; then
+    new_key "$d/key.pem"
+    issue "$enclave" "$d/key.pem" "$d/cert.pem" ext_enclave "$DIR/public/identity_ca.cert.pem" "$DIR/private/identity_ca.key.pem"
+    what=created
+  fi
+  chmod 600 "$d/key.pem"
+  role=$ROLE
+  [ -n "$role" ] || { [ "$enclave" = /eezybot/pi ] && role=pi || role=pc; }
+  if [ ! -f "$d/permissions.p7s" ] || [ ! -f "$d/permissions.xml" ] || [ "$RENEW" = 1 ] || [ "$what" = created ]; then
+    "$SROS2" permissions --enclave "$enclave" --role "$role" --namespace "$NAMESPACE" "${POLICY_ARGS[@]}" \
+      --cert "$d/cert.pem" >"$WORK/permissions.xml"
+    install -m 0644 "$WORK/permissions.xml" "$d/permissions.xml"
+    sign "$d/permissions.xml" "$d/permissions.p7s"
+    [ "$what" = created ] || what="kept, permissions renewed"
+    case "$role" in
+      pc) nodes="gui_bridge, compute_ik, state_publisher" ;;
+      pi) nodes="serial_node" ;;
+      tools) nodes="ROS 2 tools" ;;
+    esac
+    eezybot_say "enclave $enclave: $what ($d; permissions of $nodes in namespace $NAMESPACE)"
+  else
+    eezybot_say "enclave $enclave: kept ($d; --renew rewrites its permissions)"
+  fi
+done
+eezybot_say "keystore ready: export ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce ROS_SECURITY_KEYSTORE=$DIR"
