@@ -144,3 +144,61 @@ eezybot_serial_port() {
   fi
   [ "$EEZYBOT_PORT" = mock ] || [ -e "$EEZYBOT_PORT" ] || EEZYBOT_PORT_FOUND=0
 }
+
+# SROS2 (DDS Security), as rcl reads it: on only when ROS_SECURITY_ENABLE is exactly
+# `true`; ROS_SECURITY_STRATEGY=Enforce refuses to run unsecured, anything else is
+# permissive; ROS_SECURITY_KEYSTORE is the keystore (launch_scripts/keystore.sh), an
+# enclave's files are in $ROS_SECURITY_KEYSTORE/enclaves/<enclave>;
+# ROS_SECURITY_ENCLAVE_OVERRIDE replaces every node's enclave.
+#
+#   eezybot_security ENCLAVE "NODES" [ENCLAVE "NODES"]...
+#     -> EEZYBOT_SECURE=1 when on. Checks each enclave's directory and six files and says
+#        that security is on (keystore, enclave and nodes, strategy). A missing or
+#        unreadable file: exit 2 under Enforce, a warning otherwise (the nodes then warn
+#        and run unsecured). Off: nothing is printed and nothing changes.
+#   eezybot_enclave ENCLAVE -> EEZYBOT_ENCLAVE (array): `--enclave ENCLAVE` when on, else empty
+EEZYBOT_SECURE=0
+EEZYBOT_ENCLAVE_FILES="cert.pem key.pem identity_ca.cert.pem permissions_ca.cert.pem governance.p7s permissions.p7s"
+eezybot_security() {
+  local enable=${ROS_SECURITY_ENABLE:-} strategy=${ROS_SECURITY_STRATEGY:-} keystore=${ROS_SECURITY_KEYSTORE:-}
+  local override=${ROS_SECURITY_ENCLAVE_OVERRIDE:-} enforce=0 enclave nodes dir f problems=()
+  EEZYBOT_SECURE=0
+  if [ "$enable" != true ]; then
+    [ -z "$enable" ] || [ "$enable" = false ] ||
+      eezybot_say "WARNING: ROS_SECURITY_ENABLE=$enable is not \`true\`: security is off (as in rcl, only exactly \`true\` turns it on)"
+    return 0
+  fi
+  EEZYBOT_SECURE=1
+  [ "$strategy" != Enforce ] || enforce=1
+  if [ -z "$keystore" ]; then
+    problems+=("ROS_SECURITY_KEYSTORE is not set: the keystore directory (make one with launch_scripts/keystore.sh DIR)")
+  elif [ ! -d "$keystore" ]; then
+    problems+=("ROS_SECURITY_KEYSTORE=$keystore is not a directory (make the keystore with launch_scripts/keystore.sh $keystore)")
+  else
+    while [ $# -ge 2 ]; do
+      enclave=${override:-$1}; nodes=$2; shift 2
+      dir="$keystore/enclaves/${enclave#/}"
+      if [ ! -d "$dir" ]; then
+        problems+=("no enclave $enclave in the keystore: $dir is not a directory (launch_scripts/keystore.sh $keystore --enclave $enclave)")
+        continue
+      fi
+      for f in $EEZYBOT_ENCLAVE_FILES; do
+        [ -r "$dir/$f" ] || problems+=("$dir/$f is missing or unreadable (enclave $enclave)")
+      done
+      eezybot_say "security on: keystore $keystore, enclave $enclave${override:+ (ROS_SECURITY_ENCLAVE_OVERRIDE)} for $nodes, strategy $([ $enforce = 1 ] && echo Enforce || echo "Permissive (${strategy:-unset})")"
+    done
+  fi
+  [ ${#problems[@]} -gt 0 ] || return 0
+  for f in "${problems[@]}"; do eezybot_say "$f"; done
+  if [ $enforce = 1 ]; then
+    eezybot_say "ROS_SECURITY_STRATEGY=Enforce: not starting unsecured (README: Securing the link)"
+    trap - EXIT
+    exit 2
+  fi
+  eezybot_say "WARNING: ROS_SECURITY_STRATEGY=${strategy:-unset} is not Enforce: the nodes start unsecured where their enclave is unusable"
+}
+
+eezybot_enclave() {
+  EEZYBOT_ENCLAVE=()
+  [ "$EEZYBOT_SECURE" = 0 ] || EEZYBOT_ENCLAVE=(--enclave "$1")
+}

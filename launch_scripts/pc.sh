@@ -4,6 +4,9 @@
 # state_publisher, in ROS domain ROS_DOMAIN_ID (default 0). Run pi.sh on the Raspberry
 # Pi next to the Arduino, in the same domain, on the same network (multicast allowed).
 #
+# SROS2: with ROS_SECURITY_ENABLE=true every node runs under the enclave /eezybot/pc of
+# ROS_SECURITY_KEYSTORE (launch_scripts/keystore.sh; README: Securing the link).
+#
 # Arguments are ROS arguments for every node, e.g.
 #   launch_scripts/pc.sh -r __ns:=/arm2
 # Ctrl-C (or SIGTERM) stops every node; the script then exits 0.
@@ -14,10 +17,12 @@ EEZYBOT_SCRIPT=pc.sh
 eezybot_find_binaries compute_ik state_publisher gui_bridge
 eezybot_ros_args "$@"
 bind=${GUI_BIND:-127.0.0.1:8080}
+eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge"
+eezybot_enclave /eezybot/pc
 
-eezybot_start compute_ik
-eezybot_start state_publisher
-eezybot_start gui_bridge -p "bind:=$bind"
+eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}"
+eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
+eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
 
 eezybot_banner
 eezybot_say "running here (operator PC): compute_ik, state_publisher, gui_bridge"

@@ -7,6 +7,10 @@
 # Uses the prebuilt binaries in bin/ when they are there (a bundle from
 # cross_build.sh), so the Pi needs no Rust toolchain.
 #
+# SROS2: with ROS_SECURITY_ENABLE=true serial_node runs under the enclave /eezybot/pi of
+# ROS_SECURITY_KEYSTORE (only enclaves/eezybot/pi is needed on the Pi; README: Securing
+# the link; deploy/install.sh --keystore).
+#
 # Arguments are ROS arguments for serial_node, e.g.
 #   launch_scripts/pi.sh -r __ns:=/arm2
 # Ctrl-C (or SIGTERM) stops it; the script then exits 0.
@@ -17,8 +21,10 @@ EEZYBOT_SCRIPT=pi.sh
 eezybot_find_binaries serial_node
 eezybot_ros_args "$@"
 eezybot_serial_port
+eezybot_security /eezybot/pi serial_node
+eezybot_enclave /eezybot/pi
 
-eezybot_start serial_node -p "port:=$EEZYBOT_PORT"
+eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT"
 
 eezybot_banner
 if [ "$EEZYBOT_PORT" = mock ]; then

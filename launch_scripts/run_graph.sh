@@ -10,6 +10,10 @@
 # serial_node (the Jaco has no hobby servos: compute_ik publishes no servo_angles).
 # `--arm eezybot` (the default) is the EezyBotArm.
 #
+# SROS2: with ROS_SECURITY_ENABLE=true compute_ik, state_publisher and gui_bridge run
+# under the enclave /eezybot/pc and serial_node under /eezybot/pi, of
+# ROS_SECURITY_KEYSTORE (launch_scripts/keystore.sh; README: Securing the link).
+#
 # The other arguments are ROS arguments for every node, e.g.
 #   launch_scripts/run_graph.sh -r __ns:=/arm2
 #   launch_scripts/run_graph.sh --arm jaco -r __ns:=/jaco
@@ -36,11 +40,14 @@ case "$arm" in
       eezybot_say "no Arduino at ${SERIAL_PORT:-/dev/eezybot or /dev/ttyACM0}: using the built-in virtual Arduino"
       EEZYBOT_PORT=mock
     fi
+    eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge" /eezybot/pi serial_node
 
-    eezybot_start compute_ik
-    eezybot_start state_publisher
-    eezybot_start serial_node -p "port:=$EEZYBOT_PORT"
-    eezybot_start gui_bridge -p "bind:=$bind"
+    eezybot_enclave /eezybot/pc
+    eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}"
+    eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
+    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
+    eezybot_enclave /eezybot/pi
+    eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT"
 
     eezybot_banner
     eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($([ "$EEZYBOT_PORT" = mock ] && echo "virtual Arduino" || echo "Arduino on $EEZYBOT_PORT"))"
@@ -52,10 +59,12 @@ case "$arm" in
     [ -f "$urdf" ] || { eezybot_say "no $urdf: --arm jaco runs from a source tree"; exit 1; }
     eezybot_find_binaries compute_ik state_publisher gui_bridge
     eezybot_ros_args "$@"
+    eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge"
+    eezybot_enclave /eezybot/pc
 
-    eezybot_start compute_ik -p "urdf:=$urdf" -p "tip_link:=jaco_end_effector"
-    eezybot_start state_publisher -p "urdf:=$urdf"
-    eezybot_start gui_bridge -p "bind:=$bind"
+    eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" -p "urdf:=$urdf" -p "tip_link:=jaco_end_effector"
+    eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}" -p "urdf:=$urdf"
+    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
 
     eezybot_banner
     eezybot_say "arm: Kinova Jaco 2 (6 DOF, $urdf), tip jaco_end_effector; no serial_node (no servos to drive)"
