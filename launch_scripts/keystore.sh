@@ -95,7 +95,8 @@ fi
 [ ${#ENCLAVES[@]} -gt 0 ] || ENCLAVES=(/eezybot/pc /eezybot/pi)
 command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }
 
-eezybot_find_binaries eezybot_sros2
+# in a source tree: build only the generator, not every node
+EEZYBOT_CARGO_SELECT="-p ros_plumbing --bin eezybot_sros2" eezybot_find_binaries eezybot_sros2
 SROS2="$EEZYBOT_BIN/eezybot_sros2"
 POLICY_ARGS=()
 [ -z "$DOMAIN" ] || POLICY_ARGS+=(--domain "$DOMAIN")

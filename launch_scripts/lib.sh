@@ -19,7 +19,8 @@ eezybot_say() { echo "[${EEZYBOT_SCRIPT:-eezybot}] $*" >&2; }
 # Where the binaries come from, in this order:
 #  1. EEZYBOT_BIN_DIR, if set;
 #  2. bin/ next to launch_scripts/ (a bundle from cross_build.sh, copied to a Pi);
-#  3. in a source tree with cargo: `cargo build --release` (progress shown), then target/release;
+#  3. in a source tree with cargo: `cargo build --release` (progress shown), then target/release
+#     (EEZYBOT_CARGO_SELECT: what to build, default every binary: `--bins`);
 #  4. in a source tree without cargo: target/release, if it holds the binaries.
 eezybot_find_binaries() {
   local b missing
@@ -28,8 +29,9 @@ eezybot_find_binaries() {
   elif [ -x "$EEZYBOT_ROOT/bin/$1" ]; then
     EEZYBOT_BIN="$EEZYBOT_ROOT/bin"
   elif [ -f "$EEZYBOT_ROOT/Cargo.toml" ] && command -v cargo >/dev/null 2>&1; then
-    eezybot_say "building the nodes: cargo build --release (the first build takes a few minutes)"
-    (cd "$EEZYBOT_ROOT" && cargo build --release --bins) || {
+    eezybot_say "building: cargo build --release ${EEZYBOT_CARGO_SELECT:---bins} (the first build takes a few minutes)"
+    # shellcheck disable=SC2086 # the selection is words: -p crate --bin name
+    (cd "$EEZYBOT_ROOT" && cargo build --release ${EEZYBOT_CARGO_SELECT:---bins}) || {
       eezybot_say "the build failed"; exit 1; }
     EEZYBOT_BIN="$EEZYBOT_ROOT/target/release"
   else
