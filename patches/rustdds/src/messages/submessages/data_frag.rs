@@ -269,18 +269,11 @@ impl DataFrag {
       _ => {}
     }
 
-    let max_payload_bytes = (count_u32 as usize) * (fragment_size as usize);
-    if datafrag.serialized_payload.len() > max_payload_bytes {
-      return Err(io::Error::new(
-        io::ErrorKind::InvalidData,
-        format!(
-          "DataFrag serializedData length={} exceeds fragmentsInSubmessage={} x fragmentSize={}.",
-          datafrag.serialized_payload.len(),
-          fragments_in_submessage,
-          fragment_size
-        ),
-      ));
-    }
+    // serializedData is not checked against fragmentsInSubmessage x fragmentSize
+    // here: with DDS Security's payload protection it is the *encoded* fragment
+    // (CryptoHeader + ciphertext + CryptoFooter), 44 bytes longer than the
+    // fragments it carries. MessageReceiver::decode_and_handle_datafrag checks the
+    // length after decoding, with security or without.
 
     Ok(datafrag)
   }
@@ -372,19 +365,26 @@ mod tests {
     assert!(DataFrag::deserialize(&bytes, BitFlags::<DATAFRAG_Flags>::empty()).is_err());
   }
 
+  // With DDS Security's payload protection a fragment's serializedData is the
+  // encoded fragment: CryptoHeader (20) + ciphertext + CryptoFooter (24), 44
+  // bytes more than the fragments it carries. It must deserialize; the length is
+  // checked after decoding (MessageReceiver::decode_and_handle_datafrag). Before,
+  // every fragmented sample of a secured RustDDS writer was dropped here ("exceeds
+  // fragmentsInSubmessage x fragmentSize").
   #[test]
-  fn deserialize_rejects_oversized_payload_for_fragment_run() {
+  fn an_encoded_fragment_longer_than_its_run_deserializes() {
     let df = DataFrag {
       writer_sn: SequenceNumber::new(1),
       fragment_starting_num: FragmentNumber::new(1),
       fragments_in_submessage: 1,
       fragment_size: 256,
       data_size: 512,
-      serialized_payload: Bytes::from(vec![0u8; 512]),
+      serialized_payload: Bytes::from(vec![0u8; 256 + 44]),
       ..Default::default()
     };
     let bytes = serialize_body(&df);
-    assert!(DataFrag::deserialize(&bytes, BitFlags::<DATAFRAG_Flags>::empty()).is_err());
+    let flags = BitFlags::from_flag(DATAFRAG_Flags::Endianness);
+    assert_eq!(DataFrag::deserialize(&bytes, flags).unwrap(), df);
   }
 
   // With inline QoS (a service reply carries its request's identity there), a
