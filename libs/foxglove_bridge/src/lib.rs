@@ -1,9 +1,11 @@
 #![doc = include_str!("../README.md")]
 
+pub mod front;
 pub mod recording;
 pub mod schemas;
 pub mod server;
 
+pub use front::{Admitted, FrontLimits, FrontStats, Gate, Refused, UpgradeRequest};
 pub use recording::{McapRecorder, McapTargets, RecordedTarget};
 pub use schemas::{ros2msg_schema, topic_spec, TopicSpec, TOPICS};
 pub use server::{ClientPublish, ClientSample, FoxgloveBridge, DEFAULT_BIND};

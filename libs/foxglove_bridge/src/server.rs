@@ -5,10 +5,14 @@
 //! which topics some client subscribes ([`FoxgloveBridge::watched`]), so that the node
 //! subscribes a ROS topic only while a client watches it.
 
+use crate::front::{self, Front, FrontLimits, FrontStats, Gate, Introductions};
 use crate::schemas::{ros2msg_schema, TopicSpec, TOPICS};
 use crate::{FoxgloveBridgeError, TopicNames};
-use foxglove::websocket::{Capability, ChannelView, Client, ClientChannel, ServerListener, Status};
-use foxglove::{ChannelBuilder, ChannelId, Context, PartialMetadata, RawChannel, Schema};
+use foxglove::websocket::{
+    Capability, ChannelView, Client, ClientChannel, ClientChannelId, ClientId, ServerListener,
+    Status,
+};
+use foxglove::{ChannelBuilder, ChannelId, Context, PartialMetadata, RawChannel, Schema, SinkId};
 use std::collections::{BTreeSet, HashMap};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
@@ -19,11 +23,9 @@ pub const DEFAULT_BIND: &str = "127.0.0.1:8765";
 
 /// Whether Foxglove clients may publish targets.
 ///
-/// The Foxglove SDK does not show the server the WebSocket upgrade request (no `Origin`,
-/// `Host` or token), so the web panel's access rules cannot be applied to a Foxglove
-/// client: with publishing on, **any** program or web page that can open a WebSocket to
-/// the bind address can move the arm. The node decides from its own access rules
-/// whether that is acceptable (see the README).
+/// Which clients may connect, and which of them may publish, the node's [`Gate`]
+/// decides from each upgrade request ([`crate::front`]); with [`ClientPublish::Off`] no
+/// client publishes whatever the gate says.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ClientPublish {
     /// Clients only watch: the server does not offer the `clientPublish` capability.
@@ -64,9 +66,21 @@ struct Shared {
     subscriptions: Mutex<HashMap<&'static str, usize>>,
     /// the topics with at least one subscription
     watched: watch::Sender<BTreeSet<&'static str>>,
+    /// the sinks of the introduced clients subscribed to each topic: samples go only there
+    sinks: Mutex<HashMap<&'static str, HashMap<ClientId, SinkId>>>,
+    /// introductions the front handed out and not yet redeemed
+    introductions: Arc<Introductions>,
+    /// clients the front introduced, and whether each may publish
+    introduced: Mutex<HashMap<ClientId, bool>>,
 }
 
 impl Shared {
+    /// Did the front introduce this client (None: no, a connection to the SDK's port that
+    /// did not come through the front)? Some(may publish) if so.
+    fn introduced(&self, client: &Client) -> Option<bool> {
+        self.introduced.lock().ok()?.get(&client.id()).copied()
+    }
+
     /// Count one subscription more (`+1`) or less (`-1`) to `topic`; the watched set
     /// changes when the first one comes or the last one goes.
     fn count(&self, topic: &'static str, delta: isize) {
@@ -97,6 +111,14 @@ pub struct FoxgloveBridge {
     server: Option<foxglove::WebSocketServerHandle>,
     local_addr: SocketAddr,
     from_clients: Option<mpsc::Receiver<ClientSample>>,
+    front: tokio::task::JoinHandle<()>,
+    front_stats: Arc<FrontStats>,
+}
+
+impl Drop for FoxgloveBridge {
+    fn drop(&mut self) {
+        self.front.abort();
+    }
 }
 
 impl std::fmt::Debug for FoxgloveBridge {
@@ -110,12 +132,35 @@ impl std::fmt::Debug for FoxgloveBridge {
 impl FoxgloveBridge {
     /// Serve the Foxglove WebSocket protocol on `bind` (`IP:port`; port 0 = any free
     /// port, see [`FoxgloveBridge::local_addr`]) on the current tokio runtime,
-    /// advertising every topic of [`TOPICS`] under its name in `names`.
+    /// advertising every topic of [`TOPICS`] under its name in `names`, to programs only
+    /// ([`front::programs_only`]: a request with an `Origin` is refused) with the default
+    /// [`FrontLimits`].
     pub async fn start(
         bind: &str,
         names: &TopicNames,
         publish: ClientPublish,
         server_name: &str,
+    ) -> Result<FoxgloveBridge, FoxgloveBridgeError> {
+        Self::start_with(
+            bind,
+            names,
+            publish,
+            server_name,
+            front::programs_only(),
+            FrontLimits::default(),
+        )
+        .await
+    }
+
+    /// [`FoxgloveBridge::start`] with the node's `gate` in front of every connection and
+    /// these `limits` ([`crate::front`]).
+    pub async fn start_with(
+        bind: &str,
+        names: &TopicNames,
+        publish: ClientPublish,
+        server_name: &str,
+        gate: Gate,
+        limits: FrontLimits,
     ) -> Result<FoxgloveBridge, FoxgloveBridgeError> {
         let addr: SocketAddr = bind.parse().map_err(|_| FoxgloveBridgeError::BadBind {
             bind: bind.to_string(),
@@ -161,26 +206,61 @@ impl FoxgloveBridge {
             to_node,
             subscriptions: Mutex::new(HashMap::new()),
             watched: watch::Sender::new(BTreeSet::new()),
+            sinks: Mutex::new(HashMap::new()),
+            introductions: Arc::new(Introductions::default()),
+            introduced: Mutex::new(HashMap::new()),
         });
-        let mut server = foxglove::WebSocketServer::new()
+        // the front's listener first: a taken port is the error the operator knows
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .map_err(|e| server_error(foxglove::FoxgloveError::Bind(e)))?;
+        let local_addr = listener
+            .local_addr()
+            .map_err(|e| server_error(foxglove::FoxgloveError::Bind(e)))?;
+        // the SDK's server on a free loopback port, behind the front; clientPublish always
+        // (the front introduces its connections with a client channel), taken from the
+        // serverInfo of a client that may not publish
+        let server = foxglove::WebSocketServer::new()
             .name(server_name)
-            .bind(addr.ip().to_string(), addr.port())
+            .bind("127.0.0.1", 0)
             .context(&context)
-            .listener(Arc::new(Listener(shared.clone())));
-        if publish != ClientPublish::Off {
-            server = server
-                .capabilities([Capability::ClientPublish])
-                .supported_encodings(["cdr"]);
-        }
-        let server = server.start().await.map_err(server_error)?;
-        let local_addr = SocketAddr::new(addr.ip(), server.port());
+            .listener(Arc::new(Listener(shared.clone())))
+            .capabilities([Capability::ClientPublish])
+            .supported_encodings(["cdr"])
+            .start()
+            .await
+            .map_err(server_error)?;
+        let front_stats = Arc::new(FrontStats::default());
+        let front = Arc::new(Front {
+            gate,
+            limits,
+            inner: SocketAddr::from(([127, 0, 0, 1], server.port())),
+            introductions: shared.introductions.clone(),
+            stats: front_stats.clone(),
+            publishing: publish != ClientPublish::Off,
+        });
+        let front = tokio::spawn(front.run(listener));
         Ok(FoxgloveBridge {
             shared,
             _context: context,
             server: Some(server),
             local_addr,
             from_clients,
+            front,
+            front_stats,
         })
+    }
+
+    /// The address of the SDK's own server behind the front (loopback), for tests that
+    /// check what a connection bypassing the front gets (nothing but the channel list).
+    #[doc(hidden)]
+    pub fn sdk_addr(&self) -> SocketAddr {
+        SocketAddr::from(([127, 0, 0, 1], self.server.as_ref().map_or(0, |s| s.port())))
+    }
+
+    /// The front's counters (refusals, busy, oversized messages, header timeouts).
+    pub fn front_stats(&self) -> Arc<FrontStats> {
+        self.front_stats.clone()
     }
 
     /// The address the server listens on.
@@ -217,12 +297,22 @@ impl FoxgloveBridge {
                 latched.insert(t.spec.topic, (Arc::from(cdr), log_time_ns));
             }
         }
-        if t.channel.has_sinks() {
-            t.channel.log_with_meta(
+        // to the introduced clients subscribed, each by its sink (never to all sinks: a
+        // connection to the SDK's port that bypassed the front is a sink too)
+        let sinks: Vec<SinkId> = match self.shared.sinks.lock() {
+            Ok(s) => s
+                .get(t.spec.topic)
+                .map(|m| m.values().copied().collect())
+                .unwrap_or_default(),
+            Err(_) => Vec::new(),
+        };
+        for sink in sinks {
+            t.channel.log_with_meta_to_sink(
                 cdr,
                 PartialMetadata {
                     log_time: Some(log_time_ns),
                 },
+                Some(sink),
             );
         }
         Ok(())
@@ -241,6 +331,7 @@ impl FoxgloveBridge {
 
     /// Close every connection and stop listening.
     pub async fn stop(mut self) {
+        self.front.abort();
         if let Some(server) = self.server.take() {
             server.stop().wait().await;
         }
@@ -301,6 +392,22 @@ impl ServerListener for Listener {
         let Some(topic) = self.0.by_channel.get(&channel.id()) else {
             return;
         };
+        let (Some(_), Some(sink)) = (self.0.introduced(&client), client.sink_id()) else {
+            client.send_status(Status::error(
+                "connect through the server's address, not the SDK's port".to_string(),
+            ));
+            return;
+        };
+        if let Ok(mut sinks) = self.0.sinks.lock() {
+            if sinks
+                .entry(topic)
+                .or_default()
+                .insert(client.id(), sink)
+                .is_some()
+            {
+                return; // subscribed already
+            }
+        }
         self.0.count(topic, 1);
         let last = match self.0.latched.lock() {
             Ok(latched) => latched.get(topic).cloned(),
@@ -317,13 +424,40 @@ impl ServerListener for Listener {
         }
     }
 
-    fn on_unsubscribe(&self, _client: Client, channel: ChannelView) {
+    fn on_unsubscribe(&self, client: Client, channel: ChannelView) {
         if let Some(topic) = self.0.by_channel.get(&channel.id()) {
-            self.0.count(topic, -1);
+            let was = self
+                .0
+                .sinks
+                .lock()
+                .ok()
+                .and_then(|mut s| s.get_mut(topic)?.remove(&client.id()));
+            if was.is_some() {
+                self.0.count(topic, -1);
+            }
         }
     }
 
     fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
+        if channel.id == ClientChannelId::new(front::INTRODUCTION_CHANNEL) {
+            if let Some(may_publish) = self.0.introductions.redeem(&channel.topic) {
+                if let Ok(mut i) = self.0.introduced.lock() {
+                    i.insert(client.id(), may_publish);
+                }
+                return;
+            }
+        }
+        match self.0.introduced(&client) {
+            Some(true) => {}
+            Some(false) => {
+                client.send_status(Status::warning(format!(
+                    "{}: this server does not take samples from this client",
+                    channel.topic
+                )));
+                return;
+            }
+            None => return,
+        }
         if let Err(why) = self.publishable(channel) {
             log::warn!("Foxglove client {:?}: {why}", client.id());
             client.send_status(Status::warning(why));
@@ -334,6 +468,9 @@ impl ServerListener for Listener {
         let Some(to_node) = &self.0.to_node else {
             return;
         };
+        if self.0.introduced(&client) != Some(true) {
+            return; // not introduced by the front as a publisher: said so at advertise
+        }
         let Ok(spec) = self.publishable(channel) else {
             return; // said so at advertise
         };
@@ -347,6 +484,15 @@ impl ServerListener for Listener {
                 mpsc::error::TrySendError::Closed(_) => "the node no longer takes targets",
             };
             client.send_status(Status::warning(format!("{}: {why}", channel.topic)));
+        }
+    }
+
+    fn on_client_unadvertise(&self, client: Client, channel: &ClientChannel) {
+        // the introduction stays advertised until the client goes: then this comes
+        if channel.id == ClientChannelId::new(front::INTRODUCTION_CHANNEL) {
+            if let Ok(mut i) = self.0.introduced.lock() {
+                i.remove(&client.id());
+            }
         }
     }
 }

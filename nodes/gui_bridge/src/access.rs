@@ -333,8 +333,49 @@ impl AccessPolicy {
     /// assert!(matches!(open.check(&evil), Err(Refusal::ForeignOrigin { .. })));
     /// ```
     pub fn check(&self, req: &RequestFacts<'_>) -> Result<Admission, Refusal> {
+        self.check_origins(req, None)
+    }
+
+    /// [`AccessPolicy::check`] for a server that serves no page of its own (the Foxglove
+    /// server): a request with an `Origin` must come from one of `origins` (e.g.
+    /// `https://app.foxglove.dev`) instead of from this server's own origin; the `Host`
+    /// and token rules are the panel's. The token may not come from the panel's cookie
+    /// (leave [`RequestFacts::cookie_token`] empty).
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::access::{AccessPolicy, RequestFacts, Refusal};
+    /// let open = AccessPolicy::new(None, 8080);
+    /// let app = ["https://app.foxglove.dev".to_string()];
+    /// let from = |origin| RequestFacts { host: Some("127.0.0.1:8765"), origin, ..Default::default() };
+    /// assert!(open.check_listed_origins(&from(None), &app).is_ok());
+    /// assert!(open.check_listed_origins(&from(Some("https://app.foxglove.dev")), &app).is_ok());
+    /// let evil = open.check_listed_origins(&from(Some("http://evil.example")), &app);
+    /// assert!(matches!(evil, Err(Refusal::ForeignOrigin { .. })));
+    /// ```
+    pub fn check_listed_origins(
+        &self,
+        req: &RequestFacts<'_>,
+        origins: &[String],
+    ) -> Result<Admission, Refusal> {
+        self.check_origins(req, Some(origins))
+    }
+
+    fn check_origins(
+        &self,
+        req: &RequestFacts<'_>,
+        listed: Option<&[String]>,
+    ) -> Result<Admission, Refusal> {
         let host = req.host.map(str::trim).filter(|h| !h.is_empty());
-        if let Some(origin) = req.origin {
+        if let (Some(origin), Some(listed)) = (req.origin, listed) {
+            let actual = parse_origin(origin);
+            if actual.is_none() || !listed.iter().any(|l| parse_origin(l) == actual) {
+                return Err(Refusal::ForeignOrigin {
+                    origin: shorten(origin),
+                    expected: shorten(&format!("one of: {}", listed.join(", "))),
+                });
+            }
+        } else if let Some(origin) = req.origin {
             let scheme = match req.forwarded_proto.map(forwarded_scheme) {
                 Some(Some(s)) => s,
                 _ => "http",

@@ -8,13 +8,15 @@
 //! (`eezybot_msgs::cdr`): the same bytes as any little-endian ROS 2 writer's for these
 //! types (Fast DDS' too; a big-endian writer's samples come out little-endian).
 
+use crate::access::{self, AccessPolicy, RequestFacts};
 use anyhow::{anyhow, Context as _};
 use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Float64;
 use eezybot_msgs::{RosMessage, Time};
 use foxglove_bridge::{
-    now_ns, ClientPublish, ClientSample, FoxgloveBridge, McapRecorder, McapTargets, TopicNames,
+    now_ns, Admitted, ClientPublish, ClientSample, FoxgloveBridge, FrontLimits, Gate, McapRecorder,
+    McapTargets, Refused, TopicNames, UpgradeRequest,
 };
 use futures::future::{FutureExt, LocalBoxFuture};
 use futures::stream::{LocalBoxStream, StreamExt};
@@ -26,6 +28,7 @@ use std::collections::{BTreeSet, HashMap};
 use std::future::Future;
 use std::path::Path;
 use std::rc::Rc;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// One sample: the topic (relative name) and its CDR bytes.
@@ -277,15 +280,64 @@ impl TargetPublishers {
     }
 }
 
+/// Is the `foxglove_bind` parameter's address loopback (or the server off)? A Foxglove
+/// server on any other address makes the panel's token required (generated if not set),
+/// for the panel and for every Foxglove client alike.
+pub fn bind_is_loopback(foxglove_bind: &str) -> bool {
+    let bind = foxglove_bind.trim();
+    bind.is_empty()
+        || bind
+            .parse::<std::net::SocketAddr>()
+            .is_ok_and(|a| a.ip().is_loopback())
+}
+
+/// The `foxglove_origins` parameter as a list (comma-separated, blanks dropped).
+pub fn origins(parameter: &str) -> Vec<String> {
+    parameter
+        .split(',')
+        .map(str::trim)
+        .filter(|o| !o.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+/// Who may use the Foxglove server: the web panel's rules ([`AccessPolicy`]), with the
+/// `Origin`s of `foxglove_origins` instead of the panel's own, the token from the URL
+/// (`ws://HOST:8765/?token=…`) or an `Authorization` header (never from the panel's
+/// cookie). Every client it admits may publish when `foxglove_publish` is on: the panel's
+/// token is required whenever `foxglove_bind` is not loopback, so a client that may
+/// publish either presented it or is a program on this machine (or a page of a listed
+/// origin).
+pub fn gate(access: AccessPolicy, origins: Vec<String>) -> Gate {
+    Arc::new(move |req: &UpgradeRequest| {
+        let facts = RequestFacts {
+            host: req.header("host"),
+            origin: req.header("origin"),
+            forwarded_proto: None,
+            query_token: access::query_token(req.query()),
+            header_token: req
+                .header("authorization")
+                .and_then(access::authorization_token),
+            cookie_token: None,
+        };
+        access
+            .check_listed_origins(&facts, &origins)
+            .map(|_| Admitted { may_publish: true })
+            .map_err(|r| Refused {
+                status: r.status(),
+                reason: r.to_string(),
+            })
+    })
+}
+
 /// The Foxglove WebSocket server of the `foxglove_bind` parameter (`None` when empty),
 /// forwarding every topic a client subscribes until the returned future is dropped.
 ///
-/// Foxglove panels may publish targets only with `foxglove_publish:=true`, and only when
-/// the web panel needs no token: the Foxglove SDK shows no request headers, so neither
-/// the `Origin`/`Host` rules nor the token can be checked for its clients.
+/// Every connection passes [`gate`] first (the panel's `access` policy); Foxglove panels
+/// may publish targets only with `foxglove_publish:=true`.
 pub async fn serve<'a>(
     node: &'a RefCell<&mut RosNode>,
-    token_required: bool,
+    access: AccessPolicy,
 ) -> anyhow::Result<Option<LocalBoxFuture<'a, ()>>> {
     let params = node.borrow().params().clone();
     let bind = params.string("foxglove_bind").unwrap_or_default();
@@ -293,20 +345,28 @@ pub async fn serve<'a>(
         log::info!("Foxglove WebSocket server off (foxglove_bind is empty)");
         return Ok(None);
     }
-    let wants_publish = params.bool("foxglove_publish").unwrap_or(false);
-    let publish = if wants_publish && token_required {
-        log::warn!(
-            "foxglove_publish ignored: the web panel needs a token, and the Foxglove server cannot check one; Foxglove clients only watch"
-        );
-        ClientPublish::Off
-    } else if wants_publish {
+    let publish = if params.bool("foxglove_publish").unwrap_or(false) {
         ClientPublish::Targets { queue: 64 }
     } else {
         ClientPublish::Off
     };
+    let token_required = access.token_required();
+    let gate = gate(
+        access,
+        origins(&params.string("foxglove_origins").unwrap_or_default()),
+    );
     let names = topic_names(&node.borrow());
     let server_name = node.borrow().resolver().node_name().to_string();
-    let mut bridge = match FoxgloveBridge::start(&bind, &names, publish, &server_name).await {
+    let started = FoxgloveBridge::start_with(
+        &bind,
+        &names,
+        publish,
+        &server_name,
+        gate,
+        FrontLimits::default(),
+    )
+    .await;
+    let mut bridge = match started {
         Ok(bridge) => bridge,
         Err(e) => {
             // the web panel goes on: a second gui_bridge on this host, or a Foxglove
@@ -320,12 +380,17 @@ pub async fn serve<'a>(
         ClientPublish::Targets { .. } => Some(TargetPublishers::new(&mut node.borrow_mut())?),
     };
     log::info!(
-        "Foxglove WebSocket server on ws://{} ({})",
+        "Foxglove WebSocket server on ws://{} ({}{})",
         bridge.local_addr(),
         if targets.is_some() {
             "clients may publish targets"
         } else {
             "watch only"
+        },
+        if token_required {
+            ", token required: ws://ADDRESS/?token=… as the panel's URL"
+        } else {
+            ", loopback only, no token"
         }
     );
     let from_clients = bridge.take_client_samples();

@@ -37,6 +37,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::broadcast;
 
+/// The default `foxglove_origins`: Foxglove's web app.
+pub const FOXGLOVE_ORIGINS: &str = "https://app.foxglove.dev";
+
 /// The node's description and parameters.
 pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
@@ -89,7 +92,13 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new(
                 "foxglove_publish",
                 ParameterValue::Boolean(false),
-                "let Foxglove clients publish xyz_target, pose_target, gripper_target, joint_target (only without a panel token: the Foxglove server cannot check Origin, Host or a token)",
+                "let Foxglove clients publish xyz_target, pose_target, gripper_target, joint_target (each client passes the panel's rules first: Origin, Host, and the token, which a foxglove_bind beyond loopback requires)",
+            )
+            .read_only(),
+            ParamSpec::new(
+                "foxglove_origins",
+                ParameterValue::String(FOXGLOVE_ORIGINS.into()),
+                "web origins allowed to connect to the Foxglove server, comma-separated (a request without Origin, from a program, always may); empty = none",
             )
             .read_only(),
         ],

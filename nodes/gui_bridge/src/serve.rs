@@ -45,9 +45,12 @@ pub async fn serve(
     let local = listener
         .local_addr()
         .with_context(|| format!("cannot tell the address bound for {bind}"))?;
+    // a token whenever the panel or the Foxglove server listens beyond loopback: both
+    // take the same one
+    let foxglove_bind = params.string("foxglove_bind").unwrap_or_default();
     let (token, source) = access::resolve_token(
         &params.string("token").unwrap_or_default(),
-        local.ip().is_loopback(),
+        local.ip().is_loopback() && crate::foxglove::bind_is_loopback(&foxglove_bind),
         || {
             let mut bytes = [0u8; access::GENERATED_TOKEN_BYTES];
             getrandom::fill(&mut bytes).map_err(|e| e.to_string())?;
@@ -66,7 +69,12 @@ pub async fn serve(
     };
     // from here on shared with the Foxglove server, which subscribes topics on demand
     let node = std::cell::RefCell::new(node);
-    let foxglove = crate::foxglove::serve(&node, token.is_some()).await?;
+    let foxglove_port = foxglove_bind
+        .trim()
+        .parse::<SocketAddr>()
+        .map_or(0, |a| a.port());
+    let foxglove =
+        crate::foxglove::serve(&node, AccessPolicy::new(token.clone(), foxglove_port)).await?;
     let state = WebState::new(
         to_browsers.clone(),
         req_tx,

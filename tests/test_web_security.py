@@ -1,0 +1,139 @@
+"""The web side probed as an attacker would, on loopback (issue 18 item 7): each probe that
+got through is a test here, run against the real gui_bridge binary. The panel's own
+guards (Origin, DNS rebinding, token, floods) are tests/test_gui_bridge.py's."""
+import re
+import struct
+import time
+
+from geometry_msgs.msg import PointStamped
+from rclpy.serialization import serialize_message
+
+from foxglove_client import free_port
+from test_gui_bridge import RawWs, http_get, rss_kib, start_panel
+
+FOXGLOVE = {"Sec-WebSocket-Protocol": "foxglove.sdk.v1"}
+
+
+def foxglove_ws(port, path="/", headers=None):
+    """A raw WebSocket to the Foxglove server with the subprotocol and any headers."""
+    return RawWs(port, path=path, headers={**FOXGLOVE, **(headers or {})})
+
+
+def printed_token(proc, port):
+    deadline = time.monotonic() + 10
+    while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/\?token=([0-9a-f]+)", proc.output())):
+        assert time.monotonic() < deadline, proc.output()
+        time.sleep(0.05)
+    return m.group(1)
+
+
+def try_to_publish(ws, observer, xyz, seconds=3.0):
+    """Advertise xyz_target and publish a target on it for a while (as the issue's probe)."""
+    target = PointStamped()
+    target.header.frame_id = "base_link"
+    target.point.x, target.point.y, target.point.z = 0.2, 0.05, 0.15
+    ws.send({"op": "advertise", "channels": [{"id": 1, "topic": "/xyz_target", "encoding": "cdr",
+                                              "schemaName": "geometry_msgs/msg/PointStamped"}]})
+    deadline = time.monotonic() + seconds
+    while not xyz and time.monotonic() < deadline:
+        ws.sock.sendall(RawWs.frame(struct.pack("<BI", 1, 1) + serialize_message(target), opcode=0x2))
+        observer.spin_for(0.2)
+    return bool(xyz)
+
+
+def test_foxglove_on_the_network_publishes_only_with_the_panel_s_token(launch, observer):
+    """High: panel on loopback, foxglove_bind:=0.0.0.0, foxglove_publish:=true. A Foxglove
+    client of another origin, or without the token, published xyz_target and the base
+    turned. Now a Foxglove server beyond loopback makes the panel's token required for
+    both, and every Foxglove client passes the panel's rules."""
+    xyz = observer.sub("/xyz_target", PointStamped)
+    fox = free_port()
+    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=0.0.0.0:{fox}", "-p", "foxglove_publish:=true")
+    token = printed_token(proc, port)
+    for headers, path, status in (({"Origin": "http://evil.example"}, "/", 403),
+                                  ({"Origin": "http://evil.example"}, f"/?token={token}", 403),
+                                  ({}, "/", 401),
+                                  ({}, "/?token=" + "0" * 48, 403)):
+        ws = foxglove_ws(fox, path, headers)
+        if ws.status == 101:  # the probe of the issue: publish and see whether the arm moves
+            moved = try_to_publish(ws, observer, xyz)
+            ws.close()
+            assert False, f"{headers} {path}: admitted; a target reached ROS: {moved}"
+        assert ws.status == status, (headers, path, ws.status, ws.body)
+    observer.spin_for(0.3)
+    assert not xyz
+    # the operator's own Foxglove, with the printed token, publishes
+    ws = foxglove_ws(fox, f"/?token={token}")
+    assert ws.status == 101, ws.body
+    info = ws.recv_json(lambda m: m.get("op") == "serverInfo")
+    assert "clientPublish" in info["capabilities"]
+    assert try_to_publish(ws, observer, xyz, seconds=10), "the token holder's target never reached ROS"
+    ws.close()
+    # the panel needs the token too now (it is printed, and the same)
+    assert http_get(port, "/")[0] == 401
+    assert http_get(port, f"/?token={token}")[0] == 200
+
+
+def test_foxglove_refuses_other_origins_rebinding_and_connections_over_its_cap(launch, observer):
+    """Medium: the Foxglove server checked no Origin or Host (a page in the operator's
+    browser, or a rebinding name, read robot_description) and took 200 of 200
+    connections."""
+    fox = free_port()
+    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=127.0.0.1:{fox}")
+    deadline = time.monotonic() + 10
+    while "Foxglove WebSocket server on" not in proc.output():
+        assert time.monotonic() < deadline, proc.output()
+        time.sleep(0.05)
+    evil = foxglove_ws(fox, headers={"Origin": "http://evil.example"})
+    assert evil.status == 403 and "evil.example" in evil.body, (evil.status, evil.body)
+    rebound = foxglove_ws(fox, headers={"Host": f"evil.example:{fox}", "Origin": f"http://evil.example:{fox}"})
+    assert rebound.status == 403, (rebound.status, rebound.body)
+    rebound = foxglove_ws(fox, headers={"Host": f"evil.example:{fox}"})
+    assert rebound.status == 403 and "not a loopback name" in rebound.body, (rebound.status, rebound.body)
+    # Foxglove's web app (the default foxglove_origins) and programs are let in
+    app = foxglove_ws(fox, headers={"Origin": "https://app.foxglove.dev"})
+    assert app.status == 101, app.body
+    app.recv_json(lambda m: m.get("op") == "serverInfo")
+    app.close()
+    # 200 connections: at most 16 at once, the rest refused with 503
+    opened, refused = [], 0
+    for _ in range(200):
+        ws = foxglove_ws(fox)
+        if ws.status == 101:
+            opened.append(ws)
+        else:
+            assert ws.status == 503, (ws.status, ws.body)
+            refused += 1
+    print(f"200 connections: {len(opened)} accepted, {refused} refused with 503")
+    assert len(opened) == 16 and refused == 184
+    for ws in opened:
+        ws.close()
+
+
+def test_a_10_mib_foxglove_message_closes_that_client_and_memory_stays_flat(launch, observer):
+    """Medium: the Foxglove server read 10 MiB messages (RSS 19 -> 101 MB). Now a message
+    over 1 MiB closes the client at its header, before its payload is read."""
+    fox = free_port()
+    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=127.0.0.1:{fox}")
+    deadline = time.monotonic() + 10
+    while "Foxglove WebSocket server on" not in proc.output():
+        assert time.monotonic() < deadline, proc.output()
+        time.sleep(0.05)
+    before = rss_kib(proc.proc.pid)
+    big = RawWs.frame(b"\0" * (10 * 1024 * 1024), opcode=0x2)
+    for _ in range(5):
+        ws = foxglove_ws(fox)
+        assert ws.status == 101
+        ws.recv_json(lambda m: m.get("op") == "serverInfo")
+        try:
+            ws.sock.sendall(big)
+        except OSError:
+            pass  # closed by the server while sending: the point
+        ws.close()
+    time.sleep(0.5)
+    after = rss_kib(proc.proc.pid)
+    print(f"RSS {before} KiB -> {after} KiB after five 10 MiB messages")
+    assert after - before < 20 * 1024, (before, after)
+    ok = foxglove_ws(fox)
+    assert ok.status == 101, "the server no longer serves after the big messages"
+    ok.close()
