@@ -47,8 +47,16 @@ pub enum PlumbingError {
     /// SROS2 is on but cannot be used (under `ROS_SECURITY_STRATEGY=Enforce`), or
     /// access control refused an endpoint.
     #[error("security: {0}")]
-    Security(#[from] crate::security::SecurityError),
+    Security(crate::security::SecurityError),
     /// ros2-client refused to create something.
     #[error("ROS 2: {0}")]
     Ros(String),
+}
+
+// Not `#[from]`: that would make the security error the source as well, and `{:#}`
+// (run_main) would print its message twice.
+impl From<crate::security::SecurityError> for PlumbingError {
+    fn from(e: crate::security::SecurityError) -> Self {
+        PlumbingError::Security(e)
+    }
 }

@@ -98,6 +98,10 @@ pub fn domain_id_from_env(value: Option<&str>) -> Result<u16, PlumbingError> {
     }
 }
 
+/// ros2-client folds RustDDS' `NotAllowedBySecurity` into `CreateError::Middleware`
+/// with this prefix.
+const DENIED: &str = "not allowed by security: ";
+
 /// Builds the node's DDS participant, secured with the enclave of `plan` if given.
 fn build_participant(
     domain_id: u16,
@@ -300,9 +304,18 @@ impl RosNode {
                 None
             },
         );
-        let spinner = node
-            .spinner()
-            .map_err(|e| PlumbingError::Ros(format!("cannot start the node spinner: {e:?}")))?;
+        let spinner = node.spinner().map_err(|e| match e {
+            // the parameter services' topics, refused by the enclave's permissions
+            ros2_client::CreateError::Middleware { reason } if reason.starts_with(DENIED) => {
+                PlumbingError::from(SecurityError::Denied {
+                    action: "create",
+                    topic: "the parameter services' topics".into(),
+                    enclave: enclave.clone().unwrap_or_else(|| "/".into()),
+                    why: reason[DENIED.len()..].to_string(),
+                })
+            }
+            e => PlumbingError::Ros(format!("cannot start the node spinner: {e:?}")),
+        })?;
         let spinner = tokio::spawn(async move {
             if let Err(e) = spinner.spin().await {
                 log::error!("node spinner stopped: {e:?}");
@@ -407,8 +420,6 @@ impl RosNode {
         topic: String,
         e: ros2_client::CreateError,
     ) -> PlumbingError {
-        // ros2-client folds RustDDS' NotAllowedBySecurity into Middleware with this prefix
-        const DENIED: &str = "not allowed by security: ";
         match e {
             ros2_client::CreateError::Middleware { reason } if reason.starts_with(DENIED) => {
                 let reason = reason[DENIED.len()..].to_string();
