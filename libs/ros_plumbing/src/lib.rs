@@ -14,6 +14,7 @@ pub mod publisher;
 pub mod qos;
 pub mod remote_params;
 pub mod security;
+pub mod sros2;
 pub mod topics;
 
 pub use error::PlumbingError;
