@@ -714,7 +714,7 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
     rosout = observer.sub("/rosout", Log, LATCHED)
     proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
     deadline = time.monotonic() + 5
-    while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/\?token=([0-9a-f]+)", proc.output())):
+    while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/#token=([0-9a-f]+)", proc.output())):
         assert time.monotonic() < deadline, proc.output()
         time.sleep(0.05)
     token = m.group(1)
@@ -722,12 +722,11 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
     url = m.group(0).removeprefix("web panel: ")
     print(proc.output())
 
-    # without the token neither the page nor the WebSocket; a wrong one neither
-    status, headers, body = http_get(port, "/")
-    assert status == 401 and "access token" in body and "<html" not in body, (status, body)
+    # without the token no WebSocket and no URDF; a wrong one neither (the page itself is
+    # public code: it takes the token from its own origin's storage)
     assert RawWs(port).status == 401
-    status, _, body = http_get(port, "/?token=" + "0" * 48)
-    assert status == 403 and "wrong access token" in body and "<html" not in body
+    status, _, body = http_get(port, "/robot.urdf?token=" + "0" * 48)
+    assert status == 403 and "wrong access token" in body
     bad = RawWs(port, path="/ws?token=" + "0" * 48)
     assert bad.status == 403 and "wrong access token" in bad.body
     # the token does not excuse another origin
@@ -745,11 +744,10 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
         ws.close()
     assert observer.spin_until(lambda: xyz and abs(xyz[-1][1].point.z - 0.15) < 1e-9, 5)
     status, headers, body = http_get(port, f"/?token={token}")
-    assert status == 200 and "<html" in body
-    assert any(c.startswith(f"eezybot_panel_{port}={token};") and "HttpOnly" in c for c in headers["set-cookie"])
+    assert status == 200 and "<html" in body and "set-cookie" not in headers
 
     # the browser (a tablet on the LAN) opens the printed URL: the page works, the token
-    # leaves the address bar, and a reload works from the cookie
+    # leaves the address bar, and a reload works from the origin's storage
     context = browser.new_context()
     page = context.new_page()
     page.goto(url)
@@ -762,11 +760,15 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
         page.eval_on_selector("#z", "(el, v) => { el.value = v; el.dispatchEvent(new Event('input')); }", z)
         assert observer.spin_until(lambda: xyz and abs(xyz[-1][1].point.z - z) < 1e-9, 5), z
     context.close()
-    # a browser without the token gets the hint, not the page
+    # a browser without the token gets the hint and a field for the token
     context = browser.new_context()
     page = context.new_page()
-    response = page.goto(f"http://127.0.0.1:{port}/")
-    assert response.status == 401 and "printed" in page.inner_text("body")
+    page.goto(f"http://127.0.0.1:{port}/")
+    page.wait_for_function("() => document.getElementById('access').className === 'shown'")
+    assert "printed" in page.inner_text("#access") and page.is_visible("#token-input")
+    page.fill("#token-input", token)
+    page.click("#token-form button")
+    page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
     context.close()
 
     # `ros2 param get /gui_bridge token` does not reveal it; nor the log or /rosout
@@ -778,14 +780,14 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
     observer.spin_for(0.5)
     assert rosout and not [m for _, m in rosout if token in m.msg]
     out = proc.output()
-    assert out.count(token) == len(re.findall(r"^web panel: http://\S+\?token=" + token + "$", out, re.M)), out
+    assert out.count(token) == len(re.findall(r"^web panel: http://\S+#token=" + token + "$", out, re.M)), out
 
 
 def test_a_token_set_by_parameter_is_required_and_hidden(launch, observer, domain):
     from rcl_interfaces.srv import GetParameters
     token = "operator-chosen-token-0123"
     proc, port = start_panel(launch, observer, "-p", f"token:={token}")
-    assert http_get(port, "/")[0] == 401  # a token set on a loopback bind is required too
+    assert RawWs(port).status == 401  # a token set on a loopback bind is required too
     assert http_get(port, f"/?token={token}")[0] == 200
     client = observer.node.create_client(GetParameters, "/gui_bridge/get_parameters")
     assert client.wait_for_service(timeout_sec=10)

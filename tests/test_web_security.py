@@ -1,15 +1,17 @@
 """The web side probed as an attacker would, on loopback (issue 18 item 7): each probe that
 got through is a test here, run against the real gui_bridge binary. The panel's own
 guards (Origin, DNS rebinding, token, floods) are tests/test_gui_bridge.py's."""
+import http.server
 import re
 import struct
+import threading
 import time
 
 from geometry_msgs.msg import PointStamped
 from rclpy.serialization import serialize_message
 
 from foxglove_client import free_port
-from test_gui_bridge import RawWs, http_get, rss_kib, start_panel
+from test_gui_bridge import RawWs, browser, http_get, rss_kib, start_panel  # noqa: F401 (fixture)
 
 FOXGLOVE = {"Sec-WebSocket-Protocol": "foxglove.sdk.v1"}
 
@@ -19,9 +21,17 @@ def foxglove_ws(port, path="/", headers=None):
     return RawWs(port, path=path, headers={**FOXGLOVE, **(headers or {})})
 
 
+def peak_rss_kib(pid):
+    """The process's peak resident set (VmHWM)."""
+    for line in open(f"/proc/{pid}/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+    raise RuntimeError("no VmHWM")
+
+
 def printed_token(proc, port):
     deadline = time.monotonic() + 10
-    while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/\?token=([0-9a-f]+)", proc.output())):
+    while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/[#?]token=([0-9a-f]+)", proc.output())):
         assert time.monotonic() < deadline, proc.output()
         time.sleep(0.05)
     return m.group(1)
@@ -49,11 +59,16 @@ def test_foxglove_on_the_network_publishes_only_with_the_panel_s_token(launch, o
     xyz = observer.sub("/xyz_target", PointStamped)
     fox = free_port()
     proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=0.0.0.0:{fox}", "-p", "foxglove_publish:=true")
-    token = printed_token(proc, port)
+    deadline = time.monotonic() + 10
+    while "Foxglove WebSocket server on" not in proc.output():
+        assert time.monotonic() < deadline, proc.output()
+        time.sleep(0.05)
     for headers, path, status in (({"Origin": "http://evil.example"}, "/", 403),
-                                  ({"Origin": "http://evil.example"}, f"/?token={token}", 403),
                                   ({}, "/", 401),
-                                  ({}, "/?token=" + "0" * 48, 403)):
+                                  ({}, "/?token=" + "0" * 48, 403),
+                                  ({"Origin": "http://evil.example"}, "/?token={token}", 403)):
+        if "{token}" in path:
+            path = path.format(token=printed_token(proc, port))
         ws = foxglove_ws(fox, path, headers)
         if ws.status == 101:  # the probe of the issue: publish and see whether the arm moves
             moved = try_to_publish(ws, observer, xyz)
@@ -62,6 +77,7 @@ def test_foxglove_on_the_network_publishes_only_with_the_panel_s_token(launch, o
         assert ws.status == status, (headers, path, ws.status, ws.body)
     observer.spin_for(0.3)
     assert not xyz
+    token = printed_token(proc, port)
     # the operator's own Foxglove, with the printed token, publishes
     ws = foxglove_ws(fox, f"/?token={token}")
     assert ws.status == 101, ws.body
@@ -70,8 +86,8 @@ def test_foxglove_on_the_network_publishes_only_with_the_panel_s_token(launch, o
     assert try_to_publish(ws, observer, xyz, seconds=10), "the token holder's target never reached ROS"
     ws.close()
     # the panel needs the token too now (it is printed, and the same)
-    assert http_get(port, "/")[0] == 401
-    assert http_get(port, f"/?token={token}")[0] == 200
+    assert RawWs(port).status == 401
+    assert RawWs(port, path=f"/ws?token={token}").status == 101
 
 
 def test_foxglove_refuses_other_origins_rebinding_and_connections_over_its_cap(launch, observer):
@@ -119,7 +135,7 @@ def test_a_10_mib_foxglove_message_closes_that_client_and_memory_stays_flat(laun
     while "Foxglove WebSocket server on" not in proc.output():
         assert time.monotonic() < deadline, proc.output()
         time.sleep(0.05)
-    before = rss_kib(proc.proc.pid)
+    before, peak_before = rss_kib(proc.proc.pid), peak_rss_kib(proc.proc.pid)
     big = RawWs.frame(b"\0" * (10 * 1024 * 1024), opcode=0x2)
     for _ in range(5):
         ws = foxglove_ws(fox)
@@ -129,11 +145,65 @@ def test_a_10_mib_foxglove_message_closes_that_client_and_memory_stays_flat(laun
             ws.sock.sendall(big)
         except OSError:
             pass  # closed by the server while sending: the point
+        # the server ends this client: a close frame (1009) or the connection itself
+        ws.sock.settimeout(10)
+        ended = None
+        try:
+            while (frame := ws.recv())[0] != 0x8:
+                pass
+            ended = struct.unpack(">H", frame[1][:2])[0]
+        except (OSError, ConnectionError):
+            ended = "connection closed"
+        assert ended in (1009, "connection closed"), ended
         ws.close()
     time.sleep(0.5)
-    after = rss_kib(proc.proc.pid)
-    print(f"RSS {before} KiB -> {after} KiB after five 10 MiB messages")
-    assert after - before < 20 * 1024, (before, after)
+    after, peak_after = rss_kib(proc.proc.pid), peak_rss_kib(proc.proc.pid)
+    print(f"RSS {before} KiB -> {after} KiB, peak {peak_before} KiB -> {peak_after} KiB after five 10 MiB messages")
+    assert peak_after - peak_before < 8 * 1024, (peak_before, peak_after)
     ok = foxglove_ws(fox)
     assert ok.status == 101, "the server no longer serves after the big messages"
     ok.close()
+
+
+def test_the_token_goes_to_no_other_server_and_not_into_urls(launch, observer, browser):
+    """Medium: the token lived in a cookie, and cookies are not isolated by port: another
+    server on 127.0.0.1 received it; the ?token= URL stayed in the history. Now the page
+    keeps it in its origin's localStorage and sends it as a WebSocket subprotocol."""
+    seen = []
+
+    class Recorder(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            seen.append((self.path, dict(self.headers)))
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(b"<p>another server</p>")
+
+        def log_message(self, *args):
+            pass
+
+    other = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Recorder)
+    threading.Thread(target=other.serve_forever, daemon=True).start()
+    try:
+        proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
+        token = printed_token(proc, port)
+        context = browser.new_context()
+        page = context.new_page()
+        sockets = []
+        page.on("websocket", lambda ws: sockets.append(ws.url))
+        page.goto(f"http://127.0.0.1:{port}/?token={token}")  # the old printed URL: the probe
+        page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
+        assert token not in page.url
+        assert sockets and not [u for u in sockets if token in u], sockets
+        assert not [c for c in context.cookies() if token in c["value"]], context.cookies()
+        # a reload works from the origin's storage
+        page.reload()
+        page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
+        # another server of this host, visited by the same browser, gets nothing of it
+        page.goto(f"http://127.0.0.1:{other.server_address[1]}/")
+        assert seen, "the other server was not visited"
+        leaked = [(p, h) for p, h in seen if token in p or any(token in v for v in h.values())]
+        assert not leaked, leaked
+        context.close()
+    finally:
+        other.shutdown()

@@ -16,11 +16,18 @@
 //!    name (`127.x.x.x`, `[::1]`, `localhost`): a page of another site whose name was
 //!    made to resolve to 127.0.0.1 (DNS rebinding) sends its own name as `Host` and its
 //!    own origin, which rule 1 alone would let through.
-//! 3. **Token.** When the panel has a token (always when `bind` is not a loopback
-//!    address), every request must present it: `?token=` in the URL, an
-//!    `Authorization: token …`/`Bearer …` header, or the cookie the server sets on the
-//!    first page load that presented it. The first of these present decides; it is
-//!    compared in constant time.
+//! 3. **Token.** When the panel has a token (always when `bind` or `foxglove_bind` is
+//!    not a loopback address), every request but the page itself must present it:
+//!    `?token=` in the URL, an `Authorization: token …`/`Bearer …` header, or (the
+//!    page's WebSocket) a WebSocket subprotocol `token.…` next to [`PANEL_PROTOCOL`].
+//!    The first of these present decides; it is compared in constant time.
+//!
+//! There is no cookie: cookies are not isolated by port, so every other server on the
+//! same host (another program on 127.0.0.1) would receive it. The page (public code,
+//! the same for everyone) keeps the token in its own origin's `localStorage`, which no
+//! other port or site can read, and sends it itself, as a subprotocol on its WebSocket
+//! and an `Authorization` header on its `fetch`es: nothing sends it without the page's
+//! say-so (no ambient authority), and it is not in the WebSocket's URL (proxy logs).
 
 use std::fmt;
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
@@ -35,11 +42,12 @@ pub const MAX_TOKEN_LEN: usize = 256;
 pub const SHOWN_GENERATED: &str = "(generated)";
 /// What the `token` parameter reads when the token was set at start.
 pub const SHOWN_HIDDEN: &str = "(hidden)";
-/// Lifetime of the cookie that carries the token after the first page load (30 days).
-pub const COOKIE_MAX_AGE_S: u64 = 30 * 24 * 3600;
+/// The WebSocket subprotocol of the panel's page. The page offers it together with
+/// `token.` + the token; the server answers with this one (never the token's).
+pub const PANEL_PROTOCOL: &str = "eezybot.panel.v1";
 
 /// The secret that opens a panel. `Debug` does not show it; [`Token::reveal`] does, for
-/// the one start line meant for the operator and for the cookie.
+/// the one start line meant for the operator.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Token(String);
 
@@ -51,7 +59,7 @@ impl fmt::Debug for Token {
 
 impl Token {
     /// A token given by the operator: 16 … 256 characters that need no escaping in a
-    /// URL or a cookie (`A-Z a-z 0-9 - . _ ~`).
+    /// URL and may stand in a WebSocket subprotocol (`A-Z a-z 0-9 - . _ ~`).
     ///
     /// # Examples
     /// ```
@@ -197,8 +205,8 @@ pub struct RequestFacts<'a> {
     pub query_token: Option<&'a str>,
     /// from `Authorization: token …` or `Authorization: Bearer …`
     pub header_token: Option<&'a str>,
-    /// from the panel's cookie
-    pub cookie_token: Option<&'a str>,
+    /// from a WebSocket subprotocol `token.…` ([`protocol_token`])
+    pub protocol_token: Option<&'a str>,
 }
 
 /// How an admitted request proved itself.
@@ -210,8 +218,10 @@ pub enum Credential {
     Query,
     /// The `Authorization` header.
     Header,
-    /// The cookie.
-    Cookie,
+    /// The WebSocket subprotocol `token.…`.
+    Protocol,
+    /// No token was asked for: the page itself ([`AccessPolicy::check_page`]).
+    PageOnly,
 }
 
 /// A request the policy lets in.
@@ -219,14 +229,6 @@ pub enum Credential {
 pub struct Admission {
     /// How it proved itself.
     pub by: Credential,
-}
-
-impl Admission {
-    /// Should the answer set the cookie (the token came with the URL or a header), so
-    /// that a reload and the page's WebSocket need no token in the URL?
-    pub fn set_cookie(&self) -> bool {
-        matches!(self.by, Credential::Query | Credential::Header)
-    }
 }
 
 /// Why a request is refused. The texts are the short reasons sent with the HTTP answer
@@ -280,22 +282,16 @@ impl Refusal {
     }
 }
 
-/// The access policy of one server: its token (if any) and the name of its cookie.
+/// The access policy of one server: its token (if any).
 #[derive(Clone, Debug)]
 pub struct AccessPolicy {
     token: Option<Token>,
-    cookie_name: String,
 }
 
 impl AccessPolicy {
-    /// The policy of a server listening on `port` with this token. The cookie's name
-    /// carries the port because cookies are shared by every port of a host (two panels
-    /// on one machine keep their own).
-    pub fn new(token: Option<Token>, port: u16) -> AccessPolicy {
-        AccessPolicy {
-            token,
-            cookie_name: format!("eezybot_panel_{port}"),
-        }
+    /// The policy of a server with this token.
+    pub fn new(token: Option<Token>) -> AccessPolicy {
+        AccessPolicy { token }
     }
 
     /// Does every request need the token?
@@ -303,22 +299,20 @@ impl AccessPolicy {
         self.token.is_some()
     }
 
-    /// The cookie that carries the token.
-    pub fn cookie_name(&self) -> &str {
-        &self.cookie_name
-    }
-
-    /// The `Set-Cookie` value for an admitted request that presented the token in the
-    /// URL or a header (None: nothing to set).
-    pub fn set_cookie(&self, admission: &Admission) -> Option<String> {
-        let token = self.token.as_ref()?;
-        admission.set_cookie().then(|| {
-            format!(
-                "{}={}; Path=/; HttpOnly; SameSite=Strict; Max-Age={COOKIE_MAX_AGE_S}",
-                self.cookie_name,
-                token.reveal()
-            )
-        })
+    /// The rules for the page itself (`/`): `Origin` and, without a token, `Host`; no
+    /// token is asked for, because the page is the same public code for everyone and
+    /// takes the token from its own origin's storage (a reload has no token in the URL).
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::access::{AccessPolicy, RequestFacts, Token};
+    /// let locked = AccessPolicy::new(Some(Token::new("0123456789abcdef0123").unwrap()));
+    /// let page = RequestFacts { host: Some("192.168.1.5:8080"), ..Default::default() };
+    /// assert!(locked.check_page(&page).is_ok());
+    /// assert!(locked.check(&page).is_err());
+    /// ```
+    pub fn check_page(&self, req: &RequestFacts<'_>) -> Result<Admission, Refusal> {
+        self.check_origins(req, None, false)
     }
 
     /// Let this request in, or say why not (rules in the [module docs](self)).
@@ -326,26 +320,25 @@ impl AccessPolicy {
     /// # Examples
     /// ```
     /// use gui_bridge::access::{AccessPolicy, RequestFacts, Refusal};
-    /// let open = AccessPolicy::new(None, 8080);
+    /// let open = AccessPolicy::new(None);
     /// let page = RequestFacts { host: Some("127.0.0.1:8080"), origin: Some("http://127.0.0.1:8080"), ..Default::default() };
     /// assert!(open.check(&page).is_ok());
     /// let evil = RequestFacts { origin: Some("http://evil.example"), ..page };
     /// assert!(matches!(open.check(&evil), Err(Refusal::ForeignOrigin { .. })));
     /// ```
     pub fn check(&self, req: &RequestFacts<'_>) -> Result<Admission, Refusal> {
-        self.check_origins(req, None)
+        self.check_origins(req, None, true)
     }
 
     /// [`AccessPolicy::check`] for a server that serves no page of its own (the Foxglove
     /// server): a request with an `Origin` must come from one of `origins` (e.g.
     /// `https://app.foxglove.dev`) instead of from this server's own origin; the `Host`
-    /// and token rules are the panel's. The token may not come from the panel's cookie
-    /// (leave [`RequestFacts::cookie_token`] empty).
+    /// and token rules are the panel's.
     ///
     /// # Examples
     /// ```
     /// use gui_bridge::access::{AccessPolicy, RequestFacts, Refusal};
-    /// let open = AccessPolicy::new(None, 8080);
+    /// let open = AccessPolicy::new(None);
     /// let app = ["https://app.foxglove.dev".to_string()];
     /// let from = |origin| RequestFacts { host: Some("127.0.0.1:8765"), origin, ..Default::default() };
     /// assert!(open.check_listed_origins(&from(None), &app).is_ok());
@@ -358,13 +351,14 @@ impl AccessPolicy {
         req: &RequestFacts<'_>,
         origins: &[String],
     ) -> Result<Admission, Refusal> {
-        self.check_origins(req, Some(origins))
+        self.check_origins(req, Some(origins), true)
     }
 
     fn check_origins(
         &self,
         req: &RequestFacts<'_>,
         listed: Option<&[String]>,
+        token_rule: bool,
     ) -> Result<Admission, Refusal> {
         let host = req.host.map(str::trim).filter(|h| !h.is_empty());
         if let (Some(origin), Some(listed)) = (req.origin, listed) {
@@ -403,10 +397,15 @@ impl AccessPolicy {
                 }),
             };
         };
+        if !token_rule {
+            return Ok(Admission {
+                by: Credential::PageOnly,
+            });
+        }
         let (presented, by) = [
             (req.query_token, Credential::Query),
             (req.header_token, Credential::Header),
-            (req.cookie_token, Credential::Cookie),
+            (req.protocol_token, Credential::Protocol),
         ]
         .into_iter()
         .find_map(|(t, by)| t.map(|t| (t, by)))
@@ -535,12 +534,19 @@ pub fn authorization_token(value: &str) -> Option<&str> {
         .then(|| rest.trim())
 }
 
-/// The value of cookie `name` in a `Cookie` header (`a=1; name=value`).
-pub fn cookie_value<'a>(header: &'a str, name: &str) -> Option<&'a str> {
-    header.split(';').find_map(|kv| {
-        let (k, v) = kv.trim().split_once('=')?;
-        (k == name).then_some(v)
-    })
+/// The token of a `Sec-WebSocket-Protocol` header value: the offered subprotocol
+/// `token.…` (the page offers [`PANEL_PROTOCOL`] and this one).
+///
+/// # Examples
+/// ```
+/// use gui_bridge::access::protocol_token;
+/// assert_eq!(protocol_token("eezybot.panel.v1, token.abc"), Some("abc"));
+/// assert_eq!(protocol_token("eezybot.panel.v1"), None);
+/// ```
+pub fn protocol_token(value: &str) -> Option<&str> {
+    value
+        .split(',')
+        .find_map(|p| p.trim().strip_prefix("token."))
 }
 
 #[cfg(test)]
@@ -550,11 +556,11 @@ mod tests {
     const TOKEN: &str = "0123456789abcdef0123";
 
     fn open() -> AccessPolicy {
-        AccessPolicy::new(None, 8080)
+        AccessPolicy::new(None)
     }
 
     fn locked() -> AccessPolicy {
-        AccessPolicy::new(Some(Token::new(TOKEN).unwrap()), 8080)
+        AccessPolicy::new(Some(Token::new(TOKEN).unwrap()))
     }
 
     fn req<'a>(host: &'a str, origin: Option<&'a str>) -> RequestFacts<'a> {
@@ -693,12 +699,10 @@ mod tests {
         };
         assert_eq!(p.check(&h).unwrap().by, Credential::Header);
         let c = RequestFacts {
-            cookie_token: Some(TOKEN),
+            protocol_token: Some(TOKEN),
             ..base
         };
-        assert_eq!(p.check(&c).unwrap().by, Credential::Cookie);
-        assert!(!p.check(&c).unwrap().set_cookie());
-        assert!(p.check(&q).unwrap().set_cookie());
+        assert_eq!(p.check(&c).unwrap().by, Credential::Protocol);
         for wrong in ["", "0123456789abcdef012", "0123456789abcdef0124", "x"] {
             let w = RequestFacts {
                 query_token: Some(wrong),
@@ -707,16 +711,16 @@ mod tests {
             assert_eq!(p.check(&w), Err(Refusal::WrongToken), "{wrong:?}");
             assert_eq!(Refusal::WrongToken.status(), 403);
         }
-        // the first credential present decides: a new URL token beats a stale cookie
+        // the first credential present decides
         let both = RequestFacts {
             query_token: Some(TOKEN),
-            cookie_token: Some("stale-token-of-a-previous-run"),
+            protocol_token: Some("stale-token-of-a-previous-run"),
             ..base
         };
         assert!(p.check(&both).is_ok());
         let stale = RequestFacts {
             query_token: Some("stale-token-of-a-previous-run"),
-            cookie_token: Some(TOKEN),
+            protocol_token: Some(TOKEN),
             ..base
         };
         assert_eq!(p.check(&stale), Err(Refusal::WrongToken));
@@ -737,21 +741,20 @@ mod tests {
     }
 
     #[test]
-    fn cookie_is_set_once_and_names_the_port() {
-        let p = locked();
-        let by_query = Admission {
-            by: Credential::Query,
-        };
-        let cookie = p.set_cookie(&by_query).unwrap();
-        assert!(cookie.starts_with(&format!("eezybot_panel_8080={TOKEN};")));
-        assert!(cookie.contains("HttpOnly") && cookie.contains("SameSite=Strict"));
-        assert_eq!(
-            p.set_cookie(&Admission {
-                by: Credential::Cookie
-            }),
-            None
-        );
-        assert_eq!(open().set_cookie(&by_query), None);
+    fn the_page_needs_no_token_but_keeps_the_origin_and_host_rules() {
+        let page = req("192.168.1.5:8080", None);
+        assert_eq!(locked().check_page(&page).unwrap().by, Credential::PageOnly);
+        assert_eq!(locked().check(&page), Err(Refusal::NoToken));
+        let evil = req("192.168.1.5:8080", Some("http://evil.example"));
+        assert!(matches!(
+            locked().check_page(&evil),
+            Err(Refusal::ForeignOrigin { .. })
+        ));
+        let rebound = req("evil.example:8080", None);
+        assert!(matches!(
+            open().check_page(&rebound),
+            Err(Refusal::HostNotLoopback { .. })
+        ));
     }
 
     #[test]
@@ -809,14 +812,8 @@ mod tests {
         assert_eq!(authorization_token("token abc"), Some("abc"));
         assert_eq!(authorization_token("Bearer abc "), Some("abc"));
         assert_eq!(authorization_token("Basic YWJj"), None);
-        assert_eq!(
-            cookie_value("a=1; eezybot_panel_8080=abc; b=2", "eezybot_panel_8080"),
-            Some("abc")
-        );
-        assert_eq!(
-            cookie_value("eezybot_panel_8081=abc", "eezybot_panel_8080"),
-            None
-        );
+        assert_eq!(protocol_token("eezybot.panel.v1,token.abc"), Some("abc"));
+        assert_eq!(protocol_token("token"), None);
     }
 
     #[test]

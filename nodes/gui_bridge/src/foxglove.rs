@@ -303,8 +303,7 @@ pub fn origins(parameter: &str) -> Vec<String> {
 
 /// Who may use the Foxglove server: the web panel's rules ([`AccessPolicy`]), with the
 /// `Origin`s of `foxglove_origins` instead of the panel's own, the token from the URL
-/// (`ws://HOST:8765/?token=…`) or an `Authorization` header (never from the panel's
-/// cookie). Every client it admits may publish when `foxglove_publish` is on: the panel's
+/// (`ws://HOST:8765/?token=…`) or an `Authorization` header. Every client it admits may publish when `foxglove_publish` is on: the panel's
 /// token is required whenever `foxglove_bind` is not loopback, so a client that may
 /// publish either presented it or is a program on this machine (or a page of a listed
 /// origin).
@@ -318,7 +317,7 @@ pub fn gate(access: AccessPolicy, origins: Vec<String>) -> Gate {
             header_token: req
                 .header("authorization")
                 .and_then(access::authorization_token),
-            cookie_token: None,
+            protocol_token: None,
         };
         access
             .check_listed_origins(&facts, &origins)

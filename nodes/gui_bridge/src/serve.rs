@@ -69,12 +69,7 @@ pub async fn serve(
     };
     // from here on shared with the Foxglove server, which subscribes topics on demand
     let node = std::cell::RefCell::new(node);
-    let foxglove_port = foxglove_bind
-        .trim()
-        .parse::<SocketAddr>()
-        .map_or(0, |a| a.port());
-    let foxglove =
-        crate::foxglove::serve(&node, AccessPolicy::new(token.clone(), foxglove_port)).await?;
+    let foxglove = crate::foxglove::serve(&node, AccessPolicy::new(token.clone())).await?;
     let state = WebState::new(
         to_browsers.clone(),
         req_tx,
@@ -83,7 +78,7 @@ pub async fn serve(
                 .map(|t| crate::hello_json(&t, p.f64("rate").unwrap_or(50.0)))
                 .unwrap_or_default()
         }),
-        AccessPolicy::new(token.clone(), local.port()),
+        AccessPolicy::new(token.clone()),
         limits,
     )
     .with_urdf({
@@ -265,10 +260,13 @@ fn panel_addresses(local: SocketAddr) -> Vec<IpAddr> {
 }
 
 /// The start line meant for the operator: the panel's URL(s) with the token, on
-/// standard output only (never in the log, which also goes to `/rosout`).
+/// standard output only (never in the log, which also goes to `/rosout`). The token
+/// goes in the fragment (`#token=`), which the browser never sends to a server (no
+/// request line, proxy log or Referer has it); the page moves it to its origin's
+/// storage and out of the address bar.
 fn print_panel_urls(local: SocketAddr, token: Option<&Token>) {
     let query = token
-        .map(|t| format!("?token={}", t.reveal()))
+        .map(|t| format!("#token={}", t.reveal()))
         .unwrap_or_default();
     let mut out = std::io::stdout().lock();
     for ip in panel_addresses(local) {

@@ -741,7 +741,7 @@ async fn page() -> impl IntoResponse {
 }
 
 /// What a request says, from its headers and URL.
-fn facts<'a>(headers: &'a HeaderMap, query: Option<&'a str>, cookie: &str) -> RequestFacts<'a> {
+fn facts<'a>(headers: &'a HeaderMap, query: Option<&'a str>) -> RequestFacts<'a> {
     let text = |name: header::HeaderName| headers.get(name).and_then(|v| v.to_str().ok());
     RequestFacts {
         host: text(header::HOST),
@@ -751,11 +751,11 @@ fn facts<'a>(headers: &'a HeaderMap, query: Option<&'a str>, cookie: &str) -> Re
             .and_then(|v| v.to_str().ok()),
         query_token: access::query_token(query),
         header_token: text(header::AUTHORIZATION).and_then(access::authorization_token),
-        cookie_token: headers
-            .get_all(header::COOKIE)
+        protocol_token: headers
+            .get_all(header::SEC_WEBSOCKET_PROTOCOL)
             .iter()
             .filter_map(|v| v.to_str().ok())
-            .find_map(|c| access::cookie_value(c, cookie)),
+            .find_map(access::protocol_token),
     }
 }
 
@@ -765,21 +765,16 @@ async fn guard(State(state): State<WebState>, request: Request, next: Next) -> R
         .extensions()
         .get::<ConnectInfo<SocketAddr>>()
         .map(|c| c.0);
-    let decision = state.access.check(&facts(
-        request.headers(),
-        request.uri().query(),
-        state.access.cookie_name(),
-    ));
+    let facts = facts(request.headers(), request.uri().query());
+    // the page is public code and finds its token in its own origin's storage: only the
+    // Origin and Host rules apply to it; everything else needs the token
+    let decision = if request.uri().path() == "/" {
+        state.access.check_page(&facts)
+    } else {
+        state.access.check(&facts)
+    };
     match decision {
-        Ok(admission) => {
-            let mut response = next.run(request).await;
-            if let Some(cookie) = state.access.set_cookie(&admission) {
-                if let Ok(v) = HeaderValue::from_str(&cookie) {
-                    response.headers_mut().append(header::SET_COOKIE, v);
-                }
-            }
-            response
-        }
+        Ok(_) => next.run(request).await,
         Err(refusal) => {
             let what = format!("{} {}", request.method(), request.uri().path());
             state.stats.refused(who, &what, &refusal);
@@ -821,7 +816,9 @@ async fn ws_handler(
     let l = state.limits;
     let from = who.map_or_else(|| "(unknown address)".to_string(), |a| a.to_string());
     let (stats, failed_from) = (state.stats.clone(), from.clone());
-    ws.max_message_size(l.max_message_bytes)
+    // the page offers its protocol and `token.…`: the answer names its protocol only
+    ws.protocols([access::PANEL_PROTOCOL])
+        .max_message_size(l.max_message_bytes)
         .max_frame_size(l.max_message_bytes)
         .max_write_buffer_size(l.max_write_buffer_bytes)
         .on_failed_upgrade(move |e: axum::Error| stats.upgrade_failed(&failed_from, &e.to_string()))
