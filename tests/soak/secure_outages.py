@@ -65,13 +65,18 @@ def main():
                 g = S.OutageGraph(hosts, lease.id, variant, rate=args.rate)
                 print(f"first reply {g.wait_flowing(60):.2f} s after start", flush=True)
                 for trial in range(args.trials):
+                    t_settle = time.monotonic()
                     time.sleep(args.settle)
+                    # is the graph answering before this cut (after a trial that did not resume)?
+                    before = len([1 for t, _ in g.peer.said("recv rt/servo_state ") if t >= t_settle])
                     r = g.outage(args.length, "pi")
                     r["trial"] = trial
+                    r["servo_state_in_the_settle_before"] = before
                     results.append(r)
                     print(f"trial {trial + 1:2d}: first servo_state {fmt(r['first_servo_state_s'])} after link-up, "
                           f"resumed (a new target answered) after {fmt(r['resume_s'])}; participants dropped "
-                          f"{r['participants_dropped_during']}, handshakes after {r['handshakes_after']}", flush=True)
+                          f"{r['participants_dropped_during']}, handshakes after {r['handshakes_after']}; servo_state samples in the "
+                          f"{args.settle:g} s before the cut {before}", flush=True)
                     if r["resume_s"] is None:
                         print("  did not resume within 30 s: the soak goes on (the graph may still come back)",
                               flush=True)
