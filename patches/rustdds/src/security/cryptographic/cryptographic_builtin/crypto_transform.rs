@@ -775,6 +775,12 @@ impl CryptoTransform for CryptographicBuiltin {
     // SerializedPayload does not have a length marker, but both header and footer
     // have a fixed length. Footer is not allowed to have receiver specific MACs
     // here, which makes its size fixed.
+    //
+    // The buffer is the whole serializedPayload of a DATA (or DATA_FRAG), which
+    // the sender pads to a multiple of 4 (RTPS submessages are 4-aligned), and
+    // the receiver cannot tell the padding from the payload. So the footer is not
+    // always at the end: when the CryptoContent has a length marker, the footer is
+    // read right after it, and what follows the footer is padding.
 
     let head_len = BuiltinCryptoHeader::serialized_len();
     let foot_len = BuiltinCryptoFooter::minimal_serialized_len();
@@ -841,9 +847,65 @@ impl CryptoTransform for CryptographicBuiltin {
       }
       BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GCM
       | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM => {
-        let ciphertext = CryptoContent::read_from_buffer(content_bytes)?.data;
+        // CryptoContent is length-prefixed: the footer follows it directly (a
+        // sender that aligns the footer's sequence length to 4, as Fast DDS does,
+        // still has the common MAC right there).
+        let ciphertext = CryptoContent::read_from_buffer(&encoded_buffer[head_len..])?.data;
+        let footer_start = head_len + 4 + ciphertext.len();
+        let common_mac = match encoded_buffer.get(footer_start..footer_start + foot_len) {
+          Some(footer_bytes) => BuiltinCryptoFooter::try_from(footer_bytes)?.common_mac,
+          None => return Err(security_error("Encoded payload too short for its CryptoContent")),
+        };
         decrypt(decode_key, initialization_vector, &ciphertext, common_mac)
       }
+    }
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use super::{super::builtin_key::BuiltinKey, *};
+
+  // A DATA's serializedData is padded to a multiple of 4 by the sender
+  // (`Data::write_to`), and the receiver gets the padding as part of the
+  // payload. An encrypted payload whose plaintext length is not a multiple of 4
+  // must still decode.
+  #[test]
+  fn an_encrypted_payload_decodes_with_the_datas_alignment_padding() {
+    let mut crypto = CryptographicBuiltin::new();
+    let key_material = KeyMaterial_AES_GCM_GMAC {
+      transformation_kind: BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM,
+      master_salt: BuiltinKey::generate_random(KeyLength::AES256),
+      sender_key_id: CryptoTransformKeyId::random(),
+      master_sender_key: BuiltinKey::generate_random(KeyLength::AES256),
+      receiver_specific_key_id: CryptoTransformKeyId::ZERO,
+      master_receiver_specific_key: BuiltinKey::None,
+    };
+    let local_writer = 1;
+    let remote_writer = 2; // the same writer, as a remote reader's participant sees it
+    crypto
+      .insert_common_encode_key_materials(
+        local_writer,
+        CommonEncodeKeyMaterials::Some(KeyMaterial_AES_GCM_GMAC_seq::One(key_material.clone())),
+      )
+      .unwrap();
+    crypto
+      .insert_decode_key_materials(remote_writer, KeyMaterial_AES_GCM_GMAC_seq::One(key_material))
+      .unwrap();
+
+    for plaintext_len in 0..12usize {
+      let plaintext: Vec<u8> = (0..plaintext_len).map(|i| i as u8 + 1).collect();
+      let (mut encoded, _) = crypto
+        .encode_serialized_payload(plaintext.clone(), local_writer)
+        .unwrap();
+      // As the DATA submessage carries it: padded to a multiple of 4
+      while encoded.len() % 4 != 0 {
+        encoded.push(0);
+      }
+      let decoded = crypto
+        .decode_serialized_payload(encoded, ParameterList::new(), 3, remote_writer)
+        .unwrap_or_else(|e| panic!("plaintext of {plaintext_len} bytes: {e:?}"));
+      assert_eq!(decoded, plaintext, "plaintext of {plaintext_len} bytes");
     }
   }
 }
