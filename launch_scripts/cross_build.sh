@@ -8,7 +8,10 @@
 #   armv7:   armv7-unknown-linux-gnueabihf, 32-bit Raspberry Pi OS (Pi 2, 3, 4, Zero 2 W)
 #
 # Installs what it needs (launch_scripts/setup_cross.sh), builds with the `pi` profile of
-# Cargo.toml (stripped, LTO), checks that the binaries start (under qemu-user), and writes
+# Cargo.toml (stripped, LTO) and DDS Security (SROS2) built in: OpenSSL is compiled from
+# source for the target and linked statically (feature ros_plumbing/vendored-openssl), so
+# the Pi needs no libssl and this PC no target libssl. Checks that the binaries start
+# (under qemu-user), and writes
 # per target a bundle dist/eezybot-pi-ARCH/ and its tarball dist/eezybot-pi-ARCH.tar.gz:
 # bin/, launch_scripts/{lib.sh,pi.sh}, deploy/ (systemd unit, udev rule, install.sh),
 # README.txt and raspberry_pi.md. Copy the tarball to the Pi, unpack it and follow
@@ -41,6 +44,10 @@ tools() {
     armv7) echo arm-linux-gnueabihf ;;
   esac
 }
+# The C cross compiler and archiver: openssl-src (OpenSSL's own build, with perl and
+# make) and ring's C and assembly use them through the cc crate.
+cc_of() { echo "$(tools "$1")-gcc"; }
+ar_of() { echo "$(tools "$1")-ar"; }
 # The cargo runner of .cargo/config.toml, for the start-up check.
 qemu() {
   case "$1" in
@@ -57,8 +64,11 @@ declare -A need_glibc
 mkdir -p dist
 for arch in "${arches[@]}"; do
   t=$(triple "$arch")
-  _say "building ${bins[*]} for $t (profile pi; the first build takes several minutes)"
-  cargo build -q --profile pi --target "$t" -p serial_node --bins
+  _say "building ${bins[*]} for $t (profile pi, with DDS Security; the first build takes several minutes, OpenSSL among them)"
+  # CC_<triple>/AR_<triple>: what the cc crate would guess for these triples, said
+  # explicitly, so OpenSSL is never configured with the host's gcc
+  env "CC_${t//-/_}=$(cc_of "$arch")" "AR_${t//-/_}=$(ar_of "$arch")" \
+    cargo build -q --profile pi --target "$t" -p serial_node --bins --features ros_plumbing/vendored-openssl
   out="target/$t/pi"
 
   # The binaries start on the target's CPU and name no file of this build tree.
@@ -67,9 +77,16 @@ for arch in "${arches[@]}"; do
   fi
   code=0; $(qemu "$arch") "$out/virtual_arduino" 2>/dev/null || code=$?
   [ "$code" = 2 ] || { _say "$out/virtual_arduino under qemu exited $code, not 2 (usage)"; exit 1; }
+  # One exception: OpenSSL compiles in the default directories of its dynamic engines and
+  # providers (ENGINESDIR, MODULESDIR), under its install prefix in this build tree. They
+  # are read only if an engine or provider module is loaded by name (none is: the
+  # providers are built in, and OPENSSL_ENGINES/OPENSSL_MODULES would override them).
+  root_re=$(printf '%s' "$root" | sed 's/[][\.*^$+?(){}|/]/\\&/g')
+  openssl_dirs="^$root_re/target/$t/pi/build/openssl-sys-[0-9a-f]+/out/openssl-build/install/lib/(engines-3|ossl-modules)\$"
   for b in "${bins[@]}"; do
-    if grep -qF "$root/" "$out/$b"; then
-      _say "$out/$b names a path in $root:"; grep -aoF "$root/" "$out/$b" | sort -u >&2; exit 1
+    leaks=$(grep -aoE "$root_re/[[:print:]]*" "$out/$b" | grep -vE "$openssl_dirs" | sort -u || true)
+    if [ -n "$leaks" ]; then
+      _say "$out/$b names a path in $root:"; echo "$leaks" >&2; exit 1
     fi
   done
 
@@ -92,7 +109,11 @@ EezyBot teleop: the Raspberry Pi half (serial_node), prebuilt for $t
 (version $version). No Rust toolchain is needed on the Pi; the binaries need glibc
 $glibc or later (\`ldd --version\`: Raspberry Pi OS bookworm, Ubuntu 22.04 and later).
 
-  bin/serial_node        the ROS 2 node that drives the Arduino over USB serial
+  bin/serial_node        the ROS 2 node that drives the Arduino over USB serial; DDS
+                         Security (SROS2) is built in, OpenSSL linked statically: no
+                         libssl needed. Off unless ROS_SECURITY_ENABLE=true: install
+                         the Pi's enclave with deploy/install.sh --keystore DIR
+                         (raspberry_pi.md, "SROS2: the Pi's enclave")
   bin/virtual_arduino    a virtual Arduino behind a pseudo-terminal (tests without a board)
   launch_scripts/pi.sh   starts serial_node (SERIAL_PORT, ROS_DOMAIN_ID; Ctrl-C stops it)
   deploy/                systemd unit, udev rule (/dev/eezybot), env file, install.sh
