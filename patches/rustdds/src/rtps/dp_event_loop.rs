@@ -897,6 +897,21 @@ impl DPEventLoop {
       })
       .unwrap_or_else(|e| error!("Cannot report participant status: {e:?}"));
 
+    // Discovery lists our own endpoints on the topic too (`add_local_writer`). A
+    // built-in one is never a match: built-in endpoints are matched per remote
+    // participant (`update_participant`), not with ourselves. Without this, the
+    // security check below found each of our built-in endpoints "incompatible" with
+    // its counterpart and warned about it, at every start.
+    #[cfg(feature = "security")]
+    if self.security_plugins_opt.is_some()
+      && self.is_own_builtin_endpoint(remote_reader.reader_proxy.remote_reader_guid)
+    {
+      return debug!(
+        "Not matching our own built-in reader {:?}",
+        remote_reader.reader_proxy.remote_reader_guid
+      );
+    }
+
     for writer in self.writers.values_mut() {
       if remote_reader.subscription_topic_data.topic_name() == writer.topic_name() {
         #[cfg(not(feature = "security"))]
@@ -965,6 +980,12 @@ impl DPEventLoop {
     }
   }
 
+  #[cfg(feature = "security")]
+  fn is_own_builtin_endpoint(&self, guid: GUID) -> bool {
+    guid.prefix == self.domain_info.domain_participant_guid.prefix
+      && guid.entity_id.kind().is_built_in()
+  }
+
   fn remote_reader_lost(&mut self, reader_guid: GUID) {
     for writer in self.writers.values_mut() {
       writer.reader_lost(reader_guid);
@@ -985,6 +1006,17 @@ impl DPEventLoop {
         },
       })
       .unwrap_or_else(|e| error!("Cannot report participant status: {e:?}"));
+
+    // Our own built-in writer: see remote_reader_discovered.
+    #[cfg(feature = "security")]
+    if self.security_plugins_opt.is_some()
+      && self.is_own_builtin_endpoint(remote_writer.writer_proxy.remote_writer_guid)
+    {
+      return debug!(
+        "Not matching our own built-in writer {:?}",
+        remote_writer.writer_proxy.remote_writer_guid
+      );
+    }
 
     // update writer proxies in local readers
     for reader in self.message_receiver.available_readers.values_mut() {
@@ -1273,6 +1305,62 @@ mod tests {
     mio_source,
     polling::{ready_channel, wake_channel, wake_channel_unbounded, LoopWaker},
   };
+
+  // Discovery announces our own endpoints on a topic to the event loop as well
+  // (`add_local_reader` / `add_local_writer`). With security, each built-in one
+  // was checked against its counterpart, found "incompatible" and warned about:
+  // 22 WARNs at every start of a secured participant.
+  #[cfg(feature = "security")]
+  #[test]
+  fn a_secured_participant_does_not_match_its_own_builtin_endpoints() {
+    static WARNINGS: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    struct Capture;
+    impl log::Log for Capture {
+      fn enabled(&self, metadata: &log::Metadata) -> bool {
+        metadata.level() <= log::Level::Warn
+      }
+      fn log(&self, record: &log::Record) {
+        if self.enabled(record.metadata()) {
+          WARNINGS.lock().unwrap().push(record.args().to_string());
+        }
+      }
+      fn flush(&self) {}
+    }
+    log::set_boxed_logger(Box::new(Capture)).expect("no other logger in the unit tests");
+    log::set_max_level(log::LevelFilter::Warn);
+
+    // The example permissions grant domain 0
+    let participant = crate::dds::participant::DomainParticipantBuilder::new(0)
+      .builtin_security(
+        crate::DomainParticipantSecurityConfigFiles::with_ros_default_names(
+          concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/examples/security_configuration_files"
+          ),
+          "password123".to_string(),
+        ),
+      )
+      .build()
+      .expect("a secured participant");
+    let own_prefix: String = participant
+      .guid()
+      .prefix
+      .bytes
+      .iter()
+      .map(|b| format!("{b:02x}"))
+      .collect();
+    thread::sleep(std::time::Duration::from_millis(1500));
+    drop(participant);
+
+    let about_ourselves: Vec<String> = WARNINGS
+      .lock()
+      .unwrap()
+      .iter()
+      .filter(|w| w.contains("incompatible security") && w.contains(&own_prefix))
+      .cloned()
+      .collect();
+    assert!(about_ourselves.is_empty(), "{about_ourselves:#?}");
+  }
 
   //#[test]
   // TODO: Investigate why this fails in the github CI pipeline
