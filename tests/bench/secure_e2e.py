@@ -51,6 +51,7 @@ import argparse
 import json
 import os
 import shutil
+import signal
 import statistics
 import sys
 import time
@@ -281,6 +282,9 @@ def main():
     ap.add_argument("--json")
     args = ap.parse_args()
     args.send_rate = None  # serial_node's default (e2e.analyze reads it)
+    # SIGINT/SIGTERM: stop the nodes and delete the namespaces (background jobs start with SIGINT ignored)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.default_int_handler)
     if twohost.available():
         sys.exit(f"cannot run: {twohost.available()}")
     parts = args.parts.split(",")

@@ -22,6 +22,7 @@ target (resume within 5 s, 20 of 20) is met.
 """
 import argparse
 import json
+import signal
 import statistics
 import sys
 import time
@@ -47,6 +48,10 @@ def main():
     ap.add_argument("--unsecured", action="store_true", help="the control: no security anywhere")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
+    # Ctrl-C or kill (SIGINT, SIGTERM) ends the soak with the trials so far, the nodes
+    # stopped and the namespaces deleted (a shell starts background jobs with SIGINT ignored)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.default_int_handler)
     if twohost.available():
         sys.exit(f"cannot run: {twohost.available()}")
     work = S.keystore_dir()
