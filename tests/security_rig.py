@@ -17,6 +17,7 @@ import os
 import re
 import shutil
 import signal
+import struct
 import subprocess
 import threading
 import time
@@ -467,3 +468,65 @@ def wait_at_rest(peer, topic="servo_state", quiet=0.5, timeout=10.0):
         if time.monotonic() >= end:
             return got[-1][1] if got else None
         time.sleep(quiet / 4)
+
+
+def udp_datagrams(pcap):
+    """The UDP payloads (RTPS messages) of a pcap capture (Ethernet link type, as tcpdump
+    writes on a veth), with IPv4 fragments reassembled, in capture order."""
+    magic = pcap[:4]
+    if magic == b"\xd4\xc3\xb2\xa1" or magic == b"\x4d\x3c\xb2\xa1":
+        endian = "<"
+    elif magic in (b"\xa1\xb2\xc3\xd4", b"\xa1\xb2\x3c\x4d"):
+        endian = ">"
+    else:
+        raise ValueError("not a pcap file")
+    linktype = struct.unpack(endian + "I", pcap[20:24])[0]
+    if linktype != 1:
+        raise ValueError(f"pcap link type {linktype}, not Ethernet")
+    out, frags = [], {}
+    pos = 24
+    while pos + 16 <= len(pcap):
+        incl = struct.unpack(endian + "I", pcap[pos + 8:pos + 12])[0]
+        frame = pcap[pos + 16:pos + 16 + incl]
+        pos += 16 + incl
+        if len(frame) < 34 or frame[12:14] != b"\x08\x00":
+            continue
+        ip = frame[14:]
+        ihl = (ip[0] & 15) * 4
+        total = struct.unpack(">H", ip[2:4])[0]
+        ident, flags_off = struct.unpack(">HH", ip[4:8])
+        if ip[9] != 17:  # UDP
+            continue
+        body = ip[ihl:total]
+        more, offset = bool(flags_off & 0x2000), (flags_off & 0x1FFF) * 8
+        if not more and offset == 0:
+            out.append(body[8:])
+            continue
+        key = (ip[12:16], ip[16:20], ident)
+        parts = frags.setdefault(key, {})
+        parts[offset] = body
+        if not more:
+            parts["end"] = offset + len(body)
+        if "end" in parts:
+            data, at = b"", 0
+            while at in parts:
+                data += parts[at]
+                at += len(parts[at])
+            if at == parts["end"]:
+                out.append(data[8:])
+                del frags[key]
+    return out
+
+
+# the text of a `<topic>` element, found by either of its tags (a fragment boundary may cut
+# the other one off): printable, no whitespace, no angle bracket
+PERMISSIONS_TOPIC = re.compile(rb"<topic>[\x21-\x3b\x3d\x3f-\x7e]*|[\x21-\x3b\x3d\x3f-\x7e]*</topic>")
+
+
+def handshake_permissions_removed(datagram):
+    """A datagram with the `<topic>` elements of permissions documents taken out. A PKI-DH
+    handshake message carries its participant's signed permissions document (`c.perm`)
+    unencrypted, as the DDS Security specification has it, often split over several
+    DATA_FRAG submessages; nothing else on the wire is XML. What is left is what must
+    not show a topic name."""
+    return PERMISSIONS_TOPIC.sub(b"<topic/>", datagram)
