@@ -214,11 +214,15 @@ def _run(argv, **kw):
 def make_keystore(path, *enclaves):
     """A keystore made by launch_scripts/keystore.sh (its CAs new: two keystores are two
     strangers), with its default enclaves and `enclaves` (`/eezybot/tools`) besides."""
+    from conftest import bin_path
+
     if not KEYSTORE_SH.exists():
         raise FileNotFoundError(f"{KEYSTORE_SH} is missing")
-    _run([KEYSTORE_SH, path])
+    # the eezybot_sros2 the tests run with (target/debug), not a release build of its own
+    env = {**os.environ, "EEZYBOT_BIN_DIR": str(Path(bin_path("eezybot_sros2")).parent)}
+    _run([KEYSTORE_SH, path], env=env)
     for e in enclaves:
-        _run([KEYSTORE_SH, path, "--enclave", e])
+        _run([KEYSTORE_SH, path, "--enclave", e], env=env)
     return Keystore(path)
 
 
@@ -294,7 +298,7 @@ class Keystore:
         work = dst / ".ca"
         work.mkdir()
         (work / "index.txt").write_text("")
-        (work / "serial").write_text("%x\n" % (int(time.time() * 1000) | 1))
+        (work / "serial").write_text("%016x\n" % int(time.time() * 1000))
         (work / "ca.cnf").write_text(
             "[ca]\ndefault_ca=d\n[d]\ndatabase=index.txt\nnew_certs_dir=.\nserial=serial\n"
             "default_md=sha256\npolicy=p\nunique_subject=no\n[p]\ncommonName=supplied\n")

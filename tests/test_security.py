@@ -331,7 +331,7 @@ def test_a_bad_keystore_file_stops_the_node_naming_it(domain, keystore, foreign_
         pass
     running = p.proc.poll() is None
     code = p.stop()
-    out = p.output()
+    out = p.log_path.read_text()
     assert not running, f"{node} kept running with {case} under Enforce:\n{out[-2000:]}"
     assert code == 2, f"{node} exited {code}, not 2:\n{out[-2000:]}"
     assert str(bad) in out, f"{node}'s message does not name {bad}:\n{out[-2000:]}"
