@@ -9,8 +9,16 @@
 //! (abnormal closure) instead of the reason. So a dropped connection first sends its
 //! FIN after everything written, then reads and discards what still arrives until
 //! the client closes its side, for at most [`LINGER`]; only then is the socket closed.
+//!
+//! With [`LingeringListener::with_head_timeout`] a connection must also send its first
+//! request head (up to the blank line) within that time, or its reads fail with
+//! `TimedOut` and the server drops it: a client that opens connections and sends
+//! nothing (or a byte a minute) holds no connection for long, and it has not been
+//! authenticated yet (hyper has no such timeout unless given a timer, and axum's
+//! `serve` gives none).
 
 use axum::serve::Listener;
+use std::future::Future as _;
 use std::io;
 use std::net::SocketAddr;
 use std::pin::Pin;
@@ -24,16 +32,58 @@ use tokio::net::{TcpListener, TcpStream};
 /// this is reset.
 pub const LINGER: Duration = Duration::from_secs(2);
 
+/// How long a web client has to send its first request head.
+pub const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// A TCP listener whose connections close with a lingering close.
 pub struct LingeringListener {
     tcp: TcpListener,
     linger: Duration,
+    head_timeout: Option<Duration>,
 }
 
 impl LingeringListener {
     /// Serve the connections of `tcp`; each dropped one reads for at most `linger`.
     pub fn new(tcp: TcpListener, linger: Duration) -> Self {
-        LingeringListener { tcp, linger }
+        LingeringListener {
+            tcp,
+            linger,
+            head_timeout: None,
+        }
+    }
+
+    /// Each connection must send its first request head within `timeout`.
+    pub fn with_head_timeout(mut self, timeout: Duration) -> Self {
+        self.head_timeout = Some(timeout);
+        self
+    }
+}
+
+/// The first request head of a connection, until its blank line arrives.
+struct HeadDeadline {
+    sleep: Pin<Box<tokio::time::Sleep>>,
+    timeout: Duration,
+    /// how much of `\r\n\r\n` the bytes so far end with
+    matched: usize,
+}
+
+impl HeadDeadline {
+    /// Take in bytes read; true once the head is complete.
+    fn complete_after(&mut self, bytes: &[u8]) -> bool {
+        const END: &[u8] = b"\r\n\r\n";
+        for &b in bytes {
+            self.matched = if b == END[self.matched] {
+                self.matched + 1
+            } else if b == b'\r' {
+                1
+            } else {
+                0
+            };
+            if self.matched == END.len() {
+                return true;
+            }
+        }
+        false
     }
 }
 
@@ -46,6 +96,11 @@ impl Listener for LingeringListener {
         let stream = LingeringStream {
             tcp: Some(tcp),
             linger: self.linger,
+            head: self.head_timeout.map(|timeout| HeadDeadline {
+                sleep: Box::pin(tokio::time::sleep(timeout)),
+                timeout,
+                matched: 0,
+            }),
         };
         (stream, from)
     }
@@ -60,6 +115,8 @@ pub struct LingeringStream {
     /// `None` only inside `drop`.
     tcp: Option<TcpStream>,
     linger: Duration,
+    /// the first request head is still to come by this deadline
+    head: Option<HeadDeadline>,
 }
 
 impl LingeringStream {
@@ -87,7 +144,24 @@ impl AsyncRead for LingeringStream {
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        self.get_mut().tcp()?.poll_read(cx, buf)
+        let this = self.get_mut();
+        if let Some(head) = this.head.as_mut() {
+            if head.sleep.as_mut().poll(cx).is_ready() {
+                let why = format!(
+                    "no complete request head within {:.0} s",
+                    head.timeout.as_secs_f64()
+                );
+                return Poll::Ready(Err(io::Error::new(io::ErrorKind::TimedOut, why)));
+            }
+        }
+        let before = buf.filled().len();
+        let read = this.tcp()?.poll_read(cx, buf);
+        if let (Poll::Ready(Ok(())), Some(head)) = (&read, this.head.as_mut()) {
+            if head.complete_after(&buf.filled()[before..]) {
+                this.head = None;
+            }
+        }
+        read
     }
 }
 

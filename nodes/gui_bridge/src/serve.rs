@@ -114,7 +114,9 @@ pub async fn serve(
     print_panel_urls(local, token.as_ref());
     let server = tokio::spawn(async move {
         let app = crate::web::router(state).into_make_service_with_connect_info::<SocketAddr>();
-        let listener = LingeringListener::new(listener, linger::LINGER).tap_io(|s| s.set_nodelay());
+        let listener = LingeringListener::new(listener, linger::LINGER)
+            .with_head_timeout(linger::HEAD_TIMEOUT)
+            .tap_io(|s| s.set_nodelay());
         if let Err(e) = axum::serve(listener, app).await {
             log::error!("web server stopped: {e}");
         }

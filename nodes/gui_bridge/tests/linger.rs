@@ -65,3 +65,41 @@ async fn a_lingering_connection_gives_up_on_a_client_that_never_closes() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
+
+#[tokio::test]
+async fn a_connection_that_sends_no_complete_head_in_time_is_dropped() {
+    let tcp = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let mut listener = LingeringListener::new(tcp, Duration::from_millis(100))
+        .with_head_timeout(Duration::from_millis(300));
+    let at = listener.local_addr().unwrap();
+    // half a head: the read fails with TimedOut when the time is up
+    let mut slow = tokio::net::TcpStream::connect(at).await.unwrap();
+    slow.write_all(b"GET / HTTP/1.1\r\nHost: x\r\n")
+        .await
+        .unwrap();
+    let (mut conn, _) = listener.accept().await;
+    let mut buf = vec![0u8; 1024];
+    let mut got = 0;
+    let err = loop {
+        match tokio::time::timeout(Duration::from_secs(10), conn.read(&mut buf[got..])).await {
+            Ok(Ok(n)) => got += n,
+            Ok(Err(e)) => break e,
+            Err(_) => panic!("no timeout: the read waited on"),
+        }
+    };
+    assert_eq!(err.kind(), std::io::ErrorKind::TimedOut);
+    // a whole head in time: reads go on after the deadline (the body, a WebSocket)
+    let mut quick = tokio::net::TcpStream::connect(at).await.unwrap();
+    quick
+        .write_all(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+        .await
+        .unwrap();
+    let (mut conn, _) = listener.accept().await;
+    let mut head = [0u8; 27];
+    conn.read_exact(&mut head).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    quick.write_all(b"frames").await.unwrap();
+    let mut more = [0u8; 6];
+    conn.read_exact(&mut more).await.unwrap();
+    assert_eq!(&more, b"frames");
+}
