@@ -6,16 +6,118 @@
 //! compute_ik's `motion` for points with a move mode through a [`MotionControl`].
 
 use crate::program::{
-    list_programs, load, save, MoveMode, Player, PlayerAction, Program, ProgramPoint,
+    list_programs, load, save, MoveMode, Player, PlayerAction, Program, ProgramFileError,
+    ProgramPoint,
 };
 use crate::teleop::{Event, Teleop};
 use crate::web::ProgramOp;
 use eezybot_msgs::Time;
 use futures::future::LocalBoxFuture;
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::time::Instant;
+use std::time::{Duration, Instant};
+
+/// How long a program file's load or save may take before the panel gives up on it
+/// (a hung network mount); the event loop never waits for it.
+pub const FILE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// A file operation of the desk: the run loop runs it off its event loop
+/// ([`FileJob::run`] blocks, so in `spawn_blocking`, with [`FILE_TIMEOUT`]) and hands the
+/// result to [`Desk::file_done`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum FileJob {
+    /// Read a program.
+    Load {
+        /// the program's name
+        name: String,
+    },
+    /// Write the program.
+    Save {
+        /// the program's name
+        name: String,
+        /// what to write
+        program: Program,
+        /// replace an existing program of that name
+        overwrite: bool,
+    },
+}
+
+/// What a [`FileJob`] came to, with the program files listed afterwards (None: not
+/// listed, the job timed out).
+#[derive(Debug, Clone, PartialEq)]
+pub enum FileDone {
+    /// A load.
+    Loaded {
+        /// the program's name
+        name: String,
+        /// the program, or why not
+        result: Result<Program, ProgramFileError>,
+        /// the programs in the directory now
+        files: Option<Vec<String>>,
+    },
+    /// A save.
+    Saved {
+        /// the program's name
+        name: String,
+        /// its points
+        points: usize,
+        /// done, or why not
+        result: Result<(), ProgramFileError>,
+        /// the programs in the directory now
+        files: Option<Vec<String>>,
+    },
+}
+
+impl FileJob {
+    /// Do it (blocking) in `dir`.
+    pub fn run(self, dir: &Path) -> FileDone {
+        match self {
+            FileJob::Load { name } => {
+                let result = load(dir, &name);
+                FileDone::Loaded {
+                    name,
+                    result,
+                    files: Some(list_programs(dir)),
+                }
+            }
+            FileJob::Save {
+                name,
+                program,
+                overwrite,
+            } => {
+                let result = save(dir, &name, &program, overwrite);
+                FileDone::Saved {
+                    name,
+                    points: program.points.len(),
+                    result,
+                    files: Some(list_programs(dir)),
+                }
+            }
+        }
+    }
+
+    /// What it came to when the file system did not answer within `timeout`.
+    pub fn timed_out(self, timeout: Duration) -> FileDone {
+        let err = |name: &str| ProgramFileError::TimedOut {
+            name: name.trim_end_matches(".csv").to_string(),
+            seconds: timeout.as_secs(),
+        };
+        match self {
+            FileJob::Load { name } => FileDone::Loaded {
+                result: Err(err(&name)),
+                name,
+                files: None,
+            },
+            FileJob::Save { name, program, .. } => FileDone::Saved {
+                result: Err(err(&name)),
+                name,
+                points: program.points.len(),
+                files: None,
+            },
+        }
+    }
+}
 
 /// Sets compute_ik's `motion` parameter for program moves.
 pub trait MotionControl {
@@ -46,6 +148,8 @@ pub struct DeskOutcome {
     pub restore_mode: bool,
     /// The desk changed: send [`Desk::json`] to every browser.
     pub changed: bool,
+    /// Run this file operation off the event loop, then call [`Desk::file_done`].
+    pub file: Option<FileJob>,
 }
 
 /// The panel's program, its files and its player.
@@ -65,6 +169,10 @@ pub struct Desk {
     /// the program files in `dir`, read again on each browser request (not on each
     /// player step: the directory is no business of the playback)
     files: Vec<String>,
+    /// a file operation is under way
+    file_busy: bool,
+    /// the program a save found existing: the panel asks whether to replace it
+    confirm_overwrite: Option<String>,
 }
 
 impl Desk {
@@ -80,6 +188,8 @@ impl Desk {
             target_stamp: None,
             awaiting_stamp: false,
             mode_touched: false,
+            file_busy: false,
+            confirm_overwrite: None,
         }
     }
 
@@ -104,6 +214,7 @@ impl Desk {
             "name": self.name,
             "message": self.message,
             "dir": self.dir.display().to_string(),
+            "confirm_overwrite": self.confirm_overwrite,
         })
     }
 
@@ -123,8 +234,13 @@ impl Desk {
             ..DeskOutcome::default()
         };
         let editing = !matches!(op, ProgramOp::Play { .. } | ProgramOp::Stop);
+        self.confirm_overwrite = None;
         if editing && self.playing() && !matches!(op, ProgramOp::Save { .. }) {
             self.message = "stop the program before changing it".into();
+            return out;
+        }
+        if matches!(op, ProgramOp::Save { .. } | ProgramOp::Load { .. }) && self.file_busy {
+            self.message = "another save or load is under way; try again".into();
             return out;
         }
         let result: Result<String, String> = match op {
@@ -178,30 +294,82 @@ impl Desk {
                 out.restore_mode = self.stop();
                 Ok("stopped".into())
             }
-            ProgramOp::Save { name } => save(&self.dir, &name, &self.program).map(|()| {
-                self.name = name.trim_end_matches(".csv").to_string();
-                format!(
-                    "saved {} points as {}",
-                    self.program.points.len(),
-                    self.name
-                )
-            }),
-            ProgramOp::Load { name } => load(&self.dir, &name).map(|p| {
-                self.program = p;
-                self.name = name.trim_end_matches(".csv").to_string();
-                format!(
-                    "loaded {} ({} points)",
-                    self.name,
-                    self.program.points.len()
-                )
-            }),
+            ProgramOp::Save { name, overwrite } => {
+                self.file_busy = true;
+                out.file = Some(FileJob::Save {
+                    name: name.clone(),
+                    program: self.program.clone(),
+                    overwrite,
+                });
+                Ok(format!("saving {}…", name.trim_end_matches(".csv")))
+            }
+            ProgramOp::Load { name } => {
+                self.file_busy = true;
+                out.file = Some(FileJob::Load { name: name.clone() });
+                Ok(format!("loading {}…", name.trim_end_matches(".csv")))
+            }
         };
         self.message = match result {
             Ok(m) => m,
             Err(e) => e,
         };
-        self.files = list_programs(&self.dir);
         out
+    }
+
+    /// A [`FileJob`] of [`DeskOutcome::file`] is done (or timed out).
+    pub fn file_done(&mut self, done: FileDone) -> DeskOutcome {
+        self.file_busy = false;
+        let (files, message) = match done {
+            FileDone::Loaded {
+                name,
+                result,
+                files,
+            } => (
+                files,
+                match result {
+                    // a program that started playing meanwhile keeps playing
+                    Ok(_) if self.playing() => "stop the program before loading another".into(),
+                    Ok(p) => {
+                        self.program = p;
+                        self.name = name.trim_end_matches(".csv").to_string();
+                        format!(
+                            "loaded {} ({} points)",
+                            self.name,
+                            self.program.points.len()
+                        )
+                    }
+                    Err(e) => e.to_string(),
+                },
+            ),
+            FileDone::Saved {
+                name,
+                points,
+                result,
+                files,
+            } => (
+                files,
+                match result {
+                    Ok(()) => {
+                        self.name = name.trim_end_matches(".csv").to_string();
+                        format!("saved {points} points as {}", self.name)
+                    }
+                    Err(e) => {
+                        if let ProgramFileError::Exists { name } = &e {
+                            self.confirm_overwrite = Some(name.clone());
+                        }
+                        e.to_string()
+                    }
+                },
+            ),
+        };
+        if let Some(files) = files {
+            self.files = files;
+        }
+        self.message = message;
+        DeskOutcome {
+            changed: true,
+            ..DeskOutcome::default()
+        }
     }
 
     /// Stop playing (the e-stop, a stop request). Returns whether `motion` is to be put

@@ -693,12 +693,26 @@ pub async fn run<F: Fn() -> Vec<usize>>(
     let mut last_gripper: Option<f64> = None;
     let mut motion_job: Option<futures::future::LocalBoxFuture<'_, Option<Result<(), String>>>> =
         None;
+    // a program file's load or save, off the event loop (a FIFO, a hung mount: the loop
+    // goes on, the job times out)
+    let mut file_job: Option<futures::future::BoxFuture<'static, desk::FileDone>> = None;
     if let Ok(mut t) = teleop.lock() {
         t.set_program(desk.json());
     }
     macro_rules! desk_outcome {
         ($out:expr) => {{
             let out: desk::DeskOutcome = $out;
+            if let Some(job) = out.file.clone() {
+                let dir = desk.dir().to_path_buf();
+                file_job = Some(Box::pin(async move {
+                    let fallback = job.clone();
+                    let blocking = tokio::task::spawn_blocking(move || job.run(&dir));
+                    match tokio::time::timeout(desk::FILE_TIMEOUT, blocking).await {
+                        Ok(Ok(done)) => done,
+                        _ => fallback.timed_out(desk::FILE_TIMEOUT),
+                    }
+                }));
+            }
             if let Some(mode) = out.set_mode {
                 motion_job = Some(Box::pin(async move { Some(motion.set(mode).await) }));
             } else if out.restore_mode {
@@ -747,7 +761,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                 let engaged = matches!(from.request, ClientRequest::Estop { on: true });
                 serve_request(&teleop, from, &reporting.web);
                 if engaged && desk.playing() {
-                    desk_outcome!(desk::DeskOutcome { restore_mode: desk.stop(), changed: true, set_mode: None });
+                    desk_outcome!(desk::DeskOutcome { restore_mode: desk.stop(), changed: true, ..Default::default() });
                 }
             }
             _ = async { if let Some(d) = due { tokio::time::sleep_until(d.into()).await } }, if due.is_some() => {
@@ -757,6 +771,10 @@ pub async fn run<F: Fn() -> Vec<usize>>(
             }
             _ = async { if let Some(w) = desk_wake { tokio::time::sleep_until(w.into()).await } }, if desk_wake.is_some() => {
                 desk_step!();
+            }
+            done = async { match file_job.as_mut() { Some(job) => job.await, None => futures::future::pending().await } }, if file_job.is_some() => {
+                file_job = None;
+                desk_outcome!(desk.file_done(done));
             }
             done = async { match motion_job.as_mut() { Some(job) => job.await, None => futures::future::pending().await } }, if motion_job.is_some() => {
                 motion_job = None;
@@ -867,7 +885,7 @@ pub async fn run<F: Fn() -> Vec<usize>>(
                     Input::Estop(on) => {
                         send(json!({"t": "estop", "on": on}));
                         if on && desk.playing() {
-                            desk_outcome!(desk::DeskOutcome { restore_mode: desk.stop(), changed: true, set_mode: None });
+                            desk_outcome!(desk::DeskOutcome { restore_mode: desk.stop(), changed: true, ..Default::default() });
                         }
                     }
                     Input::Unreadable { topic, error } => unreadable.note(topic, &error),

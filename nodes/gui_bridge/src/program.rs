@@ -17,7 +17,8 @@
 //! `mode` how to get there: `joint`, `line` or empty (leave compute_ik's `motion` as it
 //! is, or the command line's `--line`); `name` free text, the rest of the row (commas and
 //! control characters become spaces, at most [`MAX_NAME_CHARS`] characters; empty: shown
-//! as `P1`, `P2` … by [`ProgramPoint::label`]). The older `x,y,z,gripper,dwell` files
+//! as `P1`, `P2` … by [`ProgramPoint::label`]; a name that a spreadsheet would take for a
+//! formula is written with a `'` in front, see [`name_cell`]). The older `x,y,z,gripper,dwell` files
 //! and rows (what `record` writes) are read as well, with neither mode nor name.
 //! Positions are kept to 10 µm, the claw and the dwell to 0.001: what [`Program::to_csv`]
 //! prints, so a program read back from its file is equal to the one saved.
@@ -163,9 +164,36 @@ impl ProgramPoint {
             self.gripper.map(|g| format!("{g:.3}")).unwrap_or_default(),
             self.dwell_s,
             self.mode.map(MoveMode::as_str).unwrap_or_default(),
-            sanitize_name(&self.name)
+            name_cell(&sanitize_name(&self.name))
         )
     }
+}
+
+/// A name as its CSV cell: a name a spreadsheet would take for a formula (starting with
+/// `=`, `+`, `-`, `@`, a tab or a carriage return: OWASP's advice on CSV injection) gets
+/// a `'` in front, which spreadsheets show as text; so does a name starting with `'`
+/// itself, so that [`name_from_cell`] takes exactly one off.
+///
+/// # Examples
+/// ```
+/// use gui_bridge::program::{name_cell, name_from_cell};
+/// assert_eq!(name_cell("=HYPERLINK(\"http://evil.example\")"), "'=HYPERLINK(\"http://evil.example\")");
+/// assert_eq!(name_cell("pick"), "pick");
+/// for name in ["=1+1", "+x", "-y", "@z", "'quoted", "pick"] {
+///     assert_eq!(name_from_cell(&name_cell(name)), name);
+/// }
+/// ```
+pub fn name_cell(name: &str) -> String {
+    if name.starts_with(['=', '+', '-', '@', '\t', '\r', '\'']) {
+        format!("'{name}")
+    } else {
+        name.to_string()
+    }
+}
+
+/// A name from its CSV cell: one leading `'` (see [`name_cell`]) taken off.
+pub fn name_from_cell(cell: &str) -> &str {
+    cell.strip_prefix('\'').unwrap_or(cell)
 }
 
 /// A point name as it can be stored: commas and control characters (newlines, tabs …)
@@ -275,7 +303,7 @@ impl Program {
                 Some(m) => Some(m.parse::<MoveMode>().map_err(at)?),
             };
             let point = ProgramPoint {
-                name: fields.get(6).copied().unwrap_or_default().to_string(),
+                name: name_from_cell(fields.get(6).copied().unwrap_or_default()).to_string(),
                 xyz,
                 gripper,
                 dwell_s: num(4, "dwell")?,
@@ -422,15 +450,17 @@ fn shorten(name: &str) -> String {
     s
 }
 
-/// The programs in `dir`: the names (without `.csv`) of its `*.csv` files that
-/// [`program_path`] accepts, sorted; none if `dir` cannot be read.
+/// The programs in `dir`: the names (without `.csv`) of its regular `*.csv` files (not
+/// symbolic links, FIFOs or devices) that [`program_path`] accepts, sorted; none if
+/// `dir` cannot be read.
 pub fn list_programs(dir: &Path) -> Vec<String> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return vec![];
     };
     let mut names: Vec<String> = entries
         .filter_map(Result::ok)
-        .filter(|e| e.path().is_file())
+        // the entry's own type: a symbolic link is not followed
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
         .filter_map(|e| {
             let file = e.file_name().into_string().ok()?;
             let stem = file.strip_suffix(".csv")?;
@@ -441,49 +471,193 @@ pub fn list_programs(dir: &Path) -> Vec<String> {
     names
 }
 
-/// Read program `name` from `dir` (files over [`MAX_FILE_BYTES`] are refused).
-pub fn load(dir: &Path, name: &str) -> Result<Program, String> {
-    let path = program_path(dir, name)?;
-    let shown = path.display();
-    let file = std::fs::File::open(&path).map_err(|e| format!("cannot read {shown}: {e}"))?;
+/// Why a program file could not be read or written. The texts name the program, never
+/// a path, and never show the file's content.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ProgramFileError {
+    /// Not a usable program name (see [`program_path`]).
+    #[error("{0}")]
+    BadName(String),
+    /// Saving would replace a program that exists (save again with `overwrite`).
+    #[error("a program named {name} exists already: saving again replaces it")]
+    Exists {
+        /// the program
+        name: String,
+    },
+    /// The file is not a regular file: a symbolic link, a FIFO, a device, a directory.
+    #[error(
+        "program {name} is not a regular file (symbolic links, FIFOs and devices are refused)"
+    )]
+    NotRegular {
+        /// the program
+        name: String,
+    },
+    /// The file is over [`MAX_FILE_BYTES`].
+    #[error("program {name} is larger than {MAX_FILE_BYTES} bytes")]
+    TooLarge {
+        /// the program
+        name: String,
+    },
+    /// The content is not a program.
+    #[error("program {name}: {why}")]
+    Invalid {
+        /// the program
+        name: String,
+        /// what is wrong (the line)
+        why: String,
+    },
+    /// Reading or writing failed (the OS's reason, e.g. "No such file or directory").
+    #[error("cannot {what} program {name}: {why}")]
+    Io {
+        /// `read` or `write`
+        what: &'static str,
+        /// the program
+        name: String,
+        /// the OS's reason, without the path
+        why: String,
+    },
+    /// The file system did not answer in time (a hung network mount).
+    #[error("program {name}: the file system did not answer within {seconds} s")]
+    TimedOut {
+        /// the program
+        name: String,
+        /// the timeout
+        seconds: u64,
+    },
+}
+
+/// The OS's reason without the path (`std::io::Error`'s text has none; kept so).
+fn io_why(e: &std::io::Error) -> String {
+    match e.raw_os_error() {
+        // O_NOFOLLOW on a symbolic link
+        Some(40) => "it is a symbolic link".into(),
+        _ => e.kind().to_string(),
+    }
+}
+
+/// Open `path` for reading only if it is a regular file: `O_NOFOLLOW` (a symbolic link
+/// fails), `O_NONBLOCK` (opening a FIFO does not wait for a writer), then `fstat` of
+/// what was opened must say regular file (no FIFO, device, directory).
+pub fn open_regular(path: &Path, name: &str) -> Result<std::fs::File, ProgramFileError> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use nix::fcntl::OFlag;
+        use std::os::unix::fs::OpenOptionsExt as _;
+        options.custom_flags((OFlag::O_NOFOLLOW | OFlag::O_NONBLOCK).bits());
+    }
+    let not_regular = || ProgramFileError::NotRegular {
+        name: name.to_string(),
+    };
+    let file = options.open(path).map_err(|e| match e.raw_os_error() {
+        Some(40) => not_regular(), // ELOOP: a symbolic link
+        _ => ProgramFileError::Io {
+            what: "read",
+            name: name.to_string(),
+            why: io_why(&e),
+        },
+    })?;
+    let meta = file.metadata().map_err(|e| ProgramFileError::Io {
+        what: "read",
+        name: name.to_string(),
+        why: io_why(&e),
+    })?;
+    if !meta.file_type().is_file() {
+        return Err(not_regular());
+    }
+    Ok(file)
+}
+
+/// The stem of program `name` (no `.csv`), for messages.
+fn stem(name: &str) -> &str {
+    name.strip_suffix(".csv").unwrap_or(name)
+}
+
+/// Read program `name` from `dir`: a regular file only ([`open_regular`]), at most
+/// [`MAX_FILE_BYTES`]. Blocking: the panel calls it off its event loop, with a timeout.
+pub fn load(dir: &Path, name: &str) -> Result<Program, ProgramFileError> {
+    let path = program_path(dir, name).map_err(ProgramFileError::BadName)?;
+    let name = stem(name);
+    let file = open_regular(&path, name)?;
     let mut text = String::new();
     file.take(MAX_FILE_BYTES + 1)
         .read_to_string(&mut text)
-        .map_err(|e| format!("cannot read {shown}: {e}"))?;
+        .map_err(|e| ProgramFileError::Io {
+            what: "read",
+            name: name.to_string(),
+            why: io_why(&e),
+        })?;
     if text.len() as u64 > MAX_FILE_BYTES {
-        return Err(format!("{shown} is larger than {MAX_FILE_BYTES} bytes"));
+        return Err(ProgramFileError::TooLarge {
+            name: name.to_string(),
+        });
     }
-    Program::parse(&text).map_err(|e| format!("{shown}: {e}"))
+    Program::parse(&text).map_err(|why| ProgramFileError::Invalid {
+        name: name.to_string(),
+        why,
+    })
 }
 
-/// Write `program` as program `name` in `dir` (created if missing), replacing it whole:
-/// written to a temporary file in `dir`, then renamed over it.
-pub fn save(dir: &Path, name: &str, program: &Program) -> Result<(), String> {
+/// Write `program` as program `name` in `dir` (created if missing): written to a new
+/// temporary file in `dir`, then put in place. Without `overwrite` an existing program is
+/// left as it is ([`ProgramFileError::Exists`]: the new file is linked in only if the name
+/// is free, atomically); with it, renamed over it (a symbolic link of that name is
+/// replaced, not followed). Blocking: the panel calls it off its event loop.
+pub fn save(
+    dir: &Path,
+    name: &str,
+    program: &Program,
+    overwrite: bool,
+) -> Result<(), ProgramFileError> {
     static SAVES: AtomicU64 = AtomicU64::new(0);
-    let path = program_path(dir, name)?;
-    program.validate()?;
+    let path = program_path(dir, name).map_err(ProgramFileError::BadName)?;
+    let name = stem(name);
+    let invalid = |why| ProgramFileError::Invalid {
+        name: name.to_string(),
+        why,
+    };
+    program.validate().map_err(invalid)?;
     let text = program.to_csv();
     if text.len() as u64 > MAX_FILE_BYTES {
-        return Err(format!("the program is larger than {MAX_FILE_BYTES} bytes"));
+        return Err(ProgramFileError::TooLarge {
+            name: name.to_string(),
+        });
     }
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let io = |e: std::io::Error| ProgramFileError::Io {
+        what: "write",
+        name: name.to_string(),
+        why: io_why(&e),
+    };
+    std::fs::create_dir_all(dir).map_err(io)?;
     // a dot file without `.csv`: never listed, never taken for a program
     let tmp = dir.join(format!(
-        ".{}.tmp{}-{}",
-        path.file_name()
-            .and_then(|f| f.to_str())
-            .unwrap_or("program"),
+        ".{name}.csv.tmp{}-{}",
         std::process::id(),
         SAVES.fetch_add(1, Ordering::Relaxed)
     ));
-    let written = std::fs::File::create(&tmp).and_then(|mut f| {
-        f.write_all(text.as_bytes())?;
-        f.sync_all()
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| {
+            f.write_all(text.as_bytes())?;
+            f.sync_all()
+        });
+    let placed = written.and_then(|()| {
+        if overwrite {
+            std::fs::rename(&tmp, &path)
+        } else {
+            std::fs::hard_link(&tmp, &path)
+        }
     });
-    let result = written.and_then(|()| std::fs::rename(&tmp, &path));
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("cannot write {}: {e}", path.display())
+    let _ = std::fs::remove_file(&tmp);
+    placed.map_err(|e| match e.kind() {
+        std::io::ErrorKind::AlreadyExists => ProgramFileError::Exists {
+            name: name.to_string(),
+        },
+        _ => io(e),
     })
 }
 
@@ -1234,14 +1408,21 @@ mod tests {
         let dir = tmp.0.join("programs");
         assert!(list_programs(&dir).is_empty(), "missing dir: none");
         let p = three();
-        save(&dir, "pick_place", &p).unwrap();
-        save(&dir, "a-first.csv", &Program::default()).unwrap();
+        save(&dir, "pick_place", &p, false).unwrap();
+        save(&dir, "a-first.csv", &Program::default(), false).unwrap();
         assert_eq!(load(&dir, "pick_place").unwrap(), p);
         assert_eq!(load(&dir, "pick_place.csv").unwrap(), p);
-        // replaced whole
+        // replaced whole, and only when asked to
         let mut q = p.clone();
         q.remove(0).unwrap();
-        save(&dir, "pick_place", &q).unwrap();
+        assert_eq!(
+            save(&dir, "pick_place", &q, false),
+            Err(ProgramFileError::Exists {
+                name: "pick_place".into()
+            })
+        );
+        assert_eq!(load(&dir, "pick_place").unwrap(), p, "overwritten silently");
+        save(&dir, "pick_place", &q, true).unwrap();
         assert_eq!(load(&dir, "pick_place").unwrap(), q);
         // only *.csv with a valid name; no temporary files left
         std::fs::write(dir.join("notes.txt"), "x").unwrap();
@@ -1250,25 +1431,82 @@ mod tests {
         assert_eq!(list_programs(&dir), ["a-first", "pick_place"]);
         let files = std::fs::read_dir(&dir).unwrap().count();
         assert_eq!(files, 5, "no temporary file left behind");
-        // errors
-        assert!(load(&dir, "missing").unwrap_err().contains("cannot read"));
+        // errors name the program, never the path
+        let e = load(&dir, "missing").unwrap_err().to_string();
+        assert!(e.starts_with("cannot read program missing:"), "{e}");
+        assert!(!e.contains(dir.to_str().unwrap()), "{e}");
         assert!(load(&dir, "../programs/pick_place").is_err());
-        assert!(save(&dir, "a/b", &p).is_err());
+        assert!(save(&dir, "a/b", &p, false).is_err());
         let mut bad = p.clone();
         bad.points[0].gripper = Some(7.0);
-        assert!(save(&dir, "bad", &bad)
-            .unwrap_err()
-            .starts_with("P1: gripper"));
+        let e = save(&dir, "bad", &bad, false).unwrap_err().to_string();
+        assert!(e.starts_with("program bad: P1: gripper"), "{e}");
         assert!(!dir.join("bad.csv").exists());
         std::fs::write(dir.join("broken.csv"), "0.2,0,0.15,,0\n0.2,x,0.15,,0\n").unwrap();
-        let e = load(&dir, "broken").unwrap_err();
-        assert!(
-            e.ends_with("broken.csv: line 2: y `x` is not a number"),
-            "{e}"
-        );
+        let e = load(&dir, "broken").unwrap_err().to_string();
+        assert_eq!(e, "program broken: line 2: y `x` is not a number");
         let big = "#".repeat(usize::try_from(MAX_FILE_BYTES).unwrap() + 1);
         std::fs::write(dir.join("big.csv"), big).unwrap();
-        assert!(load(&dir, "big").unwrap_err().contains("larger than"));
+        assert!(load(&dir, "big")
+            .unwrap_err()
+            .to_string()
+            .contains("larger than"));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_a_symlink_or_a_device_is_refused_at_once_not_read() {
+        let tmp = TempDir::new("special");
+        let dir = tmp.0.clone();
+        // a FIFO with no writer: opening it for reading would wait for ever
+        nix::unistd::mkfifo(&dir.join("fifo.csv"), nix::sys::stat::Mode::S_IRWXU).unwrap();
+        assert_eq!(
+            load(&dir, "fifo"),
+            Err(ProgramFileError::NotRegular {
+                name: "fifo".into()
+            })
+        );
+        // a symbolic link to a file outside: not followed, its content never shown
+        std::fs::write(tmp.0.join("secret.txt"), "root:x:0:0:secret line\n").unwrap();
+        std::os::unix::fs::symlink(tmp.0.join("secret.txt"), dir.join("link.csv")).unwrap();
+        let e = load(&dir, "link").unwrap_err();
+        assert_eq!(
+            e,
+            ProgramFileError::NotRegular {
+                name: "link".into()
+            }
+        );
+        assert!(!e.to_string().contains("secret"));
+        std::os::unix::fs::symlink("/dev/zero", dir.join("zero.csv")).unwrap();
+        assert!(matches!(
+            load(&dir, "zero"),
+            Err(ProgramFileError::NotRegular { .. })
+        ));
+        // none of them is listed; saving over the link replaces the link, not its target
+        assert!(list_programs(&dir).is_empty(), "{:?}", list_programs(&dir));
+        save(&dir, "link", &three(), true).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(tmp.0.join("secret.txt")).unwrap(),
+            "root:x:0:0:secret line\n"
+        );
+        assert_eq!(load(&dir, "link").unwrap(), three());
+    }
+
+    #[test]
+    fn a_formula_name_is_saved_as_text_and_read_back_as_it_was() {
+        let tmp = TempDir::new("formula");
+        let mut p = three();
+        let names = ["=HYPERLINK(\"http://evil.example\")", "+1", "@SUM(A1)"];
+        for (i, name) in names.iter().enumerate() {
+            p.rename(i, name).unwrap();
+        }
+        save(&tmp.0, "f", &p, false).unwrap();
+        let text = std::fs::read_to_string(tmp.0.join("f.csv")).unwrap();
+        for line in text.lines().skip(1) {
+            let cell = line.splitn(7, ',').nth(6).unwrap();
+            assert!(cell.starts_with('\''), "a formula cell: {line}");
+        }
+        assert_eq!(load(&tmp.0, "f").unwrap(), p);
     }
 
     // ---- the player ----

@@ -132,6 +132,10 @@ pub enum ProgramOp {
     Save {
         /// `[A-Za-z0-9_-]{1,64}`
         name: String,
+        /// replace a program of that name (without it, an existing one is kept and the
+        /// panel asks)
+        #[serde(default)]
+        overwrite: bool,
     },
     /// Load a saved program.
     Load {
