@@ -258,11 +258,13 @@ def test_a_publisher_the_permissions_do_not_grant_fails_with_a_clear_log_line(ho
 # ---------------------------------------------------------------------------------------
 # a link outage: new handshakes
 
-def test_the_secured_graph_resumes_after_a_25_s_link_outage(hosts, domain, keystore):
+@pytest.mark.parametrize("secured", [True, False], ids=["secured", "plain"])
+def test_the_graph_resumes_after_a_25_s_link_outage(hosts, domain, keystore, secured):
     """The Pi's end of the link down for 25 s (longer than every lease: the participants
     lose each other) while the operator keeps sending at 10 Hz; after it comes back the
-    handshakes are redone and a target sent after it is answered within 5 s."""
-    graph = SecureGraph(hosts, domain, keystore)
+    handshakes are redone and a target sent after it is answered within 5 s. `plain`:
+    the same without security (test_two_hosts.py has the full outage matrix)."""
+    graph = SecureGraph(hosts, domain, keystore if secured else None)
     peer = graph.operator()
     try:
         wait_matched(peer, graph)
@@ -290,11 +292,16 @@ def test_the_secured_graph_resumes_after_a_25_s_link_outage(hosts, domain, keyst
             time.sleep(0.1)
         dropped = [line for t, line in peer.said("participant ") if t_cut <= t and (" dropped " in line or " removed " in line)]
         rehandshakes = [line for t, line in peer.said("auth ok ") if t >= t_cut]
-        print(f"\n25 s outage: resumed {resumed_s if resumed_s is None else round(resumed_s, 2)} s after the link "
+        print(f"\n{'secured' if secured else 'plain'}: 25 s outage: resumed {resumed_s if resumed_s is None else round(resumed_s, 2)} s after the link "
               f"returned; the operator dropped {len(dropped)} participant(s), new handshakes {len(rehandshakes)}")
-        assert resumed_s is not None, f"no servo_state for a new target within 15 s\n{graph.logs_tail()}"
+        seen = [f"{t - t_restore:+.2f} s {line}" for t, line in peer.lines if t >= t_cut and line.split(" ")[0] in
+                ("participant", "auth", "matched") and " changed " not in line]
+        assert resumed_s is not None, (f"no servo_state for a new target within 15 s; the operator, relative to the "
+                                       f"link's return:\n" + "\n".join(seen) + f"\n{graph.logs_tail()}")
         assert resumed_s <= 5.0, f"resumed only after {resumed_s:.2f} s"
-        assert dropped and rehandshakes, "the outage did not make the operator lose and re-authenticate serial_node"
+        assert dropped, "the outage did not make the operator lose serial_node (the test did not test a lost peer)"
+        if secured:
+            assert rehandshakes, "the operator did not re-authenticate serial_node after the outage"
     finally:
         close(graph, peer)
 
