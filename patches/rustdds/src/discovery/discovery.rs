@@ -783,14 +783,22 @@ impl Discovery {
                   if guid == self.dcps_publication.writer.guid() {
                     continue;
                   }
-                  self.send_endpoint_dispose_message(guid);
+                  let protected = self.local_endpoint_discovery_protected(
+                    &discovery_db_read(&self.discovery_db),
+                    guid,
+                  );
+                  self.send_endpoint_dispose_message(guid, protected);
                   discovery_db_write(&self.discovery_db).remove_local_topic_writer(guid);
                 }
                 DiscoveryCommand::RemoveLocalReader { guid } => {
                   if guid == self.dcps_subscription.writer.guid() {
                     continue;
                   }
-                  self.send_endpoint_dispose_message(guid);
+                  let protected = self.local_endpoint_discovery_protected(
+                    &discovery_db_read(&self.discovery_db),
+                    guid,
+                  );
+                  self.send_endpoint_dispose_message(guid, protected);
                   discovery_db_write(&self.discovery_db).remove_local_topic_reader(guid);
                 }
                 DiscoveryCommand::ManualAssertLiveliness => {
@@ -1145,14 +1153,44 @@ impl Discovery {
     self.spdp_quick_response_sent.remove(&participant_guidp);
   }
 
-  fn send_endpoint_dispose_message(&self, endpoint_guid: GUID) {
+  // Whether a local endpoint's discovery is protected (DDS Security 1.1 sections
+  // 7.4.1.4 and 8.8.6): then it was announced only on the secure SEDP writers
+  // (DCPSPublicationsSecure / DCPSSubscriptionsSecure), and nothing about it may go
+  // out on the non-secure ones, its dispose included. `security_info` is the
+  // endpoint's from the discovery DB, None when it is not there (removed before it
+  // was announced): with security on, that is treated as protected.
+  #[allow(unused_variables)]
+  fn local_endpoint_discovery_protected(&self, db: &DiscoveryDB, guid: GUID) -> bool {
+    #[cfg(not(feature = "security"))]
+    let protected = false;
+    #[cfg(feature = "security")]
+    let protected = self.security_opt.is_some() && {
+      let security_info = if guid.entity_id.entity_kind.is_writer() {
+        db.get_local_topic_writer(guid)
+          .map(|w| w.publication_topic_data.security_info())
+      } else {
+        db.get_local_topic_reader(guid)
+          .map(|r| r.subscription_topic_data.security_info())
+      };
+      security_info.is_none_or(|info| endpoint_discovery_protected(info.as_ref()))
+    };
+    protected
+  }
+
+  // Disposes a local endpoint on the SEDP writer it was announced on: the secure
+  // one if its discovery is protected, else the non-secure one (and the secure one
+  // too, as before, when security is on).
+  #[allow(unused_variables)]
+  fn send_endpoint_dispose_message(&self, endpoint_guid: GUID, discovery_protected: bool) {
     let is_writer = endpoint_guid.entity_id.entity_kind.is_writer();
     if is_writer {
-      self
-        .dcps_publication
-        .writer
-        .dispose(&Endpoint_GUID(endpoint_guid), None)
-        .unwrap_or_else(|e| error!("Disposing local Writer: {e:?}"));
+      if !discovery_protected {
+        self
+          .dcps_publication
+          .writer
+          .dispose(&Endpoint_GUID(endpoint_guid), None)
+          .unwrap_or_else(|e| error!("Disposing local Writer: {e:?}"));
+      }
       #[cfg(feature = "security")]
       self
         .dcps_publications_secure
@@ -1161,11 +1199,13 @@ impl Discovery {
         .unwrap_or_else(|e| error!("Disposing local Writer: {e:?}"));
     } else {
       // is reader
-      self
-        .dcps_subscription
-        .writer
-        .dispose(&Endpoint_GUID(endpoint_guid), None)
-        .unwrap_or_else(|e| error!("Disposing local Reader: {e:?}"));
+      if !discovery_protected {
+        self
+          .dcps_subscription
+          .writer
+          .dispose(&Endpoint_GUID(endpoint_guid), None)
+          .unwrap_or_else(|e| error!("Disposing local Reader: {e:?}"));
+      }
       #[cfg(feature = "security")]
       self
         .dcps_subscriptions_secure
@@ -1179,11 +1219,13 @@ impl Discovery {
     let db = discovery_db_read(&self.discovery_db);
 
     for reader in db.get_all_local_topic_readers() {
-      self.send_endpoint_dispose_message(reader.reader_proxy.remote_reader_guid);
+      let guid = reader.reader_proxy.remote_reader_guid;
+      self.send_endpoint_dispose_message(guid, self.local_endpoint_discovery_protected(&db, guid));
     }
 
     for writer in db.get_all_local_topic_writers() {
-      self.send_endpoint_dispose_message(writer.writer_proxy.remote_writer_guid);
+      let guid = writer.writer_proxy.remote_writer_guid;
+      self.send_endpoint_dispose_message(guid, self.local_endpoint_discovery_protected(&db, guid));
     }
 
     self
@@ -2026,6 +2068,26 @@ impl Discovery {
   }
 
   pub fn sedp_publish_topic(&self, topic_name: &str) {
+    // DCPSTopic has no secure counterpart in DDS Security 1.1: a topic whose
+    // discovery is protected (sros2's default governance protects every topic) is
+    // announced only inside the secure DCPSPublicationsSecure /
+    // DCPSSubscriptionsSecure samples of its endpoints. A DCPSTopic sample would
+    // send its name and type in the clear (signed at most) to every participant.
+    // When the topic's security attributes cannot be had, it is not published
+    // either.
+    #[cfg(feature = "security")]
+    if let Some(security) = self.security_opt.as_ref() {
+      let protected = security
+        .security_plugins
+        .get_plugins()
+        .get_topic_sec_attributes(self.domain_participant.guid().prefix, topic_name)
+        .map_or(true, |attributes| attributes.is_discovery_protected);
+      if protected {
+        debug!("Topic {topic_name} not published to DCPSTopic: its discovery is protected");
+        return;
+      }
+    }
+
     let db = discovery_db_read(&self.discovery_db);
     // We might have multiple topics with the same name (but different Qos etc..),
     // and the following call gets just one of them. Should we publish all of
@@ -2246,6 +2308,19 @@ impl Discovery {
 // -----------------------------------------------------------------------
 // -----------------------------------------------------------------------
 // -----------------------------------------------------------------------
+
+// Whether an endpoint with this security info has its discovery protected: the
+// same test as `SecureDiscovery::sedp_publish_single_writer` / `_reader` make to
+// pick the secure SEDP writer.
+#[cfg(feature = "security")]
+fn endpoint_discovery_protected(security_info: Option<&EndpointSecurityInfo>) -> bool {
+  security_info.is_some_and(|info| {
+    info
+      .endpoint_security_attributes
+      .0
+      .contains(EndpointSecurityAttributesMaskFlags::IsDiscoveryProtected)
+  })
+}
 
 #[cfg(test)]
 mod tests {
@@ -2866,5 +2941,121 @@ mod tests {
       reported.disposed(disposed_reader_guid) && reported.disposed(disposed_writer_guid),
       "the disposed reader and writer were not reported lost"
     );
+  }
+
+  // With DDS Security, a topic whose discovery is protected (the example
+  // governance protects "Square"; sros2's default protects every topic) is
+  // announced only on the secure SEDP writers, to authenticated participants.
+  // Nothing about it may reach another participant on the non-secure SEDP
+  // writers: not a DCPSTopic sample (it carries the topic's name and type in
+  // the clear), and not the dispose of a removed endpoint.
+  #[cfg(feature = "security")]
+  #[test]
+  fn a_topic_with_protected_discovery_is_not_announced_in_the_clear() {
+    use crate::{
+      dds::participant::DomainParticipantBuilder, DomainParticipantSecurityConfigFiles, TopicKind,
+    };
+
+    // The example permissions grant domain 0 only.
+    const DOMAIN_ID: u16 = 0;
+    const TOPIC: &str = "Square";
+    let secure_participant = || {
+      DomainParticipantBuilder::new(DOMAIN_ID)
+        .spdp_publish_period(StdDuration::from_millis(200))
+        .builtin_security(
+          DomainParticipantSecurityConfigFiles::with_ros_default_names(
+            concat!(
+              env!("CARGO_MANIFEST_DIR"),
+              "/examples/security_configuration_files"
+            ),
+            "password123".to_string(),
+          ),
+        )
+        .build()
+        .expect("secure participant creation")
+    };
+    let observer = secure_participant();
+    let announcer = secure_participant();
+    let announcer_prefix = announcer.guid().prefix;
+
+    let topic = announcer
+      .create_topic(
+        TOPIC.to_string(),
+        "ShapeType".to_string(),
+        &QosPolicies::qos_none(),
+        TopicKind::WithKey,
+      )
+      .unwrap();
+    let writer = announcer
+      .create_publisher(&QosPolicies::qos_none())
+      .unwrap()
+      .create_datawriter_cdr::<ShapeType>(&topic, None)
+      .unwrap();
+    let reader = announcer
+      .create_subscriber(&QosPolicies::qos_none())
+      .unwrap()
+      .create_datareader_cdr::<ShapeType>(&topic, None)
+      .unwrap();
+    let writer_guid = writer.guid();
+    let reader_guid = reader.guid();
+
+    let wait_until = |what: &str, condition: &dyn Fn() -> bool| {
+      let deadline = std::time::Instant::now() + StdDuration::from_secs(20);
+      while !condition() {
+        assert!(std::time::Instant::now() < deadline, "timed out: {what}");
+        std::thread::sleep(StdDuration::from_millis(50));
+      }
+    };
+    let writer_known = || {
+      observer
+        .discovered_writers()
+        .iter()
+        .any(|w| w.writer_proxy.remote_writer_guid == writer_guid)
+    };
+    let reader_known = || {
+      observer
+        .discovered_readers()
+        .iter()
+        .any(|r| r.reader_proxy.remote_reader_guid == reader_guid)
+    };
+    // The observer learns of both endpoints (over the secure SEDP writers, after
+    // authentication), and of their removal.
+    wait_until("the observer discovers the endpoints", &|| {
+      writer_known() && reader_known()
+    });
+    drop(writer);
+    drop(reader);
+    wait_until("the observer learns that the endpoints are gone", &|| {
+      !writer_known() && !reader_known()
+    });
+    // Time for a late sample on the non-secure writers, sent after the secure ones
+    std::thread::sleep(StdDuration::from_millis(500));
+
+    // What reached the observer's non-secure SEDP readers from the announcer
+    let received = |topic_name: &str| {
+      let topic_cache = observer
+        .dds_cache()
+        .read()
+        .unwrap()
+        .get_existing_topic_cache(topic_name)
+        .unwrap();
+      let topic_cache = topic_cache.lock().unwrap();
+      topic_cache
+        .get_changes_in_range_best_effort(Timestamp::ZERO, Timestamp::now())
+        .filter(|(_, change)| change.writer_guid.prefix == announcer_prefix)
+        .map(|(_, change)| format!("{:?} {:?}", change.writer_guid, change.data_value))
+        .collect::<Vec<_>>()
+    };
+    for topic_name in [
+      builtin_topic_names::DCPS_TOPIC,
+      builtin_topic_names::DCPS_PUBLICATION,
+      builtin_topic_names::DCPS_SUBSCRIPTION,
+    ] {
+      assert_eq!(
+        received(topic_name),
+        Vec::<String>::new(),
+        "the announcer sent samples on the non-secure {topic_name} writer"
+      );
+    }
   }
 }
