@@ -273,7 +273,7 @@ def test_page_is_small_local_and_shows_the_live_arm(launch, observer, browser):
         p.page.wait_for_function("() => urdf3d && urdf3d.includes('<robot name=\"eezybot')", timeout=10000)
         # the URDF is served behind the panel's access rules, like the page
         status, headers, body = http_get(p.port, "/robot.urdf")
-        assert status == 200 and "<robot" in body and headers["content-type"][0].startswith("application/xml"), status
+        assert status == 200 and "<robot" in body and headers["content-type"][0] == "text/plain; charset=utf-8", status
         foreign = [u for u in p.requests if not u.startswith(p.url.rstrip("/")) and not u.startswith(f"ws://127.0.0.1:{p.port}")]
         assert not foreign, foreign
         # the icon the page links is served (bundled in the binary), and nothing went to the console

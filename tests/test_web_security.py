@@ -12,7 +12,7 @@ import time
 from geometry_msgs.msg import PointStamped
 from rclpy.serialization import serialize_message
 
-from conftest import LATCHED
+from conftest import LATCHED, REPO
 from foxglove_client import free_port
 from test_gui_bridge import RawWs, browser, http_get, rss_kib, start_panel  # noqa: F401 (fixture)
 
@@ -307,3 +307,52 @@ def test_a_half_open_http_connection_is_dropped_after_the_head_timeout(launch, o
     # the behaviour is a timeout: dropped within a generous bound of it (10 s)
     print(f"a half-open connection was dropped after {held:.1f} s")
     assert held < 30, held
+
+
+def test_a_script_in_robot_description_does_not_run_in_the_panel_s_origin(launch, observer, browser, tmp_path):
+    """Medium: a robot_description with an XHTML <script> (any DDS peer can publish one)
+    was served at /robot.urdf as application/xml and ran in the panel's origin. Now it is
+    text/plain with nosniff, and the page has a full Content-Security-Policy (no inline
+    script) under which it still works."""
+    urdf = (REPO / "urdf" / "eezybot.urdf").read_text()
+    script = ('<h:script xmlns:h="http://www.w3.org/1999/xhtml">'
+              'document.title = "pwned"; window.__pwned = document.domain;</h:script>')
+    evil = urdf.replace('<robot name="eezybot_arm_mk2">', '<robot name="eezybot_arm_mk2">' + script, 1)
+    assert script in evil
+    path = tmp_path / "evil.urdf"
+    path.write_text(evil)
+    launch("state_publisher", "--ros-args", "-p", f"urdf:={path}")
+    proc, port = start_panel(launch, observer)
+    deadline = time.monotonic() + 15
+    while (got := http_get(port, "/robot.urdf"))[0] != 200:
+        assert time.monotonic() < deadline, got
+        time.sleep(0.1)
+    status, headers, body = got
+    assert script in body
+    context = browser.new_context()
+    page = context.new_page()
+    console = []
+    page.on("console", lambda m: console.append((m.type, m.text)) if m.type in ("error", "warning") else None)
+    page.goto(f"http://127.0.0.1:{port}/robot.urdf")
+    page.wait_for_load_state("load")
+    assert page.title() != "pwned" and page.evaluate("() => window.__pwned") is None, "the URDF's script ran"
+    assert headers["content-type"] == ["text/plain; charset=utf-8"], headers
+    assert headers["x-content-type-options"] == ["nosniff"], headers
+    # the page: a full policy, and it works under it (3D view, WebSocket, no violation)
+    _, headers, _ = http_get(port, "/")
+    csp = headers["content-security-policy"][0]
+    for directive in ("default-src 'self'", "script-src 'self';", "frame-ancestors 'none'", "object-src 'none'",
+                      "base-uri 'none'", f"ws://127.0.0.1:{port}"):
+        assert directive in csp, csp
+    assert "unsafe-inline" not in csp and "unsafe-eval" not in csp, csp
+    console.clear()
+    page.goto(f"http://127.0.0.1:{port}/")
+    page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
+    # the style sheet applies (panel.css hides the empty access banner), no violation
+    page.wait_for_function("() => window.getComputedStyle(document.getElementById('access')).display === 'none'")
+    assert not [m for _, m in console if "Content Security Policy" in m], console
+    # a script injected into the page does not run
+    page.evaluate("""() => { const s = document.createElement('script');
+                             s.textContent = 'window.__inline = 1'; document.body.append(s); }""")
+    assert page.evaluate("() => window.__inline") is None, "an inline script ran under the page's policy"
+    context.close()

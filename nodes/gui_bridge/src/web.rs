@@ -28,8 +28,44 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, mpsc, Semaphore};
 
-/// The page: one file, no build step, no request to any other host.
+/// The page: its HTML, no inline script or style (its Content-Security-Policy allows
+/// none), no build step, no request to any other host.
 pub const INDEX_HTML: &str = include_str!("../web/index.html");
+/// The page's script, served at `/panel.js` to anyone (public code, the same for every
+/// panel; the token is not in it).
+pub const PANEL_JS: &str = include_str!("../web/panel.js");
+/// The page's style sheet, served at `/panel.css` to anyone.
+pub const PANEL_CSS: &str = include_str!("../web/panel.css");
+
+/// The page's Content-Security-Policy for a request with this `Host`: scripts, styles,
+/// images and connections from the panel itself only (its WebSocket named explicitly,
+/// `ws://HOST` and `wss://HOST`, for browsers whose `'self'` does not cover `ws:`), no
+/// plugins, no `<base>`, no form posts, no framing. A script a URDF might carry can
+/// neither run as the page nor call another host.
+///
+/// # Examples
+/// ```
+/// let csp = gui_bridge::web::content_security_policy(Some("127.0.0.1:8080"));
+/// assert!(csp.contains("script-src 'self';") && csp.contains("ws://127.0.0.1:8080"));
+/// // a Host that could break out of the header is left out
+/// assert!(!gui_bridge::web::content_security_policy(Some("x; script-src *")).contains("script-src *"));
+/// ```
+pub fn content_security_policy(host: Option<&str>) -> String {
+    let ws = host
+        .map(str::trim)
+        .filter(|h| {
+            !h.is_empty()
+                && h.bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b".-:[]".contains(&b))
+        })
+        .map(|h| format!(" ws://{h} wss://{h}"))
+        .unwrap_or_default();
+    format!(
+        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; \
+         connect-src 'self'{ws}; frame-ancestors 'none'; object-src 'none'; base-uri 'none'; \
+         form-action 'none'"
+    )
+}
 
 /// The page's icon (SVG), served at `/favicon.ico` to anyone: it is no secret, and a
 /// page refused for its token still gets it (no console error for a missing icon).
@@ -666,6 +702,8 @@ pub fn router(state: WebState) -> Router {
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .route("/favicon.ico", get(favicon))
         .route("/viewer3d.js", get(viewer3d))
+        .route("/panel.js", get(panel_js))
+        .route("/panel.css", get(panel_css))
         .with_state(state)
 }
 
@@ -702,6 +740,28 @@ async fn viewer3d(headers: HeaderMap) -> Response {
     }
 }
 
+async fn panel_js() -> impl IntoResponse {
+    (
+        [
+            (header::CONTENT_TYPE, "text/javascript; charset=utf-8"),
+            (header::CACHE_CONTROL, "no-cache"),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
+        PANEL_JS,
+    )
+}
+
+async fn panel_css() -> impl IntoResponse {
+    (
+        [
+            (header::CONTENT_TYPE, "text/css; charset=utf-8"),
+            (header::CACHE_CONTROL, "no-cache"),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
+        PANEL_CSS,
+    )
+}
+
 async fn favicon() -> impl IntoResponse {
     (
         [
@@ -713,14 +773,21 @@ async fn favicon() -> impl IntoResponse {
     )
 }
 
-/// The URDF of `robot_description`, for the page's 3D view.
+/// The URDF of `robot_description`, for the page's 3D view, as plain text: any DDS peer
+/// can publish a `robot_description`, and as `application/xml` an XHTML `<script>` in it
+/// would run in the panel's origin when the URL is opened. As `text/plain` with
+/// `nosniff` a browser only shows it; the sandbox CSP is a second wall.
 async fn robot_urdf(State(state): State<WebState>) -> Response {
     match (state.urdf)() {
         Some(text) => (
             [
-                (header::CONTENT_TYPE, "application/xml; charset=utf-8"),
+                (header::CONTENT_TYPE, "text/plain; charset=utf-8"),
                 (header::CACHE_CONTROL, "no-store"),
                 (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+                (
+                    header::CONTENT_SECURITY_POLICY,
+                    "sandbox; default-src 'none'",
+                ),
             ],
             text.to_string(),
         )
@@ -729,19 +796,32 @@ async fn robot_urdf(State(state): State<WebState>) -> Response {
     }
 }
 
-async fn page() -> impl IntoResponse {
+async fn page(headers: HeaderMap) -> Response {
+    let host = headers.get(header::HOST).and_then(|v| v.to_str().ok());
+    let csp = HeaderValue::from_str(&content_security_policy(host)).unwrap_or_else(|_| {
+        HeaderValue::from_static(
+            "default-src 'self'; frame-ancestors 'none'; object-src 'none'; base-uri 'none'",
+        )
+    });
     (
         [
-            (header::CACHE_CONTROL, "no-store"),
+            (header::CACHE_CONTROL, HeaderValue::from_static("no-store")),
             // no other site may frame the panel (clickjacking the e-stop's release)
-            (header::X_FRAME_OPTIONS, "DENY"),
-            (header::CONTENT_SECURITY_POLICY, "frame-ancestors 'none'"),
+            (header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY")),
+            (header::CONTENT_SECURITY_POLICY, csp),
             // the URL may carry the token: never send it on as a referrer
-            (header::REFERRER_POLICY, "no-referrer"),
-            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+            (
+                header::REFERRER_POLICY,
+                HeaderValue::from_static("no-referrer"),
+            ),
+            (
+                header::X_CONTENT_TYPE_OPTIONS,
+                HeaderValue::from_static("nosniff"),
+            ),
         ],
         Html(INDEX_HTML),
     )
+        .into_response()
 }
 
 /// What a request says, from its headers and URL.

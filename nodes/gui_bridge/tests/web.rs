@@ -20,13 +20,36 @@ fn requests_parse() {
 
 #[test]
 fn the_page_is_small_and_self_contained() {
-    assert!(INDEX_HTML.len() < 300_000);
-    for forbidden in ["http://", "https://", "//cdn", "@import"] {
-        let hits: Vec<&str> = INDEX_HTML
-            .lines()
-            .filter(|l| l.contains(forbidden) && !l.contains("xmlns"))
-            .collect();
-        assert!(hits.is_empty(), "the page refers to another host: {hits:?}");
+    assert!(INDEX_HTML.len() + PANEL_JS.len() + PANEL_CSS.len() < 300_000);
+    for file in [INDEX_HTML, PANEL_JS, PANEL_CSS] {
+        for forbidden in ["http://", "https://", "//cdn", "@import"] {
+            let hits: Vec<&str> = file
+                .lines()
+                .filter(|l| l.contains(forbidden) && !l.contains("xmlns"))
+                .collect();
+            assert!(hits.is_empty(), "the page refers to another host: {hits:?}");
+        }
+    }
+}
+
+#[test]
+fn the_page_has_no_inline_script_or_style_for_its_csp_to_block() {
+    let lower = INDEX_HTML.to_ascii_lowercase();
+    assert!(!lower.contains("<style"), "inline <style>");
+    assert!(!lower.contains(" style="), "a style attribute");
+    assert!(!lower.contains("javascript:"));
+    for (at, _) in lower.match_indices("<script") {
+        let tag = &lower[at..at + lower[at..].find('>').unwrap()];
+        assert!(tag.contains(" src="), "an inline <script>: {tag}");
+    }
+    for attr in [
+        " onclick=",
+        " onload=",
+        " onerror=",
+        " oninput=",
+        " onsubmit=",
+    ] {
+        assert!(!lower.contains(attr), "an inline handler {attr}");
     }
 }
 
