@@ -111,6 +111,15 @@ pub(crate) struct SecureDiscovery {
 
   // A set for keeping track which remote readers are relay-only
   relay_only_remote_readers: HashSet<GUID>,
+
+  // (local endpoint, remote endpoint) pairs whose remote keys we have set
+  remote_endpoint_keys_received: HashSet<(GUID, GUID)>,
+  // (local endpoint, remote endpoint) pairs whose remote sends us keys: the key
+  // exchange is complete only when they have come
+  remote_endpoint_sends_keys: HashSet<(GUID, GUID)>,
+  // To tell the event loop that a key exchange is complete: it matches a remote
+  // endpoint only then (see RemoteEndpointKeysExchanged)
+  discovery_updated_sender: WakeSender<DiscoveryNotificationType>,
 }
 
 impl SecureDiscovery {
@@ -118,6 +127,7 @@ impl SecureDiscovery {
     domain_participant: &DomainParticipantWeak,
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
     security_plugins: SecurityPluginsHandle,
+    discovery_updated_sender: WakeSender<DiscoveryNotificationType>,
   ) -> SecurityResult<Self> {
     // Run the Discovery-related initialization steps of DDS Security spec v1.1
     // Section "8.8.1 Authentication and AccessControl behavior with local
@@ -257,6 +267,9 @@ impl SecureDiscovery {
       cached_received_key_exchange_messages: HashMap::new(),
       user_data_endpoints_with_keys_already_sent_to: HashSet::new(),
       relay_only_remote_readers: HashSet::new(),
+      remote_endpoint_keys_received: HashSet::new(),
+      remote_endpoint_sends_keys: HashSet::new(),
+      discovery_updated_sender,
     })
   }
 
@@ -1934,6 +1947,30 @@ impl SecureDiscovery {
       .map(|dh| CryptoToken::from(dh.clone()))
       .collect();
 
+    // Keys of a remote endpoint often come before we have discovered it (its
+    // participant discovered us first): they are stored and set when we register
+    // it (start_key_exchange_with_remote_endpoint). That is no error.
+    let local_endpoint_guid = msg.generic.destination_endpoint_guid;
+    let remote_endpoint_guid = msg.generic.source_endpoint_guid;
+    let endpoint_tokens = [
+      GMCLASSID_SECURITY_DATAWRITER_CRYPTO_TOKENS,
+      GMCLASSID_SECURITY_DATAREADER_CRYPTO_TOKENS,
+    ]
+    .contains(&msg.generic.message_class_id.as_str());
+    if endpoint_tokens
+      && !self
+        .security_plugins
+        .get_plugins()
+        .has_remote_endpoint_been_registered_already(local_endpoint_guid, remote_endpoint_guid)
+    {
+      debug!(
+        "Got crypto tokens of {remote_endpoint_guid:?} for {local_endpoint_guid:?} before \
+         discovering it. Storing them until then."
+      );
+      self.store_received_volatile_message(msg.clone());
+      return;
+    }
+
     match msg.generic.message_class_id.as_str() {
       GMCLASSID_SECURITY_PARTICIPANT_CRYPTO_TOKENS => {
         // Got participant crypto tokens, see "7.4.4.6.1 Data for message class
@@ -1988,6 +2025,10 @@ impl SecureDiscovery {
             "Set crypto tokens for remote writer {:?}",
             msg.generic.source_endpoint_guid
           );
+          self.remote_endpoint_keys_received_for(
+            msg.generic.destination_endpoint_guid,
+            msg.generic.source_endpoint_guid,
+          );
         }
       }
 
@@ -2016,6 +2057,10 @@ impl SecureDiscovery {
           info!(
             "Set crypto tokens for remote reader {:?}",
             msg.generic.source_endpoint_guid
+          );
+          self.remote_endpoint_keys_received_for(
+            msg.generic.destination_endpoint_guid,
+            msg.generic.source_endpoint_guid,
           );
         }
       }
@@ -2366,6 +2411,9 @@ impl SecureDiscovery {
         self
           .cached_received_key_exchange_messages
           .remove(&(local_endpoint_guid, remote_endpoint_guid));
+        self
+          .remote_endpoint_keys_received
+          .insert((local_endpoint_guid, remote_endpoint_guid));
       }
     }
 
@@ -2374,6 +2422,7 @@ impl SecureDiscovery {
       .user_data_endpoints_with_keys_already_sent_to
       .contains(&remote_endpoint_guid);
     if we_have_sent_ours {
+      self.notify_if_keys_exchanged(local_endpoint_guid, remote_endpoint_guid);
       return;
     }
 
@@ -2422,7 +2471,24 @@ impl SecureDiscovery {
       self
         .user_data_endpoints_with_keys_already_sent_to
         .insert(remote_endpoint_guid);
+      self.notify_if_keys_exchanged(local_endpoint_guid, remote_endpoint_guid);
       return;
+    }
+
+    // Whether the remote sends us keys too: a writer whenever it protects
+    // anything (section 8.8.9.2), a reader when it protects submessages (8.8.9.3;
+    // a RustDDS reader sends them also for payload protection alone, see above,
+    // but others need not, and waiting for keys that never come would never
+    // match the remote).
+    let remote_sends_keys = if remote_is_writer {
+      sec_attr.is_payload_protected || sec_attr.is_submessage_protected
+    } else {
+      sec_attr.is_submessage_protected
+    };
+    if remote_sends_keys {
+      self
+        .remote_endpoint_sends_keys
+        .insert((local_endpoint_guid, remote_endpoint_guid));
     }
 
     // Get the crypto tokens for the remote
@@ -2521,6 +2587,45 @@ impl SecureDiscovery {
     self
       .user_data_endpoints_with_keys_already_sent_to
       .insert(remote_endpoint_guid);
+    self.notify_if_keys_exchanged(local_endpoint_guid, remote_endpoint_guid);
+  }
+
+  fn remote_endpoint_keys_received_for(
+    &mut self,
+    local_endpoint_guid: GUID,
+    remote_endpoint_guid: GUID,
+  ) {
+    self
+      .remote_endpoint_keys_received
+      .insert((local_endpoint_guid, remote_endpoint_guid));
+    self.notify_if_keys_exchanged(local_endpoint_guid, remote_endpoint_guid);
+  }
+
+  // Tells the event loop when the key exchange between a local endpoint and a
+  // remote one is complete: the remote is registered, our keys have been sent to
+  // it, and its keys have been set if it sends any. The event loop matches the
+  // remote only then, so the first sample sent to it is one it can decode, and one
+  // we can encode (before, the first samples after matching failed to encode,
+  // 'Could not find a remote EndpointCryptoHandle', or to decode at the remote, and
+  // came only with a repair, or never for a best-effort writer). As Fast DDS does
+  // (`SecurityManager`: a secured remote endpoint is paired after its crypto tokens
+  // are registered).
+  fn notify_if_keys_exchanged(&self, local_endpoint_guid: GUID, remote_endpoint_guid: GUID) {
+    let pair = (local_endpoint_guid, remote_endpoint_guid);
+    let complete = self
+      .user_data_endpoints_with_keys_already_sent_to
+      .contains(&remote_endpoint_guid)
+      && (!self.remote_endpoint_sends_keys.contains(&pair)
+        || self.remote_endpoint_keys_received.contains(&pair));
+    if complete {
+      send_discovery_notification(
+        &self.discovery_updated_sender,
+        DiscoveryNotificationType::RemoteEndpointKeysExchanged {
+          local_endpoint_guid,
+          remote_endpoint_guid,
+        },
+      );
+    }
   }
 
   fn validate_remote_participant_permissions(

@@ -504,6 +504,15 @@ pub(crate) enum DiscoveryNotificationType {
   ParticipantAuthenticationStatusChanged {
     guid_prefix: GuidPrefix,
   },
+  // The crypto key exchange between a local endpoint and a matching remote one
+  // has come as far as the local endpoint needs to talk to the remote: the remote
+  // is registered with the crypto plugin, our keys have been sent to it, and its
+  // own keys have been received if it sends any.
+  #[cfg(feature = "security")]
+  RemoteEndpointKeysExchanged {
+    local_endpoint_guid: GUID,
+    remote_endpoint_guid: GUID,
+  },
 }
 
 pub mod builtin_topic_names {

@@ -86,6 +86,16 @@ pub struct DPEventLoop {
   // If security is enabled, this contains the security plugins
   #[cfg(feature = "security")]
   security_plugins_opt: Option<SecurityPluginsHandle>,
+  // Secured remote endpoints of other participants are matched only once the
+  // crypto key exchange with them is complete (RemoteEndpointKeysExchanged).
+  // Keyed by (local endpoint, remote endpoint): the pairs waiting for it, and
+  // the pairs that have it.
+  #[cfg(feature = "security")]
+  readers_waiting_for_keys: HashMap<(GUID, GUID), DiscoveredReaderData>,
+  #[cfg(feature = "security")]
+  writers_waiting_for_keys: HashMap<(GUID, GUID), DiscoveredWriterData>,
+  #[cfg(feature = "security")]
+  keys_exchanged: BTreeSet<(GUID, GUID)>,
 
   // Adding readers
   add_reader_receiver: TokenReceiverPair<ReaderIngredients>,
@@ -240,6 +250,12 @@ impl DPEventLoop {
       local_interfaces,
       #[cfg(feature = "security")]
       security_plugins_opt,
+      #[cfg(feature = "security")]
+      readers_waiting_for_keys: HashMap::new(),
+      #[cfg(feature = "security")]
+      writers_waiting_for_keys: HashMap::new(),
+      #[cfg(feature = "security")]
+      keys_exchanged: BTreeSet::new(),
       add_reader_receiver,
       remove_reader_receiver,
       add_writer_receiver,
@@ -451,6 +467,11 @@ impl DPEventLoop {
         ParticipantAuthenticationStatusChanged { guid_prefix } => {
           self.on_remote_participant_authentication_status_changed(guid_prefix);
         }
+        #[cfg(feature = "security")]
+        RemoteEndpointKeysExchanged {
+          local_endpoint_guid,
+          remote_endpoint_guid,
+        } => self.remote_endpoint_keys_exchanged(local_endpoint_guid, remote_endpoint_guid),
       }
     }
 
@@ -855,6 +876,8 @@ impl DPEventLoop {
     // Now we have to remove any ReaderProxies and WriterProxies belonging
     // to that participant, so that we do not send messages to them anymore.
 
+    #[cfg(feature = "security")]
+    self.forget_keys_of_remotes(|remote| remote.prefix == participant_guid_prefix);
     for writer in self.writers.values_mut() {
       writer.participant_lost(participant_guid_prefix);
     }
@@ -963,7 +986,18 @@ impl DPEventLoop {
                    {remote_reader_guid:?}. Reason: {e}."
                 );
               });
-            true // match_to_reader
+            let pair = (local_writer_guid, remote_reader_guid);
+            if remote_reader_guid.prefix == self.domain_info.domain_participant_guid.prefix
+              || self.keys_exchanged.contains(&pair)
+            {
+              true // match_to_reader
+            } else {
+              // Matched when the key exchange is complete
+              self
+                .readers_waiting_for_keys
+                .insert(pair, remote_reader.clone());
+              false // match_to_reader
+            }
           }
         } else {
           // No security enabled. Always match
@@ -988,7 +1022,58 @@ impl DPEventLoop {
       && guid.entity_id.kind().is_built_in()
   }
 
+  // The key exchange between a local endpoint and a remote one is complete: match
+  // the remote if it was waiting for that.
+  #[cfg(feature = "security")]
+  fn remote_endpoint_keys_exchanged(&mut self, local_guid: GUID, remote_guid: GUID) {
+    let pair = (local_guid, remote_guid);
+    self.keys_exchanged.insert(pair);
+    if let Some(remote_reader) = self.readers_waiting_for_keys.remove(&pair) {
+      if let Some(writer) = self.writers.get_mut(&local_guid.entity_id) {
+        debug!("Keys exchanged: matching {local_guid:?} with remote reader {remote_guid:?}");
+        let requested_qos = remote_reader.subscription_topic_data.qos();
+        writer.update_reader_proxy(
+          &RtpsReaderProxy::from_discovered_reader_data(&remote_reader, &[], &[]),
+          &requested_qos,
+        );
+      }
+    }
+    if let Some(remote_writer) = self.writers_waiting_for_keys.remove(&pair) {
+      let vendor_id = discovery_db_read(&self.discovery_db)
+        .find_participant_proxy(remote_guid.prefix)
+        .map(|participant| participant.vendor_id);
+      if let Some(reader) = self
+        .message_receiver
+        .available_readers
+        .get_mut(&local_guid.entity_id)
+      {
+        debug!("Keys exchanged: matching {local_guid:?} with remote writer {remote_guid:?}");
+        let offered_qos = remote_writer.publication_topic_data.qos();
+        reader.update_writer_proxy(
+          RtpsWriterProxy::from_discovered_writer_data(&remote_writer, &[], &[])
+            .with_vendor_id(vendor_id),
+          &offered_qos,
+        );
+      }
+    }
+  }
+
+  // Forget the key exchange state of remote endpoints that are gone: a returning
+  // one exchanges keys again.
+  #[cfg(feature = "security")]
+  fn forget_keys_of_remotes(&mut self, is_gone: impl Fn(&GUID) -> bool) {
+    self
+      .readers_waiting_for_keys
+      .retain(|(_, remote), _| !is_gone(remote));
+    self
+      .writers_waiting_for_keys
+      .retain(|(_, remote), _| !is_gone(remote));
+    self.keys_exchanged.retain(|(_, remote)| !is_gone(remote));
+  }
+
   fn remote_reader_lost(&mut self, reader_guid: GUID) {
+    #[cfg(feature = "security")]
+    self.forget_keys_of_remotes(|remote| *remote == reader_guid);
     for writer in self.writers.values_mut() {
       writer.reader_lost(reader_guid);
     }
@@ -1070,7 +1155,18 @@ impl DPEventLoop {
                  {remote_writer_guid:?}. Reason: {e}."
               );
             }
-            true // match_to_writer
+            let pair = (local_reader_guid, remote_writer_guid);
+            if remote_writer_guid.prefix == self.domain_info.domain_participant_guid.prefix
+              || self.keys_exchanged.contains(&pair)
+            {
+              true // match_to_writer
+            } else {
+              // Matched when the key exchange is complete
+              self
+                .writers_waiting_for_keys
+                .insert(pair, remote_writer.clone());
+              false // match_to_writer
+            }
           }
         } else {
           // No security enabled. Always match
@@ -1094,6 +1190,8 @@ impl DPEventLoop {
   }
 
   fn remote_writer_lost(&mut self, writer_guid: GUID) {
+    #[cfg(feature = "security")]
+    self.forget_keys_of_remotes(|remote| *remote == writer_guid);
     for reader in self.message_receiver.available_readers.values_mut() {
       reader.remove_writer_proxy(writer_guid);
     }

@@ -303,7 +303,7 @@ impl SecurityPlugins {
     }
   }
 
-  fn has_remote_endpoint_been_registered_already(
+  pub(crate) fn has_remote_endpoint_been_registered_already(
     &self,
     local_guid: GUID,
     remote_guid: GUID,
