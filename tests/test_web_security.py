@@ -14,7 +14,7 @@ from rclpy.serialization import serialize_message
 
 from conftest import LATCHED, REPO
 from foxglove_client import free_port
-from test_gui_bridge import RawWs, browser, http_get, rss_kib, start_panel  # noqa: F401 (fixture)
+from test_gui_bridge import RawWs, browser, http_get, panel_status, rss_kib, start_panel  # noqa: F401 (fixture)
 
 FOXGLOVE = {"Sec-WebSocket-Protocol": "foxglove.sdk.v1"}
 
@@ -97,6 +97,8 @@ def test_foxglove_refuses_other_origins_rebinding_and_connections_over_its_cap(l
     """Medium: the Foxglove server checked no Origin or Host (a page in the operator's
     browser, or a rebinding name, read robot_description) and took 200 of 200
     connections."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    diags = observer.sub("/diagnostics", DiagnosticArray)
     fox = free_port()
     proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=127.0.0.1:{fox}")
     deadline = time.monotonic() + 10
@@ -127,6 +129,12 @@ def test_foxglove_refuses_other_origins_rebinding_and_connections_over_its_cap(l
     assert len(opened) == 16 and refused == 184
     for ws in opened:
         ws.close()
+    # counted in gui_bridge's diagnostics, logged once per address and status
+    def counted():
+        status = panel_status(diags)
+        return status and status[2].get("foxglove_refused") == "3" and status[2].get("foxglove_refused_busy") == "184"
+    assert observer.spin_until(counted, 10), panel_status(diags)
+    assert proc.output().count("Foxglove client 127.0.0.1") == 1, proc.output()
 
 
 def test_a_10_mib_foxglove_message_closes_that_client_and_memory_stays_flat(launch, observer):

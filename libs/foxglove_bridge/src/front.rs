@@ -167,6 +167,8 @@ pub(crate) struct Front {
     pub(crate) stats: Arc<FrontStats>,
     /// Does the SDK's server take samples at all?
     pub(crate) publishing: bool,
+    /// refusals logged already (address, status)
+    pub(crate) logged: Mutex<std::collections::HashSet<(std::net::IpAddr, u16)>>,
 }
 
 impl Front {
@@ -190,6 +192,15 @@ impl Front {
                 front.connection(stream, peer, head_permit, clients).await;
             });
         }
+    }
+
+    /// Is this the first refusal of `ip` with `status` (so it is logged)? A client retrying
+    /// every second logs one line; past 1024 addresses refusals are only counted.
+    fn first_refusal(&self, ip: std::net::IpAddr, status: u16) -> bool {
+        let Ok(mut logged) = self.logged.lock() else {
+            return false;
+        };
+        logged.len() < 1024 && logged.insert((ip, status))
     }
 
     fn count(&self, c: &std::sync::atomic::AtomicU64) {
@@ -231,11 +242,13 @@ impl Front {
             Ok(a) => a,
             Err(refused) => {
                 self.count(&self.stats.refused);
-                log::info!(
-                    "Foxglove client {peer} refused: {} {}",
-                    refused.status,
-                    refused.reason
-                );
+                if self.first_refusal(peer.ip(), refused.status) {
+                    log::warn!(
+                        "Foxglove client {peer} refused: {} {} (further refusals of this address with this status are counted, not logged)",
+                        refused.status,
+                        refused.reason
+                    );
+                }
                 let _ = answer(&mut client, refused.status, &refused.reason).await;
                 return;
             }

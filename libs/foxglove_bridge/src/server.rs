@@ -238,6 +238,7 @@ impl FoxgloveBridge {
             introductions: shared.introductions.clone(),
             stats: front_stats.clone(),
             publishing: publish != ClientPublish::Off,
+            logged: Mutex::new(std::collections::HashSet::new()),
         });
         let front = tokio::spawn(front.run(listener));
         Ok(FoxgloveBridge {

@@ -337,6 +337,7 @@ pub fn gate(access: AccessPolicy, origins: Vec<String>) -> Gate {
 pub async fn serve<'a>(
     node: &'a RefCell<&mut RosNode>,
     access: AccessPolicy,
+    stats: &crate::web::WebStats,
 ) -> anyhow::Result<Option<LocalBoxFuture<'a, ()>>> {
     let params = node.borrow().params().clone();
     let bind = params.string("foxglove_bind").unwrap_or_default();
@@ -392,6 +393,7 @@ pub async fn serve<'a>(
             ", loopback only, no token"
         }
     );
+    stats.set_foxglove(bridge.front_stats());
     let from_clients = bridge.take_client_samples();
     Ok(Some(
         forward(bridge, node, from_clients, targets).boxed_local(),

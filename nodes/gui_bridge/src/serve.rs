@@ -69,7 +69,6 @@ pub async fn serve(
     };
     // from here on shared with the Foxglove server, which subscribes topics on demand
     let node = std::cell::RefCell::new(node);
-    let foxglove = crate::foxglove::serve(&node, AccessPolicy::new(token.clone())).await?;
     let state = WebState::new(
         to_browsers.clone(),
         req_tx,
@@ -90,6 +89,8 @@ pub async fn serve(
         })
     });
     let web_stats = state.stats.clone();
+    let foxglove =
+        crate::foxglove::serve(&node, AccessPolicy::new(token.clone()), &web_stats).await?;
     let url = format!("http://{local}/");
     // no borrow of the node may live across an await: the Foxglove server borrows it
     let (panel_name, xyz_target, servo_state_topic) = {

@@ -315,6 +315,8 @@ pub struct WebStats {
     last_rejection: Mutex<Option<String>>,
     last_drop: Mutex<Option<String>>,
     complaints: Mutex<Throttle>,
+    /// the Foxglove server's front, when it runs (its refusals are reported with ours)
+    foxglove: std::sync::OnceLock<Arc<foxglove_bridge::FrontStats>>,
 }
 
 /// The length reasons are cut to in log lines, diagnostics and answers.
@@ -598,6 +600,11 @@ impl WebStats {
         }
     }
 
+    /// Report the Foxglove server's front counters with the panel's.
+    pub fn set_foxglove(&self, stats: Arc<foxglove_bridge::FrontStats>) {
+        let _ = self.foxglove.set(stats);
+    }
+
     /// The latest refusal and when.
     pub fn last_refusal(&self) -> Option<(Instant, String)> {
         self.last_refusal.lock().ok().and_then(|l| l.clone())
@@ -621,7 +628,7 @@ impl WebStats {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed).to_string();
         let text =
             |m: &Mutex<Option<String>>| m.lock().ok().and_then(|l| l.clone()).unwrap_or_default();
-        vec![
+        let mut values = vec![
             ("clients", get(&self.clients)),
             ("refused_origin", get(&self.refused_origin)),
             ("refused_host", get(&self.refused_host)),
@@ -636,7 +643,16 @@ impl WebStats {
             ("bad_requests", get(&self.bad_requests)),
             ("last_rejection", text(&self.last_rejection)),
             ("dropped_replies", get(&self.dropped_replies)),
-        ]
+        ];
+        if let Some(f) = self.foxglove.get() {
+            values.extend([
+                ("foxglove_refused", get(&f.refused)),
+                ("foxglove_refused_busy", get(&f.refused_busy)),
+                ("foxglove_closed_oversized", get(&f.closed_oversized)),
+                ("foxglove_header_timeouts", get(&f.header_timeouts)),
+            ]);
+        }
+        values
     }
 }
 
