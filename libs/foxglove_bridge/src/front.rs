@@ -296,7 +296,11 @@ impl Front {
             .map_err(|_| std::io::Error::other("no answer from the SDK's server"))?;
         client_wr.write_all(&answer_head).await?;
         if !answer_head.starts_with(b"HTTP/1.1 101") {
-            return Ok(()); // the SDK refused the upgrade (e.g. no subprotocol): said so
+            // the SDK refused the upgrade (e.g. no subprotocol): its reason on to the client
+            client_wr.write_all(&buffered).await?;
+            let rest = tokio::io::copy(&mut inner_rd, &mut client_wr);
+            let _ = tokio::time::timeout(Duration::from_secs(5), rest).await;
+            return Ok(());
         }
         let (info, after) = read_frame(&mut inner_rd, &mut buffered).await?;
         client_wr

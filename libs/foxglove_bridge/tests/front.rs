@@ -354,3 +354,30 @@ async fn a_half_open_connection_is_answered_408_when_its_head_times_out() {
         1
     );
 }
+
+#[tokio::test]
+async fn the_sdk_s_own_refusal_reaches_the_client_whole() {
+    let bridge = FoxgloveBridge::start(
+        "127.0.0.1:0",
+        &TopicNames::default(),
+        ClientPublish::Off,
+        "t",
+    )
+    .await
+    .unwrap();
+    // no subprotocol: the SDK answers 400 with its reason
+    let mut s = TcpStream::connect(bridge.local_addr()).await.unwrap();
+    s.write_all(
+        b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+          Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
+    )
+    .await
+    .unwrap();
+    let mut answer = String::new();
+    tokio::time::timeout(WAIT, s.read_to_string(&mut answer))
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(answer.starts_with("HTTP/1.1 400"), "{answer}");
+    assert!(answer.contains("sec-websocket-protocol"), "{answer}");
+}
