@@ -2426,15 +2426,26 @@ impl SecureDiscovery {
       return;
     }
 
-    // Dig out remote's security attributes
+    // Dig out remote's security attributes. The "remote" may be an endpoint of
+    // our own participant (a reader and a writer of one topic): that one is among
+    // the local endpoints.
+    let remote_is_local = remote_endpoint_guid.prefix == self.local_participant_guid.prefix;
     let sec_info_opt = if remote_is_writer {
-      discovery_db_read(discovery_db)
-        .get_topic_writer(&remote_endpoint_guid)
-        .map(|writer| writer.publication_topic_data.security_info().clone())
+      let db = discovery_db_read(discovery_db);
+      if remote_is_local {
+        db.get_local_topic_writer(remote_endpoint_guid)
+      } else {
+        db.get_topic_writer(&remote_endpoint_guid)
+      }
+      .map(|writer| writer.publication_topic_data.security_info().clone())
     } else {
-      discovery_db_read(discovery_db)
-        .get_topic_reader(&remote_endpoint_guid)
-        .map(|reader| reader.subscription_topic_data.security_info().clone())
+      let db = discovery_db_read(discovery_db);
+      if remote_is_local {
+        db.get_local_topic_reader(remote_endpoint_guid)
+      } else {
+        db.get_topic_reader(&remote_endpoint_guid)
+      }
+      .map(|reader| reader.subscription_topic_data.security_info().clone())
     };
 
     let sec_attr = match sec_info_opt.flatten() {
@@ -2516,57 +2527,42 @@ impl SecureDiscovery {
       }
     };
 
-    // Shortcut: if the remote is actually our endpoint, set tokens directly (no
-    // need to send then to the network)
+    // Create the volatile message containing the tokens
+    let vol_msg = if remote_is_writer {
+      // Our local endpoint is a reader
+      self.new_volatile_message(
+        GMCLASSID_SECURITY_DATAREADER_CRYPTO_TOKENS,
+        key_exchange_writer.guid(),
+        local_endpoint_guid,
+        remote_endpoint_guid.prefix,
+        remote_endpoint_guid,
+        &crypto_tokens,
+      )
+    } else {
+      // Our local endpoint is a writer
+      self.new_volatile_message(
+        GMCLASSID_SECURITY_DATAWRITER_CRYPTO_TOKENS,
+        key_exchange_writer.guid(),
+        local_endpoint_guid,
+        remote_endpoint_guid.prefix,
+        remote_endpoint_guid,
+        &crypto_tokens,
+      )
+    };
+
+    // Shortcut: if the remote is actually our endpoint, take the tokens in as if
+    // they had come over the network (no need to send them). They are our local
+    // endpoint's keys, for the other endpoint to decode what ours sends: set as
+    // the keys of the remote *local* endpoint on the other one's side, or stored
+    // until that side has registered ours. (Setting them as the other endpoint's
+    // keys on our side, as before, gave our endpoint its own keys for the other
+    // one's, and a participant's own reader never decoded its own writer.)
     let remote_is_us = remote_endpoint_guid.prefix == self.local_participant_guid.prefix;
     if remote_is_us {
-      let set_res = if remote_is_writer {
-        self
-          .security_plugins
-          .get_plugins()
-          .set_remote_writer_crypto_tokens(remote_endpoint_guid, local_endpoint_guid, crypto_tokens)
-      } else {
-        self
-          .security_plugins
-          .get_plugins()
-          .set_remote_reader_crypto_tokens(remote_endpoint_guid, local_endpoint_guid, crypto_tokens)
-      };
-
-      if let Err(e) = set_res {
-        create_security_error_and_log!(
-          "Failed to set our own crypto tokens as remote tokens: {}. Guid: {:?}",
-          e,
-          remote_endpoint_guid
-        );
-        return;
-      } else {
-        debug!("Set our own crypto tokens as remote tokens. Guid: {remote_endpoint_guid:?}");
-      }
+      debug!("Taking our own crypto tokens in. Guid: {remote_endpoint_guid:?}");
+      self.volatile_message_secure_read(&vol_msg);
     } else {
       // It's a real remote, send tokens over the network
-
-      // Create the volatile message containing the tokens
-      let vol_msg = if remote_is_writer {
-        // Our local endpoint is a reader
-        self.new_volatile_message(
-          GMCLASSID_SECURITY_DATAREADER_CRYPTO_TOKENS,
-          key_exchange_writer.guid(),
-          local_endpoint_guid,
-          remote_endpoint_guid.prefix,
-          remote_endpoint_guid,
-          &crypto_tokens,
-        )
-      } else {
-        // Our local endpoint is a writer
-        self.new_volatile_message(
-          GMCLASSID_SECURITY_DATAWRITER_CRYPTO_TOKENS,
-          key_exchange_writer.guid(),
-          local_endpoint_guid,
-          remote_endpoint_guid.prefix,
-          remote_endpoint_guid,
-          &crypto_tokens,
-        )
-      };
       if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &vol_msg) {
         create_security_error_and_log!(
           "Failed to send local endpoint {:?} crypto tokens to {:?}: {e}. Trying again later.",

@@ -86,8 +86,9 @@ pub struct DPEventLoop {
   // If security is enabled, this contains the security plugins
   #[cfg(feature = "security")]
   security_plugins_opt: Option<SecurityPluginsHandle>,
-  // Secured remote endpoints of other participants are matched only once the
-  // crypto key exchange with them is complete (RemoteEndpointKeysExchanged).
+  // Secured "remote" endpoints (those of other participants, and our own ones on
+  // the topic) are matched only once the crypto key exchange with them is
+  // complete (RemoteEndpointKeysExchanged).
   // Keyed by (local endpoint, remote endpoint): the pairs waiting for it, and
   // the pairs that have it.
   #[cfg(feature = "security")]
@@ -987,9 +988,7 @@ impl DPEventLoop {
                 );
               });
             let pair = (local_writer_guid, remote_reader_guid);
-            if remote_reader_guid.prefix == self.domain_info.domain_participant_guid.prefix
-              || self.keys_exchanged.contains(&pair)
-            {
+            if self.keys_exchanged.contains(&pair) {
               true // match_to_reader
             } else {
               // Matched when the key exchange is complete
@@ -1156,9 +1155,7 @@ impl DPEventLoop {
               );
             }
             let pair = (local_reader_guid, remote_writer_guid);
-            if remote_writer_guid.prefix == self.domain_info.domain_participant_guid.prefix
-              || self.keys_exchanged.contains(&pair)
-            {
+            if self.keys_exchanged.contains(&pair) {
               true // match_to_writer
             } else {
               // Matched when the key exchange is complete
@@ -1451,6 +1448,84 @@ mod tests {
       .copied()
       .collect();
     assert!(about_ourselves.is_empty(), "{about_ourselves:#?}");
+  }
+
+  // A secured participant's own reader of a topic it also writes gets the
+  // samples, as without security. Before, the key exchange between the two
+  // stopped at "Could not find EndpointSecurityAttributes for remote" (our own
+  // endpoint was looked for among the remote ones), and its shortcut for our own
+  // endpoints set each endpoint's own keys as the other one's: nothing came.
+  #[cfg(feature = "security")]
+  #[test]
+  fn a_secured_participants_own_reader_gets_its_own_writers_samples() {
+    use crate::{
+      dds::participant::DomainParticipantBuilder, no_key::DataWriter, policy::Reliability,
+      CDRDeserializerAdapter, CDRSerializerAdapter, DataWriterStatus, QosPolicyBuilder,
+      StatusEvented, TopicKind,
+    };
+
+    // The example permissions grant domain 0
+    let participant = DomainParticipantBuilder::new(0)
+      .builtin_security(
+        crate::DomainParticipantSecurityConfigFiles::with_ros_default_names(
+          concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/examples/security_configuration_files"
+          ),
+          "password123".to_string(),
+        ),
+      )
+      .build()
+      .expect("a secured participant");
+    let qos = QosPolicyBuilder::new()
+      .reliability(Reliability::Reliable {
+        max_blocking_time: crate::Duration::from_millis(100),
+      })
+      .build();
+    // The example permissions and governance cover topics named "Square"
+    let topic = participant
+      .create_topic(
+        "Square".to_string(),
+        "u32".to_string(),
+        &qos,
+        TopicKind::NoKey,
+      )
+      .unwrap();
+    let writer: DataWriter<u32, CDRSerializerAdapter<u32>> = participant
+      .create_publisher(&qos)
+      .unwrap()
+      .create_datawriter_no_key(&topic, None)
+      .unwrap();
+    let mut reader = participant
+      .create_subscriber(&qos)
+      .unwrap()
+      .create_datareader_no_key::<u32, CDRDeserializerAdapter<u32>>(&topic, None)
+      .unwrap();
+
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    loop {
+      if let Some(DataWriterStatus::PublicationMatched { .. }) = writer.try_recv_status() {
+        break;
+      }
+      assert!(
+        std::time::Instant::now() < deadline,
+        "the writer never matched"
+      );
+      thread::sleep(std::time::Duration::from_millis(1));
+    }
+    writer.write(7, None).unwrap();
+    let written = std::time::Instant::now();
+    let received = loop {
+      if let Ok(Some(sample)) = reader.take_next_sample() {
+        break sample.into_value();
+      }
+      assert!(
+        written.elapsed() < std::time::Duration::from_secs(3),
+        "our own sample never came"
+      );
+      thread::sleep(std::time::Duration::from_millis(1));
+    };
+    assert_eq!(received, 7);
   }
 
   //#[test]
