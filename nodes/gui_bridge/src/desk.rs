@@ -473,3 +473,65 @@ impl Desk {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn teleop() -> Teleop {
+        Teleop::new(crate::load_arm("").unwrap(), 50.0)
+    }
+
+    #[test]
+    fn saves_and_loads_are_jobs_for_off_the_loop_one_at_a_time_and_a_save_asks_first() {
+        let dir = std::env::temp_dir().join(format!("gui_bridge_desk_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let (t, now) = (teleop(), Instant::now());
+        let mut desk = Desk::new(dir.clone());
+        desk.request(ProgramOp::Teach, &t, None, None, now);
+        let save = |overwrite| ProgramOp::Save {
+            name: "p".into(),
+            overwrite,
+        };
+        // the request only hands out a job: no file is touched on the loop
+        let out = desk.request(save(false), &t, None, None, now);
+        let job = out.file.unwrap();
+        assert!(!dir.join("p.csv").exists());
+        assert_eq!(desk.json()["message"], "saving p…");
+        // one at a time
+        let busy = desk.request(ProgramOp::Load { name: "p".into() }, &t, None, None, now);
+        assert!(busy.file.is_none());
+        assert!(desk.json()["message"]
+            .as_str()
+            .unwrap()
+            .contains("under way"));
+        desk.file_done(job.run(&dir));
+        assert_eq!(desk.json()["message"], "saved 1 points as p");
+        assert_eq!(desk.json()["files"], serde_json::json!(["p"]));
+        // saving again asks, replacing needs overwrite
+        let job = desk.request(save(false), &t, None, None, now).file.unwrap();
+        desk.file_done(job.run(&dir));
+        assert_eq!(desk.json()["confirm_overwrite"], "p");
+        let job = desk.request(save(true), &t, None, None, now).file.unwrap();
+        desk.file_done(job.run(&dir));
+        assert_eq!(desk.json()["message"], "saved 1 points as p");
+        assert!(desk.json()["confirm_overwrite"].is_null());
+        // a job the file system never answered
+        let job = desk
+            .request(ProgramOp::Load { name: "p".into() }, &t, None, None, now)
+            .file
+            .unwrap();
+        desk.file_done(job.timed_out(FILE_TIMEOUT));
+        assert_eq!(
+            desk.json()["message"],
+            "program p: the file system did not answer within 5 s"
+        );
+        assert_eq!(
+            desk.json()["files"],
+            serde_json::json!(["p"]),
+            "the list is kept"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
