@@ -841,9 +841,33 @@ impl CryptoTransform for CryptographicBuiltin {
       }
       BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GMAC
       | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GMAC => {
-        validate_mac(decode_key, initialization_vector, content_bytes, common_mac)
-          // if validate_mac succeeds, then map result to content bytes
-          .map(|()| Vec::from(content_bytes))
+        // The plaintext SerializedPayload has no length marker: the footer is at
+        // the end, unless the DATA padded it (1 to 3 zero bytes after the footer,
+        // whose own last 4 bytes, the empty receiver_specific_macs, are zeros too).
+        // Try the footer at the end, then 1, 2 and 3 bytes before it.
+        let validated = validate_mac(decode_key, initialization_vector, content_bytes, common_mac);
+        if validated.is_ok() {
+          return Ok(Vec::from(content_bytes));
+        }
+        for padding in 1..4 {
+          let Some(unpadded_len) = encoded_buffer.len().checked_sub(padding) else {
+            break;
+          };
+          if unpadded_len < head_len + foot_len || encoded_buffer[unpadded_len] != 0 {
+            break;
+          }
+          let (content, footer) =
+            encoded_buffer[head_len..unpadded_len].split_at(unpadded_len - head_len - foot_len);
+          if footer[MAC_LENGTH..] != [0, 0, 0, 0] {
+            continue; // receiver-specific MACs are not allowed here
+          }
+          let mut mac: BuiltinMAC = [0; MAC_LENGTH];
+          mac.copy_from_slice(&footer[..MAC_LENGTH]);
+          if validate_mac(decode_key, initialization_vector, content, mac).is_ok() {
+            return Ok(Vec::from(content));
+          }
+        }
+        validated.map(|()| Vec::from(content_bytes))
       }
       BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GCM
       | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM => {
@@ -854,7 +878,11 @@ impl CryptoTransform for CryptographicBuiltin {
         let footer_start = head_len + 4 + ciphertext.len();
         let common_mac = match encoded_buffer.get(footer_start..footer_start + foot_len) {
           Some(footer_bytes) => BuiltinCryptoFooter::try_from(footer_bytes)?.common_mac,
-          None => return Err(security_error("Encoded payload too short for its CryptoContent")),
+          None => {
+            return Err(security_error(
+              "Encoded payload too short for its CryptoContent",
+            ))
+          }
         };
         decrypt(decode_key, initialization_vector, &ciphertext, common_mac)
       }
@@ -872,9 +900,26 @@ mod tests {
   // must still decode.
   #[test]
   fn an_encrypted_payload_decodes_with_the_datas_alignment_padding() {
+    payloads_decode_with_the_datas_alignment_padding(
+      BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM,
+    );
+  }
+
+  // The same for a payload that is only signed (data_protection_kind SIGN): its
+  // plaintext has no length marker, so the footer is found by the MAC.
+  #[test]
+  fn a_signed_payload_decodes_with_the_datas_alignment_padding() {
+    payloads_decode_with_the_datas_alignment_padding(
+      BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GMAC,
+    );
+  }
+
+  fn payloads_decode_with_the_datas_alignment_padding(
+    transformation_kind: BuiltinCryptoTransformationKind,
+  ) {
     let mut crypto = CryptographicBuiltin::new();
     let key_material = KeyMaterial_AES_GCM_GMAC {
-      transformation_kind: BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM,
+      transformation_kind,
       master_salt: BuiltinKey::generate_random(KeyLength::AES256),
       sender_key_id: CryptoTransformKeyId::random(),
       master_sender_key: BuiltinKey::generate_random(KeyLength::AES256),
@@ -890,7 +935,10 @@ mod tests {
       )
       .unwrap();
     crypto
-      .insert_decode_key_materials(remote_writer, KeyMaterial_AES_GCM_GMAC_seq::One(key_material))
+      .insert_decode_key_materials(
+        remote_writer,
+        KeyMaterial_AES_GCM_GMAC_seq::One(key_material),
+      )
       .unwrap();
 
     for plaintext_len in 0..12usize {
