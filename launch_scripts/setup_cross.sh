@@ -22,8 +22,9 @@ if [ ${#_missing[@]} -gt 0 ]; then
 fi
 
 # Debian packages: cross linkers and C libraries, qemu-user (provides qemu-aarch64 and
-# qemu-arm, the cargo runners).
-EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu libc6-dev-arm64-cross gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user}
+# qemu-arm, the cargo runners), perl and make (OpenSSL's own build, which openssl-src runs
+# for the target: the Pi binaries link OpenSSL statically for DDS Security).
+EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu libc6-dev-arm64-cross gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user perl make}
 _missing=()
 for p in $EEZYBOT_CROSS_APT_PACKAGES; do
   dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
