@@ -331,6 +331,17 @@ impl DiscoveryDB {
     // TODO: We are not cleaning up liast_life_signs table, but that should not be a
     // problem, except for a slight memory leak.
     for (&guid, sp) in &self.participant_proxies {
+      // Our own participant is in the table too (its announcements come back to
+      // us by multicast), but it is alive as long as we are. When the network
+      // interface goes down, its announcements stop coming back and its "lease"
+      // ran out: the participant was then removed as lost, and with security the
+      // event loop unregistered it as a remote participant, dropping our own
+      // identity, permissions and crypto handles; no handshake ever succeeded
+      // again after a network outage ("Could not find an IdentityHandle" for our
+      // own prefix).
+      if guid == self.my_guid.prefix {
+        continue;
+      }
       let lease_duration = sp
         .lease_duration
         .unwrap_or(DEFAULT_PARTICIPANT_LEASE_DURATION);
@@ -903,6 +914,32 @@ mod tests {
     assert!(discoverydb.participant_proxies.is_empty());
 
     // TODO: more operations tests
+  }
+
+  // Our own participant, heard by multicast, is never timed out: with the
+  // network down its announcements stop coming back, but it is not lost.
+  #[test]
+  fn discdb_never_times_out_the_local_participant() {
+    let (discovery_db_event_sender, _discovery_db_event_receiver) =
+      std::sync::mpsc::sync_channel::<()>(4);
+    let (status_sender, _status_receiver) = sync_status_channel(16).unwrap();
+    let mut own = spdp_participant_data().unwrap();
+    own.lease_duration = Some(Duration::from(StdDuration::from_millis(100)));
+    let mut discoverydb = DiscoveryDB::new(own.participant_guid, discovery_db_event_sender, status_sender);
+    let mut other = own.clone();
+    other.participant_guid = GUID::new_participant_guid();
+
+    discoverydb.update_participant(&own);
+    discoverydb.update_participant(&other);
+    assert_eq!(discoverydb.participant_proxies.len(), 2);
+
+    std::thread::sleep(StdDuration::from_millis(300)); // past the lease (tolerance 0)
+    let removed = discoverydb.participant_cleanup();
+    assert_eq!(
+      removed.iter().map(|(g, _)| *g).collect::<Vec<_>>(),
+      vec![other.participant_guid.prefix]
+    );
+    assert!(discoverydb.participant_proxies.contains_key(&own.participant_guid.prefix));
   }
 
   #[test]
