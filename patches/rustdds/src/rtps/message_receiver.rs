@@ -460,6 +460,7 @@ impl MessageReceiver {
                   if plugins_handle
                     .get_plugins()
                     .submessage_not_protected(&destination_guid)
+                    || !self.is_for_this_participant()
                   {
                     self.handle_writer_submessage(receiver_entity_id, submessage);
                   } else {
@@ -492,7 +493,12 @@ impl MessageReceiver {
                 };
                 #[cfg(feature = "security")]
                 // This match branch can only be taken with security feature
-                if plugins.submessage_not_protected(&destination_guid) {
+                // A submessage for another participant (our own multicast
+                // ACKNACK to a remote writer, looped back to us) is dropped by
+                // handle_reader_submessage, as without security; it is no error.
+                if plugins.submessage_not_protected(&destination_guid)
+                  || !self.is_for_this_participant()
+                {
                   self.handle_reader_submessage(submessage);
                 } else {
                   error!(
@@ -832,9 +838,13 @@ impl MessageReceiver {
     });
   }
 
+  // INFO_DST names this participant, or no one (then it is for everyone).
+  fn is_for_this_participant(&self) -> bool {
+    self.dest_guid_prefix == self.own_guid_prefix || self.dest_guid_prefix == GuidPrefix::UNKNOWN
+  }
+
   fn handle_reader_submessage(&self, submessage: ReaderSubmessage) {
-    if self.dest_guid_prefix != self.own_guid_prefix && self.dest_guid_prefix != GuidPrefix::UNKNOWN
-    {
+    if !self.is_for_this_participant() {
       debug!(
         "Message is not for this participant. Dropping. dest_guid_prefix={:?} participant \
          guid={:?}",
