@@ -103,10 +103,28 @@ pub fn domain_id_from_env(value: Option<&str>) -> Result<u16, PlumbingError> {
 const DENIED: &str = "not allowed by security: ";
 
 /// Builds the node's DDS participant, secured with the enclave of `plan` if given.
+/// Why [`build_participant`] failed: refused by DDS Security, or anything else (a
+/// socket that cannot be opened).
+enum BuildError {
+    Security(String),
+    Other(PlumbingError),
+}
+
+impl From<BuildError> for PlumbingError {
+    fn from(e: BuildError) -> Self {
+        match e {
+            BuildError::Security(why) => {
+                PlumbingError::Ros(format!("cannot create the DDS participant: {why}"))
+            }
+            BuildError::Other(e) => e,
+        }
+    }
+}
+
 fn build_participant(
     domain_id: u16,
     plan: Option<&SecurityPlan>,
-) -> Result<rustdds::DomainParticipant, PlumbingError> {
+) -> Result<rustdds::DomainParticipant, BuildError> {
     // User data by unicast only, as Fast DDS does by default: with the multicast
     // group advertised, a Fast DDS writer (rclpy's xyz_target) sent every sample to
     // the group too, and every other node on the host, or across the Wi-Fi link,
@@ -117,9 +135,14 @@ fn build_participant(
     if let Some(plan) = plan {
         builder = builder.builtin_security(security::participant_files(plan));
     }
-    builder
-        .build()
-        .map_err(|e| PlumbingError::Ros(format!("cannot create the DDS participant: {e}")))
+    builder.build().map_err(|e| match e {
+        rustdds::dds::result::CreateError::NotAllowedBySecurity { reason } => {
+            BuildError::Security(reason)
+        }
+        e => BuildError::Other(PlumbingError::Ros(format!(
+            "cannot create the DDS participant: {e}"
+        ))),
+    })
 }
 
 /// rcl's security rules ([`crate::security`]): `None` runs unsecured (security off,
@@ -266,10 +289,10 @@ impl RosNode {
         let participant = build_participant(domain_id, plan.as_ref());
         let (participant, enclave) = match (participant, &plan) {
             (Ok(p), plan) => (p, plan.as_ref().map(|p| p.enclave.clone())),
-            (Err(e), Some(plan)) => {
+            (Err(BuildError::Security(why)), Some(plan)) => {
                 let refused = SecurityError::Refused {
                     dir: plan.dir.clone(),
-                    why: e.to_string(),
+                    why,
                 };
                 if plan.strategy == Strategy::Enforce {
                     return Err(refused.into());
@@ -280,7 +303,7 @@ impl RosNode {
                 );
                 (build_participant(domain_id, None)?, None)
             }
-            (Err(e), None) => return Err(e),
+            (Err(e), _) => return Err(e.into()),
         };
         let context = Context::from_domain_participant(participant)
             .map_err(|e| PlumbingError::Ros(format!("cannot create the ROS context: {e:?}")))?;

@@ -302,7 +302,15 @@ fn certificate(path: &Path) -> Result<X509, SecurityError> {
 
 /// The certificate is valid at `now` (seconds since the Unix epoch).
 fn check_dates(path: &Path, cert: &X509, now: i64) -> Result<(), SecurityError> {
-    let now_asn1 = Asn1Time::from_unix(now).map_err(|e| malformed(path, e.to_string()))?;
+    // time_t is 32 bits on armv7 (infallible where it is 64)
+    #[allow(irrefutable_let_patterns, clippy::useless_conversion)]
+    let Ok(now_t) = now.try_into() else {
+        return Err(malformed(
+            path,
+            format!("the clock ({now} s) does not fit this system's time_t"),
+        ));
+    };
+    let now_asn1 = Asn1Time::from_unix(now_t).map_err(|e| malformed(path, e.to_string()))?;
     let before = now_asn1
         .diff(cert.not_before())
         .map_err(|e| malformed(path, format!("bad notBefore: {e}")))?;
