@@ -189,11 +189,15 @@ impl Delivery {
         })
     }
 
-    /// Wait until someone subscribes `xyz_target`, and a little more for their reader
-    /// to see our writer too.
+    /// Wait until someone subscribes `xyz_target` and our `joint_states` reader has its
+    /// publisher (else compute_ik's answer can go out before it is matched: with SROS2
+    /// the two endpoints are matched after separate key exchanges, up to 0.5 s apart),
+    /// and a little more for their reader to see our writer too.
     async fn connect(&self, node: &RosNode) -> Result<(), NotDelivered> {
         let deadline = Instant::now() + self.timeout;
-        while self.out.xyz.get_subscription_count(node.node()) == 0 {
+        while self.out.xyz.get_subscription_count(node.node()) == 0
+            || self.joint_states.get_publisher_count(node.node()) == 0
+        {
             if Instant::now() > deadline {
                 return Err(NotDelivered::NobodyListens {
                     topic: self.topic.clone(),
