@@ -1147,6 +1147,10 @@ impl Discovery {
   fn process_participant_dispose(&mut self, participant_guidp: GuidPrefix) {
     discovery_db_write(&self.discovery_db).remove_participant(participant_guidp, true); // true = actively removed
     self.forget_participant_samples(participant_guidp);
+    #[cfg(feature = "security")]
+    if let Some(security) = self.security_opt.as_mut() {
+      security.participant_lost(participant_guidp);
+    }
     self.send_discovery_notification(DiscoveryNotificationType::ParticipantLost {
       guid_prefix: participant_guidp,
     });
@@ -1840,11 +1844,15 @@ impl Discovery {
     }
   }
 
-  pub fn participant_cleanup(&self) {
+  pub fn participant_cleanup(&mut self) {
     let removed = discovery_db_write(&self.discovery_db).participant_cleanup();
     for (guid_prefix, reason) in removed {
       debug!("participant cleanup - timeout for {guid_prefix:?}");
       self.forget_participant_samples(guid_prefix);
+      #[cfg(feature = "security")]
+      if let Some(security) = self.security_opt.as_mut() {
+        security.participant_lost(guid_prefix);
+      }
       self.send_discovery_notification(DiscoveryNotificationType::ParticipantLost { guid_prefix });
       self.send_participant_status(DomainParticipantStatusEvent::ParticipantLost {
         id: guid_prefix,

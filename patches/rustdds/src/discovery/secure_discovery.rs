@@ -2586,6 +2586,37 @@ impl SecureDiscovery {
     self.notify_if_keys_exchanged(local_endpoint_guid, remote_endpoint_guid);
   }
 
+  // A remote participant was lost (its lease expired, or it disposed itself):
+  // forget what the key exchange with its endpoints recorded. The event loop has
+  // dropped its crypto handles (`unregister_remote_participant`) and a Fast DDS
+  // peer that lost us dropped ours, so if it comes back the exchange must be done
+  // again with the new session. Before, the record that our keys had been sent to
+  // a remote endpoint outlived the participant: after re-authentication our user
+  // endpoints' keys were never sent again ("already sent"), the exchange was
+  // reported complete from the stale records, and a Fast DDS peer, which pairs a
+  // secured endpoint only once it has its keys, never matched our writers again.
+  pub fn participant_lost(&mut self, remote_guid_prefix: GuidPrefix) {
+    let is_gone = |guid: &GUID| guid.prefix == remote_guid_prefix;
+    self
+      .user_data_endpoints_with_keys_already_sent_to
+      .retain(|remote| !is_gone(remote));
+    self
+      .remote_endpoint_keys_received
+      .retain(|(_, remote)| !is_gone(remote));
+    self
+      .remote_endpoint_sends_keys
+      .retain(|(_, remote)| !is_gone(remote));
+    self
+      .cached_received_key_exchange_messages
+      .retain(|(_, remote), _| !is_gone(remote));
+    self.cached_key_exchange_messages_for_resend.retain(|msg| {
+      msg.generic.destination_participant_guid.prefix != remote_guid_prefix
+    });
+    self
+      .relay_only_remote_readers
+      .retain(|remote| !is_gone(remote));
+  }
+
   fn remote_endpoint_keys_received_for(
     &mut self,
     local_endpoint_guid: GUID,
