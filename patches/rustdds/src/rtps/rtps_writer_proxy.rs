@@ -119,10 +119,14 @@ impl RtpsWriterProxy {
     }
   }
 
+  // The count of the next ACKNACK to this writer: 1 for the first one. Fast DDS
+  // 2.9 accepts an ACKNACK only when its count is greater than the last one's,
+  // starting from 0 (`ReaderProxy::check_and_set_acknack_count`), so a first
+  // ACKNACK with count 0, our pre-emptive one, was ignored, and a Fast DDS writer
+  // that had sent before we matched it resent only with its periodic HEARTBEAT.
   pub fn next_ack_nack_sequence_number(&mut self) -> i32 {
-    let c = self.sent_ack_nack_count;
     self.sent_ack_nack_count += 1;
-    c
+    self.sent_ack_nack_count
   }
 
   // Returns a bound, below which everything can be acknowledged, i.e.
@@ -481,5 +485,16 @@ mod bounded_map_tests {
       MAX_TRACKED_CHANGES_PER_WRITER,
       wp.tracked_changes_count()
     );
+  }
+
+  // Fast DDS 2.9 ignores an ACKNACK whose count is not greater than the last
+  // one's, starting from 0: the first ACKNACK to a writer (the pre-emptive one)
+  // must have count 1, and each next one a greater count.
+  #[test]
+  fn the_first_acknack_has_count_1() {
+    let mut wp = test_proxy();
+    assert_eq!(wp.next_ack_nack_sequence_number(), 1);
+    assert_eq!(wp.next_ack_nack_sequence_number(), 2);
+    assert_eq!(wp.sent_ack_nack_count, 2);
   }
 }
