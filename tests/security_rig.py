@@ -369,25 +369,7 @@ class Capture:
 # ---------------------------------------------------------------------------------------
 # a graph across two hosts, secured or not
 
-# ROBOT.md, written out again so the test does not trust the code under test
-# (test_two_hosts.py and test_compute_ik.py do the same).
-H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
-
-
-def servo_deg(x, y, z):
-    """The servo horn angles (degrees) of base, main arm and forearm at rest at (x, y, z):
-    ROBOT.md's closed-form IK and default servo mapping."""
-    import math
-
-    base = math.atan2(y, x)
-    r, h = math.hypot(x, y) - TOOL_DX, z - H
-    s2 = r * r + h * h
-    cos_e = (s2 - L2 * L2 - L3 * L3) / (2 * L2 * L3)
-    sin_e = -math.sqrt(((L2 + L3) ** 2 - s2) * (s2 - (L2 - L3) ** 2)) / (2 * L2 * L3)
-    elbow = math.atan2(sin_e, cos_e)
-    shoulder = math.atan2(h, r) - math.atan2(L3 * sin_e, L2 + L3 * cos_e)
-    d = math.degrees
-    return [90 - 2 * d(base), 180 - d(shoulder), 90 + d(shoulder + elbow)]
+from robot_facts import servo_deg  # noqa: E402,F401  (ROBOT.md, not the code under test)
 
 
 class SecureGraph:

@@ -22,26 +22,7 @@ pytestmark = [pytest.mark.own_process,
               pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")]
 
 # ROBOT.md, written out again so the test does not trust the code under test.
-H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
-
-
-def ik(x, y, z):
-    """Closed-form IK of ROBOT.md: (base, shoulder, elbow)."""
-    base = math.atan2(y, x)
-    r, h = math.hypot(x, y) - TOOL_DX, z - H
-    s2 = r * r + h * h
-    cos_e = (s2 - L2 * L2 - L3 * L3) / (2 * L2 * L3)
-    sin_e = -math.sqrt(((L2 + L3) ** 2 - s2) * (s2 - (L2 - L3) ** 2)) / (2 * L2 * L3)
-    elbow = math.atan2(sin_e, cos_e)
-    shoulder = math.atan2(h, r) - math.atan2(L3 * sin_e, L2 + L3 * cos_e)
-    return base, shoulder, elbow
-
-
-def servo_deg(x, y, z):
-    """ROBOT.md's default servo mapping of the arm joints (base, main arm, forearm)."""
-    base, shoulder, elbow = ik(x, y, z)
-    d = math.degrees
-    return [90 - 2 * d(base), 180 - d(shoulder), 90 + d(shoulder + elbow)]
+from robot_facts import servo_deg  # noqa: E402
 
 
 @pytest.fixture
