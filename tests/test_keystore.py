@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import OUTPUT, REPO, TOPICS, bin_path
+from conftest import OUTPUT, REPO, TOPICS, bin_path, descendants
 
 KEYSTORE_SH = REPO / "launch_scripts" / "keystore.sh"
 INSTALL_SH = REPO / "deploy" / "install.sh"
@@ -395,23 +395,15 @@ NODES = {"compute_ik", "state_publisher", "gui_bridge", "serial_node"}
 
 def node_cmdlines(pid):
     """{node name: argv} of the node processes below `pid`."""
-    out, todo = {}, [pid]
-    while todo:
-        p = todo.pop()
-        for task in Path(f"/proc/{p}/task").glob("*"):
-            try:
-                kids = [int(c) for c in (task / "children").read_text().split()]
-            except OSError:
-                continue
-            todo += kids
-            for k in kids:
-                try:
-                    exe = Path(os.readlink(f"/proc/{k}/exe")).name
-                    argv = Path(f"/proc/{k}/cmdline").read_bytes().split(b"\0")[:-1]
-                except OSError:
-                    continue
-                if exe in NODES:
-                    out[exe] = [a.decode() for a in argv]
+    out = {}
+    for k in descendants(pid):
+        try:
+            exe = Path(os.readlink(f"/proc/{k}/exe")).name
+            argv = Path(f"/proc/{k}/cmdline").read_bytes().split(b"\0")[:-1]
+        except OSError:
+            continue
+        if exe in NODES:
+            out[exe] = [a.decode() for a in argv]
     return out
 
 

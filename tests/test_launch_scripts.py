@@ -14,7 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
-from conftest import OUTPUT, REPO, bin_path
+from conftest import OUTPUT, REPO, bin_path, descendants
 
 SCRIPTS = REPO / "launch_scripts"
 
@@ -23,21 +23,6 @@ def now_stamp():
     t = time.time()
     return int(t), int((t % 1) * 1e9)
 BIN_DIR = str(Path(bin_path("compute_ik")).parent)
-
-
-def descendants(pid):
-    """Every process below `pid` (from /proc/*/task/*/children)."""
-    out, todo = [], [pid]
-    while todo:
-        p = todo.pop()
-        for task in Path(f"/proc/{p}/task").glob("*"):
-            try:
-                kids = [int(c) for c in (task / "children").read_text().split()]
-            except OSError:
-                continue
-            out += kids
-            todo += kids
-    return out
 
 
 NODES = {"compute_ik", "state_publisher", "gui_bridge", "serial_node", "virtual_arduino"}
