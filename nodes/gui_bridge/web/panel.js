@@ -49,7 +49,7 @@ async function explainRefusal() {
       showAccess("The panel refused this page: " + why, /token/.test(why));
       return true;
     }
-  } catch (e) { /* the node is not running: the red bridge dot says it */ }
+  } catch (e) { /* the node is not running: the red gui_bridge dot says it */ }
   return false;
 }
 
@@ -192,9 +192,9 @@ function pollPad() {
   const now = performance.now(), dt = Math.min(0.1, (now - lastPad) / 1000); lastPad = now;
   const pads = navigator.getGamepads ? navigator.getGamepads() : [];
   const pad = pads && Array.from(pads).find((p) => p);
-  if (!pad) { $("pad").firstChild.textContent = "gamepad: none"; requestAnimationFrame(pollPad); return; }
+  if (!pad) { $("pad-state").textContent = "gamepad: none"; requestAnimationFrame(pollPad); return; }
   const held = pad.buttons[PAD.deadman] && pad.buttons[PAD.deadman].pressed;
-  $("pad").textContent = `gamepad: ${pad.id || "connected"} — deadman ${held ? "HELD" : "released"}`;
+  $("pad-state").textContent = `gamepad: ${pad.id || "connected"} — deadman ${held ? "HELD" : "released"}`;
   if (held) {
     const ax = (i) => { const v = pad.axes[i] || 0; return Math.abs(v) < PAD.deadzone ? 0 : v; };
     const d = [-ax(1), -ax(0), -ax(3)].map((v) => v * PAD.speed * dt);
