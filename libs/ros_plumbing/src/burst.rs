@@ -8,8 +8,6 @@
 //! in case a newer one follows.
 
 use futures::{FutureExt, Stream, StreamExt};
-use std::collections::VecDeque;
-use std::time::{Duration, Instant};
 
 /// `first` and every input that is ready with it (arrived together: a burst). Never
 /// waits: a lone input, or a live stream at any rate, goes at once. A burst that DDS
@@ -57,60 +55,9 @@ pub fn latest_wins<T, K: PartialEq>(
     (kept, dropped)
 }
 
-/// How long a late command is held back: a newer one arriving meanwhile replaces it.
-/// Longer than the gap between two DDS repair rounds (about 10 ms).
-pub const HOLD_LATE: Duration = Duration::from_millis(30);
-
-/// A command whose stamp is this much older than usual arrives late. Shorter than the
-/// span of what DDS repairs after an outage (a keep-last-10 history at 50 Hz: the last
-/// 200 ms before the link returned), so that only the newest repaired commands, stamped
-/// within ~60 ms of the link's return, can go out before the rest of the burst is in:
-/// with 250 ms the oldest repaired ones were not late yet, and after 4 of 40 three-second
-/// outages serial_node sent two commands from the outage before the newest (outage soak).
-/// Longer than a Wi-Fi link's usual jitter, so live commands are not held.
-pub const LATE_BY: Duration = Duration::from_millis(60);
-
-/// How long the usual delay (receive time minus stamp) is remembered.
-const WINDOW: Duration = Duration::from_secs(10);
-
-/// Recognises commands that arrive late, from their stamps. The usual delay
-/// (receive wall time minus stamp) is the smallest seen in the last 10 s, so a
-/// constant offset between the clocks of the operator's machine and this one does
-/// not matter; a command delayed [`LATE_BY`] more than that is late. A zero stamp
-/// (ROS' "now") is never late.
-#[derive(Debug, Default)]
-pub struct Lateness {
-    delays: VecDeque<(Instant, f64)>,
-}
-
-impl Lateness {
-    /// Whether a command stamped `stamp_s` (seconds) and received at wall time
-    /// `received_s` (seconds) at `now` is late; remembers its delay.
-    pub fn is_late(&mut self, stamp_s: f64, received_s: f64, now: Instant) -> bool {
-        if stamp_s == 0.0 || !stamp_s.is_finite() {
-            return false;
-        }
-        let delay = received_s - stamp_s;
-        while self
-            .delays
-            .front()
-            .is_some_and(|(t, _)| now.duration_since(*t) > WINDOW)
-        {
-            self.delays.pop_front();
-        }
-        let usual = self
-            .delays
-            .iter()
-            .map(|(_, d)| *d)
-            .fold(f64::INFINITY, f64::min);
-        // keep the window short: only delays that could become the minimum matter
-        while self.delays.back().is_some_and(|(_, d)| *d >= delay) {
-            self.delays.pop_back();
-        }
-        self.delays.push_back((now, delay));
-        usual.is_finite() && delay > usual + LATE_BY.as_secs_f64()
-    }
-}
+// The late-hold rule lives in `command_gate` (one copy for every node); `Held` stays
+// here for the nodes that have not moved to `command_gate::CommandGate` yet.
+pub use command_gate::{Lateness, HOLD_LATE, LATE_BY};
 
 /// The late command a node holds back for [`HOLD_LATE`] in case a newer one follows.
 /// A later late command replaces it but does not extend the deadline: whatever the
@@ -161,6 +108,7 @@ impl<T> Held<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Duration;
     use futures::stream;
 
     #[tokio::test]
@@ -180,27 +128,6 @@ mod tests {
         assert!(t.elapsed() < Duration::from_millis(1));
         let mut lone = stream::pending::<u32>();
         assert_eq!(take_burst(5, &mut lone), vec![5]);
-    }
-
-    #[test]
-    fn late_commands_are_recognised_whatever_the_clock_offset() {
-        let t0 = Instant::now();
-        let mut l = Lateness::default();
-        let offset = 1234.5; // the operator's clock is ahead
-                             // live commands, received 2 ms after their stamp
-        for i in 0..50 {
-            let stamp = 100.0 + offset + i as f64 * 0.02;
-            assert!(!l.is_late(
-                stamp,
-                stamp - offset + 0.002,
-                t0 + Duration::from_millis(20 * i)
-            ));
-        }
-        // after a 3 s outage, a repaired command from before it, then a live one
-        let now = t0 + Duration::from_secs(4);
-        assert!(l.is_late(101.0 + offset, 104.0, now));
-        assert!(!l.is_late(104.0 + offset - 0.003, 104.0, now));
-        assert!(!l.is_late(0.0, 104.0, now), "a zero stamp means now");
     }
 
     #[test]
