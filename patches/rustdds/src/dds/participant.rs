@@ -1818,6 +1818,50 @@ mod tests {
   };
   use super::DomainParticipant;
 
+  // patches/README.md entry 9: the event loop and the discovery thread keep running
+  // when a signal interrupts their poll (EINTR: a signal handled on that thread, a
+  // debugger or strace attaching). They used to return for good, and the
+  // participant left the DDS graph without a word.
+  #[cfg(target_os = "linux")]
+  #[test]
+  fn the_event_loop_and_discovery_survive_an_interrupted_poll() {
+    use std::os::unix::thread::JoinHandleExt;
+
+    use nix::sys::{
+      pthread::pthread_kill,
+      signal::{sigaction, SaFlags, SigAction, SigHandler, SigSet, Signal},
+    };
+
+    extern "C" fn ignore(_: nix::libc::c_int) {}
+    // Without SA_RESTART; epoll_wait is never restarted anyway. Not SIG_IGN: an
+    // ignored signal does not interrupt a system call.
+    let action = SigAction::new(SigHandler::Handler(ignore), SaFlags::empty(), SigSet::empty());
+    // SAFETY: the handler does nothing, so it is async-signal-safe.
+    unsafe { sigaction(Signal::SIGUSR2, &action) }.unwrap();
+
+    let dp = DomainParticipant::new(test_domain_id(20)).unwrap();
+    let discovery = dp.dpi.lock().unwrap().discovery_join_handle.try_recv().unwrap();
+    let event_loop = dp.dpi.lock().unwrap().dpi.ev_loop_handle.as_ref().unwrap().as_pthread_t();
+
+    // both threads spend nearly all their time in epoll_wait: some of these land there
+    for _ in 0..50 {
+      pthread_kill(event_loop, Signal::SIGUSR2).unwrap();
+      pthread_kill(discovery.as_pthread_t(), Signal::SIGUSR2).unwrap();
+      std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(100));
+
+    assert!(!discovery.is_finished(), "the discovery thread stopped");
+    let dpi = dp.dpi.lock().unwrap();
+    assert!(
+      !dpi.dpi.ev_loop_handle.as_ref().unwrap().is_finished(),
+      "the event loop stopped"
+    );
+    drop(dpi);
+    drop(dp); // stops both; the discovery thread is joined here, as Drop no longer has it
+    discovery.join().unwrap();
+  }
+
   #[test]
   fn without_user_traffic_multicast_no_multicast_locator_is_advertised() {
     use crate::{

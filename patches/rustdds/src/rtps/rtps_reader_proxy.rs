@@ -800,6 +800,36 @@ mod acknack_tests {
 
     assert_eq!(rp.all_acked_before, SequenceNumber::from(4));
   }
+
+  // patches/README.md entry 3: a durable reader that acknowledges less than before
+  // dropped us and matched us again with an empty writer proxy (its participant's
+  // lease for us expired); it gets our history again from its new base instead of
+  // having the ACKNACK ignored. A volatile one keeps the monotonic rule (above).
+  #[test]
+  fn a_durable_reader_whose_acknowledgement_went_backwards_gets_the_history_again() {
+    use crate::{dds::qos::policy::Durability, QosPolicyBuilder};
+    let guid = GUID::new(GuidPrefix::UNKNOWN, EntityId::UNKNOWN);
+    let qos = QosPolicyBuilder::new()
+      .durability(Durability::TransientLocal)
+      .build();
+    let mut rp = RtpsReaderProxy::new(guid, qos, false);
+    rp.all_acked_before = SequenceNumber::from(10);
+
+    // a new writer proxy on the reader's side: nothing received, base 1
+    let ack = AckNack {
+      reader_id: EntityId::UNKNOWN,
+      writer_id: EntityId::UNKNOWN,
+      reader_sn_state: SequenceNumberSet::new_empty(SequenceNumber::from(1)),
+      count: 1,
+    };
+    rp.handle_ack_nack(&AckSubmessage::AckNack(ack), SequenceNumber::from(12));
+
+    assert_eq!(rp.all_acked_before, SequenceNumber::from(1));
+    assert_eq!(
+      rp.unsent_changes_debug(),
+      (1..=12i64).map(SequenceNumber::new).collect::<Vec<_>>()
+    );
+  }
 }
 
 #[cfg(test)]

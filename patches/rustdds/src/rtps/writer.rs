@@ -65,8 +65,8 @@ use crate::no_security::SecurityPluginsHandle;
 /// must answer a HEARTBEAT without the final flag; with it, only when it misses
 /// something). Acknowledgements come from the periodic HEARTBEAT, at the fast
 /// period while a reader has not acknowledged everything. Without this, each
-/// sample cost a second datagram each way and a wake-up of both event loops: at
-/// 50 Hz an ACKNACK per command from serial_node to compute_ik.
+/// sample cost a second datagram each way and a wake-up of both event loops: a
+/// reader of a 50 Hz stream sent its writer 50 ACKNACKs a second.
 const PIGGYBACK_HEARTBEAT_FINAL: bool = true;
 
 #[derive(PartialEq, Eq, Clone, Copy)]
