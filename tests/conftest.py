@@ -1,5 +1,6 @@
 """Shared fixtures: binaries, a private ROS_DOMAIN_ID per test, real rclpy observers,
 and launching our nodes as real processes."""
+import faulthandler
 import fcntl
 import importlib
 import json
@@ -204,7 +205,7 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 self.dump_stacks()
                 self.proc.kill()
-                self.proc.wait()
+                self.proc.wait(10)
         self.log.close()
         return self.proc.returncode
 
@@ -314,6 +315,94 @@ def compose_chain(transforms, root, frame):
 
 
 # ---------------------------------------------------------------------------------------
+# A per-test timeout: a test that hangs fails, with the stack where it hung, and the run
+# goes on. SIGALRM raises in the main thread (where tests run) once the limit of a phase
+# (setup, call, teardown) has passed; should the main thread be stuck where Python
+# cannot raise (inside a C call), faulthandler dumps every thread's stack and ends the
+# process a minute later, so that a run can never hang. No test here takes over 70 s.
+
+TEST_TIMEOUT_S = float(os.environ.get("EEZYBOT_TEST_TIMEOUT", "300"))
+_STDERR = 2
+
+
+def phase_timeout_s(item):
+    """The limit of each phase of `item`, in seconds."""
+    marker = item.get_closest_marker("timeout")
+    return float(marker.args[0]) if marker is not None else TEST_TIMEOUT_S
+
+
+class PhaseTimedOut(Exception):
+    """A test phase over its limit (raised by the SIGALRM handler)."""
+
+
+def _timed_phase(item, phase):
+    limit = phase_timeout_s(item)
+
+    def expired(signum, frame):
+        raise PhaseTimedOut(f"{item.nodeid}: {phase} took over {limit:.0f} s (the per-test timeout, "
+                           f"tests/conftest.py; pytest.mark.timeout to change it)")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, limit)
+    faulthandler.dump_traceback_later(limit + 60, exit=True, file=_STDERR)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        faulthandler.cancel_dump_traceback_later()
+        signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_setup(item):
+    yield from _timed_phase(item, "setup")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item):
+    yield from _timed_phase(item, "call")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item):
+    yield from _timed_phase(item, "teardown")
+
+
+# ---------------------------------------------------------------------------------------
+# Tests that need root (network namespaces, TAP devices, installing into /etc) skip
+# without it, with a reason that says "needs root" (NEEDS_ROOT). They are counted apart
+# in the summary line ("N skipped (need root)") and listed at the end, so that a run
+# without root cannot look complete.
+
+NEEDS_ROOT = "needs root"
+ROOT_SKIPPED = "skipped (need root)"
+
+
+def _skip_reason(report):
+    longrepr = report.longrepr
+    if isinstance(longrepr, tuple) and len(longrepr) == 3:
+        return str(longrepr[2])
+    return str(longrepr or "")
+
+
+def pytest_report_teststatus(report, config):
+    if report.skipped and NEEDS_ROOT in _skip_reason(report):
+        return ROOT_SKIPPED, "s", ("SKIPPED (needs root)", {"yellow": True})
+    return None
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    skipped = terminalreporter.stats.get(ROOT_SKIPPED, [])
+    if not skipped:
+        return
+    files = sorted({r.nodeid.split("::")[0] for r in skipped})
+    n = len(skipped)
+    terminalreporter.write_sep("=", f"{n} test{'s' if n != 1 else ''} did not run: {'they need' if n != 1 else 'it needs'} root",
+                               yellow=True, bold=True)
+    terminalreporter.write_line(f"not run here: {', '.join(files)}; run tests/run_all.sh as root for the whole suite")
+
+
+# ---------------------------------------------------------------------------------------
 # Modules whose rclpy participants live in network namespaces run in a pytest process of
 # their own. Fast DDS keeps process-wide state about the network interfaces: a
 # participant created in namespace `pc` after one in the root namespace announced the
@@ -323,6 +412,10 @@ def compose_chain(transforms, root, frame):
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "own_process: run this module's tests in a pytest process of their own")
+    config.addinivalue_line("markers", "timeout(seconds): this test's limit for each of setup, call and teardown "
+                                       f"(default {TEST_TIMEOUT_S:.0f} s, EEZYBOT_TEST_TIMEOUT)")
+    global _STDERR
+    _STDERR = os.dup(2)  # the terminal's stderr (output capture is suspended here)
 
 
 _OWN_PROCESS_RESULTS = {}
@@ -335,16 +428,26 @@ def _run_module_in_own_process(item):
         with tempfile.TemporaryDirectory() as tmp:
             junit = Path(tmp) / "junit.xml"
             started = time.monotonic()
-            proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-s", "-o",
-                                   "junit_logging=all", f"--junitxml={junit}", *ids],
-                                  cwd=str(item.session.config.rootpath), capture_output=True, text=True,
-                                  env={**os.environ, "EEZYBOT_OWN_PROCESS": "1"})
+            # each test there has its own timeout; this bounds the whole module's process
+            limit = sum(3 * phase_timeout_s(i) for i in item.session.items if str(i.fspath) == module) + 120
+            try:
+                proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-s", "-o",
+                                       "junit_logging=all", f"--junitxml={junit}", *ids],
+                                      cwd=str(item.session.config.rootpath), capture_output=True, text=True,
+                                      env={**os.environ, "EEZYBOT_OWN_PROCESS": "1"}, timeout=limit)
+            except subprocess.TimeoutExpired as e:
+                proc = subprocess.CompletedProcess(e.cmd, None, _text(e.stdout),
+                                                   _text(e.stderr) + f"\n(killed after {limit:.0f} s)")
             cases = {}
             if junit.exists():
                 for case in ET.parse(junit).getroot().iter("testcase"):
                     cases[case.get("name")] = case
             _OWN_PROCESS_RESULTS[module] = (cases, proc, time.monotonic() - started)
     return _OWN_PROCESS_RESULTS[module]
+
+
+def _text(out):
+    return out.decode(errors="replace") if isinstance(out, bytes) else (out or "")
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -128,7 +128,7 @@ def bring_up(ns, ifname, cidr, multicast_route=True):
     if multicast_route:
         cmds.append(["ip", "-n", ns, "route", "add", "224.0.0.0/4", "dev", ifname])
     for c in cmds:
-        subprocess.run(c, check=True, capture_output=True, text=True)
+        subprocess.run(c, check=True, capture_output=True, text=True, timeout=30)
 
 
 def _summary(values):
@@ -203,7 +203,7 @@ class Forwarder:
             if d.queued >= self.limit:
                 d.overflow += 1
                 continue
-            release = now + rng.uniform(self.lo, self.hi)
+            release = now + rng.uniform(self.lo, self.hi * 1.5)
             if self.fifo:
                 if release < d.last_release:
                     release = d.last_release
@@ -368,7 +368,7 @@ class ImpairedLink:
                 raise TimeoutError(f"linkem not ready after {timeout} s: {self._stderr()}")
             chunk = self.proc.stdout.read(64)
             if not chunk:
-                self.proc.wait()
+                self.proc.wait(10)
                 raise RuntimeError(f"linkem exited with {self.proc.returncode} before ready: {self._stderr()}")
             line += chunk
         if line.strip() != b"ready":
@@ -379,7 +379,7 @@ class ImpairedLink:
     def _kill(self):
         if self.proc and self.proc.poll() is None:
             self.proc.kill()
-            self.proc.wait()
+            self.proc.wait(10)
 
     def stop(self, timeout=5):
         """SIGTERM, wait, return the stats dict (raises if linkem failed or wrote none)."""

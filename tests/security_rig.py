@@ -49,7 +49,8 @@ def peer_binary():
         fcntl.flock(lock, fcntl.LOCK_EX)  # another pytest process may be building it
         if not exe.exists():
             tmp = out_dir / f"sros2_peer.{os.getpid()}"
-            r = subprocess.run([*PEER_BUILD, "-o", str(tmp), str(PEER_SRC), *PEER_LIBS], capture_output=True, text=True)
+            r = subprocess.run([*PEER_BUILD, "-o", str(tmp), str(PEER_SRC), *PEER_LIBS], capture_output=True, text=True,
+                               timeout=600)
             if r.returncode != 0:
                 raise RuntimeError(f"building {PEER_SRC.name} failed (libfastrtps-dev: launch_scripts/setup_env.sh):\n"
                                    f"{r.stdout}{r.stderr}")
@@ -164,7 +165,7 @@ class SecurePeer:
             self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            self.proc.wait()
+            self.proc.wait(10)
         self._reader.join(5)
         self.err.close()
         return self.proc.returncode
@@ -356,7 +357,7 @@ class Capture:
                 self.proc.wait(10)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
-                self.proc.wait()
+                self.proc.wait(10)
         self.log.close()
         return self.path.read_bytes()
 

@@ -10,6 +10,9 @@ import pytest
 from conftest import REPO
 from interop.servo_link import HEARTBEAT, STATE, SimulatedUno, frame, parse_state, set_pulses
 
+# the fuzzers' build and runs have limits of their own (600 s each), above the default
+pytestmark = pytest.mark.timeout(1300)
+
 FIRMWARE = REPO / "firmware" / "servo_control"
 FUZZ_DIR = FIRMWARE / "build" / "fuzz"
 SHORT_RUNS = 20_000
@@ -18,7 +21,7 @@ SHORT_RUNS = 20_000
 @pytest.fixture(scope="module")
 def fuzzers():
     assert shutil.which("clang++"), "clang++ is missing: launch_scripts/setup_env.sh installs clang and libclang-rt-14-dev"
-    build = subprocess.run(["make", "-C", str(FIRMWARE), "fuzz-build"], capture_output=True, text=True)
+    build = subprocess.run(["make", "-C", str(FIRMWARE), "fuzz-build"], capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stdout[-2000:] + build.stderr[-3000:]
     return FUZZ_DIR
 

@@ -43,7 +43,7 @@ def keystore_sh(*args, env=None):
 
 
 def openssl(*args, check=True):
-    r = subprocess.run(["openssl", *map(str, args)], capture_output=True, text=True)
+    r = subprocess.run(["openssl", *map(str, args)], capture_output=True, text=True, timeout=60)
     if check:
         assert r.returncode == 0, f"openssl {' '.join(map(str, args))}: {r.stdout}{r.stderr}"
     return r
@@ -375,7 +375,7 @@ def test_a_node_runs_under_its_enclave_and_is_refused_under_another(keystore, do
                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(4)
-        assert ok.poll() is None, ok.communicate()[0]
+        assert ok.poll() is None, ok.communicate(timeout=10)[0]
     finally:
         ok.send_signal(signal.SIGINT)
         out, _ = ok.communicate(timeout=20)
@@ -543,7 +543,7 @@ def test_security_not_enabled_changes_nothing(value, domain):
 # ---------------------------------------------------------------------------------------
 # deploy/install.sh --keystore
 
-@pytest.mark.skipif(os.geteuid() != 0, reason="install.sh runs as root")
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root (install.sh installs into /etc)")
 def test_install_keystore_copies_the_pi_enclave_owner_only_and_turns_security_on(keystore, tmp_path):
     """A keystore copied as the README says (rsync -L: links resolved, only
     enclaves/eezybot/pi) installed under DESTDIR: the six files plus permissions.xml in
@@ -580,7 +580,7 @@ def test_install_keystore_copies_the_pi_enclave_owner_only_and_turns_security_on
     assert (root / "etc" / "default" / "eezybot").read_text() == env
 
 
-@pytest.mark.skipif(os.geteuid() != 0, reason="install.sh runs as root")
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root (install.sh installs into /etc)")
 def test_install_keystore_refuses_a_bad_enclave(keystore, tmp_path):
     """Links not resolved when copying (a dangling identity_ca.cert.pem), a certificate of
     another keystore's CA, or no such directory: nothing is installed."""
@@ -588,7 +588,8 @@ def test_install_keystore_refuses_a_bad_enclave(keystore, tmp_path):
     env = {**os.environ, "DESTDIR": str(root)}
     dangling = tmp_path / "dangling"
     shutil.copytree(enclave(keystore, "/eezybot/pi"), dangling, symlinks=True)
-    r = subprocess.run([str(INSTALL_SH), "--keystore", str(dangling)], capture_output=True, text=True, env=env)
+    r = subprocess.run([str(INSTALL_SH), "--keystore", str(dangling)], capture_output=True, text=True, env=env,
+                       timeout=60)
     assert r.returncode == 1 and "identity_ca.cert.pem is missing" in r.stderr, r.stderr
     other = tmp_path / "other"
     assert keystore_sh(other).returncode == 0
@@ -596,9 +597,10 @@ def test_install_keystore_refuses_a_bad_enclave(keystore, tmp_path):
     shutil.copytree(enclave(keystore, "/eezybot/pi"), mixed)
     (mixed / "identity_ca.cert.pem").unlink()
     shutil.copy(other / "public" / "ca.cert.pem", mixed / "identity_ca.cert.pem")
-    r = subprocess.run([str(INSTALL_SH), "--keystore", str(mixed)], capture_output=True, text=True, env=env)
+    r = subprocess.run([str(INSTALL_SH), "--keystore", str(mixed)], capture_output=True, text=True, env=env,
+                       timeout=60)
     assert r.returncode == 1 and "is not issued by" in r.stderr, r.stderr
     r = subprocess.run([str(INSTALL_SH), "--keystore", str(tmp_path / "nothing")], capture_output=True, text=True,
-                       env=env)
+                       env=env, timeout=60)
     assert r.returncode == 2
     assert not (root / "etc" / "eezybot").exists()

@@ -16,7 +16,8 @@ CASES = cases()
 
 @pytest.fixture(scope="module")
 def rust_vectors():
-    out = subprocess.run([bin_path("examples/cdr_vectors"), "encode"], check=True, capture_output=True, text=True).stdout
+    out = subprocess.run([bin_path("examples/cdr_vectors"), "encode"], check=True, capture_output=True, text=True,
+                         timeout=60).stdout
     vectors = {}
     for line in out.splitlines():
         name, ros_type, hexbytes = line.split(" ")
@@ -52,7 +53,8 @@ def test_ros2_decodes_rust_bytes_to_the_same_value(rust_vectors, name, msg):
 
 def test_rust_decodes_ros2_bytes_to_the_same_value():
     lines = "".join(f"{name} {serialize(msg).hex()}\n" for name, msg in CASES)
-    out = subprocess.run([bin_path("examples/cdr_vectors"), "decode"], input=lines, check=True, capture_output=True, text=True).stdout
+    out = subprocess.run([bin_path("examples/cdr_vectors"), "decode"], input=lines, check=True, capture_output=True, text=True,
+                         timeout=60).stdout
     verdicts = dict(line.split(" ", 1) for line in out.splitlines())
     assert set(verdicts) == {name for name, _ in CASES}
     bad = {k: v for k, v in verdicts.items() if v != "OK"}

@@ -31,7 +31,7 @@ def test_play_sets_each_points_mode_then_puts_compute_ik_back(launch, observer, 
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     while cli.poll() is None:
         observer.spin_for(0.05)
-    out, err = cli.communicate()
+    out, err = cli.communicate(timeout=10)
     assert cli.returncode == 0, err
     assert out.count("waypoint ") == 3, out
     # `line` was set for the a-to-b move (the straight segment below proves it; sampling the

@@ -22,7 +22,7 @@ _CLONE_NEWNET = 0x40000000
 
 
 def _ip(*args, check=True):
-    r = subprocess.run(["ip", *args], capture_output=True, text=True)
+    r = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
     if check and r.returncode != 0:
         raise RuntimeError(f"ip {' '.join(args)}: {r.stderr.strip()}")
     return r
@@ -51,7 +51,7 @@ def available():
     """Why two-host tests cannot run here, or None."""
     if os.geteuid() != 0:
         return "needs root (ip netns)"
-    if subprocess.run(["ip", "netns", "list"], capture_output=True).returncode != 0:
+    if subprocess.run(["ip", "netns", "list"], capture_output=True, timeout=30).returncode != 0:
         return "ip netns is not available"
     return None
 
