@@ -93,19 +93,23 @@ def test_bad_servo_angles_are_refused_and_nothing_is_sent(launch, observer):
 def test_latest_wins_at_1khz(launch, observer):
     rig = SerialRig(launch, observer)
     assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    assert rig.diag()[1]["frames_sent"] == "0"
     start = time.monotonic()
     n = 0
-    while time.monotonic() - start < 2.0:
+    while n < 2000:
         rig.angles.publish(angles([60 + (n % 60), 90, 90, 90]))
         n += 1
         observer.executor.spin_once(timeout_sec=0.0005)
     last = 60 + ((n - 1) % 60)
     observer.spin_for(1.0)
     sent = int(rig.diag()[1]["frames_sent"])
-    assert n > 1000
-    rate = 100  # serial_node's default send_rate (frames a second)
-    assert sent <= 2.0 * rate + 10, f"{sent} frames for {n} commands: more than the {rate} Hz rate"
-    assert sent >= 2.0 * rate * 0.5
+    window = time.monotonic() - start  # every frame counted was sent within it
+    rate = 100  # serial_node's default send_rate (frames a second; a token bucket of 2)
+    print(f"\n{n} commands in {window:.2f} s: {sent} frames (at most {rate * window + 2:.0f})")
+    # at most the rate however fast commands come (a slower host sends fewer, never
+    # more); many commands to a frame: latest wins, none is queued
+    assert sent <= rate * window + 2, f"{sent} frames in {window:.2f} s for {n} commands: more than the {rate} Hz rate"
+    assert 2 <= sent <= n // 5, f"{sent} frames for {n} commands"
     # the newest command is the one applied
     assert observer.spin_until(lambda: round(math.degrees(rig.state[-1][1].position[0]), 1) == last, 3)
 
@@ -152,7 +156,7 @@ def test_missing_port_then_unplug_and_replug(launch, observer, tmp_path):
         assert observer.spin_until(lambda: any(m.header.stamp.sec == 7 for _, m in rig.state), 10)
         # unplug
         dev.kill()
-        dev.wait()
+        dev.wait(10)
         assert rig.wait_diag(lambda s, v: v.get("connection") == "disconnected")
         n_state = len(rig.state)
         # replug: handshake again and continue from the newest command, unasked

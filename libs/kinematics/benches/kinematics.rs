@@ -1,6 +1,9 @@
-//! IK and FK timing. `cargo bench -p eezybot_kinematics`.
+//! IK and FK timing, and how long refusing a hostile input takes (the unit tests check
+//! that it is refused before parsing; the time is here, not asserted there).
+//! `cargo bench -p eezybot_kinematics`.
 use criterion::{criterion_group, criterion_main, Criterion};
-use eezybot_kinematics::{Arm, ArmJoints, ArmState, ServoCalibrations};
+use eezybot_kinematics::urdf::RobotModel;
+use eezybot_kinematics::{Arm, ArmConfig, ArmJoints, ArmState, ServoCalibrations};
 use nalgebra::Vector3;
 use std::hint::black_box;
 
@@ -49,6 +52,20 @@ fn bench(c: &mut Criterion) {
     };
     c.bench_function("servo_angles", |b| {
         b.iter(|| black_box(cal.servo_angles(black_box(&state))))
+    });
+    // 10,000 nested elements / flow collections: refused before parsing
+    let depth = 10_000;
+    let urdf = format!(
+        "<robot name='deep'><link name='a'>{}{}</link></robot>",
+        "<visual>".repeat(depth),
+        "</visual>".repeat(depth)
+    );
+    c.bench_function("refuse_10k_deep_urdf", |b| {
+        b.iter(|| black_box(RobotModel::from_urdf_str(black_box(&urdf), "deep.urdf").is_err()))
+    });
+    let yaml = format!("geometry: {}{}\n", "[".repeat(depth), "]".repeat(depth));
+    c.bench_function("refuse_10k_deep_arm_config", |b| {
+        b.iter(|| black_box(ArmConfig::from_yaml(black_box(&yaml), "deep.yaml").is_err()))
     });
 }
 

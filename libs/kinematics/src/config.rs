@@ -325,10 +325,10 @@ mod tests {
     #[test]
     fn deeply_nested_flow_collections_are_refused_before_parsing() {
         for depth in [10_000, 100_000] {
+            // refused by the count before the YAML parser sees it: the error says so
+            // (how long that takes: `cargo bench -p eezybot_kinematics --bench kinematics`)
             let text = format!("geometry: {}{}\n", "[".repeat(depth), "]".repeat(depth));
-            let started = std::time::Instant::now();
             let err = ArmConfig::from_yaml(&text, "deep.yaml").unwrap_err();
-            assert!(started.elapsed() < std::time::Duration::from_secs(1));
             let text = err.to_string();
             assert!(text.contains("deep.yaml"), "{text}");
             match (depth, err) {

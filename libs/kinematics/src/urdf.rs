@@ -575,8 +575,9 @@ mod tests {
 
     #[test]
     fn deeply_nested_urdf_is_refused_before_parsing() {
+        // refused by the depth count before urdf-rs parses it: TooDeep says so (how long
+        // that takes: `cargo bench -p eezybot_kinematics --bench kinematics`)
         for depth in [10_000, 100_000] {
-            let started = std::time::Instant::now();
             let err =
                 RobotModel::from_urdf_str(&deep_urdf("visual", depth), "deep.urdf").unwrap_err();
             assert!(
@@ -588,7 +589,6 @@ mod tests {
                 text.contains("deep.urdf") && text.contains(&format!("{}", depth + 2)),
                 "{text}"
             );
-            assert!(started.elapsed() < std::time::Duration::from_secs(2));
         }
     }
 
