@@ -5,6 +5,7 @@
 //! slider move does: rate, e-stop and reachability rules included), and sets
 //! compute_ik's `motion` for points with a move mode through a [`MotionControl`].
 
+use crate::message::ProgramView;
 use crate::program::{
     list_programs, load, save, MoveMode, Player, PlayerAction, Program, ProgramFileError,
     ProgramPoint,
@@ -13,7 +14,6 @@ use crate::teleop::{Event, Teleop};
 use crate::web::ProgramOp;
 use eezybot_msgs::Time;
 use futures::future::LocalBoxFuture;
-use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::{Duration, Instant};
@@ -146,7 +146,7 @@ pub struct DeskOutcome {
     pub set_mode: Option<MoveMode>,
     /// The player ended: put `motion` back.
     pub restore_mode: bool,
-    /// The desk changed: send [`Desk::json`] to every browser.
+    /// The desk changed: send [`Desk::view`] to every browser.
     pub changed: bool,
     /// Run this file operation off the event loop, then call [`Desk::file_done`].
     pub file: Option<FileJob>,
@@ -203,19 +203,17 @@ impl Desk {
         self.player.as_ref().is_some_and(Player::is_running)
     }
 
-    /// `{"t": "program", "program": …, "player": …, "files": […], "name": …, "message": …}`
-    /// for the browsers.
-    pub fn json(&self) -> serde_json::Value {
-        json!({
-            "t": "program",
-            "program": self.program,
-            "player": self.player.as_ref().map(Player::state),
-            "files": self.files,
-            "name": self.name,
-            "message": self.message,
-            "dir": self.dir.display().to_string(),
-            "confirm_overwrite": self.confirm_overwrite,
-        })
+    /// The desk as the browsers show it (`{"t": "program", …}`).
+    pub fn view(&self) -> ProgramView {
+        ProgramView {
+            program: self.program.clone(),
+            player: self.player.as_ref().map(Player::state),
+            files: self.files.clone(),
+            name: self.name.clone(),
+            message: self.message.clone(),
+            dir: self.dir.display().to_string(),
+            confirm_overwrite: self.confirm_overwrite.clone(),
+        }
     }
 
     /// Apply a browser's request (after `play`, run [`Desk::play_step`]). `tool`: where
@@ -498,25 +496,22 @@ mod tests {
         let out = desk.request(save(false), &t, None, None, now);
         let job = out.file.unwrap();
         assert!(!dir.join("p.csv").exists());
-        assert_eq!(desk.json()["message"], "saving p…");
+        assert_eq!(desk.view().message, "saving p…");
         // one at a time
         let busy = desk.request(ProgramOp::Load { name: "p".into() }, &t, None, None, now);
         assert!(busy.file.is_none());
-        assert!(desk.json()["message"]
-            .as_str()
-            .unwrap()
-            .contains("under way"));
+        assert!(desk.view().message.contains("under way"));
         desk.file_done(job.run(&dir));
-        assert_eq!(desk.json()["message"], "saved 1 points as p");
-        assert_eq!(desk.json()["files"], serde_json::json!(["p"]));
+        assert_eq!(desk.view().message, "saved 1 points as p");
+        assert_eq!(desk.view().files, ["p"]);
         // saving again asks, replacing needs overwrite
         let job = desk.request(save(false), &t, None, None, now).file.unwrap();
         desk.file_done(job.run(&dir));
-        assert_eq!(desk.json()["confirm_overwrite"], "p");
+        assert_eq!(desk.view().confirm_overwrite.as_deref(), Some("p"));
         let job = desk.request(save(true), &t, None, None, now).file.unwrap();
         desk.file_done(job.run(&dir));
-        assert_eq!(desk.json()["message"], "saved 1 points as p");
-        assert!(desk.json()["confirm_overwrite"].is_null());
+        assert_eq!(desk.view().message, "saved 1 points as p");
+        assert!(desk.view().confirm_overwrite.is_none());
         // a job the file system never answered
         let job = desk
             .request(ProgramOp::Load { name: "p".into() }, &t, None, None, now)
@@ -524,14 +519,10 @@ mod tests {
             .unwrap();
         desk.file_done(job.timed_out(FILE_TIMEOUT));
         assert_eq!(
-            desk.json()["message"],
+            desk.view().message,
             "program p: the file system did not answer within 5 s"
         );
-        assert_eq!(
-            desk.json()["files"],
-            serde_json::json!(["p"]),
-            "the list is kept"
-        );
+        assert_eq!(desk.view().files, ["p"], "the list is kept");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -3,7 +3,6 @@
 use crate::access::{self, AccessPolicy, Token, TokenSource};
 use crate::linger::{self, LingeringListener};
 use crate::ros_outputs::RosOutputs;
-use crate::teleop::Teleop;
 use crate::web::{Limits, WebState};
 use crate::Input;
 use anyhow::Context as _;
@@ -14,7 +13,7 @@ use ros_plumbing::{topics, ParameterValue, RosNode};
 use std::future::Future;
 use std::io::Write as _;
 use std::net::{IpAddr, SocketAddr};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// Serve the panel on the `bind` parameter's address until `shutdown`.
 pub async fn serve(
@@ -27,15 +26,12 @@ pub async fn serve(
     let joint_states = node.subscribe_to(&topics::JOINT_STATES)?;
     let diagnostics = node.subscribe_to(&topics::DIAGNOSTICS)?;
     let rate = params.f64("rate").unwrap_or(50.0);
-    let teleop = Arc::new(Mutex::new(Teleop::new(arm, rate)));
     let description = node.subscribe_to(&topics::ROBOT_DESCRIPTION)?;
     let servo_state = node.subscribe_to(&topics::SERVO_STATE)?;
     let estop = node.subscribe_to(&topics::ESTOP)?;
     let (to_browsers, _) = tokio::sync::broadcast::channel(256);
     let limits = Limits::default();
     let (req_tx, req_rx) = crate::web::request_channels(&limits);
-    let t = teleop.clone();
-    let p = params.clone();
     let bind = params
         .string("bind")
         .unwrap_or_else(|| "127.0.0.1:8080".into());
@@ -67,27 +63,25 @@ pub async fn serve(
             None
         }
     };
+    let desk = crate::desk::Desk::new(crate::program_dir(
+        &params.string("program_dir").unwrap_or_default(),
+    ));
+    log::info!("waypoint programs in {}", desk.dir().display());
+    let panel = crate::panel::Panel::new(arm, rate, desk, node.resolver().node_name());
+    // what a browser that connects gets first: the bridge loop keeps it current
+    let (snapshot, view) = tokio::sync::watch::channel(panel.snapshot());
     // from here on shared with the Foxglove server, which subscribes topics on demand
     let node = std::cell::RefCell::new(node);
+    let p = params.clone();
+    let urdf_view = view.clone();
     let state = WebState::new(
         to_browsers.clone(),
         req_tx,
-        Arc::new(move || {
-            t.lock()
-                .map(|t| crate::hello_json(&t, p.f64("rate").unwrap_or(50.0)))
-                .unwrap_or_default()
-        }),
+        Arc::new(move || view.borrow().hello(p.f64("rate").unwrap_or(50.0))),
         AccessPolicy::new(token.clone()),
         limits,
     )
-    .with_urdf({
-        let t = teleop.clone();
-        Arc::new(move || {
-            t.lock()
-                .ok()
-                .and_then(|t| t.urdf().map(|(text, _)| text.clone()))
-        })
-    });
+    .with_urdf(Arc::new(move || urdf_view.borrow().urdf.clone()));
     let web_stats = state.stats.clone();
     let foxglove =
         crate::foxglove::serve(&node, AccessPolicy::new(token.clone()), &web_stats).await?;
@@ -177,25 +171,23 @@ pub async fn serve(
         },
         web: web_stats,
     };
-    let desk = crate::desk::Desk::new(crate::program_dir(
-        &params.string("program_dir").unwrap_or_default(),
-    ));
-    log::info!("waypoint programs in {}", desk.dir().display());
     let motion = ComputeIkMotion {
         client: ik_params,
         original: std::cell::RefCell::new(None),
     };
     let panel = crate::run(
-        teleop,
-        inputs,
-        req_rx,
-        to_browsers,
-        &outputs,
-        params,
-        reporting,
-        desk,
-        &motion,
-        shutdown,
+        panel,
+        crate::Handles {
+            inputs,
+            requests: req_rx,
+            to_browsers,
+            snapshot,
+            outputs: &outputs,
+            params,
+            reporting,
+            motion: &motion,
+            shutdown,
+        },
     );
     match foxglove {
         // the Foxglove forwarding never ends by itself: the panel's shutdown ends both

@@ -9,8 +9,8 @@ use ros_plumbing::logging::{shorten, NAME_MAX};
 use std::f64::consts::PI;
 use std::time::{Duration, Instant};
 
-/// One slider of the joint mode.
-#[derive(Clone, Debug, PartialEq)]
+/// One slider of the joint mode (`{"name", "lower", "upper"}` to the page).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct JointSlider {
     /// The joint's name on `joint_target`.
     pub name: String,
@@ -319,10 +319,6 @@ pub struct Teleop {
     joint_target: Slot<Vec<(String, f64)>>,
     estop: Option<bool>,
     robot: Option<RobotView>,
-    scene: Option<serde_json::Value>,
-    urdf: Option<(std::sync::Arc<str>, u64)>,
-    program: Option<serde_json::Value>,
-    last_pose: Option<serde_json::Value>,
 }
 
 impl Teleop {
@@ -339,49 +335,12 @@ impl Teleop {
             joint_target: Slot::default(),
             estop: None,
             robot: None,
-            scene: None,
-            urdf: None,
-            program: None,
-            last_pose: None,
         }
     }
 
     /// The arm `robot_description` describes: joint mode and checks follow it.
     pub fn set_robot(&mut self, model: &RobotModel) -> &RobotView {
         self.robot.insert(RobotView::of(model, &self.arm))
-    }
-
-    /// What the page's 3D view draws besides the pose (the URDF text, the workspace
-    /// envelope), kept for browsers that connect later.
-    pub fn set_scene(&mut self, scene: serde_json::Value) {
-        self.scene = Some(scene);
-    }
-
-    /// The URDF text of `robot_description`, for the page's 3D view; each new one gets
-    /// the next revision number.
-    pub fn set_urdf(&mut self, text: std::sync::Arc<str>) {
-        let rev = self.urdf.as_ref().map_or(1, |(_, r)| r + 1);
-        self.urdf = Some((text, rev));
-    }
-
-    /// See [`Teleop::set_urdf`]: the text and its revision.
-    pub fn urdf(&self) -> Option<(&std::sync::Arc<str>, u64)> {
-        self.urdf.as_ref().map(|(t, r)| (t, *r))
-    }
-
-    /// The waypoint program as the page shows it, kept for browsers that connect later.
-    pub fn set_program(&mut self, program: serde_json::Value) {
-        self.program = Some(program);
-    }
-
-    /// See [`Teleop::set_program`].
-    pub fn program(&self) -> Option<&serde_json::Value> {
-        self.program.as_ref()
-    }
-
-    /// See [`Teleop::set_scene`].
-    pub fn scene(&self) -> Option<&serde_json::Value> {
-        self.scene.as_ref()
     }
 
     /// The arm from `robot_description`, if one arrived.
@@ -430,16 +389,6 @@ impl Teleop {
     /// The arm model used for the checks.
     pub fn arm(&self) -> &Arm {
         &self.arm
-    }
-
-    /// The latest `pose` message sent to the browsers, for one that connects later.
-    pub fn last_pose(&self) -> Option<&serde_json::Value> {
-        self.last_pose.as_ref()
-    }
-
-    /// Remember the `pose` message just sent to the browsers.
-    pub fn set_last_pose(&mut self, pose: serde_json::Value) {
-        self.last_pose = Some(pose);
     }
 
     /// The arm moved (from `joint_states`): jogs continue from where it is.

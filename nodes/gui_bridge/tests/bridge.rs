@@ -5,16 +5,16 @@
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::Time;
 use futures::StreamExt;
-use gui_bridge::teleop::Teleop;
+use gui_bridge::panel::Panel;
 use gui_bridge::web::{request_channels, ClientRequest, FromClient, Limits, WebStats};
-use gui_bridge::{Outputs, Reporting};
+use gui_bridge::{Handles, Outputs, Reporting};
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Params;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, Mutex};
-use tokio::sync::{broadcast, mpsc, oneshot};
+use std::sync::Arc;
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 /// Records e-stops with the number of replies the loop had given by then.
 struct Fake {
@@ -45,9 +45,9 @@ fn desk() -> Desk {
     Desk::new(std::env::temp_dir().join(format!("gui_bridge_bridge_{}", std::process::id())))
 }
 
-fn teleop() -> Arc<Mutex<Teleop>> {
+fn panel() -> Panel {
     let arm = gui_bridge::load_arm("").unwrap();
-    Arc::new(Mutex::new(Teleop::new(arm, 50.0)))
+    Panel::new(arm, 50.0, desk(), "gui_bridge")
 }
 
 fn reporting(web: Arc<WebStats>) -> Reporting<impl Fn() -> Vec<usize>> {
@@ -95,17 +95,19 @@ async fn an_estop_is_served_before_a_thousand_queued_requests() {
         .unwrap();
     let stats = Arc::new(WebStats::default());
     gui_bridge::run(
-        teleop(),
-        futures::stream::pending(),
-        requests,
-        to_clients,
-        &fake,
-        Params::new(BTreeMap::new()),
-        reporting(stats),
-        desk(),
-        &NoMotionControl,
-        async {
-            let _ = done_rx.await;
+        panel(),
+        Handles {
+            inputs: futures::stream::pending(),
+            requests,
+            to_browsers: to_clients,
+            snapshot: watch::channel(panel().snapshot()).0,
+            outputs: &fake,
+            params: Params::new(BTreeMap::new()),
+            reporting: reporting(stats),
+            motion: &NoMotionControl,
+            shutdown: async {
+                let _ = done_rx.await;
+            },
         },
     )
     .await;
@@ -155,16 +157,18 @@ async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
         }
     };
     let run = gui_bridge::run(
-        teleop(),
-        futures::stream::pending(),
-        requests,
-        to_clients,
-        &fake,
-        Params::new(BTreeMap::new()),
-        reporting(stats.clone()),
-        desk(),
-        &NoMotionControl,
-        through,
+        panel(),
+        Handles {
+            inputs: futures::stream::pending(),
+            requests,
+            to_browsers: to_clients,
+            snapshot: watch::channel(panel().snapshot()).0,
+            outputs: &fake,
+            params: Params::new(BTreeMap::new()),
+            reporting: reporting(stats.clone()),
+            motion: &NoMotionControl,
+            shutdown: through,
+        },
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
         .await
@@ -234,16 +238,18 @@ async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published()
         }
     };
     let run = gui_bridge::run(
-        teleop(),
-        inputs,
-        requests,
-        to_clients,
-        &recorder,
-        Params::new(BTreeMap::new()),
-        reporting(stats.clone()),
-        desk(),
-        &NoMotionControl,
-        counted,
+        panel(),
+        Handles {
+            inputs,
+            requests,
+            to_browsers: to_clients,
+            snapshot: watch::channel(panel().snapshot()).0,
+            outputs: &recorder,
+            params: Params::new(BTreeMap::new()),
+            reporting: reporting(stats.clone()),
+            motion: &NoMotionControl,
+            shutdown: counted,
+        },
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
         .await

@@ -1,0 +1,558 @@
+//! What the panel sends to browsers: [`ToClient`], the counterpart of
+//! [`ClientRequest`](crate::web::ClientRequest). Each message is a JSON object whose
+//! `t` names its kind (`web/panel.js`'s `handle()` switches on it); every field below is
+//! one the page reads, and a field written as `null` stays `null` (not left out).
+
+use crate::program::{PlayerState, Program};
+use crate::teleop::JointSlider;
+use eezybot_kinematics::envelope::Envelope;
+use eezybot_kinematics::{Arm, ArmJoints};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// A message to browsers.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "t", rename_all = "snake_case")]
+pub enum ToClient {
+    /// A target, a jog, the claw, a joint target or the e-stop was taken.
+    Ack {
+        /// the Cartesian target now (m)
+        target: [f64; 3],
+        /// the joints that reach it (the EezyBot's closed form; null for any other arm)
+        joints: Option<ArmJointsMsg>,
+        /// always true
+        reachable: bool,
+    },
+    /// A request was refused.
+    Refused {
+        /// why (cut to [`crate::web::REASON_MAX`])
+        reason: String,
+        /// false for a request the loop refused; left out for a message that was no
+        /// request
+        #[serde(skip_serializing_if = "Option::is_none")]
+        reachable: Option<bool>,
+    },
+    /// The answer to a `check` (nothing is sent).
+    Check {
+        /// the point asked about (m)
+        xyz: [f64; 3],
+        /// reachable, not, or null: not checked here (an arm without a closed form)
+        reachable: Option<bool>,
+        /// the joints that reach it (reachable only)
+        #[serde(skip_serializing_if = "Option::is_none")]
+        joints: Option<ArmJointsMsg>,
+        /// why not (or why not checked)
+        #[serde(skip_serializing_if = "Option::is_none")]
+        reason: Option<String>,
+    },
+    /// Where the arm is, from `joint_states`.
+    Pose(Pose),
+    /// The arm, from `robot_description`.
+    Robot {
+        /// the arm as the page needs it
+        robot: RobotInfo,
+    },
+    /// The waypoint program, its files and its player.
+    Program(ProgramView),
+    /// Health of the other nodes, from their `diagnostics`.
+    Status {
+        /// the expected nodes first, then every other node heard
+        nodes: Vec<NodeEntry>,
+        /// compute_ik's last refusal of a target
+        last_rejection: Option<String>,
+    },
+    /// Arrival time − stamp of a `servo_state` reply to one of our targets.
+    Latency {
+        /// this one, ms
+        ms: f64,
+        /// the median of the last 50, ms
+        median_ms: Option<f64>,
+        /// how many of them
+        n: usize,
+    },
+    /// `estop` as heard on the topic.
+    Estop {
+        /// engaged?
+        on: bool,
+    },
+    /// Something was published.
+    Sent(Sent),
+}
+
+impl ToClient {
+    /// The JSON text sent over the WebSocket.
+    pub fn to_text(&self) -> String {
+        // serializing these types cannot fail (string keys, no custom serializers)
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+/// The EezyBot's three arm joints, rad.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ArmJointsMsg {
+    /// base
+    pub base_joint: f64,
+    /// shoulder
+    pub shoulder_joint: f64,
+    /// elbow
+    pub elbow_joint: f64,
+}
+
+impl From<&ArmJoints> for ArmJointsMsg {
+    fn from(q: &ArmJoints) -> Self {
+        ArmJointsMsg {
+            base_joint: q.base_rad,
+            shoulder_joint: q.shoulder_rad,
+            elbow_joint: q.elbow_rad,
+        }
+    }
+}
+
+/// `{"t": "pose", …}`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Pose {
+    /// The actuated joints (the EezyBot's three), or every URDF joint of another arm.
+    pub joints: BTreeMap<String, f64>,
+    /// The EezyBot only: every URDF joint, passive linkage ones included, for the 3D view.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub all: Option<BTreeMap<String, f64>>,
+    /// The claw's joint (rad), if reported (always null for another arm).
+    pub gripper: Option<f64>,
+    /// Where the tool is (m).
+    pub tool: Option<[f64; 3]>,
+    /// (parent origin → child origin, child link) of every joint, for the side and top views.
+    pub segments: Vec<([f64; 6], String)>,
+}
+
+/// The arm as the page needs it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RobotInfo {
+    /// the URDF's robot name (`eezybot` before any)
+    pub name: String,
+    /// the EezyBot (closed-form checks, a claw slider)
+    pub eezybot: bool,
+    /// the joint mode's sliders
+    pub joints: Vec<JointSlider>,
+    /// a generous reach (m)
+    pub reach: f64,
+    /// the link a Cartesian target places
+    pub tool_link: Option<String>,
+    /// whether this came from `robot_description`
+    pub from_urdf: bool,
+    /// with a URDF: where to fetch it and the workspace envelope
+    #[serde(flatten)]
+    pub scene: Option<UrdfScene>,
+}
+
+impl RobotInfo {
+    /// The EezyBot before any `robot_description`.
+    pub fn eezybot(joints: Vec<JointSlider>) -> RobotInfo {
+        RobotInfo {
+            name: "eezybot".into(),
+            eezybot: true,
+            joints,
+            reach: 0.33,
+            tool_link: Some("tool0".into()),
+            from_urdf: false,
+            scene: None,
+        }
+    }
+}
+
+/// What the 3D view draws of a URDF arm besides the pose.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct UrdfScene {
+    /// `robot.urdf?rev=N`: the page fetches the text over HTTP (it can be larger than a
+    /// WebSocket client's buffer)
+    pub urdf: Option<String>,
+    /// the reachable workspace
+    pub envelope: Option<Envelope>,
+}
+
+/// `{"t": "program", …}`: the desk as every browser shows it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ProgramView {
+    /// the points
+    pub program: Program,
+    /// the player, once a program played
+    pub player: Option<PlayerState>,
+    /// the program files on the node's host
+    pub files: Vec<String>,
+    /// the program's name (as last saved or loaded)
+    pub name: String,
+    /// the desk's last word
+    pub message: String,
+    /// where the files are
+    pub dir: String,
+    /// a save found this program existing: the panel asks whether to replace it
+    pub confirm_overwrite: Option<String>,
+}
+
+/// One node of `{"t": "status"}`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NodeEntry {
+    /// the name it runs under
+    pub name: String,
+    /// what its `diagnostics` entry says it does
+    pub task: String,
+    /// its hardware id
+    pub hardware_id: String,
+    /// heard recently
+    pub up: bool,
+    /// its level (OK, WARN, ERROR, STALE)
+    pub level: u8,
+    /// its message
+    pub message: String,
+    /// seconds since heard (null: never)
+    pub age_s: Option<f64>,
+}
+
+/// `{"t": "sent", "topic": …}`: what went out on which topic.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Sent {
+    /// `xyz_target`
+    Xyz {
+        /// the topic's name
+        topic: &'static str,
+        /// m
+        xyz: [f64; 3],
+        /// the target's stamp, ns
+        stamp_ns: i64,
+    },
+    /// `gripper_target`
+    Gripper {
+        /// the topic's name
+        topic: &'static str,
+        /// 0 … 1
+        value: f64,
+    },
+    /// `joint_target`
+    Joints {
+        /// the topic's name
+        topic: &'static str,
+        /// (name, position) pairs
+        q: Vec<(String, f64)>,
+        /// the target's stamp, ns
+        stamp_ns: i64,
+    },
+    /// `estop`
+    Estop {
+        /// the topic's name
+        topic: &'static str,
+        /// engaged?
+        on: bool,
+    },
+}
+
+/// The arm's fixed facts a browser gets with its hello.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ArmFacts {
+    /// joint limits (rad), by joint
+    pub limits: BTreeMap<&'static str, [f64; 2]>,
+    /// the sliders' ranges (m)
+    pub workspace: BTreeMap<&'static str, [f64; 2]>,
+    /// link lengths (m) for the side and top views
+    pub geometry: BTreeMap<&'static str, f64>,
+}
+
+impl ArmFacts {
+    /// Of this arm.
+    pub fn of(arm: &Arm) -> ArmFacts {
+        let l = arm.limits;
+        let g = arm.geometry;
+        ArmFacts {
+            limits: BTreeMap::from([
+                ("base_joint", [l.base_rad.0, l.base_rad.1]),
+                ("shoulder_joint", [l.shoulder_rad.0, l.shoulder_rad.1]),
+                ("elbow_joint", [l.elbow_rad.0, l.elbow_rad.1]),
+                ("gripper_joint", [0.0, g.gripper_open_rad]),
+            ]),
+            workspace: BTreeMap::from([
+                ("x", [0.0, 0.30]),
+                ("y", [-0.22, 0.22]),
+                ("z", [0.0, 0.30]),
+            ]),
+            geometry: BTreeMap::from([
+                ("shoulder_height", g.shoulder_height_m),
+                ("main_arm", g.main_arm_m),
+                ("forearm", g.forearm_m),
+                ("tool_dx", g.tool_dx_m),
+            ]),
+        }
+    }
+}
+
+/// What a browser that connects gets first: the panel as it is now. The bridge loop
+/// keeps it current; the web server reads it for each new client (and `/robot.urdf`).
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    /// the Cartesian target now (m)
+    pub target: [f64; 3],
+    /// the latest `pose` message
+    pub pose: Option<Arc<ToClient>>,
+    /// the arm
+    pub robot: Arc<RobotInfo>,
+    /// the latest `program` message
+    pub program: Arc<ToClient>,
+    /// the arm's fixed facts
+    pub arm: Arc<ArmFacts>,
+    /// the text of `robot_description`, for `/robot.urdf`
+    pub urdf: Option<Arc<str>>,
+}
+
+/// `{"t": "hello", …}`.
+#[derive(Serialize)]
+#[serde(tag = "t", rename = "hello")]
+struct Hello<'a> {
+    target: [f64; 3],
+    pose: Option<&'a ToClient>,
+    rate: f64,
+    robot: &'a RobotInfo,
+    program: &'a ToClient,
+    #[serde(flatten)]
+    arm: &'a ArmFacts,
+}
+
+impl Snapshot {
+    /// The hello message, with the `rate` parameter as it is now.
+    pub fn hello(&self, rate: f64) -> String {
+        serde_json::to_string(&Hello {
+            target: self.target,
+            pose: self.pose.as_deref(),
+            rate,
+            robot: &self.robot,
+            program: &self.program,
+            arm: &self.arm,
+        })
+        .unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn value(m: &ToClient) -> serde_json::Value {
+        serde_json::from_str(&m.to_text()).unwrap()
+    }
+
+    /// The fields `web/panel.js` reads, null where it may read null.
+    #[test]
+    fn the_wire_format_is_the_one_the_page_reads() {
+        let q = ArmJointsMsg {
+            base_joint: 0.1,
+            shoulder_joint: 0.2,
+            elbow_joint: 0.3,
+        };
+        let joints = json!({"base_joint": 0.1, "shoulder_joint": 0.2, "elbow_joint": 0.3});
+        let cases = [
+            (
+                ToClient::Ack {
+                    target: [0.2, 0.0, 0.1],
+                    joints: Some(q),
+                    reachable: true,
+                },
+                json!({"t": "ack", "target": [0.2, 0.0, 0.1], "joints": joints, "reachable": true}),
+            ),
+            (
+                ToClient::Ack {
+                    target: [0.2, 0.0, 0.1],
+                    joints: None,
+                    reachable: true,
+                },
+                json!({"t": "ack", "target": [0.2, 0.0, 0.1], "joints": null, "reachable": true}),
+            ),
+            (
+                ToClient::Refused {
+                    reason: "far".into(),
+                    reachable: Some(false),
+                },
+                json!({"t": "refused", "reason": "far", "reachable": false}),
+            ),
+            (
+                ToClient::Refused {
+                    reason: "not JSON".into(),
+                    reachable: None,
+                },
+                json!({"t": "refused", "reason": "not JSON"}),
+            ),
+            (
+                ToClient::Check {
+                    xyz: [1.0, 2.0, 3.0],
+                    reachable: None,
+                    joints: None,
+                    reason: Some("not here".into()),
+                },
+                json!({"t": "check", "xyz": [1.0, 2.0, 3.0], "reachable": null, "reason": "not here"}),
+            ),
+            (
+                ToClient::Check {
+                    xyz: [1.0, 2.0, 3.0],
+                    reachable: Some(true),
+                    joints: Some(q),
+                    reason: None,
+                },
+                json!({"t": "check", "xyz": [1.0, 2.0, 3.0], "reachable": true, "joints": joints}),
+            ),
+            (
+                ToClient::Pose(Pose {
+                    joints: BTreeMap::from([("j".to_string(), 1.0)]),
+                    all: None,
+                    gripper: None,
+                    tool: Some([1.0, 2.0, 3.0]),
+                    segments: vec![([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], "l".into())],
+                }),
+                json!({"t": "pose", "joints": {"j": 1.0}, "gripper": null, "tool": [1.0, 2.0, 3.0],
+                       "segments": [[[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], "l"]]}),
+            ),
+            (
+                ToClient::Pose(Pose {
+                    joints: BTreeMap::new(),
+                    all: Some(BTreeMap::new()),
+                    gripper: Some(0.5),
+                    tool: None,
+                    segments: vec![],
+                }),
+                json!({"t": "pose", "joints": {}, "all": {}, "gripper": 0.5, "tool": null, "segments": []}),
+            ),
+            (
+                ToClient::Robot {
+                    robot: RobotInfo::eezybot(vec![]),
+                },
+                json!({"t": "robot", "robot": {"name": "eezybot", "eezybot": true, "joints": [], "reach": 0.33,
+                                               "tool_link": "tool0", "from_urdf": false}}),
+            ),
+            (
+                ToClient::Robot {
+                    robot: RobotInfo {
+                        name: "jaco".into(),
+                        eezybot: false,
+                        joints: vec![JointSlider {
+                            name: "j1".into(),
+                            lower: -1.0,
+                            upper: 1.0,
+                        }],
+                        reach: 1.5,
+                        tool_link: None,
+                        from_urdf: true,
+                        scene: Some(UrdfScene {
+                            urdf: Some("robot.urdf?rev=1".into()),
+                            envelope: None,
+                        }),
+                    },
+                },
+                json!({"t": "robot", "robot": {"name": "jaco", "eezybot": false,
+                       "joints": [{"name": "j1", "lower": -1.0, "upper": 1.0}], "reach": 1.5, "tool_link": null,
+                       "from_urdf": true, "urdf": "robot.urdf?rev=1", "envelope": null}}),
+            ),
+            (
+                ToClient::Status {
+                    nodes: vec![NodeEntry {
+                        name: "compute_ik".into(),
+                        task: "inverse kinematics".into(),
+                        hardware_id: String::new(),
+                        up: false,
+                        level: 3,
+                        message: "not seen".into(),
+                        age_s: None,
+                    }],
+                    last_rejection: None,
+                },
+                json!({"t": "status", "nodes": [{"name": "compute_ik", "task": "inverse kinematics",
+                       "hardware_id": "", "up": false, "level": 3, "message": "not seen", "age_s": null}],
+                       "last_rejection": null}),
+            ),
+            (
+                ToClient::Latency {
+                    ms: 2.5,
+                    median_ms: Some(2.0),
+                    n: 3,
+                },
+                json!({"t": "latency", "ms": 2.5, "median_ms": 2.0, "n": 3}),
+            ),
+            (
+                ToClient::Estop { on: true },
+                json!({"t": "estop", "on": true}),
+            ),
+            (
+                ToClient::Sent(Sent::Xyz {
+                    topic: "xyz_target",
+                    xyz: [1.0, 2.0, 3.0],
+                    stamp_ns: 7,
+                }),
+                json!({"t": "sent", "topic": "xyz_target", "xyz": [1.0, 2.0, 3.0], "stamp_ns": 7}),
+            ),
+            (
+                ToClient::Sent(Sent::Gripper {
+                    topic: "gripper_target",
+                    value: 0.5,
+                }),
+                json!({"t": "sent", "topic": "gripper_target", "value": 0.5}),
+            ),
+            (
+                ToClient::Sent(Sent::Joints {
+                    topic: "joint_target",
+                    q: vec![("j".into(), 0.5)],
+                    stamp_ns: 7,
+                }),
+                json!({"t": "sent", "topic": "joint_target", "q": [["j", 0.5]], "stamp_ns": 7}),
+            ),
+            (
+                ToClient::Sent(Sent::Estop {
+                    topic: "estop",
+                    on: false,
+                }),
+                json!({"t": "sent", "topic": "estop", "on": false}),
+            ),
+        ];
+        for (message, wire) in cases {
+            assert_eq!(value(&message), wire, "{message:?}");
+        }
+    }
+
+    #[test]
+    fn a_hello_carries_the_pose_and_program_messages_and_the_arm() {
+        let arm = crate::load_arm("").unwrap();
+        let program = ToClient::Program(ProgramView {
+            program: Program::default(),
+            player: None,
+            files: vec!["p".into()],
+            name: String::new(),
+            message: String::new(),
+            dir: "/tmp/p".into(),
+            confirm_overwrite: None,
+        });
+        let snapshot = Snapshot {
+            target: [0.2, 0.0, 0.1],
+            pose: Some(Arc::new(ToClient::Estop { on: false })),
+            robot: Arc::new(RobotInfo::eezybot(vec![])),
+            program: Arc::new(program),
+            arm: Arc::new(ArmFacts::of(&arm)),
+            urdf: None,
+        };
+        let hello: serde_json::Value = serde_json::from_str(&snapshot.hello(50.0)).unwrap();
+        assert_eq!(hello["t"], "hello");
+        assert_eq!(hello["rate"], 50.0);
+        assert_eq!(hello["target"], json!([0.2, 0.0, 0.1]));
+        assert_eq!(hello["pose"]["t"], "estop");
+        assert_eq!(hello["program"]["t"], "program");
+        assert_eq!(hello["program"]["files"], json!(["p"]));
+        assert!(
+            hello["program"]["player"].is_null() && hello["program"]["confirm_overwrite"].is_null()
+        );
+        assert_eq!(hello["robot"]["name"], "eezybot");
+        assert_eq!(
+            hello["workspace"],
+            json!({"x": [0.0, 0.30], "y": [-0.22, 0.22], "z": [0.0, 0.30]})
+        );
+        assert_eq!(
+            hello["limits"]["gripper_joint"],
+            json!([0.0, arm.geometry.gripper_open_rad])
+        );
+        assert_eq!(hello["geometry"]["main_arm"], arm.geometry.main_arm_m);
+        assert_eq!(hello["geometry"].as_object().unwrap().len(), 4);
+    }
+}

@@ -1,0 +1,949 @@
+//! The web panel's core: teleoperation, the program desk and the live view, as one
+//! state owned by the bridge loop. Events go in with the time they happen at
+//! ([`Clock`]); [`Effect`]s come out for the loop to apply (publish, answer a browser,
+//! tell every browser, set compute_ik's move mode, run a file job, log). No I/O here.
+
+use crate::desk::{Desk, DeskOutcome, FileDone, FileJob};
+use crate::message::{
+    ArmFacts, ArmJointsMsg, NodeEntry, Pose, RobotInfo, Sent, Snapshot, ToClient, UrdfScene,
+};
+use crate::program::MoveMode;
+use crate::teleop::{Command, Event, Teleop};
+use crate::web::{self, ClientRequest, WebStats};
+use crate::Input;
+use eezybot_kinematics::envelope::Envelope;
+use eezybot_kinematics::urdf::RobotModel;
+use eezybot_kinematics::{Arm, ArmJoints, ACTUATED_JOINTS};
+use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::Time;
+use ros_plumbing::diagnostics::{
+    status_node, LatencyWindow, LAST_REJECTION_KEY, REJECTED_STAMP_KEY,
+};
+use ros_plumbing::logging::{shorten, Throttle};
+use ros_plumbing::topics;
+use std::collections::{BTreeMap, VecDeque};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// When an event happens: the monotonic clock (rate limits, timeouts) and the wall
+/// clock (stamps).
+#[derive(Clone, Copy, Debug)]
+pub struct Clock {
+    /// monotonic
+    pub now: Instant,
+    /// ROS time
+    pub wall: Time,
+}
+
+impl Clock {
+    /// The clocks now.
+    pub fn read() -> Clock {
+        Clock {
+            now: Instant::now(),
+            wall: Time::now(),
+        }
+    }
+}
+
+/// Something for the bridge loop to do.
+#[derive(Debug)]
+pub enum Effect {
+    /// Publish this, stamped `stamp` (the stamp of a target).
+    Publish {
+        /// what, on which topic
+        command: Command,
+        /// its stamp
+        stamp: Time,
+    },
+    /// Tell every browser.
+    Broadcast(ToClient),
+    /// Answer the browser whose request this is.
+    Answer(ToClient),
+    /// A request was refused: count it in the web side's diagnostics.
+    Rejected {
+        /// [`crate::teleop::Refusal::kind`]
+        kind: &'static str,
+        /// why
+        reason: String,
+    },
+    /// Set compute_ik's `motion` to this, then call [`Panel::on_mode_set`].
+    SetMotion(MoveMode),
+    /// Put compute_ik's `motion` back as it was.
+    RestoreMotion,
+    /// Run this program file job in `dir` off the loop, then call [`Panel::on_file_done`].
+    File {
+        /// the job
+        job: FileJob,
+        /// the program directory
+        dir: PathBuf,
+    },
+    /// What a browser that connects now gets changed.
+    Snapshot(Snapshot),
+    /// Log this.
+    Log(log::Level, String),
+}
+
+/// Longest node name (and task, hardware id) the panel shows.
+const NODE_NAME_MAX: usize = ros_plumbing::diagnostics::NODE_NAME_MAX;
+/// Most nodes the panel tracks; a new one beyond them replaces one gone silent, if any.
+pub const MAX_TRACKED_NODES: usize = 16;
+/// A node heard within this is up.
+const UP_WITHIN: Duration = Duration::from_secs(3);
+/// A node not heard for this long is forgotten (its task's placeholder shows again).
+const FORGET_AFTER: Duration = Duration::from_secs(60);
+/// How long a refused client keeps the panel's diagnostics at WARN.
+pub const REFUSAL_WARN_FOR: Duration = Duration::from_secs(60);
+/// The most joints a URDF may have for the 3D view to get its workspace envelope.
+pub const ENVELOPE_MAX_JOINTS: usize = 64;
+
+/// The graph's other nodes the panel always shows: (default node name, the task their
+/// `diagnostics` entry names). Until a node reporting that task is heard, the default
+/// name shows as missing; any node reporting it, under whatever name, takes its place.
+pub const EXPECTED_NODES: [(&str, &str); 3] = [
+    ("compute_ik", "inverse kinematics"),
+    ("state_publisher", "robot state"),
+    ("serial_node", "servo link"),
+];
+
+/// Samples that could not be read, for `diagnostics` and the (throttled) log.
+#[derive(Debug, Default)]
+struct UnreadableSamples {
+    count: u64,
+    last: Option<String>,
+    complaints: Throttle,
+}
+
+impl UnreadableSamples {
+    fn note(&mut self, topic: &str, error: &str, now: Instant) -> Option<Effect> {
+        self.count += 1;
+        let error = shorten(error, web::REASON_MAX);
+        self.last = Some(format!("{topic}: {error}"));
+        let quiet = self.complaints.allow(topic, now)?;
+        Some(Effect::Log(
+            log::Level::Warn,
+            format!(
+                "unreadable sample on {topic} ignored: {error}{}",
+                Throttle::suffix(quiet)
+            ),
+        ))
+    }
+
+    fn values(&self) -> [(&'static str, String); 2] {
+        [
+            ("unreadable_samples", self.count.to_string()),
+            (
+                "last_unreadable_sample",
+                self.last.clone().unwrap_or_default(),
+            ),
+        ]
+    }
+}
+
+struct Heard {
+    task: String,
+    hardware_id: String,
+    level: u8,
+    message: String,
+    at: Instant,
+}
+
+/// Health of the other nodes, from their `diagnostics`: every node heard, by the name
+/// it reports (so under any remap or namespace), besides this one.
+struct NodeHealth {
+    own: String,
+    seen: BTreeMap<String, Heard>,
+    last_rejection: Option<String>,
+}
+
+impl NodeHealth {
+    fn new(own: &str) -> Self {
+        NodeHealth {
+            own: own.to_string(),
+            seen: BTreeMap::new(),
+            last_rejection: None,
+        }
+    }
+
+    fn update(&mut self, msg: &DiagnosticArray, now: Instant) {
+        self.seen
+            .retain(|_, h| now.duration_since(h.at) < FORGET_AFTER);
+        for s in &msg.status {
+            if let Some(kv) = s.values.iter().find(|kv| kv.key == REJECTED_STAMP_KEY) {
+                let reason = s
+                    .values
+                    .iter()
+                    .find(|kv| kv.key == LAST_REJECTION_KEY)
+                    .map_or(kv.value.as_str(), |r| r.value.as_str());
+                self.last_rejection = Some(shorten(reason, web::REASON_MAX).into_owned());
+            }
+            let Some((node, task)) = status_node(&s.name) else {
+                continue;
+            };
+            if node == self.own {
+                continue;
+            }
+            if !self.seen.contains_key(node) && self.seen.len() >= MAX_TRACKED_NODES {
+                // room only by forgetting one gone silent: a flood of names never
+                // pushes out a node that is up
+                let silent = self
+                    .seen
+                    .iter()
+                    .filter(|(_, h)| now.duration_since(h.at) >= UP_WITHIN)
+                    .min_by_key(|(_, h)| h.at)
+                    .map(|(n, _)| n.clone());
+                match silent {
+                    Some(n) => self.seen.remove(&n),
+                    None => continue,
+                };
+            }
+            self.seen.insert(
+                node.to_string(),
+                Heard {
+                    task: shorten(task, NODE_NAME_MAX).into_owned(),
+                    hardware_id: shorten(&s.hardware_id, NODE_NAME_MAX).into_owned(),
+                    level: s.level,
+                    message: shorten(&s.message, web::REASON_MAX).into_owned(),
+                    at: now,
+                },
+            );
+        }
+    }
+
+    /// The expected tasks first (each node heard reporting it, or its default name as
+    /// missing), then every other node heard, by name.
+    fn status(&self, now: Instant) -> ToClient {
+        let entry = |name: &str, h: &Heard| {
+            let age = now.saturating_duration_since(h.at);
+            NodeEntry {
+                name: name.to_string(),
+                task: h.task.clone(),
+                hardware_id: h.hardware_id.clone(),
+                up: age < UP_WITHIN,
+                level: h.level,
+                message: h.message.clone(),
+                age_s: Some(age.as_secs_f64()),
+            }
+        };
+        let mut nodes = vec![];
+        let mut listed: Vec<&str> = vec![];
+        for (default, task) in EXPECTED_NODES {
+            let mut doing = self
+                .seen
+                .iter()
+                .filter(|(n, h)| h.task == task || n.as_str() == default)
+                .peekable();
+            if doing.peek().is_none() {
+                nodes.push(NodeEntry {
+                    name: default.into(),
+                    task: task.into(),
+                    hardware_id: String::new(),
+                    up: false,
+                    level: DiagnosticStatus::STALE,
+                    message: "not seen".into(),
+                    age_s: None,
+                });
+            }
+            for (n, h) in doing {
+                if !listed.contains(&n.as_str()) {
+                    listed.push(n);
+                    nodes.push(entry(n, h));
+                }
+            }
+        }
+        for (n, h) in &self.seen {
+            if !listed.contains(&n.as_str()) {
+                nodes.push(entry(n, h));
+            }
+        }
+        ToClient::Status {
+            nodes,
+            last_rejection: self.last_rejection.clone(),
+        }
+    }
+}
+
+/// Arrival time − stamp of `servo_state` replies to our own targets.
+struct Latency {
+    /// stamps of our last 200 targets, ns
+    ours: VecDeque<i64>,
+    /// the last 50 latencies, ms
+    ms: LatencyWindow,
+}
+
+impl Latency {
+    fn new() -> Latency {
+        Latency {
+            ours: VecDeque::new(),
+            ms: LatencyWindow::new(50),
+        }
+    }
+
+    fn sent(&mut self, stamp: Time) {
+        if self.ours.len() == 200 {
+            self.ours.pop_front();
+        }
+        self.ours.push_back(stamp.to_nanos());
+    }
+
+    fn reply(&mut self, stamp: Time, wall: Time) -> Option<ToClient> {
+        let i = self.ours.iter().position(|s| *s == stamp.to_nanos())?;
+        self.ours.remove(i);
+        let ms = (wall.to_nanos() - stamp.to_nanos()) as f64 / 1e6;
+        self.ms.push(ms);
+        Some(ToClient::Latency {
+            ms,
+            median_ms: self.ms.percentile(0.5),
+            n: self.ms.len(),
+        })
+    }
+}
+
+/// The panel: the operator state, the program desk, the live view and what the page
+/// shows of the other nodes.
+pub struct Panel {
+    teleop: Teleop,
+    desk: Desk,
+    health: NodeHealth,
+    latency: Latency,
+    unreadable: UnreadableSamples,
+    /// `xyz_target` messages published
+    sent: u64,
+    /// the arm of `robot_description`, for the live view
+    model: Option<RobotModel>,
+    /// the EezyBot's workspace envelope (its configuration's only: computed once)
+    eezybot_envelope: Option<Envelope>,
+    /// where the tool and the claw are (teach, arrival)
+    last_tool: Option<[f64; 3]>,
+    last_gripper: Option<f64>,
+    /// `robot_description`'s text and its revision
+    urdf: Option<(Arc<str>, u64)>,
+    /// what a browser that connects later gets
+    pose: Option<Arc<ToClient>>,
+    robot: Arc<RobotInfo>,
+    program: Arc<ToClient>,
+    arm_facts: Arc<ArmFacts>,
+    /// the snapshot changed since the last [`Effect::Snapshot`]
+    changed: bool,
+}
+
+impl Panel {
+    /// The panel of `arm`, targets at most `rate` a second each, programs on `desk`;
+    /// `own` is this node's name (its own `diagnostics` are not shown as another node's).
+    pub fn new(arm: Arm, rate: f64, desk: Desk, own: &str) -> Panel {
+        let teleop = Teleop::new(arm, rate);
+        Panel {
+            robot: Arc::new(RobotInfo::eezybot(teleop.joint_sliders())),
+            program: Arc::new(ToClient::Program(desk.view())),
+            arm_facts: Arc::new(ArmFacts::of(teleop.arm())),
+            teleop,
+            desk,
+            health: NodeHealth::new(own),
+            latency: Latency::new(),
+            unreadable: UnreadableSamples::default(),
+            sent: 0,
+            model: None,
+            eezybot_envelope: None,
+            last_tool: None,
+            last_gripper: None,
+            urdf: None,
+            pose: None,
+            changed: false,
+        }
+    }
+
+    /// What a browser that connects now gets.
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            target: self.teleop.target(),
+            pose: self.pose.clone(),
+            robot: self.robot.clone(),
+            program: self.program.clone(),
+            arm: self.arm_facts.clone(),
+            urdf: self.urdf.as_ref().map(|(text, _)| text.clone()),
+        }
+    }
+
+    /// The program directory.
+    pub fn program_dir(&self) -> &std::path::Path {
+        self.desk.dir()
+    }
+
+    /// Change the publish rate limit (the `rate` parameter).
+    pub fn set_rate(&mut self, rate: f64) {
+        self.teleop.set_rate(rate);
+    }
+
+    /// When [`Panel::on_tick`] is due next: a target to publish or the player to run.
+    pub fn next_wakeup(&self, now: Instant) -> Option<Instant> {
+        [self.teleop.next_due(now), self.desk.next_wakeup()]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    /// Whether a target is due for publishing now (the loop does this before anything else).
+    pub fn publish_due(&self, now: Instant) -> bool {
+        self.teleop.next_due(now).is_some_and(|d| d <= now)
+    }
+
+    /// Time passed: publish what is due (latest wins; the e-stop first), run the player
+    /// when it is due.
+    pub fn on_tick(&mut self, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        for command in self.teleop.take_due(clock.now) {
+            let stamp = clock.wall;
+            let sent = match &command {
+                Command::Target(xyz) => {
+                    self.sent += 1;
+                    self.latency.sent(stamp);
+                    self.desk.published_target(stamp);
+                    Sent::Xyz {
+                        topic: topics::XYZ_TARGET.name,
+                        xyz: *xyz,
+                        stamp_ns: stamp.to_nanos(),
+                    }
+                }
+                Command::Gripper(g) => Sent::Gripper {
+                    topic: topics::GRIPPER_TARGET.name,
+                    value: *g,
+                },
+                Command::Joints(q) => {
+                    self.latency.sent(stamp);
+                    Sent::Joints {
+                        topic: topics::JOINT_TARGET.name,
+                        q: q.clone(),
+                        stamp_ns: stamp.to_nanos(),
+                    }
+                }
+                Command::Estop(on) => Sent::Estop {
+                    topic: topics::ESTOP.name,
+                    on: *on,
+                },
+            };
+            effects.push(Effect::Publish { command, stamp });
+            effects.push(Effect::Broadcast(ToClient::Sent(sent)));
+        }
+        if self.desk.next_wakeup().is_some_and(|w| w <= clock.now) {
+            self.desk_step(clock.now, &mut effects);
+        }
+        self.finish(effects)
+    }
+
+    /// Every half second: the other nodes' health to every browser.
+    pub fn on_status_tick(&self, clock: Clock) -> Vec<Effect> {
+        vec![Effect::Broadcast(self.health.status(clock.now))]
+    }
+
+    /// A browser's request; its answer is an [`Effect::Answer`].
+    pub fn on_request(&mut self, request: ClientRequest, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        let event = match request {
+            ClientRequest::Check { xyz } => {
+                return vec![Effect::Answer(self.check(xyz))];
+            }
+            ClientRequest::Program(op) => {
+                let out = self.desk.request(
+                    op,
+                    &self.teleop,
+                    self.last_tool,
+                    self.last_gripper,
+                    clock.now,
+                );
+                self.desk_outcome(out, &mut effects);
+                self.desk_step(clock.now, &mut effects);
+                return self.finish(effects);
+            }
+            ClientRequest::Target { xyz } => Event::SetTarget { xyz },
+            ClientRequest::Jog { d } => Event::Jog { dxyz: d },
+            ClientRequest::Gripper { v } => Event::Gripper { opening: v },
+            ClientRequest::Joints { q } => Event::Joints {
+                positions: q.into_iter().collect(),
+            },
+            ClientRequest::Estop { on } => Event::Estop { engaged: on },
+        };
+        let engaged = matches!(event, Event::Estop { engaged: true });
+        let eezybot = self.teleop.is_eezybot();
+        match self.teleop.handle_event(event) {
+            Ok(f) => {
+                self.changed = true;
+                effects.push(Effect::Answer(ToClient::Ack {
+                    target: f.target,
+                    joints: eezybot.then(|| ArmJointsMsg::from(&f.joints)),
+                    reachable: true,
+                }));
+            }
+            Err(refusal) => {
+                let reason = refusal.to_string();
+                let answer = ToClient::Refused {
+                    reason: shorten(&reason, web::REASON_MAX).into_owned(),
+                    reachable: Some(false),
+                };
+                effects.push(Effect::Rejected {
+                    kind: refusal.kind(),
+                    reason,
+                });
+                effects.push(Effect::Answer(answer));
+            }
+        }
+        if engaged {
+            self.stop_playing(&mut effects);
+        }
+        self.finish(effects)
+    }
+
+    /// The answer to a `check`: the EezyBot's closed form, as compute_ik checks.
+    fn check(&self, xyz: [f64; 3]) -> ToClient {
+        let (reachable, joints, reason) = if !self.teleop.is_eezybot() {
+            let why =
+                "not checked here: this arm has no closed form, compute_ik decides when it is sent";
+            (None, None, Some(why.into()))
+        } else {
+            match self.teleop.check(xyz) {
+                Ok(q) => (Some(true), Some(ArmJointsMsg::from(&q)), None),
+                Err(e) => (Some(false), None, Some(e.to_string())),
+            }
+        };
+        ToClient::Check {
+            xyz,
+            reachable,
+            joints,
+            reason,
+        }
+    }
+
+    /// A ROS input.
+    pub fn on_input(&mut self, input: Input, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        match input {
+            Input::JointStates(js) => {
+                if let Some(pose) = self.pose_of(&js) {
+                    let pose = Arc::new(ToClient::Pose(pose));
+                    effects.push(Effect::Broadcast((*pose).clone()));
+                    self.pose = Some(pose);
+                    self.changed = true;
+                }
+                // arrival is judged on where the tool is now
+                self.desk_step(clock.now, &mut effects);
+            }
+            Input::RobotDescription(text) => self.robot_description(text, &mut effects),
+            Input::Diagnostics(d) => {
+                self.health.update(&d, clock.now);
+                if self.desk.playing() {
+                    let value = |s: &DiagnosticStatus, k: &str| {
+                        s.values
+                            .iter()
+                            .find(|v| v.key == k)
+                            .map(|v| v.value.clone())
+                    };
+                    for st in &d.status {
+                        if let Some(stamp) = value(st, REJECTED_STAMP_KEY) {
+                            let reason =
+                                value(st, LAST_REJECTION_KEY).unwrap_or_else(|| st.message.clone());
+                            self.desk.refused(&stamp, &reason);
+                        }
+                    }
+                    self.desk_step(clock.now, &mut effects);
+                }
+            }
+            Input::ServoState(s) => {
+                if let Some(latency) = self.latency.reply(s.header.stamp, clock.wall) {
+                    effects.push(Effect::Broadcast(latency));
+                }
+            }
+            Input::Estop(on) => {
+                effects.push(Effect::Broadcast(ToClient::Estop { on }));
+                if on {
+                    self.stop_playing(&mut effects);
+                }
+            }
+            Input::Unreadable { topic, error } => {
+                effects.extend(self.unreadable.note(topic, &error, clock.now));
+            }
+        }
+        self.finish(effects)
+    }
+
+    /// A program file job of an [`Effect::File`] is done (or timed out).
+    pub fn on_file_done(&mut self, done: FileDone) -> Vec<Effect> {
+        let mut effects = vec![];
+        let out = self.desk.file_done(done);
+        self.desk_outcome(out, &mut effects);
+        self.finish(effects)
+    }
+
+    /// compute_ik took the move mode of an [`Effect::SetMotion`] (or not, with the reason).
+    pub fn on_mode_set(&mut self, result: Result<(), String>, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        self.desk.mode_set(result);
+        self.desk_step(clock.now, &mut effects);
+        self.finish(effects)
+    }
+
+    /// The panel's own `diagnostics` status (the loop adds the watched topics' peers).
+    pub fn report(&self, name: &str, url: &str, web: &WebStats, now: Instant) -> DiagnosticStatus {
+        let mut values = vec![
+            ("url", url.to_string()),
+            ("targets_sent", self.sent.to_string()),
+        ];
+        values.extend(web.values());
+        values.extend(self.unreadable.values());
+        let last = web.last_refusal();
+        let recent = last
+            .clone()
+            .filter(|(at, _)| now.saturating_duration_since(*at) < REFUSAL_WARN_FOR);
+        if let Some((_, last)) = last {
+            values.push(("last_refusal", last));
+        }
+        let (level, message) = match recent {
+            Some((at, last)) => (
+                DiagnosticStatus::WARN,
+                format!(
+                    "web panel on {url}; refused a client {:.0} s ago ({} refusals in all): {last}",
+                    now.saturating_duration_since(at).as_secs_f64(),
+                    web.refused_total()
+                ),
+            ),
+            None => (DiagnosticStatus::OK, format!("web panel on {url}")),
+        };
+        ros_plumbing::diagnostics::status(level, name, "", &message, &values)
+    }
+
+    /// Append the snapshot if it changed.
+    fn finish(&mut self, mut effects: Vec<Effect>) -> Vec<Effect> {
+        if std::mem::take(&mut self.changed) {
+            effects.push(Effect::Snapshot(self.snapshot()));
+        }
+        effects
+    }
+
+    fn stop_playing(&mut self, effects: &mut Vec<Effect>) {
+        if self.desk.playing() {
+            let out = DeskOutcome {
+                restore_mode: self.desk.stop(),
+                changed: true,
+                ..Default::default()
+            };
+            self.desk_outcome(out, effects);
+        }
+    }
+
+    fn desk_step(&mut self, now: Instant, effects: &mut Vec<Effect>) {
+        if self.desk.playing() {
+            let out = self.desk.play_step(&mut self.teleop, now, self.last_tool);
+            self.desk_outcome(out, effects);
+        }
+    }
+
+    fn desk_outcome(&mut self, out: DeskOutcome, effects: &mut Vec<Effect>) {
+        let mode = out.set_mode.is_some() || out.restore_mode;
+        if let Some(job) = out.file {
+            effects.push(Effect::File {
+                job,
+                dir: self.desk.dir().to_path_buf(),
+            });
+        }
+        if let Some(mode) = out.set_mode {
+            effects.push(Effect::SetMotion(mode));
+        } else if out.restore_mode {
+            effects.push(Effect::RestoreMotion);
+        }
+        if out.changed || mode {
+            let view = Arc::new(ToClient::Program(self.desk.view()));
+            effects.push(Effect::Broadcast((*view).clone()));
+            self.program = view;
+            self.changed = true;
+        }
+    }
+
+    fn robot_description(&mut self, text: String, effects: &mut Vec<Effect>) {
+        let m = match RobotModel::from_urdf_str(&text, topics::ROBOT_DESCRIPTION.name) {
+            Ok(m) => m,
+            Err(e) => {
+                effects.push(Effect::Log(
+                    log::Level::Warn,
+                    format!("robot_description not usable for the live view: {e}"),
+                ));
+                return;
+            }
+        };
+        effects.push(Effect::Log(
+            log::Level::Info,
+            format!("robot_description: {} ({} links)", m.name, m.links.len()),
+        ));
+        // the joint mode's sliders come from the URDF, for any arm
+        let view = self.teleop.set_robot(&m).clone();
+        let envelope = self.envelope(&m);
+        let rev = self.urdf.as_ref().map_or(1, |(_, r)| r + 1);
+        self.urdf = Some((text.into(), rev));
+        let robot = RobotInfo {
+            name: view.name,
+            eezybot: view.eezybot,
+            joints: self.teleop.joint_sliders(),
+            reach: view.reach_m,
+            tool_link: view.tool_link,
+            from_urdf: true,
+            scene: Some(UrdfScene {
+                urdf: Some(format!("robot.urdf?rev={rev}")),
+                envelope,
+            }),
+        };
+        effects.push(Effect::Broadcast(ToClient::Robot {
+            robot: robot.clone(),
+        }));
+        self.robot = Arc::new(robot);
+        self.model = Some(m);
+        self.changed = true;
+    }
+
+    /// The 3D view's workspace: for the EezyBot the solid of revolution of its closed
+    /// form's limits (computed once), for any other arm a cloud of its tool's positions
+    /// at random configurations, only for a chain of at most [`ENVELOPE_MAX_JOINTS`]
+    /// joints (a description of thousands of links would hold the loop for seconds).
+    fn envelope(&mut self, model: &RobotModel) -> Option<Envelope> {
+        use eezybot_kinematics::envelope::{chain_envelope, eezybot_envelope};
+        match self.teleop.robot() {
+            Some(r) if !r.eezybot => r
+                .tool_link
+                .as_ref()
+                .filter(|_| model.joints.len() <= ENVELOPE_MAX_JOINTS)
+                .and_then(|tip| {
+                    eezybot_kinematics::chain::SerialChain::from_model(model, &model.root, tip)
+                        .ok()
+                        .map(|chain| chain_envelope(&chain, 2000, 1))
+                }),
+            _ => {
+                let arm = self.teleop.arm();
+                Some(
+                    self.eezybot_envelope
+                        .get_or_insert_with(|| eezybot_envelope(arm, 0.004))
+                        .clone(),
+                )
+            }
+        }
+    }
+
+    /// The live view of `js`; remembers where the tool and the claw are.
+    fn pose_of(&mut self, js: &JointState) -> Option<Pose> {
+        if !self.teleop.is_eezybot() {
+            // any other arm: every joint, the links' segments and its tool
+            let m = self.model.as_ref()?;
+            let finite: Vec<(&str, f64)> = js
+                .name
+                .iter()
+                .map(String::as_str)
+                .zip(js.position.iter().copied())
+                .filter(|(_, v)| v.is_finite())
+                .collect();
+            let tool_link = self.teleop.robot().and_then(|r| r.tool_link.clone());
+            let tool = tool_link
+                .and_then(|l| m.link_poses(&finite).get(&l).map(|p| p.translation.vector))
+                .map(|p| [p.x, p.y, p.z]);
+            self.last_tool = tool;
+            let joints = finite
+                .iter()
+                .filter(|(n, _)| m.joint_index(n).is_some())
+                .map(|(n, v)| (n.to_string(), *v))
+                .collect();
+            return Some(Pose {
+                joints,
+                all: None,
+                gripper: None,
+                tool,
+                segments: segments(m, js),
+            });
+        }
+        let get = |n: &str| {
+            js.name
+                .iter()
+                .position(|x| x == n)
+                .and_then(|i| js.position.get(i).copied())
+        };
+        let (b, s, e) = (
+            get(ACTUATED_JOINTS[0])?,
+            get(ACTUATED_JOINTS[1])?,
+            get(ACTUATED_JOINTS[2])?,
+        );
+        if !(b.is_finite() && s.is_finite() && e.is_finite()) {
+            return None;
+        }
+        let q = ArmJoints {
+            base_rad: b,
+            shoulder_rad: s,
+            elbow_rad: e,
+        };
+        self.teleop.observe_joints(q);
+        let tool = self.teleop.arm().forward(&q);
+        self.last_tool = Some([tool.x, tool.y, tool.z]);
+        let open_rad = self.teleop.arm().geometry.gripper_open_rad;
+        if let Some(g) = get(ACTUATED_JOINTS[3]).filter(|g| g.is_finite() && open_rad > 0.0) {
+            self.last_gripper = Some((g / open_rad).clamp(0.0, 1.0));
+        }
+        let model = self.model.as_ref();
+        // every joint, passive linkage ones included, for the 3D view (the URDF's joints
+        // only: a joint_states of thousands of names must not become a message of
+        // megabytes to every browser)
+        let all = js
+            .name
+            .iter()
+            .zip(js.position.iter())
+            .filter(|(n, v)| v.is_finite() && model.is_some_and(|m| m.joint_index(n).is_some()))
+            .map(|(n, v)| (n.clone(), *v))
+            .collect();
+        let msg = ArmJointsMsg::from(&q);
+        Some(Pose {
+            joints: BTreeMap::from([
+                ("base_joint".to_string(), msg.base_joint),
+                ("shoulder_joint".to_string(), msg.shoulder_joint),
+                ("elbow_joint".to_string(), msg.elbow_joint),
+            ]),
+            all: Some(all),
+            gripper: get(ACTUATED_JOINTS[3]),
+            tool: Some([tool.x, tool.y, tool.z]),
+            segments: model.map(|m| segments(m, js)).unwrap_or_default(),
+        })
+    }
+}
+
+/// Segments (parent origin → child origin, child link name) of every joint of the URDF
+/// for these joint positions, for the page's side and top views.
+fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
+    let positions: Vec<(&str, f64)> = js
+        .name
+        .iter()
+        .map(String::as_str)
+        .zip(js.position.iter().copied())
+        .collect();
+    let poses = model.link_poses(&positions);
+    model
+        .joints
+        .iter()
+        .filter_map(|j| {
+            let a = poses.get(&j.parent)?.translation.vector;
+            let b = poses.get(&j.child)?.translation.vector;
+            ((b - a).norm() > 1e-6).then(|| ([a.x, a.y, a.z, b.x, b.y, b.z], j.child.clone()))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use eezybot_msgs::diagnostic_msgs::KeyValue;
+    use eezybot_msgs::std_msgs::Header;
+
+    /// (status name, level, key-value pairs)
+    type Entry<'a> = (&'a str, u8, &'a [(&'a str, &'a str)]);
+
+    fn array(statuses: &[Entry]) -> DiagnosticArray {
+        DiagnosticArray {
+            header: Header::default(),
+            status: statuses
+                .iter()
+                .map(|(name, level, values)| DiagnosticStatus {
+                    level: *level,
+                    name: (*name).into(),
+                    message: "m".into(),
+                    hardware_id: "eezybot_arm".into(),
+                    values: values
+                        .iter()
+                        .map(|(k, v)| KeyValue {
+                            key: (*k).into(),
+                            value: (*v).into(),
+                        })
+                        .collect(),
+                })
+                .collect(),
+        }
+    }
+
+    fn json(h: &NodeHealth) -> serde_json::Value {
+        serde_json::from_str(&h.status(Instant::now()).to_text()).unwrap()
+    }
+
+    fn names(h: &NodeHealth) -> Vec<(String, bool)> {
+        json(h)["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|n| {
+                (
+                    n["name"].as_str().unwrap().to_string(),
+                    n["up"].as_bool().unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn nodes_show_under_the_names_they_run_under() {
+        let mut h = NodeHealth::new("gui_bridge");
+        assert_eq!(
+            names(&h),
+            [
+                ("compute_ik".into(), false),
+                ("state_publisher".into(), false),
+                ("serial_node".into(), false)
+            ]
+        );
+        h.update(
+            &array(&[
+                ("ik2: inverse kinematics", 0, &[]),
+                ("gui_bridge: operator panel", 0, &[]),
+                ("serial_node: servo link", 1, &[]),
+                ("camera: frames", 0, &[]),
+            ]),
+            Instant::now(),
+        );
+        assert_eq!(
+            names(&h),
+            [
+                ("ik2".into(), true),
+                ("state_publisher".into(), false),
+                ("serial_node".into(), true),
+                ("camera".into(), true)
+            ]
+        );
+    }
+
+    #[test]
+    fn the_rejection_shown_is_the_one_carrying_the_refusal_key() {
+        let mut h = NodeHealth::new("gui_bridge");
+        h.update(
+            &array(&[("serial_node: servo link", 1, &[("last_rejection", "servo")])]),
+            Instant::now(),
+        );
+        assert!(json(&h)["last_rejection"].is_null());
+        h.update(
+            &array(&[(
+                "ik2: inverse kinematics",
+                1,
+                &[
+                    ("last_rejection", "out of reach"),
+                    (REJECTED_STAMP_KEY, "1.000000002"),
+                ],
+            )]),
+            Instant::now(),
+        );
+        assert_eq!(json(&h)["last_rejection"], "out of reach");
+    }
+
+    #[test]
+    fn a_flood_of_names_never_pushes_out_a_node_that_is_up() {
+        let mut h = NodeHealth::new("gui_bridge");
+        h.update(
+            &array(&[("compute_ik: inverse kinematics", 0, &[])]),
+            Instant::now(),
+        );
+        let many: Vec<String> = (0..2000).map(|i| format!("s{i}")).collect();
+        let flood: Vec<Entry> = many.iter().map(|n| (n.as_str(), 0, &[][..])).collect();
+        h.update(&array(&flood), Instant::now());
+        h.update(
+            &array(&[(":::", 0, &[]), ("", 0, &[]), ("\u{2603}: x", 0, &[])]),
+            Instant::now(),
+        );
+        assert_eq!(h.seen.len(), MAX_TRACKED_NODES);
+        assert!(h.seen.contains_key("compute_ik"));
+    }
+}
