@@ -203,7 +203,7 @@ class Forwarder:
             if d.queued >= self.limit:
                 d.overflow += 1
                 continue
-            release = now + rng.uniform(self.lo, self.hi * 1.5)
+            release = now + rng.uniform(self.lo, self.hi)
             if self.fifo:
                 if release < d.last_release:
                     release = d.last_release
