@@ -1,7 +1,7 @@
 //! `compute_ik` binary: sets up ROS and runs [`compute_ik::run`].
 
 use compute_ik::core::Source;
-use compute_ik::{Core, Input, Outputs};
+use compute_ik::{ArmModel, Core, Handles, Input, Outputs, Pipeline};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -49,12 +49,25 @@ async fn main_async() -> anyhow::Result<()> {
     let spec = compute_ik::spec();
     // signal handlers first: Ctrl-C while the node starts stops it cleanly
     let shutdown = ros_plumbing::shutdown_logged();
-    let mut node = RosNode::start(&spec)?;
+    let node = RosNode::start(&spec)?;
     if let Some(extra) = node.user_args().first() {
         anyhow::bail!("unexpected argument `{extra}` (see --help)");
     }
     let params = node.params().clone();
-    let core = Core::from_params(&params).map_err(anyhow::Error::msg)?;
+    match Core::from_params(&params).map_err(anyhow::Error::msg)? {
+        Core::EezyBot(core) => serve(*core, node, params, shutdown).await,
+        Core::Urdf(core) => serve(*core, node, params, shutdown).await,
+    }
+}
+
+/// Subscribe, publish and run the node for this arm until `shutdown`.
+async fn serve<M: ArmModel>(
+    core: Pipeline<M>,
+    mut node: RosNode,
+    params: ros_plumbing::Params,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let arm = core.model();
 
     let xyz = node.subscribe_to(&topics::XYZ_TARGET)?;
     let gripper = node.subscribe_to(&topics::GRIPPER_TARGET)?;
@@ -62,7 +75,7 @@ async fn main_async() -> anyhow::Result<()> {
     let pose = node.subscribe_to(&topics::POSE_TARGET)?;
     let estop = node.subscribe_to(&topics::ESTOP)?;
     let joint_states = node.publish_on(&topics::JOINT_STATES)?;
-    let servo_angles = if core.has_servos() {
+    let servo_angles = if arm.has_servos() {
         Some(node.publish_on(&topics::SERVO_ANGLES)?)
     } else {
         None
@@ -130,15 +143,22 @@ async fn main_async() -> anyhow::Result<()> {
         node.domain_id(),
         node.resolve(&topics::XYZ_TARGET)?,
         node.resolve(&topics::JOINT_STATES)?,
-        if core.has_servos() {
+        if arm.has_servos() {
             format!(", {}", node.resolve(&topics::SERVO_ANGLES)?)
         } else {
             String::new()
         },
-        core.describe()
+        arm.describe()
     );
-    compute_ik::run(core, inputs, &outputs, params, diag_name, peers, shutdown).await;
-    drop(outputs);
+    let handles = Handles {
+        inputs,
+        outputs,
+        params,
+        peers,
+        diag_name,
+        shutdown,
+    };
+    compute_ik::run(core, handles).await;
     drop((xyz, gripper, joints, pose, estop));
     node.shutdown().await;
     Ok(())

@@ -1,6 +1,8 @@
 //! The IK node's logic without ROS.
 #![allow(clippy::unwrap_used)]
 use compute_ik::core::*;
+use compute_ik::eezybot::*;
+use compute_ik::pipeline::Step as Output;
 use eezybot_kinematics::{Arm, ArmConfig, ArmJoints};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::Point;
@@ -49,9 +51,12 @@ fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
         out.joint_states.header.stamp,
         Time::from_nanos(1_700_000_000_123_456_789)
     );
-    assert_eq!(out.servo_angles.header.stamp, out.joint_states.header.stamp);
     assert_eq!(
-        out.servo_angles.name,
+        out.servo_angles.as_ref().unwrap().header.stamp,
+        out.joint_states.header.stamp
+    );
+    assert_eq!(
+        out.servo_angles.as_ref().unwrap().name,
         [
             "base_servo",
             "shoulder_servo",
@@ -69,6 +74,8 @@ fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
     let q = c.state().joints;
     let deg: Vec<f64> = out
         .servo_angles
+        .as_ref()
+        .unwrap()
         .position
         .iter()
         .map(|r| r.to_degrees())
@@ -230,7 +237,7 @@ fn joint_mode_keeps_unnamed_joints() {
     assert_eq!(c.state().joints.base_rad, 0.3);
     assert_eq!(c.state().joints.shoulder_rad, ArmJoints::HOME.shoulder_rad);
     assert!((c.state().gripper_opening - 0.5).abs() < 1e-12);
-    assert!((out.servo_angles.position[3].to_degrees() - 120.0).abs() < 1e-9);
+    assert!((out.servo_angles.as_ref().unwrap().position[3].to_degrees() - 120.0).abs() < 1e-9);
 }
 
 #[test]
@@ -266,6 +273,8 @@ fn servo_trace(first: Output, rest: Vec<Output>) -> Vec<Vec<f64>> {
         .chain(rest)
         .map(|o| {
             o.servo_angles
+                .as_ref()
+                .unwrap()
                 .position
                 .iter()
                 .map(|r| r.to_degrees())

@@ -2,6 +2,7 @@
 //! substitution, pose targets and a URDF arm (the Jaco), without ROS.
 #![allow(clippy::unwrap_used)]
 use compute_ik::core::*;
+use compute_ik::eezybot::*;
 use compute_ik::numeric::Solver;
 use compute_ik::urdf_arm::{UrdfArm, UrdfCore};
 use eezybot_kinematics::urdf::RobotModel;
@@ -283,7 +284,7 @@ fn the_jaco_reaches_poses_and_keeps_its_orientation_for_positions() {
     let q = [-0.5, 2.5, -2.0, 1.0, 2.5, 0.5];
     let goal = chain.forward(&q).unwrap();
     let out = c.handle_pose_target(&pose_msg(&goal), now()).unwrap();
-    assert_eq!(out.header.stamp, now());
+    assert_eq!(out.joint_states.header.stamp, now());
     settle_urdf(&mut c);
     let tip = jaco_tip(&c);
     assert!((tip.translation.vector - goal.translation.vector).norm() < 1e-9);

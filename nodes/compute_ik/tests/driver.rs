@@ -1,0 +1,271 @@
+//! The node's loop policy ([`Driver`]) on a fixed clock: every event is handed its
+//! time, as `servo_protocol::host`'s tests do, so nothing here waits or reads a clock.
+#![allow(clippy::unwrap_used)]
+use compute_ik::core::Source;
+use compute_ik::driver::{Driver, Effect, MIN_IMMEDIATE_DIAG_GAP};
+use compute_ik::eezybot::{EezyBot, IkCore};
+use compute_ik::urdf_arm::{UrdfArm, UrdfCore};
+use compute_ik::Input;
+use eezybot_kinematics::urdf::RobotModel;
+use eezybot_kinematics::ArmConfig;
+use eezybot_msgs::geometry_msgs::{Point, PointStamped};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::Time;
+use std::time::{Duration, Instant};
+
+fn ms(n: u64) -> Duration {
+    Duration::from_millis(n)
+}
+
+/// The wall clock of the test: `t0_wall` at the monotonic `t0`, advancing with it.
+struct Clock {
+    t0: Instant,
+    t0_wall: Time,
+}
+
+impl Clock {
+    fn new() -> Clock {
+        Clock {
+            t0: Instant::now(),
+            t0_wall: Time::from_nanos(1_700_000_000_000_000_000),
+        }
+    }
+    fn at(&self, t: Duration) -> (Instant, Time) {
+        (self.t0 + t, self.wall(t))
+    }
+    fn wall(&self, t: Duration) -> Time {
+        Time::from_nanos(self.t0_wall.to_nanos() + t.as_nanos() as i64)
+    }
+}
+
+fn xyz(x: f64, y: f64, z: f64, stamp: Time) -> Input {
+    Input::XyzTarget(PointStamped {
+        header: Header {
+            stamp,
+            frame_id: String::new(),
+        },
+        point: Point { x, y, z },
+    })
+}
+
+fn driver() -> Driver<EezyBot> {
+    Driver::new(IkCore::new(&ArmConfig::default(), "base_link"))
+}
+
+fn published(effects: &[Effect]) -> Vec<&JointState> {
+    effects
+        .iter()
+        .filter_map(|e| match e {
+            Effect::Publish(s) => Some(&s.joint_states),
+            _ => None,
+        })
+        .collect()
+}
+
+fn reports(effects: &[Effect]) -> usize {
+    effects.iter().filter(|e| **e == Effect::Report).count()
+}
+
+/// Run the driver's deadlines until nothing is due; the effects with their times.
+fn run_until_idle(d: &mut Driver<EezyBot>, clock: &Clock) -> Vec<(Duration, Effect)> {
+    let mut out = vec![];
+    while let Some(t) = d.deadline() {
+        let since = t - clock.t0;
+        let effects = d.on_time(t, clock.wall(since));
+        out.extend(effects.into_iter().map(|e| (since, e)));
+        assert!(out.len() < 10_000, "never settles");
+    }
+    out
+}
+
+#[test]
+fn a_target_goes_at_once_then_steps_every_period_after_one_and_a_half_and_reports_at_rest() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let (now, wall) = clock.at(ms(1000));
+    let first = d.on_inputs(vec![xyz(0.2, 0.1, 0.15, wall)], now, wall);
+    assert_eq!(published(&first).len(), 1, "{first:?}");
+    assert_eq!(
+        published(&first)[0].header.stamp,
+        wall,
+        "the first step carries the target's stamp"
+    );
+    assert_eq!(reports(&first), 0);
+    assert_eq!(d.deadline(), Some(now + ms(30)), "1.5 periods of 20 ms");
+    let rest = run_until_idle(&mut d, &clock);
+    let steps: Vec<Duration> = rest
+        .iter()
+        .filter_map(|(t, e)| matches!(e, Effect::Publish(_)).then_some(*t))
+        .collect();
+    assert!(steps.len() > 5, "{} steps", steps.len());
+    assert_eq!(steps[0], ms(1030));
+    for w in steps.windows(2) {
+        assert_eq!(w[1] - w[0], ms(20), "one step a period");
+    }
+    // each step stamped when it is planned; the end of the motion is reported once
+    let (last_t, last) = rest.last().unwrap();
+    assert_eq!((*last_t, last), (*steps.last().unwrap(), &Effect::Report));
+    assert_eq!(rest.iter().filter(|(_, e)| *e == Effect::Report).count(), 1);
+    assert!(!d.core().is_moving());
+    assert_eq!(d.deadline(), None);
+}
+
+#[test]
+fn of_targets_that_arrive_together_the_newest_wins_and_the_rest_are_counted() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let (now, wall) = clock.at(ms(10));
+    let burst = vec![
+        xyz(0.2, 0.1, 0.15, wall),
+        xyz(0.2, 0.0, 0.15, wall),
+        xyz(0.2, -0.1, 0.15, wall),
+    ];
+    let effects = d.on_inputs(burst, now, wall);
+    assert_eq!(published(&effects).len(), 1);
+    assert_eq!(d.core().counters().superseded, 2);
+    assert_eq!(d.core().counters().accepted, 1);
+    let goal = d.core().goal().joints;
+    assert!(
+        goal.base_rad < 0.0,
+        "the last one (y < 0) is the goal: {goal:?}"
+    );
+}
+
+#[test]
+fn a_late_target_is_held_for_a_newer_one_and_the_newest_applied_at_the_deadline() {
+    let clock = Clock::new();
+    let mut d = driver();
+    // live targets, received 2 ms after their stamps: the usual delay
+    for i in 0..5u64 {
+        let (now, wall) = clock.at(ms(20 * i));
+        let stamp = clock.wall(ms(20 * i).saturating_sub(ms(2)));
+        let e = d.on_inputs(vec![xyz(0.2, 0.0, 0.15, stamp)], now, wall);
+        assert_eq!(published(&e).len(), 1);
+    }
+    run_until_idle(&mut d, &clock);
+    // after an outage: two targets stamped 0.4 s before they arrive, one after the other
+    let (now, wall) = clock.at(ms(5000));
+    let old = |y: f64, back: u64| xyz(0.2, y, 0.15, clock.wall(ms(5000 - back)));
+    let held = d.on_inputs(vec![old(0.1, 400)], now, wall);
+    assert!(held.is_empty(), "held back: {held:?}");
+    let deadline = d.deadline().unwrap();
+    let (now2, wall2) = clock.at(ms(5010));
+    assert!(d.on_inputs(vec![old(-0.1, 390)], now2, wall2).is_empty());
+    assert_eq!(
+        d.deadline(),
+        Some(deadline),
+        "a newer late target does not extend the wait"
+    );
+    assert_eq!(d.core().counters().superseded, 1);
+    assert!(d.on_time(deadline - ms(1), clock.wall(ms(5029))).is_empty());
+    let applied = d.on_time(deadline, clock.wall(deadline - clock.t0));
+    assert_eq!(published(&applied).len(), 1);
+    assert!(
+        d.core().goal().joints.base_rad < 0.0,
+        "the newest of the two"
+    );
+}
+
+#[test]
+fn refusals_are_reported_at_once_at_most_every_100_ms() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let mut at = |t: u64| {
+        let (now, wall) = clock.at(ms(t));
+        reports(&d.on_inputs(vec![xyz(2.0, 0.0, 0.15, wall)], now, wall))
+    };
+    assert_eq!(at(0), 1);
+    assert_eq!(at(50), 0, "within {MIN_IMMEDIATE_DIAG_GAP:?} of the last");
+    assert_eq!(at(100), 1);
+    assert_eq!(d.core().counters().rejected, 3);
+    let r = d.core().last_rejection().unwrap();
+    assert_eq!(
+        (r.source, r.reason.code().as_str()),
+        (Source::XyzTarget, "too_far")
+    );
+}
+
+#[test]
+fn the_estop_stops_the_motion_at_once_and_refuses_targets_until_released() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let (now, wall) = clock.at(ms(0));
+    d.on_inputs(vec![xyz(0.2, 0.1, 0.15, wall)], now, wall);
+    assert!(d.core().is_moving());
+    let (now, wall) = clock.at(ms(10));
+    let e = d.on_inputs(vec![Input::Estop(true)], now, wall);
+    assert_eq!(e, vec![Effect::Report]);
+    assert!(
+        !d.core().is_moving() && d.deadline().is_none(),
+        "no step after the e-stop"
+    );
+    let (now, wall) = clock.at(ms(20));
+    assert!(
+        d.on_inputs(vec![Input::Estop(true)], now, wall).is_empty(),
+        "no change, no report"
+    );
+    let (now, wall) = clock.at(ms(500));
+    let refused = d.on_inputs(vec![xyz(0.2, 0.0, 0.15, wall)], now, wall);
+    assert_eq!((published(&refused).len(), reports(&refused)), (0, 1));
+    assert_eq!(d.core().last_rejection().unwrap().reason.code(), "estop");
+    let (now, wall) = clock.at(ms(600));
+    assert_eq!(
+        d.on_inputs(vec![Input::Estop(false)], now, wall),
+        vec![Effect::Report]
+    );
+    let (now, wall) = clock.at(ms(700));
+    assert_eq!(
+        published(&d.on_inputs(vec![xyz(0.2, 0.0, 0.15, wall)], now, wall)).len(),
+        1
+    );
+}
+
+#[test]
+fn a_new_joint_states_subscriber_gets_the_pose_over_four_polls() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let wall = clock.wall(ms(0));
+    let greet = |e: Vec<Effect>| match e.as_slice() {
+        [Effect::JointStates(js)] => js.header.stamp == wall,
+        [] => false,
+        other => panic!("{other:?}"),
+    };
+    assert!(greet(d.on_poll(1, wall)));
+    for _ in 0..3 {
+        assert!(greet(d.on_poll(1, wall)));
+    }
+    assert!(!greet(d.on_poll(1, wall)), "four polls, then quiet");
+    assert!(!greet(d.on_poll(0, wall)), "one leaving is not greeted");
+    assert!(greet(d.on_poll(1, wall)), "one more is");
+}
+
+#[test]
+fn a_urdf_arm_runs_the_same_pipeline_and_publishes_no_servo_angles() {
+    let clock = Clock::new();
+    let model = RobotModel::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../urdf/jaco.urdf"
+    )))
+    .unwrap();
+    let core = UrdfCore::new(UrdfArm::new(model, "", "").unwrap(), "base_link").unwrap();
+    let mut d = Driver::new(core);
+    let (now, wall) = clock.at(ms(0));
+    let e = d.on_inputs(vec![Input::GripperTarget(0.5, wall)], now, wall);
+    assert_eq!(reports(&e), 1);
+    assert_eq!(
+        d.core().last_rejection().unwrap().reason.code(),
+        "no_gripper"
+    );
+    let js = JointState {
+        name: vec!["jaco_joint_1".into()],
+        position: vec![0.3],
+        ..Default::default()
+    };
+    let (now, wall) = clock.at(ms(200));
+    let e = d.on_inputs(vec![Input::JointTarget(js)], now, wall);
+    match e.as_slice() {
+        [Effect::Publish(step)] => assert!(step.servo_angles.is_none()),
+        other => panic!("{other:?}"),
+    }
+}
