@@ -4,6 +4,7 @@
 pub mod args;
 pub mod burst;
 pub mod diagnostics;
+pub mod docs;
 pub mod feedback;
 mod error;
 pub mod logging;
