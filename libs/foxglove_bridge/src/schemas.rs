@@ -8,6 +8,9 @@
 //! with comments and blank lines removed (field order, types, constants and default
 //! values as upstream).
 
+use ros_plumbing::topics;
+use std::sync::LazyLock;
+
 /// One message type: its name (`pkg/msg/Type`), its `.msg` text and the types it uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MessageDefinition {
@@ -203,89 +206,50 @@ pub struct TopicSpec {
     pub recorded: bool,
 }
 
-const fn topic(
-    topic: &'static str,
-    type_name: &'static str,
-    latched: bool,
-    target: bool,
-    recorded: bool,
-) -> TopicSpec {
-    TopicSpec {
-        topic,
-        type_name,
-        latched,
-        target,
-        recorded,
+impl TopicSpec {
+    /// The spec of a topic of the contract; `None` for a message type without a
+    /// definition here (`every_topic_and_every_dependency_has_a_definition` fails then).
+    fn of(entry: &topics::TopicEntry) -> Option<TopicSpec> {
+        Some(TopicSpec {
+            topic: entry.name,
+            type_name: definition(&entry.type_name)?.name,
+            latched: entry.latched(),
+            target: entry.target,
+            recorded: entry.recorded(),
+        })
     }
 }
 
-/// Every topic of the graph (INTERFACES.md), in the order they are advertised.
-pub const TOPICS: &[TopicSpec] = &[
-    topic(
-        "robot_description",
-        "std_msgs/msg/String",
-        true,
-        false,
-        true,
-    ),
-    topic("tf_static", "tf2_msgs/msg/TFMessage", true, false, true),
-    topic("tf", "tf2_msgs/msg/TFMessage", false, false, true),
-    topic(
-        "joint_states",
-        "sensor_msgs/msg/JointState",
-        false,
-        false,
-        true,
-    ),
-    topic(
-        "servo_angles",
-        "sensor_msgs/msg/JointState",
-        false,
-        false,
-        false,
-    ),
-    topic(
-        "servo_state",
-        "sensor_msgs/msg/JointState",
-        false,
-        false,
-        true,
-    ),
-    topic(
-        "diagnostics",
-        "diagnostic_msgs/msg/DiagnosticArray",
-        false,
-        false,
-        false,
-    ),
-    topic(
-        "xyz_target",
-        "geometry_msgs/msg/PointStamped",
-        false,
-        true,
-        true,
-    ),
-    topic(
-        "pose_target",
-        "geometry_msgs/msg/PoseStamped",
-        false,
-        true,
-        true,
-    ),
-    topic("gripper_target", "std_msgs/msg/Float64", false, true, true),
-    topic(
-        "joint_target",
-        "sensor_msgs/msg/JointState",
-        false,
-        true,
-        true,
-    ),
-    topic("estop", "std_msgs/msg/Bool", true, false, false),
-];
+/// Every topic of the graph: the topic contract (`ros_plumbing::topics::all()`), in its
+/// order. Iterate it (`for spec in TOPICS`) or use it as a slice (`TOPICS.iter()`,
+/// `TOPICS.len()`).
+pub const TOPICS: Topics = Topics;
+
+/// The type of [`TOPICS`]: the table, built from the contract on first use.
+#[derive(Debug, Clone, Copy)]
+pub struct Topics;
+
+static TABLE: LazyLock<Vec<TopicSpec>> =
+    LazyLock::new(|| topics::all().iter().filter_map(TopicSpec::of).collect());
+
+impl std::ops::Deref for Topics {
+    type Target = [TopicSpec];
+    fn deref(&self) -> &[TopicSpec] {
+        &TABLE
+    }
+}
+
+impl IntoIterator for Topics {
+    type Item = &'static TopicSpec;
+    type IntoIter = std::slice::Iter<'static, TopicSpec>;
+    fn into_iter(self) -> Self::IntoIter {
+        TABLE.iter()
+    }
+}
 
 /// The spec of a topic of the graph, by its relative name.
 pub fn topic_spec(topic: &str) -> Option<&'static TopicSpec> {
-    TOPICS.iter().find(|t| t.topic == topic)
+    TABLE.iter().find(|t| t.topic == topic)
 }
 
 #[cfg(test)]
@@ -294,9 +258,10 @@ mod tests {
 
     #[test]
     fn every_topic_and_every_dependency_has_a_definition() {
-        for t in TOPICS {
-            assert!(ros2msg_schema(t.type_name).is_some(), "{}", t.type_name);
+        for t in topics::all() {
+            assert!(ros2msg_schema(&t.type_name).is_some(), "{}", t.type_name);
         }
+        assert_eq!(TOPICS.len(), topics::all().len());
         for d in DEFINITIONS {
             for u in d.uses {
                 assert!(definition(u).is_some(), "{} uses {u}", d.name);

@@ -1,11 +1,13 @@
-//! The topics of `shared/INTERFACES.md`, each declared once: name, message type, QoS and
+//! The topic contract of the graph, each topic declared once: name, message type, QoS and
 //! which of our nodes publish and subscribe it. Every endpoint of every node is created
 //! from these constants ([`RosNode::publish_on`](crate::RosNode::publish_on),
 //! [`RosNode::subscribe_to`](crate::RosNode::subscribe_to)); the Python tests read the
 //! same table from `tests/data/topics.json` and the README's topic table is
 //! [`markdown_table`]. Both are checked against [`all`] by `tests/contract.rs`;
 //! regenerate them with `cargo run -p ros_plumbing --example topics -- --json` and
-//! `-- --markdown`.
+//! `-- --markdown`. Foxglove's channels and MCAP recordings are derived from it too
+//! (`foxglove_bridge::TOPICS`): a transient-local topic is "latched", and the roles
+//! [`Topic::target`] and [`Topic::recorded`] are declared here.
 //!
 //! # Examples
 //! ```
@@ -38,6 +40,9 @@ pub struct Topic<M> {
     pub publishers: &'static [&'static str],
     /// The nodes of ours that subscribe it (empty: only outside tools do).
     pub subscribers: &'static [&'static str],
+    /// An operator target: a Foxglove panel may publish it, and a recording replays it
+    /// ([`Topic::as_target`]).
+    pub target: bool,
     message: PhantomData<fn() -> M>,
 }
 
@@ -54,8 +59,28 @@ impl<M: RosMessage> Topic<M> {
             qos,
             publishers,
             subscribers,
+            target: false,
             message: PhantomData,
         }
+    }
+
+    /// The topic as an operator target ([`Topic::target`]).
+    pub const fn as_target(self) -> Self {
+        Topic {
+            target: true,
+            ..self
+        }
+    }
+
+    /// Latched: published transient-local, so a late subscriber gets the last sample.
+    pub fn latched(&self) -> bool {
+        is_latched(&self.qos)
+    }
+
+    /// Written into a recording: `gui_bridge record` subscribes it
+    /// (the targets, and what it takes to view the session again).
+    pub fn recorded(&self) -> bool {
+        self.subscribers.contains(&RECORD)
     }
 
     /// The message type as `ros2 topic` prints it (`std_msgs/msg/Bool`).
@@ -71,6 +96,7 @@ impl<M: RosMessage> Topic<M> {
             qos: self.qos.clone(),
             publishers: self.publishers,
             subscribers: self.subscribers,
+            target: self.target,
         }
     }
 }
@@ -88,6 +114,24 @@ pub struct TopicEntry {
     pub publishers: &'static [&'static str],
     /// [`Topic::subscribers`]
     pub subscribers: &'static [&'static str],
+    /// [`Topic::target`]
+    pub target: bool,
+}
+
+impl TopicEntry {
+    /// [`Topic::latched`]
+    pub fn latched(&self) -> bool {
+        is_latched(&self.qos)
+    }
+
+    /// [`Topic::recorded`]
+    pub fn recorded(&self) -> bool {
+        self.subscribers.contains(&RECORD)
+    }
+}
+
+fn is_latched(qos: &QosProfile) -> bool {
+    matches!(qos.durability, Durability::TransientLocal)
 }
 
 /// `gui_bridge` (one line, to keep the table below readable).
@@ -105,24 +149,26 @@ const FOXGLOVE: &str = "gui_bridge (Foxglove)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.
 pub const XYZ_TARGET: Topic<PointStamped> =
-    Topic::new("xyz_target", qos::COMMANDS, &[GUI], &[IK, RECORD, FOXGLOVE]);
+    Topic::new("xyz_target", qos::COMMANDS, &[GUI], &[IK, RECORD, FOXGLOVE]).as_target();
 /// Desired pose of the tip link (arms with orientation, `ros2 topic pub`).
 pub const POSE_TARGET: Topic<PoseStamped> =
-    Topic::new("pose_target", qos::COMMANDS, &[], &[IK, RECORD, FOXGLOVE]);
+    Topic::new("pose_target", qos::COMMANDS, &[], &[IK, RECORD, FOXGLOVE]).as_target();
 /// Claw opening, 0.0 closed … 1.0 open.
 pub const GRIPPER_TARGET: Topic<Float64> = Topic::new(
     "gripper_target",
     qos::COMMANDS,
     &[GUI],
     &[IK, RECORD, FOXGLOVE],
-);
+)
+.as_target();
 /// Joint mode: positions of named actuated joints, rad.
 pub const JOINT_TARGET: Topic<JointState> = Topic::new(
     "joint_target",
     qos::COMMANDS,
     &[GUI],
     &[IK, RECORD, FOXGLOVE],
-);
+)
+.as_target();
 /// Emergency stop, latched: `true` = no servo moves until `false`.
 pub const ESTOP: Topic<Bool> = Topic::new("estop", qos::ESTOP, &[GUI], &[IK, SERIAL, GUI]);
 /// Every non-fixed URDF joint, rad.
@@ -154,22 +200,40 @@ pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
     &[GUI],
 );
 
-/// Every topic of the contract, in the order of `shared/INTERFACES.md`.
+/// Something done with each typed topic of the contract ([`visit_all`]): for code that
+/// needs the message type, e.g. to subscribe a topic chosen by name.
+pub trait TopicVisitor {
+    /// Called once for each topic.
+    fn visit<M: RosMessage>(&mut self, topic: &Topic<M>);
+}
+
+/// Every topic of the contract, typed, in the order of the README's topic table.
+pub fn visit_all(v: &mut impl TopicVisitor) {
+    v.visit(&XYZ_TARGET);
+    v.visit(&POSE_TARGET);
+    v.visit(&GRIPPER_TARGET);
+    v.visit(&JOINT_TARGET);
+    v.visit(&ESTOP);
+    v.visit(&JOINT_STATES);
+    v.visit(&SERVO_ANGLES);
+    v.visit(&SERVO_STATE);
+    v.visit(&ROBOT_DESCRIPTION);
+    v.visit(&TF);
+    v.visit(&TF_STATIC);
+    v.visit(&DIAGNOSTICS);
+}
+
+/// Every topic of the contract ([`visit_all`]'s order).
 pub fn all() -> Vec<TopicEntry> {
-    vec![
-        XYZ_TARGET.entry(),
-        POSE_TARGET.entry(),
-        GRIPPER_TARGET.entry(),
-        JOINT_TARGET.entry(),
-        ESTOP.entry(),
-        JOINT_STATES.entry(),
-        SERVO_ANGLES.entry(),
-        SERVO_STATE.entry(),
-        ROBOT_DESCRIPTION.entry(),
-        TF.entry(),
-        TF_STATIC.entry(),
-        DIAGNOSTICS.entry(),
-    ]
+    struct Entries(Vec<TopicEntry>);
+    impl TopicVisitor for Entries {
+        fn visit<M: RosMessage>(&mut self, topic: &Topic<M>) {
+            self.0.push(topic.entry());
+        }
+    }
+    let mut entries = Entries(Vec::new());
+    visit_all(&mut entries);
+    entries.0
 }
 
 fn reliability_text(qos: &QosProfile) -> &'static str {
@@ -193,7 +257,7 @@ fn depth(qos: &QosProfile) -> Option<usize> {
     }
 }
 
-/// A QoS as the README and `shared/INTERFACES.md` write it:
+/// A QoS as the topic table writes it:
 /// `reliable, transient-local, keep last 1`.
 pub fn qos_text(qos: &QosProfile) -> String {
     let history = depth(qos).map_or_else(|| "keep all".to_string(), |d| format!("keep last {d}"));
@@ -227,13 +291,14 @@ fn json_list(items: &[&str]) -> String {
 
 /// The table as JSON, one topic per line, as `tests/data/topics.json` holds it:
 /// `{"topics": [{"name", "type", "reliability", "durability", "depth", "qos",
-/// "publishers", "subscribers"}, …]}` (`depth` null for keep all).
+/// "publishers", "subscribers", "latched", "target", "recorded"}, …]}` (`depth` null
+/// for keep all).
 pub fn json(entries: &[TopicEntry]) -> String {
     let rows: Vec<String> = entries
         .iter()
         .map(|e| {
             format!(
-                "    {{\"name\": {}, \"type\": {}, \"reliability\": {}, \"durability\": {}, \"depth\": {}, \"qos\": {}, \"publishers\": {}, \"subscribers\": {}}}",
+                "    {{\"name\": {}, \"type\": {}, \"reliability\": {}, \"durability\": {}, \"depth\": {}, \"qos\": {}, \"publishers\": {}, \"subscribers\": {}, \"latched\": {}, \"target\": {}, \"recorded\": {}}}",
                 json_string(e.name),
                 json_string(&e.type_name),
                 json_string(reliability_text(&e.qos)),
@@ -242,6 +307,9 @@ pub fn json(entries: &[TopicEntry]) -> String {
                 json_string(&qos_text(&e.qos)),
                 json_list(e.publishers),
                 json_list(e.subscribers),
+                e.latched(),
+                e.target,
+                e.recorded(),
             )
         })
         .collect();

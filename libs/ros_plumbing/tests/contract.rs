@@ -1,56 +1,276 @@
-//! The topic contract ([`ros_plumbing::topics`]) and its copies outside Rust cannot
-//! drift: `tests/data/topics.json` (read by the Python tests) and the README's topic
-//! table must be exactly what the table renders.
+//! The topic contract ([`ros_plumbing::topics`]) and its copies cannot drift:
+//! `tests/data/topics.json` (read by the Python tests), the topic table of the docs,
+//! Foxglove's channels (`foxglove_bridge::TOPICS`), and the QoS as the written contract
+//! states it.
 
 use ros_plumbing::topics;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-fn read(rel: &str) -> String {
-    std::fs::read_to_string(repo().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+fn read(path: &Path) -> String {
+    std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 #[test]
 fn the_python_tests_read_the_same_topic_table() {
     let want = topics::json(&topics::all());
     assert!(
-        read("tests/data/topics.json") == want,
+        read(&repo().join("tests/data/topics.json")) == want,
         "tests/data/topics.json is stale; regenerate it:\n  \
          cargo run -q -p ros_plumbing --example topics -- --json > tests/data/topics.json"
     );
 }
 
-#[test]
-fn the_readme_topic_table_is_the_contract() {
-    let readme = read("README.md");
-    let want = topics::markdown_table(&topics::all());
-    assert!(
-        readme.contains(&want),
-        "README.md's topic table differs from ros_plumbing::topics; the table should read:\n\n{want}\n\
-         (cargo run -q -p ros_plumbing --example topics -- --markdown)"
-    );
+/// The header of the rendered topic table.
+const TABLE_HEADER: &str = "| topic | type | QoS | publishers | subscribers |";
+
+/// The repository's own docs that hold the topic table (README.md, docs/*.md).
+fn docs_with_the_topic_table() -> Vec<(PathBuf, String)> {
+    let mut files = vec![repo().join("README.md")];
+    if let Ok(dir) = std::fs::read_dir(repo().join("docs")) {
+        files.extend(
+            dir.filter_map(Result::ok)
+                .map(|e| e.path())
+                .filter(|p| p.extension().is_some_and(|x| x == "md")),
+        );
+    }
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            let text = read(&p);
+            (p, text)
+        })
+        .filter(|(_, text)| text.contains(TABLE_HEADER))
+        .collect()
 }
 
 #[test]
-fn every_topic_of_the_contract_is_in_interfaces_md() {
-    // shared/INTERFACES.md lives beside the repository when it is checked out with it
-    let Ok(interfaces) = std::fs::read_to_string(repo().join("../shared/INTERFACES.md")) else {
-        return;
-    };
-    for t in topics::all() {
+fn the_docs_topic_table_is_the_contract() {
+    let docs = docs_with_the_topic_table();
+    assert!(
+        !docs.is_empty(),
+        "no topic table in README.md or docs/*.md (a line `{TABLE_HEADER}`)"
+    );
+    let want = topics::markdown_table(&topics::all());
+    for (path, text) in docs {
         assert!(
-            interfaces.contains(&format!("`{}`", t.name)),
-            "{} is not in shared/INTERFACES.md",
-            t.name
-        );
-        assert!(
-            interfaces.contains(&t.type_name),
-            "{}'s type {} is not in shared/INTERFACES.md",
-            t.name,
-            t.type_name
+            text.contains(&want),
+            "{}'s topic table differs from ros_plumbing::topics; it should read:\n\n{want}\n\
+             (cargo run -q -p ros_plumbing --example topics -- --markdown)",
+            path.display()
         );
     }
+}
+
+/// The rows of the first topic table in `text`: topic name → the row's cells.
+fn table_rows(text: &str) -> Vec<(String, Vec<String>)> {
+    text.lines()
+        .skip_while(|l| !l.starts_with(TABLE_HEADER))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let cells: Vec<String> = l
+                .trim_matches('|')
+                .split('|')
+                .map(|c| c.trim().trim_matches('`').to_string())
+                .collect();
+            (cells[0].clone(), cells)
+        })
+        .collect()
+}
+
+#[test]
+fn every_topic_of_the_contract_is_written_in_the_docs_with_its_type_and_qos() {
+    for (path, text) in docs_with_the_topic_table() {
+        let rows = table_rows(&text);
+        let contract = topics::all();
+        for t in &contract {
+            let row = rows
+                .iter()
+                .find(|(name, _)| name == t.name)
+                .map(|(_, cells)| cells)
+                .unwrap_or_else(|| panic!("{}: no row for {}", path.display(), t.name));
+            assert_eq!(row[1], t.type_name, "{}: {}'s type", path.display(), t.name);
+            assert_eq!(
+                row[2],
+                topics::qos_text(&t.qos),
+                "{}: {}'s QoS",
+                path.display(),
+                t.name
+            );
+        }
+        for (name, _) in &rows {
+            assert!(
+                contract.iter().any(|t| t.name == name),
+                "{}: {name} is not a topic of the contract",
+                path.display()
+            );
+        }
+    }
+}
+
+/// The topics, types and QoS as the written interface contract states them
+/// (`INTERFACES.md`, "Topics"), transcribed: an independent reference, so that a QoS
+/// changed in topics.rs fails here even when the generated table and topics.json are
+/// regenerated with it. `None`: the contract leaves it open (volatile is DDS' default
+/// durability; the contract gives no depth for `tf`, `tf_static` and `diagnostics`).
+const WRITTEN: &[(&str, &str, &str, Option<&str>, Option<usize>)] = &[
+    (
+        "xyz_target",
+        "geometry_msgs/msg/PointStamped",
+        "reliable",
+        Some("volatile"),
+        Some(10),
+    ),
+    (
+        "pose_target",
+        "geometry_msgs/msg/PoseStamped",
+        "reliable",
+        None,
+        Some(10),
+    ),
+    (
+        "gripper_target",
+        "std_msgs/msg/Float64",
+        "reliable",
+        None,
+        Some(10),
+    ),
+    (
+        "joint_target",
+        "sensor_msgs/msg/JointState",
+        "reliable",
+        None,
+        Some(10),
+    ),
+    (
+        "estop",
+        "std_msgs/msg/Bool",
+        "reliable",
+        Some("transient-local"),
+        Some(1),
+    ),
+    (
+        "joint_states",
+        "sensor_msgs/msg/JointState",
+        "reliable",
+        None,
+        Some(10),
+    ),
+    (
+        "servo_angles",
+        "sensor_msgs/msg/JointState",
+        "reliable",
+        None,
+        Some(10),
+    ),
+    (
+        "servo_state",
+        "sensor_msgs/msg/JointState",
+        "reliable",
+        None,
+        Some(10),
+    ),
+    (
+        "robot_description",
+        "std_msgs/msg/String",
+        "reliable",
+        Some("transient-local"),
+        Some(1),
+    ),
+    (
+        "tf",
+        "tf2_msgs/msg/TFMessage",
+        "reliable",
+        Some("volatile"),
+        None,
+    ),
+    (
+        "tf_static",
+        "tf2_msgs/msg/TFMessage",
+        "reliable",
+        Some("transient-local"),
+        None,
+    ),
+    (
+        "diagnostics",
+        "diagnostic_msgs/msg/DiagnosticArray",
+        "reliable",
+        None,
+        None,
+    ),
+];
+
+#[test]
+fn the_qos_is_the_written_contracts() {
+    let contract = topics::all();
+    assert_eq!(
+        contract.iter().map(|t| t.name).collect::<Vec<_>>(),
+        WRITTEN.iter().map(|w| w.0).collect::<Vec<_>>(),
+        "the topics of the contract"
+    );
+    for (t, &(name, type_name, reliability, durability, depth)) in contract.iter().zip(WRITTEN) {
+        let qos = topics::qos_text(&t.qos); // "reliable, transient-local, keep last 1"
+        let parts: Vec<&str> = qos.split(", ").collect();
+        assert_eq!(t.type_name, type_name, "{name}'s type");
+        assert_eq!(parts[0], reliability, "{name}'s reliability");
+        // a durability the contract leaves open is DDS' default, volatile
+        assert_eq!(
+            parts[1],
+            durability.unwrap_or("volatile"),
+            "{name}'s durability"
+        );
+        if let Some(depth) = depth {
+            assert_eq!(parts[2], format!("keep last {depth}"), "{name}'s history");
+        }
+    }
+}
+
+#[test]
+fn foxglove_channels_are_the_contract() {
+    let contract = topics::all();
+    assert_eq!(
+        foxglove_bridge::TOPICS.len(),
+        contract.len(),
+        "a Foxglove channel for every topic"
+    );
+    for spec in foxglove_bridge::TOPICS {
+        let t = contract
+            .iter()
+            .find(|t| t.name == spec.topic)
+            .unwrap_or_else(|| panic!("Foxglove channel {} is not a topic", spec.topic));
+        assert_eq!(spec.type_name, t.type_name, "{}'s type", t.name);
+        assert_eq!(
+            spec.latched,
+            topics::qos_text(&t.qos).contains("transient-local"),
+            "{}: latched is transient-local",
+            t.name
+        );
+        assert_eq!(spec.target, t.target, "{}: target", t.name);
+        assert_eq!(
+            spec.recorded,
+            t.subscribers.contains(&"gui_bridge (record)"),
+            "{}: recorded is what `gui_bridge record` subscribes",
+            t.name
+        );
+    }
+    // the roles as the docs describe them: the four operator targets
+    let targets: Vec<&str> = foxglove_bridge::TOPICS
+        .iter()
+        .filter(|s| s.target)
+        .map(|s| s.topic)
+        .collect();
+    assert_eq!(
+        targets,
+        [
+            "xyz_target",
+            "pose_target",
+            "gripper_target",
+            "joint_target"
+        ]
+    );
 }

@@ -87,50 +87,43 @@ where
     Ok((stream, untap))
 }
 
-/// Every topic of the graph the Foxglove server and MCAP recordings know, by relative
-/// name.
-const TAPPED: [&str; 12] = [
-    topics::ROBOT_DESCRIPTION.name,
-    topics::TF_STATIC.name,
-    topics::TF.name,
-    topics::JOINT_STATES.name,
-    topics::SERVO_ANGLES.name,
-    topics::SERVO_STATE.name,
-    topics::DIAGNOSTICS.name,
-    topics::XYZ_TARGET.name,
-    topics::POSE_TARGET.name,
-    topics::GRIPPER_TARGET.name,
-    topics::JOINT_TARGET.name,
-    topics::ESTOP.name,
-];
+/// Taps on the topics of the contract ([`topics::visit_all`]) that `wanted(relative
+/// name)` chooses: every topic of the graph the Foxglove server and MCAP recordings know.
+struct Tapper<'a, F> {
+    node: &'a mut RosNode,
+    wanted: F,
+    taps: Vec<(&'static str, LocalBoxStream<'static, RawSample>, Untap)>,
+    error: Option<anyhow::Error>,
+}
 
-/// A tap on the topic of the graph named `name` (relative), if it is one of [`TAPPED`].
-fn tap_named(
-    node: &mut RosNode,
-    name: &str,
-) -> anyhow::Result<Option<(LocalBoxStream<'static, RawSample>, Untap)>> {
-    macro_rules! by_name {
-        ($($t:expr),*) => {$(
-            if name == $t.name {
-                return tap(node, &$t).map(Some);
-            }
-        )*};
+impl<F: Fn(&str) -> bool> topics::TopicVisitor for Tapper<'_, F> {
+    fn visit<M: RosMessage>(&mut self, topic: &topics::Topic<M>) {
+        if self.error.is_some() || !(self.wanted)(topic.name) {
+            return;
+        }
+        match tap(self.node, topic) {
+            Ok((samples, untap)) => self.taps.push((topic.name, samples, untap)),
+            Err(e) => self.error = Some(e),
+        }
     }
-    by_name!(
-        topics::ROBOT_DESCRIPTION,
-        topics::TF_STATIC,
-        topics::TF,
-        topics::JOINT_STATES,
-        topics::SERVO_ANGLES,
-        topics::SERVO_STATE,
-        topics::DIAGNOSTICS,
-        topics::XYZ_TARGET,
-        topics::POSE_TARGET,
-        topics::GRIPPER_TARGET,
-        topics::JOINT_TARGET,
-        topics::ESTOP
-    );
-    Ok(None)
+}
+
+/// Taps on the topics of the graph that `wanted(relative name)` chooses.
+fn tap_wanted(
+    node: &mut RosNode,
+    wanted: impl Fn(&str) -> bool,
+) -> anyhow::Result<Vec<(&'static str, LocalBoxStream<'static, RawSample>, Untap)>> {
+    let mut tapper = Tapper {
+        node,
+        wanted,
+        taps: Vec::new(),
+        error: None,
+    };
+    topics::visit_all(&mut tapper);
+    match tapper.error {
+        Some(e) => Err(e),
+        None => Ok(tapper.taps),
+    }
 }
 
 /// The samples of every topic of the graph for which `wanted(relative name)` holds, as
@@ -139,12 +132,7 @@ pub fn taps(
     node: &mut RosNode,
     wanted: impl Fn(&str) -> bool,
 ) -> anyhow::Result<LocalBoxStream<'static, RawSample>> {
-    let mut streams = Vec::new();
-    for name in TAPPED.into_iter().filter(|t| wanted(t)) {
-        if let Some((stream, _)) = tap_named(node, name)? {
-            streams.push(stream);
-        }
-    }
+    let streams = tap_wanted(node, wanted)?.into_iter().map(|(_, s, _)| s);
     Ok(futures::stream::select_all(streams).boxed_local())
 }
 
@@ -188,13 +176,14 @@ impl Taps {
             if self.untaps.contains_key(topic) {
                 continue;
             }
-            match tap_named(&mut node.borrow_mut(), topic) {
-                Ok(Some((samples, untap))) => {
-                    log::debug!("Foxglove: subscribed {topic}");
-                    self.streams.push(Keyed { topic, samples });
-                    self.untaps.insert(topic, untap);
+            match tap_wanted(&mut node.borrow_mut(), |t| t == topic) {
+                Ok(taps) => {
+                    for (topic, samples, untap) in taps {
+                        log::debug!("Foxglove: subscribed {topic}");
+                        self.streams.push(Keyed { topic, samples });
+                        self.untaps.insert(topic, untap);
+                    }
                 }
-                Ok(None) => {}
                 Err(e) => log::warn!("Foxglove: cannot subscribe {topic}: {e:#}"),
             }
         }
@@ -202,7 +191,7 @@ impl Taps {
             .untaps
             .keys()
             .copied()
-            .filter(|t| !wanted.contains(t) && !LATCHED.contains(t))
+            .filter(|t| !wanted.contains(t)) // `wanted` always has the always-tapped
             .collect();
         if gone.is_empty() {
             return;
@@ -221,9 +210,16 @@ impl Taps {
     }
 }
 
-/// Topics subscribed as long as the Foxglove server runs: latched ones, whose last
-/// sample every client gets when it subscribes.
-const LATCHED: [&str; 2] = [topics::ROBOT_DESCRIPTION.name, topics::TF_STATIC.name];
+/// Topics subscribed as long as the Foxglove server runs: the latched ones it takes to
+/// view the graph (the robot model and its fixed transforms: latched and recorded in
+/// the topic contract), whose last sample every client gets when it subscribes.
+fn always_tapped_topics() -> BTreeSet<&'static str> {
+    topics::all()
+        .iter()
+        .filter(|t| t.latched() && t.recorded())
+        .map(|t| t.name)
+        .collect()
+}
 
 /// Publishers of the four target topics, publishing samples given as CDR.
 pub struct TargetPublishers {
@@ -419,7 +415,8 @@ async fn forward(
     let to_clients = async {
         let mut watched = bridge.watched();
         let mut taps = Taps::new();
-        let mut wanted: BTreeSet<&'static str> = LATCHED.into_iter().collect();
+        let always = always_tapped_topics();
+        let mut wanted: BTreeSet<&'static str> = always.clone();
         taps.follow(node, &wanted);
         loop {
             tokio::select! {
@@ -427,7 +424,7 @@ async fn forward(
                     if changed.is_err() {
                         break; // the server is gone
                     }
-                    wanted = watched.borrow_and_update().iter().copied().chain(LATCHED).collect();
+                    wanted = watched.borrow_and_update().iter().copied().chain(always.iter().copied()).collect();
                     taps.follow(node, &wanted);
                 }
                 Some((topic, cdr)) = taps.streams.next() => {
