@@ -86,16 +86,9 @@ where
       RepresentationIdentifier::CDR_LE,
       request,
     )?;
-    let write_opts_builder = WriteOptionsBuilder::new().source_timestamp(Timestamp::now()); // always add source timestamp
-
-    let write_opts_builder = if self.service_mapping == ServiceMapping::Enhanced {
-      write_opts_builder
-    } else {
-      write_opts_builder.related_sample_identity(SampleIdentity::from(gen_rmw_req_id))
-    };
     let sent_rmw_req_id = self
       .request_sender
-      .write_with_options(req_wrapper, write_opts_builder.build())
+      .write_with_options(req_wrapper, self.request_write_options(gen_rmw_req_id))
       .map(RmwRequestId::from)
       .map_err(|e| e.forget_data())?;
 
@@ -122,7 +115,7 @@ where
         let mi = MessageInfo::from(&dcc);
         let res_wrapper = dcc.into_value();
         let (ri, res) = res_wrapper.unwrap(self.service_mapping, mi, self.client_guid)?;
-        Ok(Some((ri, res)))
+        Ok(Some((self.own_request_id(ri), res)))
       }
     } // match
   }
@@ -147,16 +140,9 @@ where
       RepresentationIdentifier::CDR_LE,
       request,
     )?;
-    let write_opts_builder = WriteOptionsBuilder::new().source_timestamp(Timestamp::now()); // always add source timestamp
-
-    let write_opts_builder = if self.service_mapping == ServiceMapping::Enhanced {
-      write_opts_builder
-    } else {
-      write_opts_builder.related_sample_identity(SampleIdentity::from(gen_rmw_req_id))
-    };
     let sent_rmw_req_id = self
       .request_sender
-      .async_write_with_options(req_wrapper, write_opts_builder.build())
+      .async_write_with_options(req_wrapper, self.request_write_options(gen_rmw_req_id))
       .await
       .map(RmwRequestId::from)
       .map_err(|e| e.forget_data())?;
@@ -189,7 +175,7 @@ where
             dcc
               .into_value()
               .unwrap(self.service_mapping, mi, self.client_guid)?;
-          if req_id == request_id {
+          if self.own_request_id(req_id) == request_id {
             return Ok(response);
           } else {
             debug!(
@@ -226,6 +212,47 @@ where
       my_node.wait_for_reader(self.request_sender.guid()),
       my_node.wait_for_writer(self.response_receiver.guid())
     );
+  }
+
+  // The write options of a request: always a source timestamp, and the
+  // related sample identity that the server answers to.
+  //
+  // Basic and Cyclone: the request's own identity (also in the payload header).
+  //
+  // Enhanced (no header in the payload): as rmw_fastrtps writes it
+  // (`__rmw_send_request`), the GUID of this client's response reader with an
+  // unknown sequence number. The server replies to that reader, with the request's
+  // sequence number: a Fast DDS server waits for its response writer to match the
+  // GUID it finds there before it replies, and our `Server` expects the parameter
+  // (`RequestWrapper::unwrap` warns "related_sample_identity missing" without it).
+  fn request_write_options(&self, generated: RmwRequestId) -> WriteOptions {
+    let related = match self.service_mapping {
+      ServiceMapping::Enhanced => SampleIdentity {
+        writer_guid: self.response_receiver.guid(),
+        sequence_number: SequenceNumber::UNKNOWN,
+      },
+      ServiceMapping::Basic | ServiceMapping::Cyclone => SampleIdentity::from(generated),
+    };
+    WriteOptionsBuilder::new()
+      .source_timestamp(Timestamp::now())
+      .related_sample_identity(related)
+      .build()
+  }
+
+  // A response's request id as `send_request` returned it: with the Enhanced
+  // mapping a server answers to our response reader (see `request_write_options`),
+  // or, if it ignored the related sample identity, to our request writer.
+  fn own_request_id(&self, received: RmwRequestId) -> RmwRequestId {
+    if self.service_mapping == ServiceMapping::Enhanced
+      && received.writer_gid == Gid::from(self.response_receiver.guid())
+    {
+      RmwRequestId {
+        writer_gid: Gid::from(self.client_guid),
+        ..received
+      }
+    } else {
+      received
+    }
   }
 
   fn increment_sequence_number(&self) {
@@ -336,5 +363,78 @@ where
 
   fn deregister(&mut self, registry: &mio1::Registry) -> io::Result<()> {
     mio1::event::Source::deregister(&mut self.response_receiver, registry)
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use std::time::{Duration, Instant};
+
+  use super::*;
+  use crate::{Context, Name, NodeName, NodeOptions, ServiceTypeName};
+
+  fn poll<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+      if let Some(t) = f() {
+        return t;
+      }
+      assert!(Instant::now() < deadline, "{what} did not come within 10 s");
+      std::thread::sleep(Duration::from_millis(5));
+    }
+  }
+
+  // An Enhanced request carries the related sample identity its server needs: the
+  // client's response reader (rmw_fastrtps' convention). Without it our own server
+  // fell back to the request's sample identity and warned "related_sample_identity
+  // missing" at every call, and a Fast DDS server found no response reader to
+  // answer. The reply still comes back under the id `send_request` returned.
+  #[test]
+  fn an_enhanced_request_names_the_response_reader_and_its_reply_is_ours() {
+    let mut node = Node::new(
+      NodeName::new("/", "enhanced_client_test").unwrap(),
+      NodeOptions::new().enable_rosout(false),
+      Context::new().unwrap(),
+    )
+    .unwrap();
+    let name = Name::new("/", "enhanced_client_test_service").unwrap();
+    let type_name = ServiceTypeName::new("test_msgs", "Echo");
+    let qos = crate::DEFAULT_SUBSCRIPTION_QOS;
+    let server = node
+      .create_server::<String, String>(
+        ServiceMapping::Enhanced,
+        &name,
+        &type_name,
+        qos.clone(),
+        qos.clone(),
+      )
+      .unwrap();
+    let client = node
+      .create_client::<String, String>(ServiceMapping::Enhanced, &name, &type_name, qos.clone(), qos)
+      .unwrap();
+
+    // a request sent before the endpoints matched is lost (volatile): resend until one comes
+    let mut sent = Vec::new();
+    let (server_id, request) = poll("the request", || {
+      sent.push(client.send_request("ping".to_string()).unwrap());
+      std::thread::sleep(Duration::from_millis(50));
+      server.receive_request().unwrap()
+    });
+    assert_eq!(request, "ping");
+    assert_eq!(
+      server_id.writer_gid,
+      Gid::from(client.response_receiver.guid()),
+      "the server answers to the client's response reader"
+    );
+    let ours = sent
+      .iter()
+      .find(|id| id.sequence_number == server_id.sequence_number)
+      .copied()
+      .unwrap_or_else(|| panic!("{server_id:?} is none of the ids sent: {sent:?}"));
+    assert_eq!(ours.writer_gid, Gid::from(client.client_guid));
+
+    server.send_response(server_id, "pong".to_string()).unwrap();
+    let (reply_id, reply) = poll("the reply", || client.receive_response().unwrap());
+    assert_eq!((reply_id, reply.as_str()), (ours, "pong"));
   }
 }
