@@ -12,6 +12,8 @@ echo "== cargo build"
 cargo build --workspace --bins --examples
 echo "== cargo test"
 cargo test --workspace
+echo "== patched crates: resolved from patches/, and their unit tests (tests/check_patches.sh)"
+tests/check_patches.sh
 echo "== Raspberry Pi: cross-build (aarch64, profile pi), pure crates' tests under qemu-aarch64"
 . launch_scripts/setup_cross.sh
 launch_scripts/cross_build.sh aarch64

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The patched crates of patches/ stay honest (tests/run_all.sh runs this):
+# 1. the workspace resolves rustdds and ros2-client to their copies under patches/
+#    (cargo only warns when a [patch.crates-io] entry goes unused, e.g. after a
+#    version bump), and so does patches/ros2-client's own lock file when its tests
+#    run against the patched rustdds;
+# 2. the unit tests of both copies pass, as we build them (feature `security`),
+#    ros2-client's against the patched rustdds.
+# Both crates build in one target directory of their own (target/patches): their
+# dependencies are shared between the two, not with the workspace (other profile).
+# `--no-tests` runs only the resolution checks.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python=${EEZYBOT_PYTHON:-python3}
+patch_rustdds=(--config 'patch.crates-io.rustdds.path="patches/rustdds"')
+
+# $1: what is checked; the rest: package=directory pairs; stdin: cargo metadata's JSON
+check_resolution() {
+  local what=$1
+  shift
+  "$python" -c "$resolution_py" "$what" "$@"
+}
+resolution_py=$(cat <<'PY'
+import json, os, sys
+what, wanted = sys.argv[1], sys.argv[2:]
+metadata = json.load(sys.stdin)
+bad = []
+for pair in wanted:
+    name, directory = pair.split("=")
+    want = os.path.realpath(os.path.join(directory, "Cargo.toml"))
+    found = [os.path.realpath(p["manifest_path"]) for p in metadata["packages"] if p["name"] == name]
+    if found != [want]:
+        bad.append(f"{name} resolves to {found or 'nothing'}, not {want}")
+if bad:
+    sys.exit(f"{what}: " + "; ".join(bad) + "\n(a [patch.crates-io] entry goes unused when the "
+             "locked version differs from the patch's version: cargo update -p <crate>)")
+print(f"{what}: " + ", ".join(p.split("=")[0] for p in wanted) + " resolve to patches/")
+PY
+)
+
+metadata=$(mktemp)
+trap 'rm -f "$metadata"' EXIT
+# --locked: a lock file that would have to change (e.g. to record an unused patch)
+# fails here too
+cargo metadata --format-version 1 --locked >"$metadata"
+check_resolution "workspace (Cargo.lock)" rustdds=patches/rustdds ros2-client=patches/ros2-client <"$metadata"
+cargo metadata --format-version 1 --locked --manifest-path patches/ros2-client/Cargo.toml \
+  "${patch_rustdds[@]}" >"$metadata"
+check_resolution "patches/ros2-client (its Cargo.lock)" rustdds=patches/rustdds <"$metadata"
+
+[[ ${1:-} == --no-tests ]] && exit 0
+export CARGO_TARGET_DIR=$PWD/target/patches CARGO_PROFILE_DEV_DEBUG=line-tables-only
+cargo test --locked --manifest-path patches/rustdds/Cargo.toml --features security --lib
+cargo test --locked --manifest-path patches/ros2-client/Cargo.toml "${patch_rustdds[@]}" --features security --lib
