@@ -1,8 +1,8 @@
 //! `once` and `play`: deliver targets to compute_ik and wait for its answer, through its
 //! public interfaces only. A target is **taken** when `joint_states` carries its stamp
 //! (the first step of the motion it starts carries the target's `header.stamp`), and
-//! **refused** when a `diagnostics` status carries [`REJECTED_STAMP_KEY`] with that
-//! stamp; it **arrived** when `joint_states` has the arm at its joints.
+//! **refused** when a `diagnostics` status reports a refusal of that stamp (read by
+//! [`feedback`]); it **arrived** when `joint_states` has the arm at its joints.
 //!
 //! compute_ik's `motion` parameter (`joint` / `line`) is set for `--line` and for the
 //! program points that name a mode, and put back as it was at the end.
@@ -18,7 +18,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::StreamExt;
 use ros2_client::Subscription;
-use ros_plumbing::diagnostics::{stamp_text, status_node, LAST_REJECTION_KEY, REJECTED_STAMP_KEY};
+use ros_plumbing::feedback;
 use ros_plumbing::remote_params::RemoteParameters;
 use ros_plumbing::{topics, ParameterValue, RosNode};
 use std::future::Future;
@@ -210,10 +210,9 @@ impl Delivery {
     }
 
     /// Publish `xyz` stamped now; wait until `joint_states` carries the stamp (taken)
-    /// or a `diagnostics` status carries it under [`REJECTED_STAMP_KEY`] (refused).
+    /// or a `diagnostics` status reports its refusal (refused).
     async fn send(&mut self, xyz: [f64; 3]) -> Result<(), NotDelivered> {
         let stamp = Time::now();
-        let refused_stamp = stamp_text(stamp);
         self.out.xyz_target(xyz, stamp);
         let deadline = Instant::now() + self.timeout;
         let js = self.joint_states.async_stream();
@@ -224,15 +223,12 @@ impl Delivery {
                 _ = tokio::time::sleep_until(deadline) => return Err(NotDelivered::NoAnswer(self.timeout.as_secs_f64())),
                 Some(Ok((m, _))) = js.next() => if m.header.stamp == stamp { return Ok(()) },
                 Some(Ok((d, _))) = diags.next() => {
-                    let value = |s: &eezybot_msgs::diagnostic_msgs::DiagnosticStatus, k: &str| {
-                        s.values.iter().find(|kv| kv.key == k).map(|kv| kv.value.clone())
-                    };
-                    if let Some(s) = d.status.iter().find(|s| value(s, REJECTED_STAMP_KEY).as_deref() == Some(refused_stamp.as_str())) {
-                        return Err(NotDelivered::Refused {
-                            node: status_node(&s.name).map_or_else(|| s.name.clone(), |(n, _)| n.to_string()),
-                            xyz,
-                            reason: value(s, LAST_REJECTION_KEY).unwrap_or_else(|| s.message.clone()),
-                        });
+                    let refused = feedback::decode(&d).into_iter().find_map(|f| {
+                        let node = f.node_or_name().to_string();
+                        f.refusal.filter(|r| r.is_for(stamp)).map(|r| (node, r.reason))
+                    });
+                    if let Some((node, reason)) = refused {
+                        return Err(NotDelivered::Refused { node, xyz, reason });
                     }
                 }
             }

@@ -14,6 +14,7 @@ use crate::teleop::{Event, Teleop};
 use crate::web::ProgramOp;
 use eezybot_msgs::Time;
 use futures::future::LocalBoxFuture;
+use ros_plumbing::feedback::Refusal;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::{Duration, Instant};
@@ -460,14 +461,13 @@ impl Desk {
         }
     }
 
-    /// compute_ik refused the target stamped `stamp` (its diagnostics say so).
-    pub fn refused(&mut self, stamp: &str, reason: &str) {
-        let ours = self
-            .target_stamp
-            .is_some_and(|t| ros_plumbing::diagnostics::stamp_text(t) == stamp);
+    /// compute_ik refused a target (its diagnostics say so): if it is the player's
+    /// last, the player stops with the reason.
+    pub fn refused(&mut self, refusal: &Refusal) {
+        let ours = self.target_stamp.is_some_and(|t| refusal.is_for(t));
         if let (true, Some(p)) = (ours, self.player.as_mut()) {
             self.target_stamp = None;
-            p.refused(reason);
+            p.refused(&refusal.reason);
         }
     }
 }

@@ -14,12 +14,11 @@ use crate::Input;
 use eezybot_kinematics::envelope::Envelope;
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{Arm, ArmJoints, ACTUATED_JOINTS};
-use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
-use ros_plumbing::diagnostics::{
-    status_node, LatencyWindow, LAST_REJECTION_KEY, REJECTED_STAMP_KEY,
-};
+use ros_plumbing::diagnostics::LatencyWindow;
+use ros_plumbing::feedback::{self, Feedback};
 use ros_plumbing::logging::{shorten, Throttle};
 use ros_plumbing::topics;
 use std::collections::{BTreeMap, VecDeque};
@@ -166,19 +165,14 @@ impl NodeHealth {
         }
     }
 
-    fn update(&mut self, msg: &DiagnosticArray, now: Instant) {
+    fn update(&mut self, heard: &[Feedback], now: Instant) {
         self.seen
             .retain(|_, h| now.duration_since(h.at) < FORGET_AFTER);
-        for s in &msg.status {
-            if let Some(kv) = s.values.iter().find(|kv| kv.key == REJECTED_STAMP_KEY) {
-                let reason = s
-                    .values
-                    .iter()
-                    .find(|kv| kv.key == LAST_REJECTION_KEY)
-                    .map_or(kv.value.as_str(), |r| r.value.as_str());
-                self.last_rejection = Some(shorten(reason, web::REASON_MAX).into_owned());
+        for s in heard {
+            if let Some(refusal) = &s.refusal {
+                self.last_rejection = Some(shorten(&refusal.reason, web::REASON_MAX).into_owned());
             }
-            let Some((node, task)) = status_node(&s.name) else {
+            let Some(node) = s.node.as_deref() else {
                 continue;
             };
             if node == self.own {
@@ -201,9 +195,9 @@ impl NodeHealth {
             self.seen.insert(
                 node.to_string(),
                 Heard {
-                    task: shorten(task, NODE_NAME_MAX).into_owned(),
+                    task: shorten(&s.task, NODE_NAME_MAX).into_owned(),
                     hardware_id: shorten(&s.hardware_id, NODE_NAME_MAX).into_owned(),
-                    level: s.level,
+                    level: s.health.level(),
                     message: shorten(&s.message, web::REASON_MAX).into_owned(),
                     at: now,
                 },
@@ -529,20 +523,11 @@ impl Panel {
             }
             Input::RobotDescription(text) => self.robot_description(text, &mut effects),
             Input::Diagnostics(d) => {
-                self.health.update(&d, clock.now);
+                let heard = feedback::decode(&d);
+                self.health.update(&heard, clock.now);
                 if self.desk.playing() {
-                    let value = |s: &DiagnosticStatus, k: &str| {
-                        s.values
-                            .iter()
-                            .find(|v| v.key == k)
-                            .map(|v| v.value.clone())
-                    };
-                    for st in &d.status {
-                        if let Some(stamp) = value(st, REJECTED_STAMP_KEY) {
-                            let reason =
-                                value(st, LAST_REJECTION_KEY).unwrap_or_else(|| st.message.clone());
-                            self.desk.refused(&stamp, &reason);
-                        }
+                    for refusal in heard.iter().filter_map(|f| f.refusal.as_ref()) {
+                        self.desk.refused(refusal);
                     }
                     self.desk_step(clock.now, &mut effects);
                 }
@@ -830,14 +815,16 @@ fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use eezybot_msgs::diagnostic_msgs::KeyValue;
+    use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, KeyValue};
     use eezybot_msgs::std_msgs::Header;
+    use ros_plumbing::diagnostics::REJECTED_STAMP_KEY;
 
     /// (status name, level, key-value pairs)
     type Entry<'a> = (&'a str, u8, &'a [(&'a str, &'a str)]);
 
-    fn array(statuses: &[Entry]) -> DiagnosticArray {
-        DiagnosticArray {
+    /// A `diagnostics` report of these statuses, read.
+    fn array(statuses: &[Entry]) -> Vec<Feedback> {
+        feedback::decode(&DiagnosticArray {
             header: Header::default(),
             status: statuses
                 .iter()
@@ -855,7 +842,7 @@ mod tests {
                         .collect(),
                 })
                 .collect(),
-        }
+        })
     }
 
     fn json(h: &NodeHealth) -> serde_json::Value {

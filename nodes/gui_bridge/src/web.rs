@@ -949,8 +949,11 @@ async fn send(socket: &mut WebSocket, msg: WsMessage, state: &WebState) -> Resul
 }
 
 fn refused(reason: &str) -> WsMessage {
-    let answer = serde_json::json!({"t": "refused", "reason": reason});
-    WsMessage::Text(answer.to_string().into())
+    let answer = crate::message::ToClient::Refused {
+        reason: reason.to_string(),
+        reachable: None,
+    };
+    WsMessage::Text(answer.to_text().into())
 }
 
 /// Serve one client until its connection ends; how it ended. `bad` counts the
