@@ -183,13 +183,19 @@ def frame_rule_violations(frames, arrived, stored):
     and no later than `stored`. Every command changes every width. Returns
     ([violations], [(start, how)] of the frames checked)."""
     bad, how_started = [], []
-    synced = {False}  # whether the frame before the first checked one began early
+    # whether the frame before the one checked began early: not known for the first (the
+    # log's first whole frame may itself have been started by the first command)
+    synced = {False, True}
     tol = EDGE_SPREAD_CYCLES + CYCLES_PER_TICK
     for prev, nxt in zip(frames, frames[1:]):
         start, end = prev[0][0], prev[-1][1]
         begin = nxt[0][0]
         if begin - start > SYNC_MAX_CYCLES + tol:
-            synced = {False, True}  # frames were missed (the log is incomplete): start again
+            # no whole frame for longer than the rule ever waits: a frame was missed, or
+            # one was not whole (a pin did not pulse, or not where the pulse before ended)
+            bad.append((start, (begin - start) / CYCLES_PER_MS, "no whole frame for longer than 22.5 ms"))
+            synced = {False, True}
+            how_started.append((begin, []))
             continue
         # stored after pin 8's width was read, before the gap's interrupt: the next frame
         # starts 14 ms after this one
@@ -261,6 +267,12 @@ def stream_and_identify(uno, cmds, pause):
                 pass
         except BlockingIOError:
             pass
+    # until the last command's reply is in the log (simavr keeps pace with the wall
+    # clock only roughly on a loaded host), then the pulses after it
+    deadline = time.monotonic() + 30
+    while not any(kind == STATE and p[0] == len(cmds) % 256 for _, kind, p in tx_frames(uno)):
+        assert time.monotonic() < deadline, "no STATE for the last SET_PULSES in 30 s"
+        uno.receive(0.05)
     uno.receive(0.15)
     edges, rx = uno.events()
 
