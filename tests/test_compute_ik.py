@@ -152,21 +152,23 @@ def test_targets_in_joint_states_and_servo_angles_out(launch, observer):
     assert fk(*[joints_of(js)[j] for j in ("base_joint", "shoulder_joint", "elbow_joint")]) == pytest.approx((0.2, 0, 0.15), abs=1e-9)
 
 
+# (topic, message, last_rejection_code, text in last_rejection, reason_code: the stable
+# code other nodes read through ros_plumbing::feedback)
 BAD_INPUTS = [
-    ("xyz", target(1.0, 0.0, 0.1), "too_far", "out of reach"),
-    ("xyz", target(0.10, 0.0, 0.15), "out_of_limits:elbow_joint", "elbow_joint"),
-    ("xyz", target(-0.2, 0.0, 0.15), "out_of_limits:base_joint", "base_joint"),
-    ("xyz", target(0.26, 0.0, 0.1), "out_of_limits:shoulder_joint", "shoulder_joint"),
-    ("xyz", target(math.nan, 0.0, 0.15), "non_finite_target", "NaN"),
-    ("xyz", target(0.2, math.inf, 0.15), "non_finite_target", "inf"),
-    ("xyz", target(0.2, 0.0, 0.15, frame="map"), "wrong_frame", "`map`"),
-    ("gripper", Float64(data=1.5), "gripper_out_of_range", "1.5"),
-    ("gripper", Float64(data=math.nan), "gripper_out_of_range", "NaN"),
-    ("joints", joint_target(["wrist_joint"], [0.0]), "unknown_joint", "wrist_joint"),
-    ("joints", joint_target(["shoulder_joint"], [2.5]), "out_of_limits:shoulder_joint", "shoulder_joint"),
-    ("joints", joint_target(["elbow_joint"], [math.nan]), "non_finite_joint:elbow_joint", "NaN"),
-    ("joints", JointState(name=["base_joint", "elbow_joint"], position=[0.1]), "length_mismatch", "2 names but 1 positions"),
-    ("joints", joint_target(["gripper_joint"], [1.0]), "out_of_limits:gripper_joint", "gripper_joint"),
+    ("xyz", target(1.0, 0.0, 0.1), "too_far", "out of reach", "unreachable"),
+    ("xyz", target(0.10, 0.0, 0.15), "out_of_limits:elbow_joint", "elbow_joint", "out_of_limits"),
+    ("xyz", target(-0.2, 0.0, 0.15), "out_of_limits:base_joint", "base_joint", "out_of_limits"),
+    ("xyz", target(0.26, 0.0, 0.1), "out_of_limits:shoulder_joint", "shoulder_joint", "out_of_limits"),
+    ("xyz", target(math.nan, 0.0, 0.15), "non_finite_target", "NaN", "not_finite"),
+    ("xyz", target(0.2, math.inf, 0.15), "non_finite_target", "inf", "not_finite"),
+    ("xyz", target(0.2, 0.0, 0.15, frame="map"), "wrong_frame", "`map`", "wrong_frame"),
+    ("gripper", Float64(data=1.5), "gripper_out_of_range", "1.5", "out_of_limits"),
+    ("gripper", Float64(data=math.nan), "gripper_out_of_range", "NaN", "out_of_limits"),
+    ("joints", joint_target(["wrist_joint"], [0.0]), "unknown_joint", "wrist_joint", "bad_joints"),
+    ("joints", joint_target(["shoulder_joint"], [2.5]), "out_of_limits:shoulder_joint", "shoulder_joint", "out_of_limits"),
+    ("joints", joint_target(["elbow_joint"], [math.nan]), "non_finite_joint:elbow_joint", "NaN", "not_finite"),
+    ("joints", JointState(name=["base_joint", "elbow_joint"], position=[0.1]), "length_mismatch", "2 names but 1 positions", "bad_joints"),
+    ("joints", joint_target(["gripper_joint"], [1.0]), "out_of_limits:gripper_joint", "gripper_joint", "out_of_limits"),
 ]
 
 
@@ -176,7 +178,7 @@ def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
     js, _ = rig.send_and_wait(rig.xyz, target(*good))
     kept = joints_of(js)
     publishers = {"xyz": rig.xyz, "gripper": rig.gripper, "joints": rig.joints}
-    for i, (topic, msg, code, text) in enumerate(BAD_INPUTS, start=1):
+    for i, (topic, msg, code, text, reason) in enumerate(BAD_INPUTS, start=1):
         n_sa = len(rig.servo_angles)
         if hasattr(msg, "header"):
             msg.header.stamp.sec, msg.header.stamp.nanosec = now_stamp()  # not refused as old
@@ -184,6 +186,7 @@ def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
         assert observer.spin_until(lambda: rig.rejected_count() >= i, 10), f"no diagnostics for {code}"
         status, values = rig.last_diag()
         assert values["last_rejection_code"] == code
+        assert values["reason_code"] == reason, (code, values["reason_code"])
         assert text in values["last_rejection"], values["last_rejection"]
         assert status.level == b"\x01"  # WARN
         observer.spin_for(0.3)
@@ -198,7 +201,7 @@ def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
     # in diagnostics, not logged again)
     log = rig.proc.output()
     first_of_kind = {}
-    for topic, _, code, text in BAD_INPUTS:
+    for topic, _, code, text, _ in BAD_INPUTS:
         first_of_kind.setdefault((topic, code), text)
     lines = [line for line in log.splitlines() if "rejected:" in line]
     assert len(lines) == len(first_of_kind), lines
@@ -226,6 +229,7 @@ def test_estop_blocks_targets_until_released(launch, observer):
     n_sa = len(rig.servo_angles)
     rig.xyz.publish(target(0.2, 0.0, 0.15))
     assert observer.spin_until(lambda: rig.last_diag()[1].get("last_rejection_code") == "estop", 10)
+    assert rig.last_diag()[1]["reason_code"] == "estop"
     observer.spin_for(0.3)
     assert len(rig.servo_angles) == n_sa
     rig.estop.publish(Bool(data=False))
