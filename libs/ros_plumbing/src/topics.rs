@@ -209,18 +209,23 @@ pub trait TopicVisitor {
 
 /// Every topic of the contract, typed, in the order of the README's topic table.
 pub fn visit_all(v: &mut impl TopicVisitor) {
-    v.visit(&XYZ_TARGET);
-    v.visit(&POSE_TARGET);
-    v.visit(&GRIPPER_TARGET);
-    v.visit(&JOINT_TARGET);
-    v.visit(&ESTOP);
-    v.visit(&JOINT_STATES);
-    v.visit(&SERVO_ANGLES);
-    v.visit(&SERVO_STATE);
-    v.visit(&ROBOT_DESCRIPTION);
-    v.visit(&TF);
-    v.visit(&TF_STATIC);
-    v.visit(&DIAGNOSTICS);
+    macro_rules! each {
+        ($($topic:ident),*) => {$(v.visit(&$topic);)*};
+    }
+    each!(
+        XYZ_TARGET,
+        POSE_TARGET,
+        GRIPPER_TARGET,
+        JOINT_TARGET,
+        ESTOP,
+        JOINT_STATES,
+        SERVO_ANGLES,
+        SERVO_STATE,
+        ROBOT_DESCRIPTION,
+        TF,
+        TF_STATIC,
+        DIAGNOSTICS
+    );
 }
 
 /// Every topic of the contract ([`visit_all`]'s order).

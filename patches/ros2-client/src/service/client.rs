@@ -391,12 +391,10 @@ mod tests {
   // answer. The reply still comes back under the id `send_request` returned.
   #[test]
   fn an_enhanced_request_names_the_response_reader_and_its_reply_is_ours() {
-    let mut node = Node::new(
-      NodeName::new("/", "enhanced_client_test").unwrap(),
-      NodeOptions::new().enable_rosout(false),
-      Context::new().unwrap(),
-    )
-    .unwrap();
+    let context = Context::new().unwrap();
+    let options = NodeOptions::new().enable_rosout(false);
+    let node_name = NodeName::new("/", "enhanced_client_test").unwrap();
+    let mut node = context.new_node(node_name, options).unwrap();
     let name = Name::new("/", "enhanced_client_test_service").unwrap();
     let type_name = ServiceTypeName::new("test_msgs", "Echo");
     let qos = crate::DEFAULT_SUBSCRIPTION_QOS;

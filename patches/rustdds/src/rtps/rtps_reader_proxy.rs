@@ -808,21 +808,23 @@ mod acknack_tests {
   #[test]
   fn a_durable_reader_whose_acknowledgement_went_backwards_gets_the_history_again() {
     use crate::{dds::qos::policy::Durability, QosPolicyBuilder};
-    let guid = GUID::new(GuidPrefix::UNKNOWN, EntityId::UNKNOWN);
     let qos = QosPolicyBuilder::new()
       .durability(Durability::TransientLocal)
       .build();
-    let mut rp = RtpsReaderProxy::new(guid, qos, false);
+    let mut rp = RtpsReaderProxy::new(GUID::default(), qos, false);
     rp.all_acked_before = SequenceNumber::from(10);
 
     // a new writer proxy on the reader's side: nothing received, base 1
-    let ack = AckNack {
-      reader_id: EntityId::UNKNOWN,
-      writer_id: EntityId::UNKNOWN,
-      reader_sn_state: SequenceNumberSet::new_empty(SequenceNumber::from(1)),
-      count: 1,
-    };
-    rp.handle_ack_nack(&AckSubmessage::AckNack(ack), SequenceNumber::from(12));
+    let nothing_yet = SequenceNumberSet::new_empty(SequenceNumber::from(1));
+    rp.handle_ack_nack(
+      &AckSubmessage::AckNack(AckNack {
+        reader_id: EntityId::UNKNOWN,
+        writer_id: EntityId::UNKNOWN,
+        reader_sn_state: nothing_yet,
+        count: 1,
+      }),
+      SequenceNumber::from(12),
+    );
 
     assert_eq!(rp.all_acked_before, SequenceNumber::from(1));
     assert_eq!(
