@@ -132,7 +132,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
 /// The arm compute_ik drives, as the parameters say: the EezyBot (closed form and servo
 /// mapping) or an arm known by its URDF. Each is a [`Pipeline`]; the node runs either
 /// with [`run`].
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub enum Core {
     /// The EezyBotArm Mk2.
     EezyBot(Box<IkCore>),

@@ -441,3 +441,53 @@ fn a_straight_line_is_followed_or_refused_before_the_move() {
     assert!(!c.is_moving());
     assert_eq!(*c.state(), before);
 }
+
+#[test]
+fn a_refusal_reads_back_through_ros_plumbing_feedback_with_its_code_and_stamp() {
+    use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
+    use ros_plumbing::feedback::{self, Health, ReasonCode};
+    let mut c = core();
+    let read = |c: &IkCore| {
+        let array = DiagnosticArray {
+            status: vec![c.diagnostic_status("ik2: inverse kinematics")],
+            ..Default::default()
+        };
+        feedback::decode(&array).remove(0)
+    };
+    let ok = read(&c);
+    assert_eq!((ok.node.as_deref(), ok.health), (Some("ik2"), Health::Ok));
+    assert!(ok.refusal.is_none(), "nothing refused yet");
+    let cases = [
+        (target(1.0, 0.0, 0.1, ""), ReasonCode::Unreachable),
+        (target(0.2, 0.0, 0.15, "map"), ReasonCode::WrongFrame),
+        (target(f64::NAN, 0.0, 0.15, ""), ReasonCode::NotFinite),
+        (target(-0.2, 0.0, 0.15, ""), ReasonCode::OutOfLimits),
+    ];
+    for (i, (mut msg, code)) in cases.into_iter().enumerate() {
+        msg.header.stamp = Time::from_nanos(now().to_nanos() - i as i64);
+        let rejection = c.handle_xyz_target(&msg, now()).unwrap_err();
+        let heard = read(&c);
+        assert_eq!(heard.health, Health::Warn);
+        let r = heard.refusal.unwrap();
+        assert!(r.is_for(msg.header.stamp), "{r:?}");
+        assert_eq!(r.code, code, "{rejection}");
+        assert_eq!(r.reason, rejection.reason.to_string());
+        assert_eq!(r.topic, "xyz_target");
+    }
+    c.set_estop(true);
+    let mut msg = target(0.2, 0.0, 0.15, "");
+    msg.header.stamp = Time::from_nanos(now().to_nanos() - 100);
+    c.handle_xyz_target(&msg, now()).unwrap_err();
+    assert_eq!(read(&c).refusal.unwrap().code, ReasonCode::Estop);
+    c.set_estop(false);
+    c.set_motion(MotionSettings {
+        max_target_age_s: 0.5,
+        ..c.motion()
+    });
+    let mut old = target(0.2, 0.0, 0.15, "");
+    old.header.stamp = Time::from_nanos(now().to_nanos() - 2_000_000_000);
+    c.handle_xyz_target(&old, now()).unwrap_err();
+    let r = read(&c).refusal.unwrap();
+    assert!(r.is_for(old.header.stamp));
+    assert_eq!(r.code, ReasonCode::Stale);
+}
