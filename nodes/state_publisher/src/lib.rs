@@ -2,11 +2,12 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod core;
+pub mod throttle;
 
 use crate::core::TfCore;
+use crate::throttle::{Flush, TfThrottle};
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
-use eezybot_msgs::geometry_msgs::TransformStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::Time;
@@ -15,7 +16,6 @@ use ros_plumbing::diagnostics::LatencyWindow;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
-use std::collections::BTreeMap;
 use std::future::Future;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -113,120 +113,195 @@ pub enum Input {
     Unreadable(String),
 }
 
-/// The loop: runs until `shutdown` resolves or `inputs` ends.
-pub async fn run(
-    description: Description,
-    inputs: impl Stream<Item = Input>,
-    outputs: &impl Outputs,
-    params: Params,
-    diag_name: String,
-    joint_states_topic: String,
-    shutdown: impl Future<Output = ()>,
-) {
-    let mut peers = PeerWatch::new(&[(joint_states_topic, Peer::Publisher)]);
+/// What [`run`] works with: the URDF, the inputs and outputs, the parameters and the
+/// shutdown signal.
+pub struct Handles<'a, I, O, S> {
+    /// the URDF to publish first
+    pub description: Description,
+    /// `joint_states` samples
+    pub inputs: I,
+    /// where results go
+    pub outputs: &'a O,
+    /// the node's parameters
+    pub params: Params,
+    /// the diagnostics entry's name
+    pub diag_name: String,
+    /// the resolved `joint_states` topic, whose publishers are watched
+    pub joint_states_topic: String,
+    /// resolves when the node is to stop
+    pub shutdown: S,
+}
+
+/// The loop: runs until `shutdown` resolves or `inputs` ends. Each input and timer
+/// goes to one handler of [`Node`].
+pub async fn run<I, O, S>(h: Handles<'_, I, O, S>)
+where
+    I: Stream<Item = Input>,
+    O: Outputs,
+    S: Future<Output = ()>,
+{
+    let Handles {
+        description,
+        inputs,
+        outputs,
+        params,
+        diag_name,
+        joint_states_topic,
+        shutdown,
+    } = h;
+    let mut node = Node::new(
+        description,
+        outputs,
+        params.clone(),
+        diag_name,
+        joint_states_topic,
+    );
     let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
-    let prefix = |p: &Params| p.string("frame_prefix").unwrap_or_default();
-    let mut core = TfCore::new(description.model, &prefix(&params));
-    outputs.robot_description(description.text);
-    outputs.tf_static(core.static_transforms(Time::now()));
     let period = ros_plumbing::diagnostics::diagnostics_period;
-    let min_interval = |p: &Params| {
-        let f = p.f64("publish_frequency").unwrap_or(0.0);
-        (f > 0.0).then(|| Duration::from_secs_f64(1.0 / f))
-    };
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
-    // µs from taking a `joint_states` sample to having published its tf
-    let mut latency = LatencyWindow::new(1000);
-    let mut last_tf = Instant::now() - Duration::from_secs(3600);
-    let mut pending: BTreeMap<String, TransformStamped> = BTreeMap::new();
-    let mut pending_since: Option<Instant> = None;
-    let mut unreadable = 0u64;
-    let mut complaints = Throttle::default();
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        let flush_at = match (min_interval(&params), pending.is_empty()) {
-            (Some(iv), false) => Some(tokio::time::Instant::from_std(last_tf + iv)),
-            _ => None,
-        };
+        let flush_at = node.throttle.flush_at().map(tokio::time::Instant::from_std);
         tokio::select! {
             _ = &mut shutdown => break,
-            _ = ticker.tick() => {
-                let mut extra = latency.p50_p99(["tf_latency_us_p50", "tf_latency_us_p99"]);
-                extra.push(("unreadable_samples", unreadable.to_string()));
-                let mut status = core.diagnostic_status(&diag_name, &extra);
-                peers.annotate(&mut status, Instant::now());
-                params.annotate(&mut status);
-                outputs.diagnostics(status);
-            }
-            _ = peer_poll.tick() => {
-                peers.update(&[outputs.joint_states_publishers()], Instant::now()).iter().for_each(|c| c.log());
-            }
+            _ = ticker.tick() => node.report(),
+            _ = peer_poll.tick() => node.on_peer_poll(),
             _ = async { if let Some(t) = flush_at { tokio::time::sleep_until(t).await } }, if flush_at.is_some() => {
-                outputs.tf(TFMessage { transforms: std::mem::take(&mut pending).into_values().collect() });
-                last_tf = Instant::now();
-                if let Some(t0) = pending_since.take() {
-                    latency.push(t0.elapsed().as_secs_f64() * 1e6);
-                }
+                node.on_flush(Instant::now());
             }
             Ok(()) = param_changes.changed() => {
-                let path = params.string("urdf").unwrap_or_default();
-                match load_urdf(&path) {
-                    Ok(d) => {
-                        core = TfCore::new(d.model, &prefix(&params));
-                        pending.clear();
-                        outputs.robot_description(d.text);
-                        outputs.tf_static(core.static_transforms(Time::now()));
-                        log::info!("publishing {} with frame prefix `{}`", urdf_origin(&path), prefix(&params));
-                    }
-                    Err(e) => log::error!("keeping the previous URDF: {e}"),
-                }
+                node.on_params();
                 ticker = tokio::time::interval(period(&params));
             }
-            input = inputs.next() => {
-                let Some(input) = input else { break };
-                let (msg, taken) = match input {
-                    Input::JointStates(msg, taken) => (msg, taken),
-                    Input::Unreadable(e) => {
-                        unreadable += 1;
-                        log::warn!("unreadable joint_states sample ignored: {e}");
-                        continue;
-                    }
-                };
-                let (tf, problems) = core.handle_joint_states(&msg);
-                for p in &problems {
-                    let kind = format!("{:?}", std::mem::discriminant(p));
-                    if let Some(quiet) = complaints.allow(&kind, Instant::now()) {
-                        log::warn!("joint_states: {p}; skipped{}", Throttle::suffix(quiet));
-                    }
-                }
-                if tf.transforms.is_empty() {
-                    continue;
-                }
-                match min_interval(&params) {
-                    Some(iv) if last_tf.elapsed() < iv => {
-                        for t in tf.transforms {
-                            pending.insert(t.child_frame_id.clone(), t);
-                        }
-                        pending_since.get_or_insert(taken);
-                    }
-                    _ => {
-                        let transforms = if pending.is_empty() {
-                            tf.transforms
-                        } else {
-                            for t in tf.transforms {
-                                pending.insert(t.child_frame_id.clone(), t);
-                            }
-                            std::mem::take(&mut pending).into_values().collect()
-                        };
-                        outputs.tf(TFMessage { transforms });
-                        last_tf = Instant::now();
-                        pending_since = None;
-                        latency.push(taken.elapsed().as_secs_f64() * 1e6);
-                    }
-                }
-            }
+            input = inputs.next() => match input {
+                None => break,
+                Some(Input::JointStates(msg, taken)) => node.on_joint_states(&msg, taken),
+                Some(Input::Unreadable(e)) => node.on_unreadable(&e),
+            },
         }
     }
+}
+
+/// The node's state between inputs, and a handler for each kind of input.
+pub struct Node<'a, O> {
+    outputs: &'a O,
+    params: Params,
+    diag_name: String,
+    peers: PeerWatch,
+    core: TfCore,
+    throttle: TfThrottle,
+    /// µs from taking a `joint_states` sample to having published its tf
+    latency: LatencyWindow,
+    unreadable: u64,
+    complaints: Throttle,
+}
+
+impl<'a, O: Outputs> Node<'a, O> {
+    /// Publish `robot_description` and `tf_static` for `description`.
+    pub fn new(
+        description: Description,
+        outputs: &'a O,
+        params: Params,
+        diag_name: String,
+        joint_states_topic: String,
+    ) -> Self {
+        let core = TfCore::new(description.model, &prefix(&params));
+        outputs.robot_description(description.text);
+        outputs.tf_static(core.static_transforms(Time::now()));
+        Node {
+            outputs,
+            peers: PeerWatch::new(&[(joint_states_topic, Peer::Publisher)]),
+            core,
+            throttle: TfThrottle::new(params.f64("publish_frequency").unwrap_or(0.0)),
+            params,
+            diag_name,
+            latency: LatencyWindow::new(1000),
+            unreadable: 0,
+            complaints: Throttle::default(),
+        }
+    }
+
+    /// Publish the diagnostics entry now.
+    pub fn report(&self) {
+        let mut extra = self
+            .latency
+            .p50_p99(["tf_latency_us_p50", "tf_latency_us_p99"]);
+        extra.push(("unreadable_samples", self.unreadable.to_string()));
+        let mut status = self.core.diagnostic_status(&self.diag_name, &extra);
+        self.peers.annotate(&mut status, Instant::now());
+        self.params.annotate(&mut status);
+        self.outputs.diagnostics(status);
+    }
+
+    /// Look at the `joint_states` publishers; log a change.
+    pub fn on_peer_poll(&mut self) {
+        self.peers
+            .update(&[self.outputs.joint_states_publishers()], Instant::now())
+            .iter()
+            .for_each(|c| c.log());
+    }
+
+    /// The throttle's interval is over at `now`: publish what is pending.
+    pub fn on_flush(&mut self, now: Instant) {
+        if let Some(f) = self.throttle.flush(now) {
+            self.publish(f);
+        }
+    }
+
+    /// The parameters changed: the throttle's frequency, and the URDF and frame
+    /// prefix (kept if the URDF does not load).
+    pub fn on_params(&mut self) {
+        self.throttle
+            .set_frequency(self.params.f64("publish_frequency").unwrap_or(0.0));
+        let path = self.params.string("urdf").unwrap_or_default();
+        match load_urdf(&path) {
+            Ok(d) => {
+                self.core = TfCore::new(d.model, &prefix(&self.params));
+                self.throttle.clear();
+                self.outputs.robot_description(d.text);
+                self.outputs
+                    .tf_static(self.core.static_transforms(Time::now()));
+                log::info!(
+                    "publishing {} with frame prefix `{}`",
+                    urdf_origin(&path),
+                    prefix(&self.params)
+                );
+            }
+            Err(e) => log::error!("keeping the previous URDF: {e}"),
+        }
+    }
+
+    /// A `joint_states` sample taken at `taken`: its transforms go out through the
+    /// throttle; what is wrong with it is logged (throttled).
+    pub fn on_joint_states(&mut self, msg: &JointState, taken: Instant) {
+        let (tf, problems) = self.core.handle_joint_states(msg);
+        let now = Instant::now();
+        for p in &problems {
+            let kind = format!("{:?}", std::mem::discriminant(p));
+            if let Some(quiet) = self.complaints.allow(&kind, now) {
+                log::warn!("joint_states: {p}; skipped{}", Throttle::suffix(quiet));
+            }
+        }
+        if let Some(f) = self.throttle.offer(tf.transforms, taken, now) {
+            self.publish(f);
+        }
+    }
+
+    /// A sample that could not be read: counted and logged.
+    pub fn on_unreadable(&mut self, e: &str) {
+        self.unreadable += 1;
+        log::warn!("unreadable joint_states sample ignored: {e}");
+    }
+
+    /// Publish a tf message; its latency counts from its oldest sample's taking.
+    fn publish(&mut self, f: Flush) {
+        self.outputs.tf(f.msg);
+        self.latency.push(f.taken.elapsed().as_secs_f64() * 1e6);
+    }
+}
+
+fn prefix(p: &Params) -> String {
+    p.string("frame_prefix").unwrap_or_default()
 }

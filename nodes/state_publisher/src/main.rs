@@ -82,15 +82,15 @@ async fn main_async() -> anyhow::Result<()> {
     );
     let diag_name = format!("{}: robot state", node.resolver().node_name());
     let topic = node.resolve(&topics::JOINT_STATES)?;
-    state_publisher::run(
+    state_publisher::run(state_publisher::Handles {
         description,
         inputs,
-        &outputs,
+        outputs: &outputs,
         params,
         diag_name,
-        topic,
+        joint_states_topic: topic,
         shutdown,
-    )
+    })
     .await;
     drop(outputs);
     drop(joint_states);
