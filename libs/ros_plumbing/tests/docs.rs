@@ -1,5 +1,6 @@
 //! docs/topics.md's table is the topic contract, [`ros_plumbing::topics::all`].
 
+use ros_plumbing::feedback::ReasonCode;
 use ros_plumbing::{docs, topics};
 
 #[test]
@@ -12,4 +13,23 @@ fn the_topics_page_is_the_contract() {
     ) {
         panic!("{why}");
     }
+}
+
+#[test]
+fn the_topics_page_lists_every_reason_code_in_order() {
+    let path = docs::repo_root().join("docs/topics.md");
+    let page = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let table =
+        docs::section(&page, "reason codes").unwrap_or_else(|e| panic!("docs/topics.md: {e}"));
+    let listed: Vec<&str> = table
+        .lines()
+        .skip(2)
+        .filter_map(|row| row.strip_prefix("| `")?.split('`').next())
+        .collect();
+    let codes: Vec<&str> = ReasonCode::ALL.iter().map(|c| c.code()).collect();
+    assert_eq!(
+        listed, codes,
+        "docs/topics.md's reason code table should list ros_plumbing::feedback::ReasonCode::ALL, \
+         in order, one row each (written by hand: the meanings are the variants' doc comments)"
+    );
 }
