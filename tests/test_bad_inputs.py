@@ -49,6 +49,7 @@ import socket
 import statistics
 import threading
 import time
+import traceback
 from collections import Counter, defaultdict
 
 import pytest
@@ -1009,7 +1010,10 @@ class Graph:
             try:
                 self.o.executor.spin_once(timeout_sec=0.02)
             except Exception as e:  # e.g. a malformed sample Fast DDS cannot take
-                self.spin_errors.append(repr(e)[:200])
+                # (when, raised in a callback of this file, what): asserted on by
+                # test_the_observer_missed_only_the_malformed_samples
+                ours = any(f.filename == __file__ for f in traceback.extract_tb(e.__traceback__))
+                self.spin_errors.append((time.monotonic(), ours, repr(e)[:200]))
 
     def _on_joint_states(self, m):
         self.counts.update(["joint_states"])
@@ -1304,8 +1308,10 @@ def campaign(tmp_path_factory):
         # ---- malformed samples (Cyclone DDS), then the e-stop released by a readable one
         cdr_before = {n: dict(g.values(n)) for n in ("compute_ik", "serial_node", "state_publisher")}
         cdr_log = {n: g.log_offset(n) for n in g.procs}
+        cdr_start = time.monotonic()
         r["cdr_sent"] = cdr_phase(g, rng, r)
         time.sleep(1.0)
+        r["cdr_window"] = (cdr_start, time.monotonic() + 2.0)  # when rclpy may fail to take a sample
         patterns = {"compute_ik": ("rejected: unreadable sample", "unreadable sample on estop ignored"),
                     "serial_node": ("unreadable sample ignored", "unreadable sample on estop ignored"),
                     "state_publisher": ("unreadable joint_states sample ignored", None), "gui_bridge": ("unreadable", None)}
@@ -1456,7 +1462,7 @@ def campaign(tmp_path_factory):
             r["longest_log_line"][n] = max((len(line) for line in f), default=0)
     r["gui_log_bad_requests"] = sum(1 for line in open(r["logs"]["gui_bridge"], "rb") if b"bad request from a browser" in line)
     r["total"] = sum(r["sent"].values())
-    r["spin_errors"] = g.spin_errors[:20]
+    r["spin_errors"] = list(g.spin_errors)
     print_report(r)
     return r
 
@@ -1552,6 +1558,7 @@ def print_report(r):
                                      "ws_closed", "exit_codes", "after_checks", "problems", "gui_rules", "cdr",
                                      "cdr_sent", "alive_after_random", "alive_at_end", "spin_errors",
                                      "ws_closed_detail")}
+    summary["spin_errors"] = (r.get("spin_errors") or [])[:20]
     summary["sent"] = dict(r["sent"])
     summary["kinds"] = {f"{c}/{k}": n for (c, k), n in sorted(r["kinds"].items())}
     summary["ws_answers"] = Counter(a.get("t") for a in r.get("ws_answers", []))
@@ -1754,6 +1761,20 @@ def test_malformed_samples_are_counted_and_named(campaign):
     assert counter(a, "unreadable_samples") - counter(b, "unreadable_samples") == logged > 0, logged
 
 
+def test_the_observer_missed_only_the_malformed_samples(campaign):
+    """The rclpy observer that counts what went over each topic (the proof of the tests
+    above) failed to take samples only while the malformed ones were on the wire, and
+    none of its own callbacks raised: either would leave a count short, silently."""
+    r = campaign
+    start, end = r["cdr_window"]
+    ours = [e for _, mine, e in r["spin_errors"] if mine]
+    outside = [e for t, mine, e in r["spin_errors"] if not mine and not start <= t <= end]
+    print(f"\nspin errors: {len(r['spin_errors'])}, in the observer's callbacks {len(ours)}, "
+          f"outside the malformed-sample phase {len(outside)}")
+    assert not ours, f"the observer's callbacks raised: {ours[:10]}"
+    assert not outside, f"rclpy failed to take samples outside the malformed-sample phase: {outside[:10]}"
+
+
 def test_bad_parameters_are_refused_with_a_reason_and_change_nothing(campaign):
     r = campaign
     accepted = [(n, x) for n, res in r["params"].items() for x in res if x[3] is not False or not x[4].strip()]
@@ -1903,8 +1924,9 @@ def test_gui_bridge_survives_a_deeply_nested_robot_description(domain, observer)
         observer.wait_matched(pub)
         pub.publish(String(data=deep_urdf(10_000)))
         # until it says what it made of it (a debug build takes a few seconds), or dies
-        observer.spin_until(lambda: p.proc.poll() is not None or "robot_description not usable" in p.output(), 30)
+        said = observer.spin_until(lambda: p.proc.poll() is not None or "robot_description not usable" in p.output(), 30)
         assert p.proc.poll() is None, p.output()[-200:]
+        assert said, f"gui_bridge did not say what it made of the description within 30 s: {p.output()[-300:]}"
     finally:
         p.stop()
 
