@@ -15,7 +15,7 @@ static const uint16_t SERVO_MIN_TICKS[SERVO_COUNT] = {1088, 1088, 1088, 1088};
 static const uint16_t SERVO_MAX_TICKS[SERVO_COUNT] = {4800, 4800, 4800, 4800};
 
 // The pose the arm is assumed to be in at power-up (no pulses go out until the first
-// command), reported to the host so that its first command ramps from here: ROBOT.md's
+// command), reported to the host so that its first command ramps from here: docs/robot.md's
 // home pose (base 0 deg, main arm vertical, forearm horizontal: arm servos at 90 deg,
 // 1472 us) with the claw closed (60 deg, 1163 us). Must lie within the limits above.
 static const uint16_t HOLD_TICKS[SERVO_COUNT] = {2944, 2944, 2944, 2325};
