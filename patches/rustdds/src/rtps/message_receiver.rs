@@ -931,7 +931,10 @@ impl MessageReceiver {
         );
         match decode_result {
           Err(e) => {
-            error!("Submessage decoding failed: {e:?}");
+            error!(
+              "Submessage decoding failed: {e:?} (from {:?}, crypto header {:?})",
+              self.source_guid_prefix, sec_prefix.crypto_header
+            );
           }
           Ok(DecodeOutcome::Success(DecodedSubmessage::Writer(
             decoded_writer_submessage,
