@@ -402,9 +402,8 @@ impl Desk {
         let Some(player) = self.player.as_mut() else {
             return DeskOutcome::default();
         };
-        if !player.is_running() {
-            return DeskOutcome::default();
-        }
+        // a player that just failed (a refusal, a mode not taken) still has its
+        // `Failed` to hand out: the message, and `motion` to put back
         let mut out = DeskOutcome::default();
         for action in player.step(now, tool) {
             out.changed = true;

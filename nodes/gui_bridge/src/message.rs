@@ -4,7 +4,7 @@
 //! one the page reads, and a field written as `null` stays `null` (not left out).
 
 use crate::program::{PlayerState, Program};
-use crate::teleop::JointSlider;
+use crate::teleop::{JointSlider, RobotView};
 use eezybot_kinematics::envelope::Envelope;
 use eezybot_kinematics::{Arm, ArmJoints};
 use serde::Serialize;
@@ -128,16 +128,9 @@ pub struct Pose {
 /// The arm as the page needs it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RobotInfo {
-    /// the URDF's robot name (`eezybot` before any)
-    pub name: String,
-    /// the EezyBot (closed-form checks, a claw slider)
-    pub eezybot: bool,
-    /// the joint mode's sliders
-    pub joints: Vec<JointSlider>,
-    /// a generous reach (m)
-    pub reach: f64,
-    /// the link a Cartesian target places
-    pub tool_link: Option<String>,
+    /// its name, whether it is the EezyBot, the joint mode's sliders, its reach, its tool
+    #[serde(flatten)]
+    pub view: RobotView,
     /// whether this came from `robot_description`
     pub from_urdf: bool,
     /// with a URDF: where to fetch it and the workspace envelope
@@ -148,12 +141,15 @@ pub struct RobotInfo {
 impl RobotInfo {
     /// The EezyBot before any `robot_description`.
     pub fn eezybot(joints: Vec<JointSlider>) -> RobotInfo {
-        RobotInfo {
+        let view = RobotView {
             name: "eezybot".into(),
             eezybot: true,
             joints,
-            reach: 0.33,
+            reach_m: 0.33,
             tool_link: Some("tool0".into()),
+        };
+        RobotInfo {
+            view,
             from_urdf: false,
             scene: None,
         }
@@ -428,15 +424,17 @@ mod tests {
             (
                 ToClient::Robot {
                     robot: RobotInfo {
-                        name: "jaco".into(),
-                        eezybot: false,
-                        joints: vec![JointSlider {
-                            name: "j1".into(),
-                            lower: -1.0,
-                            upper: 1.0,
-                        }],
-                        reach: 1.5,
-                        tool_link: None,
+                        view: RobotView {
+                            name: "jaco".into(),
+                            eezybot: false,
+                            joints: vec![JointSlider {
+                                name: "j1".into(),
+                                lower: -1.0,
+                                upper: 1.0,
+                            }],
+                            reach_m: 1.5,
+                            tool_link: None,
+                        },
                         from_urdf: true,
                         scene: Some(UrdfScene {
                             urdf: Some("robot.urdf?rev=1".into()),

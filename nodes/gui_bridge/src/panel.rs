@@ -615,10 +615,8 @@ impl Panel {
     }
 
     fn desk_step(&mut self, now: Instant, effects: &mut Vec<Effect>) {
-        if self.desk.playing() {
-            let out = self.desk.play_step(&mut self.teleop, now, self.last_tool);
-            self.desk_outcome(out, effects);
-        }
+        let out = self.desk.play_step(&mut self.teleop, now, self.last_tool);
+        self.desk_outcome(out, effects);
     }
 
     fn desk_outcome(&mut self, out: DeskOutcome, effects: &mut Vec<Effect>) {
@@ -663,11 +661,7 @@ impl Panel {
         let rev = self.urdf.as_ref().map_or(1, |(_, r)| r + 1);
         self.urdf = Some((text.into(), rev));
         let robot = RobotInfo {
-            name: view.name,
-            eezybot: view.eezybot,
-            joints: self.teleop.joint_sliders(),
-            reach: view.reach_m,
-            tool_link: view.tool_link,
+            view,
             from_urdf: true,
             scene: Some(UrdfScene {
                 urdf: Some(format!("robot.urdf?rev={rev}")),

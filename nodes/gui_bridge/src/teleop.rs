@@ -20,8 +20,9 @@ pub struct JointSlider {
     pub upper: f64,
 }
 
-/// The arm the panel drives, from `robot_description`.
-#[derive(Clone, Debug, PartialEq)]
+/// The arm the panel drives, from `robot_description` (to the page as
+/// `{"name", "eezybot", "joints", "reach", "tool_link"}`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct RobotView {
     /// The URDF's robot name.
     pub name: String,
@@ -31,6 +32,7 @@ pub struct RobotView {
     pub joints: Vec<JointSlider>,
     /// A generous reach (m): the sum of the joint offsets from the root, for the
     /// Cartesian sliders' range and the live view's scale.
+    #[serde(rename = "reach")]
     pub reach_m: f64,
     /// The link a Cartesian target places, when the URDF has one end (else none).
     pub tool_link: Option<String>,

@@ -6,7 +6,9 @@ use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::Time;
 use futures::StreamExt;
 use gui_bridge::panel::Panel;
-use gui_bridge::web::{request_channels, ClientRequest, FromClient, Limits, WebStats};
+use gui_bridge::web::{
+    request_channels, ClientRequest, FromClient, Limits, ProgramOp, Requests, WebStats,
+};
 use gui_bridge::{Handles, Outputs, Reporting};
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Params;
@@ -50,6 +52,28 @@ fn panel() -> Panel {
     Panel::new(arm, 50.0, desk(), "gui_bridge")
 }
 
+/// The loop's ends for a test: no parameters to change, no compute_ik to set modes on,
+/// browsers that hear nothing.
+fn handles<'a, I, O, S>(
+    inputs: I,
+    requests: Requests,
+    outputs: &'a O,
+    web: Arc<WebStats>,
+    shutdown: S,
+) -> Handles<'a, I, O, impl Fn() -> Vec<usize>, S> {
+    Handles {
+        inputs,
+        requests,
+        to_browsers: broadcast::channel(16).0,
+        snapshot: watch::channel(panel().snapshot()).0,
+        outputs,
+        params: Params::new(BTreeMap::new()),
+        reporting: reporting(web),
+        motion: &NoMotionControl,
+        shutdown,
+    }
+}
+
 fn reporting(web: Arc<WebStats>) -> Reporting<impl Fn() -> Vec<usize>> {
     Reporting {
         name: "gui_bridge: operator panel".into(),
@@ -67,7 +91,6 @@ async fn an_estop_is_served_before_a_thousand_queued_requests() {
         ..Limits::default()
     };
     let (senders, requests) = request_channels(&limits);
-    let (to_clients, _) = broadcast::channel(16);
     let (reply, mut replies) = mpsc::channel(1000);
     let (done_tx, done_rx) = oneshot::channel();
     let fake = Fake {
@@ -96,19 +119,9 @@ async fn an_estop_is_served_before_a_thousand_queued_requests() {
     let stats = Arc::new(WebStats::default());
     gui_bridge::run(
         panel(),
-        Handles {
-            inputs: futures::stream::pending(),
-            requests,
-            to_browsers: to_clients,
-            snapshot: watch::channel(panel().snapshot()).0,
-            outputs: &fake,
-            params: Params::new(BTreeMap::new()),
-            reporting: reporting(stats),
-            motion: &NoMotionControl,
-            shutdown: async {
-                let _ = done_rx.await;
-            },
-        },
+        handles(futures::stream::pending(), requests, &fake, stats, async {
+            let _ = done_rx.await;
+        }),
     )
     .await;
     let (engaged, answered) = fake.estops.borrow()[0];
@@ -128,7 +141,6 @@ async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
         ..Limits::default()
     };
     let (senders, requests) = request_channels(&limits);
-    let (to_clients, _) = broadcast::channel(16);
     let (reply, _replies) = mpsc::channel(4); // never read
     let (probe, _probe_rx) = mpsc::channel(1);
     let fake = Fake {
@@ -158,17 +170,13 @@ async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
     };
     let run = gui_bridge::run(
         panel(),
-        Handles {
-            inputs: futures::stream::pending(),
+        handles(
+            futures::stream::pending(),
             requests,
-            to_browsers: to_clients,
-            snapshot: watch::channel(panel().snapshot()).0,
-            outputs: &fake,
-            params: Params::new(BTreeMap::new()),
-            reporting: reporting(stats.clone()),
-            motion: &NoMotionControl,
-            shutdown: through,
-        },
+            &fake,
+            stats.clone(),
+            through,
+        ),
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
         .await
@@ -206,7 +214,6 @@ impl Recorder {
 #[tokio::test]
 async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published() {
     let (senders, requests) = request_channels(&Limits::default());
-    let (to_clients, _) = broadcast::channel(16);
     let (reply, mut replies) = mpsc::channel(16);
     let joints = |q: &[(&str, f64)]| ClientRequest::Joints {
         q: q.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
@@ -239,17 +246,7 @@ async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published()
     };
     let run = gui_bridge::run(
         panel(),
-        Handles {
-            inputs,
-            requests,
-            to_browsers: to_clients,
-            snapshot: watch::channel(panel().snapshot()).0,
-            outputs: &recorder,
-            params: Params::new(BTreeMap::new()),
-            reporting: reporting(stats.clone()),
-            motion: &NoMotionControl,
-            shutdown: counted,
-        },
+        handles(inputs, requests, &recorder, stats.clone(), counted),
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
         .await
@@ -276,4 +273,54 @@ async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published()
         recorder.last_value("last_unreadable_sample").as_deref(),
         Some("joint_states: the sample ends early")
     );
+}
+
+#[tokio::test]
+async fn a_save_runs_off_the_loop_and_every_browser_and_a_later_hello_hear_of_it() {
+    let dir = std::env::temp_dir().join(format!("gui_bridge_bridge_save_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let arm = gui_bridge::load_arm("").unwrap();
+    let panel = Panel::new(arm, 50.0, Desk::new(dir.clone()), "gui_bridge");
+    let (senders, requests) = request_channels(&Limits::default());
+    let (reply, _replies) = mpsc::channel(16);
+    let save = ProgramOp::Save {
+        name: "p".into(),
+        overwrite: false,
+    };
+    for op in [ProgramOp::Teach, save] {
+        let request = ClientRequest::Program(op);
+        let reply = reply.clone();
+        senders.try_send(FromClient { request, reply }).unwrap();
+    }
+    let (to_browsers, mut heard) = broadcast::channel::<String>(64);
+    let (snapshot, view) = watch::channel(panel.snapshot());
+    let saved = async move {
+        while let Ok(text) = heard.recv().await {
+            if text.contains("saved 1 points as p") {
+                return;
+            }
+        }
+    };
+    let recorder = Recorder::default();
+    let stats = Arc::new(WebStats::default());
+    let mut io = handles(
+        futures::stream::pending(),
+        requests,
+        &recorder,
+        stats,
+        saved,
+    );
+    io.to_browsers = to_browsers;
+    io.snapshot = snapshot;
+    tokio::time::timeout(
+        std::time::Duration::from_secs(10),
+        gui_bridge::run(panel, io),
+    )
+    .await
+    .expect("the save was never reported");
+    assert!(dir.join("p.csv").is_file());
+    let hello: serde_json::Value = serde_json::from_str(&view.borrow().hello(50.0)).unwrap();
+    assert_eq!(hello["program"]["message"], "saved 1 points as p");
+    assert_eq!(hello["program"]["files"], serde_json::json!(["p"]));
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,0 +1,335 @@
+//! The panel's core on a fixed clock: events in, effects out, no I/O.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use eezybot_kinematics::ArmJoints;
+use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::Time;
+use gui_bridge::desk::Desk;
+use gui_bridge::panel::{Clock, Effect, Panel};
+use gui_bridge::program::MoveMode;
+use gui_bridge::teleop::Command;
+use gui_bridge::web::{ClientRequest, ProgramOp};
+use gui_bridge::Input;
+use ros_plumbing::feedback::{self, ReasonCode, Refusal};
+use serde_json::Value;
+use std::time::{Duration, Instant};
+
+fn panel(test: &str) -> Panel {
+    let dir = std::env::temp_dir().join(format!("gui_bridge_panel_{test}_{}", std::process::id()));
+    let arm = gui_bridge::load_arm("").unwrap();
+    Panel::new(arm, 50.0, Desk::new(dir), "gui_bridge")
+}
+
+/// `ms` milliseconds after `t0`, on both clocks (the wall clock starts at 1000 s).
+fn at(t0: Instant, ms: u64) -> Clock {
+    Clock {
+        now: t0 + Duration::from_millis(ms),
+        wall: Time::new(1000, (ms * 1_000_000) as u32),
+    }
+}
+
+fn published(effects: &[Effect]) -> Vec<Command> {
+    effects
+        .iter()
+        .filter_map(|e| match e {
+            Effect::Publish { command, .. } => Some(command.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The messages to every browser (`broadcast: true`) or to the requester, as JSON.
+fn told(effects: &[Effect], broadcast: bool) -> Vec<Value> {
+    effects
+        .iter()
+        .filter_map(|e| match (e, broadcast) {
+            (Effect::Broadcast(m), true) | (Effect::Answer(m), false) => {
+                Some(serde_json::from_str(&m.to_text()).unwrap())
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+fn of_kind<'a>(messages: &'a [Value], t: &str) -> Vec<&'a Value> {
+    messages.iter().filter(|m| m["t"] == t).collect()
+}
+
+fn target(xyz: [f64; 3]) -> ClientRequest {
+    ClientRequest::Target { xyz }
+}
+
+#[test]
+fn targets_go_out_at_the_rate_latest_wins_and_the_estop_first() {
+    let mut p = panel("rate");
+    let t0 = Instant::now();
+    let e = p.on_request(target([0.2, 0.0, 0.15]), at(t0, 0));
+    assert_eq!(told(&e, false)[0]["t"], "ack");
+    assert!(e
+        .iter()
+        .any(|e| matches!(e, Effect::Snapshot(s) if s.target == [0.2, 0.0, 0.15])));
+    assert!(p.publish_due(at(t0, 0).now));
+    let e = p.on_tick(at(t0, 0));
+    assert_eq!(published(&e), [Command::Target([0.2, 0.0, 0.15])]);
+    let sent = told(&e, true);
+    assert_eq!(sent[0]["t"], "sent");
+    assert_eq!(sent[0]["stamp_ns"], 1_000_000_000_000_i64);
+    // within the 20 ms of 50/s: the latest of three waits, the e-stop does not
+    for y in [0.01, 0.02, 0.03] {
+        p.on_request(target([0.2, y, 0.15]), at(t0, 5));
+    }
+    assert!(!p.publish_due(at(t0, 5).now));
+    assert_eq!(p.next_wakeup(at(t0, 5).now), Some(at(t0, 20).now));
+    p.on_request(ClientRequest::Estop { on: true }, at(t0, 6));
+    assert!(p.publish_due(at(t0, 6).now));
+    assert_eq!(published(&p.on_tick(at(t0, 6))), [Command::Estop(true)]);
+    assert!(published(&p.on_tick(at(t0, 10))).is_empty());
+    assert_eq!(
+        published(&p.on_tick(at(t0, 20))),
+        [Command::Target([0.2, 0.03, 0.15])]
+    );
+}
+
+#[test]
+fn a_refused_request_is_answered_counted_and_sends_nothing() {
+    let mut p = panel("refused");
+    let t0 = Instant::now();
+    let e = p.on_request(target([1.0, 0.0, 0.1]), at(t0, 0));
+    let answer = &told(&e, false)[0];
+    assert_eq!(answer["t"], "refused");
+    assert_eq!(answer["reachable"], false);
+    assert!(answer["reason"].as_str().unwrap().contains("out of reach"));
+    assert!(e.iter().any(|e| matches!(
+        e,
+        Effect::Rejected {
+            kind: "unreachable",
+            ..
+        }
+    )));
+    assert!(!p.publish_due(at(t0, 0).now));
+    // a check answers and sends nothing either way
+    let e = p.on_request(
+        ClientRequest::Check {
+            xyz: [0.2, 0.0, 0.15],
+        },
+        at(t0, 1),
+    );
+    let answer = &told(&e, false)[0];
+    assert_eq!(
+        (answer["t"].as_str(), answer["reachable"].as_bool()),
+        (Some("check"), Some(true))
+    );
+    assert!(answer["joints"]["base_joint"].is_f64());
+    assert_eq!(p.next_wakeup(at(t0, 1).now), None);
+}
+
+/// The panel's diagnostics entry of compute_ik refusing the target stamped `stamp`.
+fn refusal_of(stamp: Time) -> DiagnosticArray {
+    let refusal = Refusal::new(stamp, ReasonCode::Unreachable, "out of reach", "xyz_target");
+    DiagnosticArray {
+        header: Header::default(),
+        status: vec![ros_plumbing::diagnostics::status(
+            DiagnosticStatus::WARN,
+            "ik2: inverse kinematics",
+            "eezybot_arm",
+            "xyz_target rejected",
+            &feedback::encode(&refusal),
+        )],
+    }
+}
+
+fn program_messages(effects: &[Effect]) -> Vec<Value> {
+    told(effects, true)
+        .into_iter()
+        .filter(|m| m["t"] == "program")
+        .collect()
+}
+
+/// A panel playing a program of one point (where the arm is) to be moved to in a
+/// straight line; the effects of `play`.
+fn play_one_point_in_line_mode(test: &str) -> (Panel, Instant, Vec<Effect>) {
+    let mut p = panel(test);
+    let t0 = Instant::now();
+    p.on_request(ClientRequest::Program(ProgramOp::Teach), at(t0, 0));
+    let mode = ProgramOp::Mode {
+        i: 0,
+        mode: Some("line".into()),
+    };
+    p.on_request(ClientRequest::Program(mode), at(t0, 1));
+    let play = ProgramOp::Play { looping: false };
+    let e = p.on_request(ClientRequest::Program(play), at(t0, 2));
+    (p, t0, e)
+}
+
+#[test]
+fn a_program_sets_its_move_mode_plays_and_an_estop_stops_it_and_puts_the_mode_back() {
+    let (mut p, t0, e) = play_one_point_in_line_mode("play");
+    assert!(e
+        .iter()
+        .any(|e| matches!(e, Effect::SetMotion(MoveMode::Line))));
+    assert_eq!(
+        program_messages(&e).last().unwrap()["player"]["phase"],
+        "setting_mode"
+    );
+    // nothing goes out before compute_ik took the mode
+    assert!(!p.publish_due(at(t0, 3).now));
+    p.on_mode_set(Ok(()), at(t0, 4));
+    let e = p.on_tick(at(t0, 4));
+    assert_eq!(published(&e).len(), 1, "{e:?}");
+    // compute_ik's e-stop on the topic: stop, and put `motion` back
+    let e = p.on_input(Input::Estop(true), at(t0, 5));
+    assert_eq!(of_kind(&told(&e, true), "estop").len(), 1);
+    assert!(e.iter().any(|e| matches!(e, Effect::RestoreMotion)));
+    assert_eq!(
+        program_messages(&e).last().unwrap()["player"]["phase"],
+        "stopped"
+    );
+}
+
+#[test]
+fn compute_iks_refusal_of_the_players_target_stops_it_and_shows_on_the_status() {
+    let mut p = panel("refusal");
+    let t0 = Instant::now();
+    p.on_request(ClientRequest::Program(ProgramOp::Teach), at(t0, 0));
+    p.on_request(
+        ClientRequest::Program(ProgramOp::Play { looping: false }),
+        at(t0, 1),
+    );
+    let clock = at(t0, 2);
+    assert_eq!(published(&p.on_tick(clock)).len(), 1);
+    // a refusal of another target changes nothing
+    let e = p.on_input(Input::Diagnostics(refusal_of(Time::new(999, 0))), at(t0, 3));
+    assert!(program_messages(&e)
+        .iter()
+        .all(|m| m["player"]["phase"] != "failed"));
+    let e = p.on_input(Input::Diagnostics(refusal_of(clock.wall)), at(t0, 4));
+    let last = program_messages(&e)
+        .pop()
+        .unwrap_or_else(|| panic!("the desk changed: {e:?}"));
+    assert_eq!(last["player"]["phase"], "failed");
+    assert_eq!(last["message"], "stopped at point 1: refused: out of reach");
+    let status = &told(&p.on_status_tick(at(t0, 5)), true)[0];
+    assert_eq!(status["last_rejection"], "out of reach");
+    let names: Vec<&str> = status["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["ik2", "state_publisher", "serial_node"]);
+    // not heard for 3 s: shown down
+    let status = &told(&p.on_status_tick(at(t0, 4000)), true)[0];
+    assert_eq!(status["nodes"][0]["up"], false);
+}
+
+#[test]
+fn joint_states_make_the_live_view_and_a_later_browsers_hello() {
+    let mut p = panel("pose");
+    let t0 = Instant::now();
+    let q = ArmJoints::HOME;
+    let js = JointState {
+        name: [
+            "base_joint",
+            "shoulder_joint",
+            "elbow_joint",
+            "gripper_joint",
+        ]
+        .map(String::from)
+        .to_vec(),
+        position: vec![q.base_rad, q.shoulder_rad, q.elbow_rad, 0.2],
+        ..Default::default()
+    };
+    let e = p.on_input(Input::JointStates(js), at(t0, 0));
+    let pose = &told(&e, true)[0];
+    assert_eq!(pose["t"], "pose");
+    assert_eq!(pose["joints"]["shoulder_joint"], q.shoulder_rad);
+    assert_eq!(pose["gripper"], 0.2);
+    assert!(pose["tool"].as_array().is_some_and(|t| t.len() == 3));
+    let Some(Effect::Snapshot(s)) = e.last() else {
+        panic!("no snapshot: {e:?}")
+    };
+    let hello: Value = serde_json::from_str(&s.hello(50.0)).unwrap();
+    assert_eq!(&hello["pose"], pose);
+    assert_eq!(hello["program"]["t"], "program");
+    // a joint_states without the arm's joints shows nothing
+    let e = p.on_input(Input::JointStates(JointState::default()), at(t0, 1));
+    assert!(told(&e, true).is_empty());
+}
+
+#[test]
+fn latency_is_measured_on_replies_to_our_own_targets_only() {
+    let mut p = panel("latency");
+    let t0 = Instant::now();
+    p.on_request(target([0.2, 0.0, 0.15]), at(t0, 0));
+    p.on_tick(at(t0, 0));
+    let reply = |stamp| {
+        Input::ServoState(JointState {
+            header: Header {
+                stamp,
+                frame_id: String::new(),
+            },
+            ..Default::default()
+        })
+    };
+    assert!(told(&p.on_input(reply(Time::new(5, 0)), at(t0, 1)), true).is_empty());
+    let e = p.on_input(reply(at(t0, 0).wall), at(t0, 2));
+    let latency = &told(&e, true)[0];
+    assert_eq!(
+        (latency["t"].as_str(), latency["ms"].as_f64()),
+        (Some("latency"), Some(2.0))
+    );
+    assert_eq!(latency["n"], 1);
+}
+
+#[test]
+fn an_unusable_robot_description_is_logged_and_changes_nothing() {
+    let mut p = panel("urdf");
+    let t0 = Instant::now();
+    let e = p.on_input(Input::RobotDescription("<robot".into()), at(t0, 0));
+    assert!(
+        matches!(e.as_slice(), [Effect::Log(log::Level::Warn, _)]),
+        "{e:?}"
+    );
+    assert!(p.snapshot().urdf.is_none());
+    let urdf =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../urdf/jaco.urdf"))
+            .unwrap();
+    let e = p.on_input(Input::RobotDescription(urdf), at(t0, 1));
+    let all = told(&e, true);
+    let robot = &of_kind(&all, "robot")[0]["robot"];
+    assert_eq!(
+        (robot["eezybot"].as_bool(), robot["urdf"].as_str()),
+        (Some(false), Some("robot.urdf?rev=1"))
+    );
+    assert!(p.snapshot().urdf.is_some());
+    // no closed form for this arm: a check says so
+    let e = p.on_request(
+        ClientRequest::Check {
+            xyz: [0.2, 0.0, 0.15],
+        },
+        at(t0, 2),
+    );
+    assert!(told(&e, false)[0]["reachable"].is_null());
+}
+
+#[test]
+fn a_move_mode_compute_ik_does_not_take_stops_the_program_with_the_reason_and_puts_it_back() {
+    let (mut p, t0, _) = play_one_point_in_line_mode("mode");
+    let e = p.on_mode_set(Err("compute_ik did not answer".into()), at(t0, 3));
+    assert!(
+        e.iter().any(|e| matches!(e, Effect::RestoreMotion)),
+        "{e:?}"
+    );
+    let last = program_messages(&e).pop().unwrap();
+    assert_eq!(last["player"]["phase"], "failed");
+    assert_eq!(
+        last["message"],
+        "stopped at point 1: compute_ik did not take motion:=line"
+    );
+    assert!(
+        !p.publish_due(at(t0, 4).now),
+        "no target after a failed mode"
+    );
+}
