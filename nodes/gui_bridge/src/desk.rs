@@ -383,7 +383,7 @@ impl Desk {
         std::mem::take(&mut self.mode_touched)
     }
 
-    /// When [`Desk::step`] is due again even without news (a dwell ends, a timeout).
+    /// When [`Desk::play_step`] is due again even without news (a dwell ends, a timeout).
     pub fn next_wakeup(&self) -> Option<Instant> {
         self.player
             .as_ref()
