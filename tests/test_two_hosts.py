@@ -128,8 +128,12 @@ def split_graph(tmp_path_factory):
 LEASE_S = 5  # our participants' lease (1 s announcements): longer outages lose peers
 
 
-@pytest.mark.parametrize("length", [3, 12, 25, 60])
-@pytest.mark.parametrize("side", ["pc", "pi"])
+# One trial per outage length, the cut end alternating (the Pi's end for 3 and 25 s,
+# the PC's for 12 and 60 s; test_security.py cuts the Pi's end for 25 s, secured, and
+# the partition test below for 5 s). tests/soak/outages.py runs every length at both
+# ends, 20 trials each.
+@pytest.mark.parametrize("length,side", [(3, "pi"), (12, "pc"), (25, "pi"), (60, "pc")],
+                         ids=["pi-3", "pc-12", "pi-25", "pc-60"])
 def test_the_graph_resumes_after_a_link_outage(split_graph, length, side):
     """Pull the cable at one end for `length` s while the operator keeps sending, plug it
     back (multicast route re-added, as a DHCP client does): the newest target is
@@ -211,8 +215,17 @@ def test_streaming_over_an_impaired_link(domain, tmp_path):
     # newer one overtakes on the way is superseded, not lost)
     arrivals = sorted(a for a, _ in g.replies_after(t0))
     longest_gap = max(b - a for a, b in zip(arrivals, arrivals[1:]))
-    print(f"longest gap between servo_state replies {longest_gap * 1e3:.0f} ms")
-    assert longest_gap < 1.0, f"streaming stalled for {longest_gap:.2f} s on the impaired link"
+    # a stall is counted in targets, not seconds: the longest run of consecutive targets
+    # (in the order sent) of which none was answered. A loaded host coalesces a few
+    # (latest wins) and answers late; a stalled stream (a reliable writer that stops
+    # repairing, say) leaves every target after it unanswered.
+    run = longest_run = 0
+    for s in sent:
+        run = 0 if s in answered else run + 1
+        longest_run = max(longest_run, run)
+    print(f"longest gap between servo_state replies {longest_gap * 1e3:.0f} ms (not asserted: wall clock), "
+          f"longest run of unanswered targets {longest_run}")
+    assert longest_run < 40, f"streaming stalled: {longest_run} targets in a row (2 s at 20 Hz) got no answer"
     assert len(answered) >= 0.8 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
     # the newest target's motion is what the arm ends with: the device's last state is
     # compute_ik's last command (the newest target's first step may not be answered as
