@@ -222,8 +222,8 @@ where
   // Enhanced (no header in the payload): as rmw_fastrtps writes it
   // (`__rmw_send_request`), the GUID of this client's response reader with an
   // unknown sequence number. The server replies to that reader, with the request's
-  // sequence number: a Fast DDS server waits for its response writer to match the
-  // GUID it finds there before it replies, and our `Server` expects the parameter
+  // sequence number (a Fast DDS server checks that its response writer matched the
+  // GUID it finds there), and our `Server` expects the parameter
   // (`RequestWrapper::unwrap` warns "related_sample_identity missing" without it).
   fn request_write_options(&self, generated: RmwRequestId) -> WriteOptions {
     let related = match self.service_mapping {
@@ -387,8 +387,8 @@ mod tests {
   // An Enhanced request carries the related sample identity its server needs: the
   // client's response reader (rmw_fastrtps' convention). Without it our own server
   // fell back to the request's sample identity and warned "related_sample_identity
-  // missing" at every call, and a Fast DDS server found no response reader to
-  // answer. The reply still comes back under the id `send_request` returned.
+  // missing" at every call. The reply still comes back under the id `send_request`
+  // returned.
   #[test]
   fn an_enhanced_request_names_the_response_reader_and_its_reply_is_ours() {
     let context = Context::new().unwrap();
