@@ -113,8 +113,8 @@ fn every_topic_of_the_contract_is_written_in_the_docs_with_its_type_and_qos() {
     }
 }
 
-/// The topics, types and QoS as the written interface contract states them
-/// (`INTERFACES.md`, "Topics"), transcribed: an independent reference, so that a QoS
+/// The topics, types and QoS as the project's written interface contract states them
+/// (its topic table), transcribed here: an independent reference, so that a QoS
 /// changed in topics.rs fails here even when the generated table and topics.json are
 /// regenerated with it. `None`: the contract leaves it open (volatile is DDS' default
 /// durability; the contract gives no depth for `tf`, `tf_static` and `diagnostics`).
