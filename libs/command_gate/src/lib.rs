@@ -343,8 +343,9 @@ mod tests {
         );
     }
 
-    #[test]
-    fn a_live_command_drops_the_held_one() {
+    /// A gate that saw live commands for 100 ms, then holds command 7, stamped 100.0 s
+    /// and received 3 s later, at t0 + 3 s.
+    fn holding() -> (Instant, CommandGate<u32>) {
         let t0 = Instant::now();
         let mut gate = CommandGate::new();
         live(&mut gate, t0, 0, 5, 0.0);
@@ -352,10 +353,14 @@ mod tests {
             stamp_s: 100.0,
             received_s: 103.0,
         };
-        assert!(matches!(
-            gate.offer(7, late, t0 + ms(3000)),
-            Verdict::Held { .. }
-        ));
+        let v = gate.offer(7, late, t0 + ms(3000));
+        assert!(matches!(v, Verdict::Held { .. }), "{v:?}");
+        (t0, gate)
+    }
+
+    #[test]
+    fn a_live_command_drops_the_held_one() {
+        let (t0, mut gate) = holding();
         let fresh = Stamp {
             stamp_s: 103.005,
             received_s: 103.006,
@@ -407,14 +412,7 @@ mod tests {
 
     #[test]
     fn the_estop_discards_the_held_command_without_counting_it_superseded() {
-        let t0 = Instant::now();
-        let mut gate = CommandGate::new();
-        live(&mut gate, t0, 0, 3, 0.0);
-        let late = Stamp {
-            stamp_s: 100.0,
-            received_s: 102.0,
-        };
-        gate.offer(9, late, t0 + ms(2000));
+        let (_, mut gate) = holding();
         assert!(gate.discard());
         assert!(!gate.discard());
         assert_eq!(gate.deadline(), None);

@@ -20,6 +20,12 @@
 //! lives here only: while engaged, commands are dropped; after its release nothing
 //! moves until a new command, which ramps from where the arm is.
 //!
+//! A stamped command goes through the late-hold gate ([`HostLink::offer`], the rule of
+//! [`command_gate`]): one that arrives late (DDS repairing what a network outage held
+//! back) waits up to [`command_gate::HOLD_LATE`] for a newer one, and [`HostLink::next`]
+//! applies it when none came. The wait is part of [`Next::Wait`], so the shell needs no
+//! timer of its own.
+//!
 //! # Examples
 //! ```
 //! use servo_protocol::host::{HostConfig, HostLink, LinkEvent, Next};
@@ -57,6 +63,7 @@
 
 use crate::frame::{DeviceState, Frame, Message, StopAction, WatchdogAction, PROTOCOL_VERSION};
 use crate::SERVOS;
+use command_gate::{CommandGate, GateCounters, Stamp, Verdict};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -171,6 +178,27 @@ pub enum LinkEvent<T> {
     },
     /// A command handed in during an engaged e-stop: dropped.
     DroppedInEstop,
+    /// A command held back for arriving late ([`HostLink::offer`]) became the command:
+    /// no newer one came within [`command_gate::HOLD_LATE`].
+    LateApplied {
+        /// its tag
+        tag: T,
+    },
+}
+
+/// What [`HostLink::offer`] did with a command.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Offered {
+    /// It is the command now.
+    Now,
+    /// It arrived late: held back for a newer one, applied by [`HostLink::next`] at
+    /// the gate's deadline if none comes.
+    Held {
+        /// seconds from its stamp to its reception
+        age_s: f64,
+    },
+    /// The e-stop is engaged: dropped (and reported as [`LinkEvent::DroppedInEstop`]).
+    DroppedInEstop,
 }
 
 /// Counters of the sending side, for diagnostics.
@@ -233,6 +261,8 @@ pub struct HostLink<T> {
     connected_once: bool,
     events: Vec<LinkEvent<T>>,
     stats: SendStats,
+    /// the late-hold gate: a late command with its tag and reception
+    gate: CommandGate<([u16; SERVOS], T, Instant)>,
 }
 
 impl<T: Clone> HostLink<T> {
@@ -258,6 +288,7 @@ impl<T: Clone> HostLink<T> {
             connected_once: false,
             events: Vec::new(),
             stats: SendStats::default(),
+            gate: CommandGate::new(),
         }
     }
 
@@ -291,14 +322,48 @@ impl<T: Clone> HostLink<T> {
         &self.stats
     }
 
+    /// What the late-hold gate did ([`HostLink::offer`]).
+    pub fn gate(&self) -> &GateCounters {
+        self.gate.counters()
+    }
+
     /// The events since the last call.
     pub fn take_events(&mut self) -> Vec<LinkEvent<T>> {
         std::mem::take(&mut self.events)
     }
 
     /// The newest command, tagged (e.g. with its stamp), handed in at `now`. It
-    /// replaces any command not yet fully sent; during an e-stop it is dropped.
+    /// replaces any command not yet fully sent (and one held late); during an e-stop it
+    /// is dropped. It bypasses the late-hold gate: see [`HostLink::offer`].
     pub fn command(&mut self, ticks: [u16; SERVOS], tag: T, now: Instant) {
+        self.gate.discard();
+        self.apply(ticks, tag, now);
+    }
+
+    /// A stamped command received at `now`, through the late-hold gate: it becomes the
+    /// command at once ([`HostLink::command`]), or, arriving late, is held back for a
+    /// newer one (which replaces it, or drops it if live; the gate's `superseded`
+    /// counts both) and applied by [`HostLink::next`] when none came in time. During
+    /// an e-stop it is dropped.
+    pub fn offer(&mut self, ticks: [u16; SERVOS], tag: T, stamp: Stamp, now: Instant) -> Offered {
+        if self.estop {
+            self.events.push(LinkEvent::DroppedInEstop);
+            return Offered::DroppedInEstop;
+        }
+        match self.gate.offer((ticks, tag, now), stamp, now) {
+            Verdict::Pass {
+                item: (ticks, tag, now),
+                ..
+            } => {
+                self.apply(ticks, tag, now);
+                Offered::Now
+            }
+            // (TooOld never comes: this gate has no maximum age)
+            Verdict::Held { age_s, .. } | Verdict::TooOld { age_s, .. } => Offered::Held { age_s },
+        }
+    }
+
+    fn apply(&mut self, ticks: [u16; SERVOS], tag: T, now: Instant) {
         if self.estop {
             self.events.push(LinkEvent::DroppedInEstop);
             return;
@@ -312,13 +377,17 @@ impl<T: Clone> HostLink<T> {
         });
     }
 
-    /// Engage or release the e-stop. Engaging drops the command being sent; after a
-    /// release the servos move only on a new command.
-    pub fn set_estop(&mut self, engaged: bool) {
+    /// Engage or release the e-stop; returns whether that changed it. Engaging drops
+    /// the command being sent and one held late; after a release the servos move only
+    /// on a new command.
+    pub fn set_estop(&mut self, engaged: bool) -> bool {
         if engaged {
             self.command = None;
+            self.gate.discard();
         }
+        let changed = self.estop != engaged;
         self.estop = engaged;
+        changed
     }
 
     /// The port opened: start the handshake.
@@ -462,8 +531,21 @@ impl<T: Clone> HostLink<T> {
     }
 
     /// What to do at `now`. A [`Next::Send`] counts as sent: if writing it fails,
-    /// call [`HostLink::lost`].
+    /// call [`HostLink::lost`]. A command held late becomes the command at its
+    /// deadline: a [`Next::Wait`] is never past it.
     pub fn next(&mut self, now: Instant) -> Next {
+        if let Some((ticks, tag, received)) = self.gate.take_due(now) {
+            self.events
+                .push(LinkEvent::LateApplied { tag: tag.clone() });
+            self.apply(ticks, tag, received);
+        }
+        match self.next_action(now) {
+            Next::Wait(until) => Next::Wait(self.gate.deadline().map_or(until, |d| d.min(until))),
+            other => other,
+        }
+    }
+
+    fn next_action(&mut self, now: Instant) -> Next {
         match self.phase.clone() {
             Phase::Closed { retry_at, .. } => {
                 if now >= retry_at {
@@ -1065,6 +1147,120 @@ mod tests {
             after[0]
         );
         assert_eq!(after.last().unwrap().1, [3400; 4]);
+    }
+
+    /// Live commands tagged `first..first + n`, every 20 ms, 2 ms on the way (wall
+    /// seconds = ms since the rig's start / 1000), each run for 20 ms.
+    fn offer_live(r: &mut Rig, first: u32, n: u32) {
+        for k in first..first + n {
+            let received_s = r.t().as_secs_f64();
+            let stamp = Stamp {
+                stamp_s: received_s - 0.002,
+                received_s,
+            };
+            assert_eq!(
+                r.link.offer([2900 + k as u16; 4], k, stamp, r.now),
+                Offered::Now
+            );
+            let next = r.t().as_millis() as u64 + 20;
+            r.run_until(next);
+        }
+    }
+
+    /// A command stamped `age_s` before now, offered now.
+    fn offer_late(r: &mut Rig, ticks: u16, tag: u32, age_s: f64) -> Offered {
+        let received_s = r.t().as_secs_f64();
+        let stamp = Stamp {
+            stamp_s: received_s - age_s,
+            received_s,
+        };
+        r.link.offer([ticks; 4], tag, stamp, r.now)
+    }
+
+    #[test]
+    fn a_late_burst_is_held_and_only_its_newest_goes_out_at_the_deadline() {
+        let mut r = Rig::new(HostConfig::default());
+        r.run_until(50);
+        offer_live(&mut r, 0, 5);
+        let n = r.pulses_sent().len();
+        // a 3 s outage: DDS repairs three commands stamped during it, 10 ms apart
+        let back = r.t();
+        assert!(
+            matches!(offer_late(&mut r, 3300, 100, 2.0), Offered::Held { age_s } if (age_s - 2.0).abs() < 1e-9)
+        );
+        r.run_until(back.as_millis() as u64 + 10);
+        assert!(matches!(
+            offer_late(&mut r, 3310, 101, 1.99),
+            Offered::Held { .. }
+        ));
+        r.run_until(back.as_millis() as u64 + 20);
+        assert!(matches!(
+            offer_late(&mut r, 3320, 102, 1.98),
+            Offered::Held { .. }
+        ));
+        r.run_until(back.as_millis() as u64 + 29);
+        assert_eq!(r.pulses_sent().len(), n, "a held command went out early");
+        // the first one's deadline, not extended by the later ones: the newest goes
+        r.run_until(back.as_millis() as u64 + 40);
+        let after: Vec<_> = r.pulses_sent().into_iter().skip(n).collect();
+        assert_eq!(after.len(), 1, "{after:?}");
+        assert!(
+            after[0].0 >= back + command_gate::HOLD_LATE
+                && after[0].0 < back + command_gate::HOLD_LATE + ms(2),
+            "{after:?}"
+        );
+        assert_eq!(after[0].1, [3320; 4]);
+        assert!(r
+            .events
+            .iter()
+            .any(|(_, e)| *e == LinkEvent::LateApplied { tag: 102 }));
+        assert_eq!(r.link.gate().superseded, 2);
+        // its latency counts from its arrival (20 ms after the first): the hold is in it
+        let last = *r.link.stats().latency_us.back().unwrap();
+        assert!((10_000.0..12_000.0).contains(&last), "{last}");
+    }
+
+    /// A link that had live commands 2900-2904 for 100 ms, and now holds a late one
+    /// (3300, tagged 100).
+    fn holding_a_late_command() -> Rig {
+        let mut r = Rig::new(HostConfig::default());
+        r.run_until(50);
+        offer_live(&mut r, 0, 5);
+        let held = offer_late(&mut r, 3300, 100, 2.0);
+        assert!(matches!(held, Offered::Held { .. }), "{held:?}");
+        r
+    }
+
+    #[test]
+    fn a_live_command_drops_the_late_one_held() {
+        let mut r = holding_a_late_command();
+        r.run_until(r.t().as_millis() as u64 + 5);
+        offer_live(&mut r, 10, 1);
+        r.run_until(r.t().as_millis() as u64 + 200);
+        assert_eq!(r.device.pulses(), [2910; 4]);
+        assert!(r.pulses_sent().iter().all(|(_, p)| *p != [3300; 4]));
+        assert_eq!(r.link.gate().superseded, 1);
+    }
+
+    #[test]
+    fn the_estop_drops_the_late_command_held_and_late_ones_during_it() {
+        let mut r = holding_a_late_command();
+        assert!(r.link.set_estop(true));
+        assert!(!r.link.set_estop(true), "engaged already");
+        assert_eq!(offer_late(&mut r, 3400, 101, 2.0), Offered::DroppedInEstop);
+        r.run_until(r.t().as_millis() as u64 + 100);
+        // released within the hold: nothing of what came before moves the arm
+        assert!(r.link.set_estop(false));
+        r.run_until(r.t().as_millis() as u64 + 200);
+        assert_eq!(r.device.pulses(), [2904; 4]);
+        assert_eq!(
+            r.events
+                .iter()
+                .filter(|(_, e)| *e == LinkEvent::DroppedInEstop)
+                .count(),
+            1
+        );
+        assert!(!r.link.estop());
     }
 
     #[test]

@@ -11,6 +11,14 @@ pub use frame::{
 };
 
 use std::io::{self, Read};
+use std::time::Duration;
+
+/// The longest [`FrameReader::rest_wait`] waits for the rest of a partial frame (the
+/// protocol drops a partial frame after 5 ms without a byte).
+pub const MAX_FRAME_WAIT: Duration = Duration::from_millis(2);
+
+/// A STATE frame's length.
+const STATE_FRAME_LEN: usize = OVERHEAD + 12;
 
 /// Reads frames from a byte stream, keeping partial frames between reads.
 pub struct FrameReader<R: Read> {
@@ -62,6 +70,23 @@ impl<R: Read> FrameReader<R> {
     /// Bytes held since the last read: a partial frame, or the start of one.
     pub fn buffered(&self) -> usize {
         self.buf.len()
+    }
+
+    /// How long to wait before reading again when part of a frame is held, for a
+    /// port whose bytes arrive as they come off the wire, `byte_time` apart: the rest's
+    /// time on the wire, and one byte's more for its way here, so that one read takes
+    /// it whole; never longer than [`MAX_FRAME_WAIT`]. With only the start byte in, the
+    /// length is not known yet: a STATE's rest is waited for (every frame a device sends
+    /// is one, but for the HELLO_ACK that answers the handshake, which is read a
+    /// little later). `None` when no partial frame is held.
+    pub fn rest_wait(&self, byte_time: Duration) -> Option<Duration> {
+        let missing = match self.missing() {
+            0 => return None,
+            _ if self.buffered() == 1 => STATE_FRAME_LEN - 1,
+            n => n,
+        };
+        let bytes = u32::try_from(missing + 1).unwrap_or(u32::MAX);
+        Some(byte_time.saturating_mul(bytes).min(MAX_FRAME_WAIT))
     }
 
     /// Bytes still to come before the partial frame held since the last read is whole
@@ -137,5 +162,39 @@ mod tests {
         assert_eq!(r.missing(), 14);
         assert!(r.read_frames().unwrap().is_empty(), "a timeout");
         assert_eq!(r.missing(), 14);
+    }
+
+    #[test]
+    fn the_reader_waits_for_the_rest_of_a_frame_a_state_when_only_its_start_is_in() {
+        assert_eq!(STATE_FRAME_LEN, OVERHEAD + MsgType::State.payload_len());
+        let state = encode(&Frame {
+            seq: 1,
+            msg: Message::State {
+                ack_seq: 1,
+                state: DeviceState::Running,
+                clamped: false,
+                rx_errors: 0,
+                ticks: [3000; SERVOS],
+            },
+        });
+        let byte = Duration::from_micros(87);
+        let mut r = FrameReader::new(Chunks(vec![
+            state[..1].to_vec(),
+            state[1..4].to_vec(),
+            state[4..].to_vec(),
+        ]));
+        assert_eq!(r.rest_wait(byte), None, "nothing held");
+        r.read_frames().unwrap();
+        // the start byte: a STATE's 15 more, and a byte's time for the way here
+        assert_eq!(r.rest_wait(byte), Some(byte * 16));
+        r.read_frames().unwrap();
+        assert_eq!(r.rest_wait(byte), Some(byte * 13), "the length is known");
+        assert_eq!(r.read_frames().unwrap().len(), 1);
+        assert_eq!(r.rest_wait(byte), None);
+        // never longer than the protocol keeps a partial frame
+        let mut slow = FrameReader::new(Chunks(vec![state[..1].to_vec()]));
+        slow.read_frames().unwrap();
+        let at_1200_baud = Duration::from_secs_f64(10.0 / 1200.0);
+        assert_eq!(slow.rest_wait(at_1200_baud), Some(MAX_FRAME_WAIT));
     }
 }

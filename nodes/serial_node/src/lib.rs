@@ -5,7 +5,7 @@ pub mod core;
 pub mod link;
 
 use crate::core::{angles_to_ticks, ticks_to_angles};
-use crate::link::{Link, LinkEvent, SendStats};
+use crate::link::{Link, LinkEvent, LinkSnapshot};
 use eezybot_kinematics::{ArmConfig, ServoCalibrations, ServoId};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -17,6 +17,7 @@ use ros_plumbing::diagnostics::p50_p99;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
+use servo_protocol::host::Offered;
 use servo_protocol::DeviceState;
 use std::future::Future;
 use std::time::{Duration, Instant};
@@ -144,7 +145,6 @@ pub struct LinkStatus {
     /// when the newest servo_angles was handed to the link
     last_command: Option<Instant>,
     last_rejection: Option<String>,
-    estop: bool,
     /// ticks and state of the last servo_state published, to skip repeats
     last_published: Option<([u16; servo_protocol::SERVOS], DeviceState)>,
     /// the settings the device was given, shown with its state: the device's
@@ -200,6 +200,13 @@ impl LinkStatus {
                 self.dropped_in_estop += 1;
                 None
             }
+            LinkEvent::LateApplied { tag } => {
+                log::debug!(
+                    "applying the newest late servo_angles (stamped {:.3} s ago)",
+                    time_s(Time::now()) - time_s(tag)
+                );
+                None
+            }
             LinkEvent::State {
                 state,
                 clamped,
@@ -249,8 +256,15 @@ impl LinkStatus {
         }
     }
 
-    /// The diagnostics entry; `sent` holds the link's send counters.
-    pub fn diagnostic_status(&self, name: &str, port: &str, sent: &SendStats) -> DiagnosticStatus {
+    /// The diagnostics entry at `now`; `link` holds the link's counters and e-stop.
+    pub fn diagnostic_status(
+        &self,
+        name: &str,
+        port: &str,
+        link: &LinkSnapshot,
+        now: Instant,
+    ) -> DiagnosticStatus {
+        let sent = &link.sent;
         let (level, message) = match (&self.connected, self.device_state) {
             (None, _) => (
                 DiagnosticStatus::ERROR,
@@ -267,7 +281,7 @@ impl LinkStatus {
                     | DeviceState::Estop),
                 ),
             ) => (DiagnosticStatus::WARN, format!("device {}", s.name())),
-            (Some(_), _) if self.estop => (DiagnosticStatus::WARN, "e-stop engaged".to_string()),
+            (Some(_), _) if link.estop => (DiagnosticStatus::WARN, "e-stop engaged".to_string()),
             (Some(_), _) if self.last_rejection.is_some() => (
                 DiagnosticStatus::WARN,
                 format!(
@@ -317,16 +331,19 @@ impl LinkStatus {
             ),
             ("clamped_by_device", self.clamped.to_string()),
             ("inputs_rejected", self.rejected_inputs.to_string()),
-            ("inputs_superseded", self.superseded_inputs.to_string()),
+            (
+                "inputs_superseded",
+                (self.superseded_inputs + link.gate.superseded).to_string(),
+            ),
             ("inputs_dropped_in_estop", self.dropped_in_estop.to_string()),
             ("frames_ramped_by_velocity_limit", sent.ramped.to_string()),
             (
                 "last_servo_angles_s_ago",
                 self.last_command
-                    .map(|t| format!("{:.3}", t.elapsed().as_secs_f64()))
+                    .map(|t| format!("{:.3}", now.saturating_duration_since(t).as_secs_f64()))
                     .unwrap_or_default(),
             ),
-            ("estop", self.estop.to_string()),
+            ("estop", link.estop.to_string()),
         ];
         values.extend(self.settings.iter().map(|(k, v)| (*k, v.clone())));
         if let Some((a, b)) = self.connected {
@@ -346,157 +363,229 @@ impl LinkStatus {
     }
 }
 
-/// The loop: runs until `shutdown` resolves or `inputs` ends. `peers` watches the
-/// topics of [`watched_topics`].
-#[allow(clippy::too_many_arguments)]
-pub async fn run(
-    link: &Link,
-    inputs: impl Stream<Item = Input>,
-    mut events: UnboundedReceiver<LinkEvent>,
-    outputs: &impl Outputs,
-    params: Params,
-    diag_name: String,
-    port_name: String,
-    mut peers: PeerWatch,
-    shutdown: impl Future<Output = ()>,
-) {
-    let config = ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default())
-        .unwrap_or_default();
-    let mut cal = config.servos;
-    link.set_velocity_limits(config.motion.ticks_per_s(&cal));
+/// What the node's handlers ([`Node`]) work with: the link, the outputs, the
+/// parameters and the names in its diagnostics.
+pub struct Io<'a, O> {
+    /// the serial link
+    pub link: &'a Link,
+    /// where results go
+    pub outputs: &'a O,
+    /// the node's parameters
+    pub params: Params,
+    /// the diagnostics entry's name
+    pub diag_name: String,
+    /// the port, as the diagnostics show it
+    pub port_name: String,
+    /// watches the topics of [`watched_topics`]
+    pub peers: PeerWatch,
+}
+
+/// What [`run`] works with: the handlers' [`Io`], and the sources of the loop.
+pub struct Handles<'a, I, O, S> {
+    /// for the handlers
+    pub io: Io<'a, O>,
+    /// `servo_angles` and `estop` samples
+    pub inputs: I,
+    /// the link's events
+    pub events: UnboundedReceiver<LinkEvent>,
+    /// resolves when the node is to stop
+    pub shutdown: S,
+}
+
+/// The loop: runs until `shutdown` resolves or `inputs` ends. Each input, link event
+/// and timer goes to one handler of [`Node`].
+pub async fn run<I, O, S>(h: Handles<'_, I, O, S>)
+where
+    I: Stream<Item = Input>,
+    O: Outputs,
+    S: Future<Output = ()>,
+{
+    let Handles {
+        io,
+        inputs,
+        mut events,
+        shutdown,
+    } = h;
+    let params = io.params.clone();
     let period = ros_plumbing::diagnostics::diagnostics_period;
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
-    let mut status = LinkStatus {
-        settings: vec![
-            (
-                "device_watchdog",
-                format!(
-                    "{} ms, {}",
-                    params.i64("watchdog_ms").unwrap_or(500),
-                    params
-                        .string("watchdog_action")
-                        .unwrap_or_else(|| "hold".into())
-                ),
-            ),
-            (
-                "estop_action",
-                params
-                    .string("estop_action")
-                    .unwrap_or_else(|| "hold".into()),
-            ),
-        ],
-        ..LinkStatus::default()
-    };
     let mut peer_poll = tokio::time::interval(PEER_POLL);
     peer_poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let report = |status: &LinkStatus, peers: &PeerWatch| {
-        let mut s = status.diagnostic_status(&diag_name, &port_name, &link.send_stats());
-        peers.annotate(&mut s, Instant::now());
-        outputs.diagnostics(s);
-    };
-    // a command that arrived late (repaired after a network outage), held back in
-    // case a newer one follows: (ticks, stamp, received)
-    let mut held = burst::Held::<([u16; servo_protocol::SERVOS], Time, Instant)>::default();
-    let mut lateness = burst::Lateness::default();
-    let mut complaints = Throttle::default();
+    let mut node = Node::new(io);
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        let hold_until = held.deadline();
         tokio::select! {
             _ = &mut shutdown => break,
-            _ = async { if let Some(t) = hold_until { tokio::time::sleep_until(t).await } }, if hold_until.is_some() => {
-                if let Some((ticks, stamp, received)) = held.take_due(tokio::time::Instant::now()) {
-                    log::debug!("applying the newest late servo_angles (stamped {:.3} s ago)", time_s(Time::now()) - time_s(stamp));
-                    link.command(ticks, stamp, received);
-                }
-            }
-            _ = ticker.tick() => report(&status, &peers),
-            _ = peer_poll.tick() => {
-                let changes = peers.update(&outputs.peer_counts(), Instant::now());
-                changes.iter().for_each(|c| c.log());
-                if !changes.is_empty() {
-                    report(&status, &peers);
-                }
-            }
+            _ = ticker.tick() => node.report(),
+            _ = peer_poll.tick() => node.on_peer_poll(),
             Ok(()) = param_changes.changed() => {
-                match ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default()) {
-                    Ok(c) => {
-                        cal = c.servos;
-                        link.set_velocity_limits(c.motion.ticks_per_s(&cal));
-                    }
-                    Err(e) => log::error!("keeping the previous calibration and motion limits: {e}"),
-                }
+                node.on_params();
                 ticker = tokio::time::interval(period(&params));
             }
-            Some(event) = events.recv() => {
-                if let Some(msg) = status.on_event(event, &cal) {
-                    outputs.servo_state(msg);
-                }
-            }
+            Some(event) = events.recv() => node.on_event(event),
             input = inputs.next() => {
                 let Some(first) = input else { break };
                 // a burst (DDS repairing what a network outage held back) moves the
                 // arm to its newest command only; a lone command goes at once
-                let batch = burst::take_burst(first, &mut inputs);
-                let (batch, superseded) = coalesce(batch);
-                if superseded > 0 {
-                    log::debug!("{superseded} servo_angles superseded by a newer one that arrived with them");
-                    status.superseded_inputs += superseded as u64;
+                node.on_inputs(burst::take_burst(first, &mut inputs));
+            }
+        }
+    }
+}
+
+/// The node's state between inputs, and a handler for each kind of input.
+pub struct Node<'a, O> {
+    io: Io<'a, O>,
+    status: LinkStatus,
+    cal: ServoCalibrations,
+    complaints: Throttle,
+}
+
+impl<'a, O: Outputs> Node<'a, O> {
+    /// Load the calibration and motion limits (`arm_config`) and give the link its
+    /// velocity limits.
+    pub fn new(io: Io<'a, O>) -> Self {
+        let params = &io.params;
+        let config = ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default())
+            .unwrap_or_default();
+        io.link
+            .set_velocity_limits(config.motion.ticks_per_s(&config.servos));
+        let setting = |name: &str| params.string(name).unwrap_or_else(|| "hold".into());
+        let status = LinkStatus {
+            settings: vec![
+                (
+                    "device_watchdog",
+                    format!(
+                        "{} ms, {}",
+                        params.i64("watchdog_ms").unwrap_or(500),
+                        setting("watchdog_action")
+                    ),
+                ),
+                ("estop_action", setting("estop_action")),
+            ],
+            ..LinkStatus::default()
+        };
+        Node {
+            io,
+            status,
+            cal: config.servos,
+            complaints: Throttle::default(),
+        }
+    }
+
+    /// Publish the diagnostics entry now.
+    pub fn report(&self) {
+        let now = Instant::now();
+        let snapshot = self.io.link.snapshot();
+        let mut s =
+            self.status
+                .diagnostic_status(&self.io.diag_name, &self.io.port_name, &snapshot, now);
+        self.io.peers.annotate(&mut s, now);
+        self.io.outputs.diagnostics(s);
+    }
+
+    /// Look at the peer counts; log and report a change.
+    pub fn on_peer_poll(&mut self) {
+        let changes = self
+            .io
+            .peers
+            .update(&self.io.outputs.peer_counts(), Instant::now());
+        changes.iter().for_each(|c| c.log());
+        if !changes.is_empty() {
+            self.report();
+        }
+    }
+
+    /// The parameters changed: load `arm_config` again (keeping the previous one if it
+    /// does not load).
+    pub fn on_params(&mut self) {
+        match ArmConfig::load_or_shipped(&self.io.params.string("arm_config").unwrap_or_default()) {
+            Ok(c) => {
+                self.cal = c.servos;
+                self.io
+                    .link
+                    .set_velocity_limits(c.motion.ticks_per_s(&self.cal));
+            }
+            Err(e) => log::error!("keeping the previous calibration and motion limits: {e}"),
+        }
+    }
+
+    /// An event of the link: publish the `servo_state` it brings, if any.
+    pub fn on_event(&mut self, event: LinkEvent) {
+        if let Some(msg) = self.status.on_event(event, &self.cal) {
+            self.io.outputs.servo_state(msg);
+        }
+    }
+
+    /// Inputs that arrived together: a `servo_angles` followed by a newer one is
+    /// superseded ([`coalesce`]), the rest handled in order.
+    pub fn on_inputs(&mut self, batch: Vec<Input>) {
+        let (batch, superseded) = coalesce(batch);
+        if superseded > 0 {
+            log::debug!(
+                "{superseded} servo_angles superseded by a newer one that arrived with them"
+            );
+            self.status.superseded_inputs += superseded as u64;
+        }
+        for input in batch {
+            match input {
+                Input::ServoAngles(msg, received) => self.on_servo_angles(&msg, received),
+                Input::Estop(engaged) => self.on_estop(engaged),
+                Input::Unreadable(e) => self.on_unreadable(&e),
+            }
+        }
+    }
+
+    /// A `servo_angles` sample: checked, turned into pulse widths and offered to the
+    /// link (late-hold and e-stop are the link's), or rejected with its reason.
+    pub fn on_servo_angles(&mut self, msg: &JointState, received: Instant) {
+        match angles_to_ticks(&self.cal, msg) {
+            Ok(ticks) => {
+                self.status.last_rejection = None;
+                self.status.last_command = Some(received);
+                let stamp = msg.header.stamp;
+                if let Some(Offered::Held { age_s }) =
+                    self.io.link.offer(ticks, stamp, received, Time::now())
+                {
+                    log::debug!(
+                        "a late servo_angles (stamped {age_s:.3} s ago) held back for a newer one"
+                    );
                 }
-                for input in batch {
-                match input {
-                    Input::ServoAngles(msg, received) => match angles_to_ticks(&cal, &msg) {
-                        Ok(ticks) => {
-                            status.last_rejection = None;
-                            let stamp = msg.header.stamp;
-                            let now_s = time_s(Time::now());
-                            let late = lateness.is_late(time_s(stamp), now_s, received);
-                            status.last_command = Some(received);
-                            let superseded = if late {
-                                log::debug!("a late servo_angles (stamped {:.3} s ago) held back for a newer one", now_s - time_s(stamp));
-                                held.hold((ticks, stamp, received), tokio::time::Instant::now())
-                            } else {
-                                let superseded = held.discard();
-                                link.command(ticks, stamp, received);
-                                superseded
-                            };
-                            status.superseded_inputs += u64::from(superseded);
-                        }
-                        Err(r) => {
-                            let kind = format!("{:?}", std::mem::discriminant(&r));
-                            if let Some(quiet) = complaints.allow(&kind, Instant::now()) {
-                                log::warn!("servo_angles rejected: {r}{}", Throttle::suffix(quiet));
-                            }
-                            status.rejected_inputs += 1;
-                            let first = status.last_rejection.is_none();
-                            status.last_rejection = Some(r.to_string());
-                            if first {
-                                report(&status, &peers);
-                            }
-                        }
-                    },
-                    Input::Estop(engaged) => {
-                        if engaged != status.estop {
-                            if engaged { log::warn!("emergency stop engaged: the device holds, commands are dropped") }
-                            else { log::info!("emergency stop released: waiting for a new command") }
-                            status.estop = engaged;
-                            if engaged {
-                                held.discard();
-                            }
-                            link.set_estop(engaged);
-                            report(&status, &peers);
-                        }
-                    }
-                    Input::Unreadable(e) => {
-                        status.rejected_inputs += 1;
-                        status.last_rejection = Some(format!("unreadable sample: {e}"));
-                        log::warn!("unreadable sample ignored: {e}");
-                    }
+            }
+            Err(r) => {
+                let kind = format!("{:?}", std::mem::discriminant(&r));
+                if let Some(quiet) = self.complaints.allow(&kind, Instant::now()) {
+                    log::warn!("servo_angles rejected: {r}{}", Throttle::suffix(quiet));
                 }
+                self.status.rejected_inputs += 1;
+                let first = self.status.last_rejection.is_none();
+                self.status.last_rejection = Some(r.to_string());
+                if first {
+                    self.report();
                 }
             }
         }
+    }
+
+    /// An `estop` sample: engage or release the link's e-stop; a change is logged
+    /// and reported at once.
+    pub fn on_estop(&mut self, engaged: bool) {
+        if self.io.link.set_estop(engaged) {
+            if engaged {
+                log::warn!("emergency stop engaged: the device holds, commands are dropped")
+            } else {
+                log::info!("emergency stop released: waiting for a new command")
+            }
+            self.report();
+        }
+    }
+
+    /// A sample that could not be read: counted and logged.
+    pub fn on_unreadable(&mut self, e: &str) {
+        self.status.rejected_inputs += 1;
+        self.status.last_rejection = Some(format!("unreadable sample: {e}"));
+        log::warn!("unreadable sample ignored: {e}");
     }
 }

@@ -6,9 +6,10 @@
 //! The port is behind [`PortOpener`], so the same code drives a real serial port, a
 //! pseudo-terminal and the in-process virtual Arduino.
 
+use command_gate::{GateCounters, Stamp};
 use eezybot_msgs::Time;
 use servo_protocol::device::{DeviceConfig, VirtualArduino};
-use servo_protocol::host::{HostConfig, HostLink, Next};
+use servo_protocol::host::{HostConfig, HostLink, Next, Offered};
 use servo_protocol::{encode, FrameReader, SERVOS};
 use std::io::{self, Read, Write};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -17,6 +18,17 @@ use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedSender;
 
 pub use servo_protocol::host::SendStats;
+
+/// What the node shows of the link in its diagnostics, as of one moment.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LinkSnapshot {
+    /// the sending side's counters
+    pub sent: SendStats,
+    /// what the late-hold gate did
+    pub gate: GateCounters,
+    /// whether the e-stop is engaged (the link is its only keeper)
+    pub estop: bool,
+}
 
 /// What the link reports: the machine's events, tagged with the commands' stamps.
 pub type LinkEvent = servo_protocol::host::LinkEvent<Time>;
@@ -142,9 +154,48 @@ impl Link {
 
     /// A copy of the sending side's counters.
     pub fn send_stats(&self) -> SendStats {
+        self.snapshot().sent
+    }
+
+    /// The counters and the e-stop, for diagnostics.
+    pub fn snapshot(&self) -> LinkSnapshot {
         lock(&self.shared)
-            .map(|s| s.machine.stats().clone())
+            .map(|s| LinkSnapshot {
+                sent: s.machine.stats().clone(),
+                gate: *s.machine.gate(),
+                estop: s.machine.estop(),
+            })
             .unwrap_or_default()
+    }
+
+    /// Whether the e-stop is engaged.
+    pub fn estop(&self) -> bool {
+        self.snapshot().estop
+    }
+
+    /// Hand in a stamped command received at `received` (`now`: the wall clock), through
+    /// the late-hold gate ([`HostLink::offer`]): it goes at once, or, arriving late, is
+    /// held back for a newer one. During an e-stop it is dropped. `None`: the link
+    /// thread died.
+    pub fn offer(
+        &self,
+        ticks: [u16; SERVOS],
+        stamp: Time,
+        received: Instant,
+        now: Time,
+    ) -> Option<Offered> {
+        let secs = |t: Time| t.to_nanos() as f64 * 1e-9;
+        let stamp_s = Stamp {
+            stamp_s: secs(stamp),
+            received_s: secs(now),
+        };
+        let offered = lock(&self.shared).map(|mut s| {
+            let o = s.machine.offer(ticks, stamp, stamp_s, received);
+            s.forward();
+            o
+        });
+        self.shared.1.notify_all();
+        offered
     }
 
     /// Hand in the newest command (`received`: when its message arrived). It replaces
@@ -164,12 +215,11 @@ impl Link {
         }
     }
 
-    /// Engage or release the device's emergency stop.
-    pub fn set_estop(&self, engaged: bool) {
-        if let Some(mut s) = lock(&self.shared) {
-            s.machine.set_estop(engaged);
-        }
+    /// Engage or release the device's emergency stop; returns whether that changed it.
+    pub fn set_estop(&self, engaged: bool) -> bool {
+        let changed = lock(&self.shared).is_some_and(|mut s| s.machine.set_estop(engaged));
         self.shared.1.notify_all();
+        changed
     }
 
     /// Stop the threads (waits for them).
@@ -266,34 +316,12 @@ fn link_loop(mut opener: PortOpener, shared: SharedLock) {
     }
 }
 
-/// The longest a reader waits for the rest of a partial frame before reading again
-/// (the protocol drops a partial frame after 5 ms without a byte).
-const MAX_FRAME_WAIT: Duration = Duration::from_millis(2);
-
-/// A STATE frame's length: every frame the device sends is one, but for the
-/// HELLO_ACK that answers the handshake.
-const STATE_FRAME_LEN: usize = servo_protocol::OVERHEAD + 12;
-
-/// How long to wait before reading again when `reader` holds part of a frame: the
-/// rest's time on the wire, and one byte's more for its way here, so that one read
-/// takes it whole. With only the start byte in, the length is not known yet: a
-/// STATE's rest is waited for (a shorter HELLO_ACK is read a little later).
-fn rest_of_frame<R: Read>(reader: &FrameReader<R>, byte_time: Duration) -> Option<Duration> {
-    let missing = match reader.missing() {
-        0 => return None,
-        _ if reader.buffered() == 1 => STATE_FRAME_LEN - 1,
-        n => n,
-    };
-    let bytes = u32::try_from(missing + 1).unwrap_or(u32::MAX);
-    Some(byte_time.saturating_mul(bytes).min(MAX_FRAME_WAIT))
-}
-
 /// Reads the device's frames into the machine until the port breaks or a newer
 /// session starts.
 ///
 /// A UART's bytes can reach the port one at a time, 87 us apart at 115200 baud (a
 /// 16-byte STATE woke this thread 10-16 times): with part of a frame in hand, the
-/// reader waits the rest's time on the wire before reading again ([`rest_of_frame`]:
+/// reader waits the rest's time on the wire before reading again ([`FrameReader::rest_wait`]:
 /// two wake-ups a STATE, for its first bytes and for the rest).
 /// The link thread is woken only when a frame changes what it is waiting for.
 fn spawn_reader(
@@ -339,70 +367,9 @@ fn spawn_reader(
                 if replan {
                     shared.1.notify_all();
                 }
-                if let Some(wait) = byte_time.and_then(|t| rest_of_frame(&reader, t)) {
+                if let Some(wait) = byte_time.and_then(|t| reader.rest_wait(t)) {
                     std::thread::sleep(wait);
                 }
             }
         })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use servo_protocol::{DeviceState, Frame, Message, MsgType};
-
-    /// Hands out its chunks, one a read.
-    struct Chunks(Vec<Vec<u8>>);
-
-    impl Read for Chunks {
-        fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
-            if self.0.is_empty() {
-                return Err(io::ErrorKind::TimedOut.into());
-            }
-            let c = self.0.remove(0);
-            out[..c.len()].copy_from_slice(&c);
-            Ok(c.len())
-        }
-    }
-
-    #[test]
-    fn the_reader_waits_for_the_rest_of_a_frame_a_state_when_only_its_start_is_in() {
-        assert_eq!(
-            STATE_FRAME_LEN,
-            servo_protocol::OVERHEAD + MsgType::State.payload_len()
-        );
-        let state = encode(&Frame {
-            seq: 1,
-            msg: Message::State {
-                ack_seq: 1,
-                state: DeviceState::Running,
-                clamped: false,
-                rx_errors: 0,
-                ticks: [3000; SERVOS],
-            },
-        });
-        let byte = Duration::from_micros(87);
-        let mut r = FrameReader::new(Chunks(vec![
-            state[..1].to_vec(),
-            state[1..4].to_vec(),
-            state[4..].to_vec(),
-        ]));
-        assert_eq!(rest_of_frame(&r, byte), None, "nothing held");
-        r.read_frames().unwrap();
-        // the start byte: a STATE's 15 more, and a byte's time for the way here
-        assert_eq!(rest_of_frame(&r, byte), Some(byte * 16));
-        r.read_frames().unwrap();
-        assert_eq!(
-            rest_of_frame(&r, byte),
-            Some(byte * 13),
-            "the length is known"
-        );
-        assert_eq!(r.read_frames().unwrap().len(), 1);
-        assert_eq!(rest_of_frame(&r, byte), None);
-        // never longer than the protocol keeps a partial frame
-        let mut slow = FrameReader::new(Chunks(vec![state[..1].to_vec()]));
-        slow.read_frames().unwrap();
-        let at_1200_baud = Duration::from_secs_f64(10.0 / 1200.0);
-        assert_eq!(rest_of_frame(&slow, at_1200_baud), Some(MAX_FRAME_WAIT));
-    }
 }

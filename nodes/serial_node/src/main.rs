@@ -116,9 +116,20 @@ async fn main_async() -> anyhow::Result<()> {
         node.resolve(&topics::SERVO_STATE)?,
     );
     let diag_name = format!("{}: servo link", node.resolver().node_name());
-    serial_node::run(
-        &link, inputs, rx, &outputs, params, diag_name, port, peers, shutdown,
-    )
+    let io = serial_node::Io {
+        link: &link,
+        outputs: &outputs,
+        params,
+        diag_name,
+        port_name: port,
+        peers,
+    };
+    serial_node::run(serial_node::Handles {
+        io,
+        inputs,
+        events: rx,
+        shutdown,
+    })
     .await;
     link.shutdown();
     drop(outputs);

@@ -97,36 +97,39 @@ fn a_command_is_acknowledged_with_its_stamp() {
 
 #[test]
 fn a_jump_is_ramped_within_the_velocity_limit() {
-    // 2000 ticks/s: 1000 ticks (500 µs, ~48°) take half a second
+    // 2000 ticks/s: at most 40 ticks a servo frame (20 ms), so 1000 ticks (500 µs,
+    // ~48°) take at least 25 frames; the device answers each frame with its pulses
     let mut r = Rig::new(HostConfig {
         max_ticks_per_s: [2000.0; 4],
         ..HostConfig::default()
     });
     assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
-    let t0 = Instant::now();
-    r.link().command([3944, 2944, 2944, 2325], stamp(1), t0);
-    let mut last = HOLD_TICKS;
-    let mut last_t = t0;
-    while Instant::now() < t0 + Duration::from_secs(2) {
-        let (_, pulses) = r.device_state();
-        if pulses != [0; 4] && pulses != last {
-            // never faster than the limit (one frame's step of slack for thread timing)
-            let dt = last_t.elapsed().as_secs_f64();
+    let target = [3944, 2944, 2944, 2325];
+    r.link().command(target, stamp(1), Instant::now());
+    let reached = r.wait_for(
+        Duration::from_secs(5),
+        |e| matches!(e, LinkEvent::State { ticks, .. } if *ticks == target),
+    );
+    assert!(reached.is_some(), "{:?}", r.seen);
+    let poses: Vec<_> = r
+        .seen
+        .iter()
+        .filter_map(|(_, e)| match e {
+            LinkEvent::State { ticks, .. } => Some(*ticks),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(poses[0], HOLD_TICKS);
+    for w in poses.windows(2) {
+        for i in 0..4 {
             assert!(
-                f64::from(pulses[0].abs_diff(last[0])) <= 2000.0 * dt + 2000.0 * 0.02 + 1.0,
-                "{pulses:?} after {dt}"
+                w[1][i].abs_diff(w[0][i]) <= 40,
+                "faster than the limit: {w:?}"
             );
-            last = pulses;
-            last_t = Instant::now();
         }
-        if pulses[0] == 3944 {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(1));
     }
-    let took = t0.elapsed().as_secs_f64();
-    assert_eq!(r.device_state().1, [3944, 2944, 2944, 2325]);
-    assert!(took > 0.45 && took < 1.0, "{took}");
+    assert!(r.link().send_stats().sent >= 25);
+    assert_eq!(r.device_state().1, target);
     assert!(r.link().send_stats().ramped >= 20);
 }
 

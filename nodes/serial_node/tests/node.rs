@@ -1,0 +1,171 @@
+//! serial_node's loop ([`serial_node::run`]) through fake I/O: samples in, `servo_state`
+//! and diagnostics out, against the link and its in-process virtual Arduino. Each wait
+//! is bounded; nothing here asserts on timing.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use eezybot_kinematics::ServoId;
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::Time;
+use futures::channel::mpsc;
+use ros_plumbing::peers::PeerWatch;
+use ros_plumbing::Params;
+use serial_node::core::{angles_to_ticks, ticks_to_angles};
+use serial_node::link::{self, Link};
+use serial_node::{Handles, Input, Io, Outputs};
+use servo_protocol::host::HostConfig;
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+#[derive(Default)]
+struct Fake {
+    servo_state: Mutex<Vec<JointState>>,
+    diagnostics: Mutex<Vec<DiagnosticStatus>>,
+}
+
+impl Outputs for Fake {
+    fn servo_state(&self, msg: JointState) {
+        self.servo_state.lock().unwrap().push(msg);
+    }
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.lock().unwrap().push(status);
+    }
+    fn peer_counts(&self) -> Vec<usize> {
+        vec![1, 1]
+    }
+}
+
+impl Fake {
+    /// The newest diagnostics value of `key`.
+    fn value(&self, key: &str) -> Option<String> {
+        let d = self.diagnostics.lock().unwrap();
+        let last = d.last()?;
+        last.values
+            .iter()
+            .find(|kv| kv.key == key)
+            .map(|kv| kv.value.clone())
+    }
+}
+
+/// Wait (at most 5 s) until `pred` holds.
+async fn until(what: &str, pred: impl Fn() -> bool) {
+    let end = Instant::now() + Duration::from_secs(5);
+    while !pred() {
+        assert!(Instant::now() < end, "never: {what}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// A servo_angles for these pulse widths, stamped `stamp`.
+fn angles(ticks: [u16; 4], stamp: Time) -> JointState {
+    let cal = serial_node::load_calibration("").unwrap();
+    JointState {
+        header: Header {
+            stamp,
+            frame_id: String::new(),
+        },
+        name: ServoId::ALL.iter().map(|s| s.name().to_string()).collect(),
+        position: ticks_to_angles(&cal, &ticks).to_vec(),
+        velocity: vec![],
+        effort: vec![],
+    }
+}
+
+#[tokio::test]
+async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnostics() {
+    let (tx, events) = tokio::sync::mpsc::unbounded_channel();
+    let link = Link::start(
+        link::mock_opener(link::virtual_arduino()),
+        HostConfig::default(),
+        tx,
+    )
+    .unwrap();
+    let fake = Fake::default();
+    let (inputs, samples) = mpsc::unbounded::<Input>();
+    let (stop, stopped) = futures::channel::oneshot::channel::<()>();
+    let io = Io {
+        link: &link,
+        outputs: &fake,
+        params: Params::new(BTreeMap::new()),
+        diag_name: "serial_node: servo link".into(),
+        port_name: "mock".into(),
+        peers: PeerWatch::new(&serial_node::watched_topics(
+            "/servo_angles",
+            "/servo_state",
+        )),
+    };
+    let handles = Handles {
+        io,
+        inputs: samples,
+        events,
+        shutdown: async move {
+            let _ = stopped.await;
+        },
+    };
+    let script = async {
+        until("connected", || {
+            fake.value("connection").as_deref() == Some("connected")
+        })
+        .await;
+        // a command: the device answers, and its servo_state carries the command's stamp
+        let stamp = Time::from_nanos(0);
+        let target = [3000, 3000, 2900, 2400];
+        let cal = serial_node::load_calibration("").unwrap();
+        let cmd = angles(target, stamp);
+        assert_eq!(angles_to_ticks(&cal, &cmd), Ok(target));
+        inputs
+            .unbounded_send(Input::ServoAngles(cmd, Instant::now()))
+            .unwrap();
+        until("the command's servo_state", || {
+            fake.servo_state
+                .lock()
+                .unwrap()
+                .iter()
+                .any(|m| m.header.stamp == stamp && angles_to_ticks(&cal, m) == Ok(target))
+        })
+        .await;
+        // the e-stop is reported at once, and a command during it is dropped
+        inputs.unbounded_send(Input::Estop(true)).unwrap();
+        until("the e-stop in diagnostics", || {
+            fake.value("estop").as_deref() == Some("true")
+        })
+        .await;
+        inputs
+            .unbounded_send(Input::ServoAngles(
+                angles([3100, 3000, 2900, 2400], Time::from_nanos(0)),
+                Instant::now(),
+            ))
+            .unwrap();
+        until("the dropped command counted", || {
+            fake.value("inputs_dropped_in_estop").as_deref() == Some("1")
+        })
+        .await;
+        // a bad sample: its reason at once
+        let mut bad = angles(target, stamp);
+        bad.name[0] = "tail_servo".into();
+        inputs
+            .unbounded_send(Input::ServoAngles(bad, Instant::now()))
+            .unwrap();
+        until("the rejection in diagnostics", || {
+            fake.value("last_rejection")
+                .is_some_and(|r| r.contains("unknown servo `tail_servo`"))
+        })
+        .await;
+        inputs.unbounded_send(Input::Estop(false)).unwrap();
+        until("the release in diagnostics", || {
+            fake.value("estop").as_deref() == Some("false")
+        })
+        .await;
+        assert_eq!(
+            link.snapshot().sent.sent,
+            1,
+            "only the first command went out"
+        );
+        assert_eq!(fake.value("inputs_rejected").as_deref(), Some("1"));
+        stop.send(()).unwrap();
+    };
+    let ((), ()) = futures::join!(serial_node::run(handles), script);
+    link.shutdown();
+}
