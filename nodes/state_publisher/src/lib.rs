@@ -113,13 +113,9 @@ pub enum Input {
     Unreadable(String),
 }
 
-/// What [`run`] works with: the URDF, the inputs and outputs, the parameters and the
-/// shutdown signal.
-pub struct Handles<'a, I, O, S> {
-    /// the URDF to publish first
-    pub description: Description,
-    /// `joint_states` samples
-    pub inputs: I,
+/// What the node's handlers ([`Node`]) work with: the outputs, the parameters and
+/// the names in its diagnostics.
+pub struct Io<'a, O> {
     /// where results go
     pub outputs: &'a O,
     /// the node's parameters
@@ -128,6 +124,17 @@ pub struct Handles<'a, I, O, S> {
     pub diag_name: String,
     /// the resolved `joint_states` topic, whose publishers are watched
     pub joint_states_topic: String,
+}
+
+/// What [`run`] works with: the URDF to publish first, the handlers' [`Io`], and the
+/// sources of the loop.
+pub struct Handles<'a, I, O, S> {
+    /// the URDF to publish first
+    pub description: Description,
+    /// for the handlers
+    pub io: Io<'a, O>,
+    /// `joint_states` samples
+    pub inputs: I,
     /// resolves when the node is to stop
     pub shutdown: S,
 }
@@ -142,20 +149,12 @@ where
 {
     let Handles {
         description,
+        io,
         inputs,
-        outputs,
-        params,
-        diag_name,
-        joint_states_topic,
         shutdown,
     } = h;
-    let mut node = Node::new(
-        description,
-        outputs,
-        params.clone(),
-        diag_name,
-        joint_states_topic,
-    );
+    let params = io.params.clone();
+    let mut node = Node::new(description, io);
     let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
     let period = ros_plumbing::diagnostics::diagnostics_period;
     let mut ticker = tokio::time::interval(period(&params));
@@ -186,9 +185,7 @@ where
 
 /// The node's state between inputs, and a handler for each kind of input.
 pub struct Node<'a, O> {
-    outputs: &'a O,
-    params: Params,
-    diag_name: String,
+    io: Io<'a, O>,
     peers: PeerWatch,
     core: TfCore,
     throttle: TfThrottle,
@@ -200,23 +197,15 @@ pub struct Node<'a, O> {
 
 impl<'a, O: Outputs> Node<'a, O> {
     /// Publish `robot_description` and `tf_static` for `description`.
-    pub fn new(
-        description: Description,
-        outputs: &'a O,
-        params: Params,
-        diag_name: String,
-        joint_states_topic: String,
-    ) -> Self {
-        let core = TfCore::new(description.model, &prefix(&params));
-        outputs.robot_description(description.text);
-        outputs.tf_static(core.static_transforms(Time::now()));
+    pub fn new(description: Description, io: Io<'a, O>) -> Self {
+        let core = TfCore::new(description.model, &prefix(&io.params));
+        io.outputs.robot_description(description.text);
+        io.outputs.tf_static(core.static_transforms(Time::now()));
         Node {
-            outputs,
-            peers: PeerWatch::new(&[(joint_states_topic, Peer::Publisher)]),
+            peers: PeerWatch::new(&[(io.joint_states_topic.clone(), Peer::Publisher)]),
             core,
-            throttle: TfThrottle::new(params.f64("publish_frequency").unwrap_or(0.0)),
-            params,
-            diag_name,
+            throttle: TfThrottle::new(io.params.f64("publish_frequency").unwrap_or(0.0)),
+            io,
             latency: LatencyWindow::new(1000),
             unreadable: 0,
             complaints: Throttle::default(),
@@ -229,16 +218,16 @@ impl<'a, O: Outputs> Node<'a, O> {
             .latency
             .p50_p99(["tf_latency_us_p50", "tf_latency_us_p99"]);
         extra.push(("unreadable_samples", self.unreadable.to_string()));
-        let mut status = self.core.diagnostic_status(&self.diag_name, &extra);
+        let mut status = self.core.diagnostic_status(&self.io.diag_name, &extra);
         self.peers.annotate(&mut status, Instant::now());
-        self.params.annotate(&mut status);
-        self.outputs.diagnostics(status);
+        self.io.params.annotate(&mut status);
+        self.io.outputs.diagnostics(status);
     }
 
     /// Look at the `joint_states` publishers; log a change.
     pub fn on_peer_poll(&mut self) {
         self.peers
-            .update(&[self.outputs.joint_states_publishers()], Instant::now())
+            .update(&[self.io.outputs.joint_states_publishers()], Instant::now())
             .iter()
             .for_each(|c| c.log());
     }
@@ -254,19 +243,20 @@ impl<'a, O: Outputs> Node<'a, O> {
     /// prefix (kept if the URDF does not load).
     pub fn on_params(&mut self) {
         self.throttle
-            .set_frequency(self.params.f64("publish_frequency").unwrap_or(0.0));
-        let path = self.params.string("urdf").unwrap_or_default();
+            .set_frequency(self.io.params.f64("publish_frequency").unwrap_or(0.0));
+        let path = self.io.params.string("urdf").unwrap_or_default();
         match load_urdf(&path) {
             Ok(d) => {
-                self.core = TfCore::new(d.model, &prefix(&self.params));
+                self.core = TfCore::new(d.model, &prefix(&self.io.params));
                 self.throttle.clear();
-                self.outputs.robot_description(d.text);
-                self.outputs
+                self.io.outputs.robot_description(d.text);
+                self.io
+                    .outputs
                     .tf_static(self.core.static_transforms(Time::now()));
                 log::info!(
                     "publishing {} with frame prefix `{}`",
                     urdf_origin(&path),
-                    prefix(&self.params)
+                    prefix(&self.io.params)
                 );
             }
             Err(e) => log::error!("keeping the previous URDF: {e}"),
@@ -297,7 +287,7 @@ impl<'a, O: Outputs> Node<'a, O> {
 
     /// Publish a tf message; its latency counts from its oldest sample's taking.
     fn publish(&mut self, f: Flush) {
-        self.outputs.tf(f.msg);
+        self.io.outputs.tf(f.msg);
         self.latency.push(f.taken.elapsed().as_secs_f64() * 1e6);
     }
 }

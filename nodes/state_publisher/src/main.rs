@@ -82,13 +82,16 @@ async fn main_async() -> anyhow::Result<()> {
     );
     let diag_name = format!("{}: robot state", node.resolver().node_name());
     let topic = node.resolve(&topics::JOINT_STATES)?;
-    state_publisher::run(state_publisher::Handles {
-        description,
-        inputs,
+    let io = state_publisher::Io {
         outputs: &outputs,
         params,
         diag_name,
         joint_states_topic: topic,
+    };
+    state_publisher::run(state_publisher::Handles {
+        description,
+        io,
+        inputs,
         shutdown,
     })
     .await;
