@@ -116,47 +116,14 @@ pub async fn serve(
             log::error!("web server stopped: {e}");
         }
     });
-    // a sample that cannot be read becomes Input::Unreadable: logged and counted
-    let unreadable = |topic: &'static str, e: &dyn std::fmt::Debug| Input::Unreadable {
-        topic,
-        error: format!("{e:?}"),
-    };
     let inputs = futures::stream::select_all([
-        joint_states
-            .async_stream()
-            .map(move |r| match r {
-                Ok((m, _)) => Input::JointStates(m),
-                Err(e) => unreadable(topics::JOINT_STATES.name, &e),
-            })
-            .boxed(),
-        description
-            .async_stream()
-            .map(move |r| match r {
-                Ok((m, _)) => Input::RobotDescription(m.data),
-                Err(e) => unreadable(topics::ROBOT_DESCRIPTION.name, &e),
-            })
-            .boxed(),
-        diagnostics
-            .async_stream()
-            .map(move |r| match r {
-                Ok((m, _)) => Input::Diagnostics(m),
-                Err(e) => unreadable(topics::DIAGNOSTICS.name, &e),
-            })
-            .boxed(),
-        servo_state
-            .async_stream()
-            .map(move |r| match r {
-                Ok((m, _)) => Input::ServoState(m),
-                Err(e) => unreadable(topics::SERVO_STATE.name, &e),
-            })
-            .boxed(),
-        estop
-            .async_stream()
-            .map(move |r| match r {
-                Ok((m, _)) => Input::Estop(m.data),
-                Err(e) => unreadable(topics::ESTOP.name, &e),
-            })
-            .boxed(),
+        inputs_of(&joint_states, &topics::JOINT_STATES, Input::JointStates),
+        inputs_of(&description, &topics::ROBOT_DESCRIPTION, |m| {
+            Input::RobotDescription(m.data)
+        }),
+        inputs_of(&diagnostics, &topics::DIAGNOSTICS, Input::Diagnostics),
+        inputs_of(&servo_state, &topics::SERVO_STATE, Input::ServoState),
+        inputs_of(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
     ]);
     let reporting = crate::Reporting {
         name: panel_name,
@@ -201,6 +168,26 @@ pub async fn serve(
     }
     server.abort();
     Ok(())
+}
+
+/// The samples of `topic` (read by `subscription`) as the panel's inputs; a sample that
+/// cannot be read becomes [`Input::Unreadable`] (logged and counted).
+fn inputs_of<'a, M: eezybot_msgs::RosMessage>(
+    subscription: &'a ros2_client::Subscription<M>,
+    topic: &ros_plumbing::Topic<M>,
+    input: fn(M) -> Input,
+) -> futures::stream::BoxStream<'a, Input> {
+    let topic = topic.name;
+    subscription
+        .async_stream()
+        .map(move |r| match r {
+            Ok((m, _)) => input(m),
+            Err(e) => Input::Unreadable {
+                topic,
+                error: format!("{e:?}"),
+            },
+        })
+        .boxed()
 }
 
 /// From now on the `token` parameter reads `(generated)` or `(hidden)`, so that
