@@ -5,7 +5,7 @@
 //! node needs, and refuses everything else with a message naming the argument.
 
 use crate::error::PlumbingError;
-use crate::params::yaml_to_parameter;
+use crate::value::yaml_to_parameter;
 use ros2_client::ParameterValue;
 use std::path::PathBuf;
 

@@ -18,6 +18,7 @@ pub mod remote_params;
 pub mod security;
 pub mod sros2;
 pub mod topics;
+mod value;
 
 pub use error::PlumbingError;
 pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode};
