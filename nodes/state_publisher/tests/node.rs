@@ -1,0 +1,167 @@
+//! state_publisher's loop ([`state_publisher::run`]) through fake I/O: `joint_states`
+//! in; `robot_description`, `tf_static`, `tf` and diagnostics out. Each wait is
+//! bounded; nothing here asserts on timing.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::tf2_msgs::TFMessage;
+use futures::channel::mpsc;
+use ros_plumbing::{ParameterValue, Params};
+use state_publisher::{load_urdf, Handles, Input, Io, Outputs};
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+#[derive(Default)]
+struct Fake {
+    tf: Mutex<Vec<TFMessage>>,
+    tf_static: Mutex<Vec<TFMessage>>,
+    robot_description: Mutex<Vec<String>>,
+    diagnostics: Mutex<Vec<DiagnosticStatus>>,
+}
+
+impl Outputs for Fake {
+    fn tf(&self, msg: TFMessage) {
+        self.tf.lock().unwrap().push(msg);
+    }
+    fn tf_static(&self, msg: TFMessage) {
+        self.tf_static.lock().unwrap().push(msg);
+    }
+    fn robot_description(&self, urdf: String) {
+        self.robot_description.lock().unwrap().push(urdf);
+    }
+    fn diagnostics(&self, status: DiagnosticStatus) {
+        self.diagnostics.lock().unwrap().push(status);
+    }
+    fn joint_states_publishers(&self) -> usize {
+        1
+    }
+}
+
+impl Fake {
+    fn value(&self, key: &str) -> Option<String> {
+        let d = self.diagnostics.lock().unwrap();
+        d.last()?
+            .values
+            .iter()
+            .find(|kv| kv.key == key)
+            .map(|kv| kv.value.clone())
+    }
+
+    /// (child frame, z translation: the slider's axis) of every transform of the tf messages so far.
+    fn tf_frames(&self) -> Vec<Vec<(String, f64)>> {
+        self.tf
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|m| {
+                m.transforms
+                    .iter()
+                    .map(|t| (t.child_frame_id.clone(), t.transform.translation.z))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// Wait (at most 6 s) until `pred` holds.
+async fn until(what: &str, pred: impl Fn() -> bool) {
+    let end = Instant::now() + Duration::from_secs(6);
+    while !pred() {
+        assert!(Instant::now() < end, "never: {what}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+fn slider(x: f64) -> Input {
+    Input::JointStates(
+        JointState {
+            name: vec!["slider_joint".into()],
+            position: vec![x],
+            ..JointState::default()
+        },
+        Instant::now(),
+    )
+}
+
+/// Run the loop on the test robot with these parameters while `script` runs.
+async fn with_node<F: std::future::Future<Output = ()>>(
+    params: &[(&str, ParameterValue)],
+    script: impl FnOnce(&'static Fake, mpsc::UnboundedSender<Input>) -> F,
+) {
+    let urdf = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/data/test_robot.urdf"
+    );
+    let fake: &'static Fake = Box::leak(Box::default());
+    let (inputs, samples) = mpsc::unbounded::<Input>();
+    let (stop, stopped) = futures::channel::oneshot::channel::<()>();
+    let values: BTreeMap<String, ParameterValue> = params
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect();
+    let handles = Handles {
+        description: load_urdf(urdf).unwrap(),
+        io: Io {
+            outputs: fake,
+            params: Params::new(values),
+            diag_name: "state_publisher: robot state".into(),
+            joint_states_topic: "/joint_states".into(),
+        },
+        inputs: samples,
+        shutdown: async move {
+            let _ = stopped.await;
+        },
+    };
+    let script = async move {
+        script(fake, inputs).await;
+        stop.send(()).unwrap();
+    };
+    futures::join!(state_publisher::run(handles), script);
+}
+
+#[tokio::test]
+async fn every_sample_becomes_a_tf_with_the_prefix_and_bad_ones_are_counted() {
+    with_node(
+        &[("frame_prefix", ParameterValue::String("r1/".into()))],
+        |fake, inputs| async move {
+            assert_eq!(fake.robot_description.lock().unwrap().len(), 1);
+            let statics = fake.tf_static.lock().unwrap()[0].clone();
+            assert_eq!(statics.transforms[0].child_frame_id, "r1/mount");
+            for x in [0.1, 0.2] {
+                inputs.unbounded_send(slider(x)).unwrap();
+            }
+            inputs
+                .unbounded_send(Input::Unreadable("bad CDR".into()))
+                .unwrap();
+            until("two tf messages", || fake.tf.lock().unwrap().len() == 2).await;
+            let frames = fake.tf_frames();
+            assert_eq!(frames[0], [("r1/carriage".to_string(), 0.1)]);
+            assert_eq!(frames[1], [("r1/carriage".to_string(), 0.2)]);
+            until("the unreadable sample in diagnostics", || {
+                fake.value("unreadable_samples").as_deref() == Some("1")
+            })
+            .await;
+        },
+    )
+    .await;
+}
+
+#[tokio::test]
+async fn with_a_publish_frequency_samples_between_two_messages_are_merged() {
+    // one message every 2 s: the first sample goes at once, the next ones wait, merged
+    with_node(
+        &[("publish_frequency", ParameterValue::Double(0.5))],
+        |fake, inputs| async move {
+            for x in [0.1, 0.2, 0.3] {
+                inputs.unbounded_send(slider(x)).unwrap();
+            }
+            until("the merged message", || fake.tf.lock().unwrap().len() == 2).await;
+            let frames = fake.tf_frames();
+            assert_eq!(frames[0], [("carriage".to_string(), 0.1)]);
+            assert_eq!(frames[1], [("carriage".to_string(), 0.3)], "the newest");
+        },
+    )
+    .await;
+}
