@@ -394,20 +394,17 @@ pub struct Handles<'a, I, O, S> {
 
 /// The loop: runs until `shutdown` resolves or `inputs` ends. Each input, link event
 /// and timer goes to one handler of [`Node`].
-pub async fn run<I, O, S>(h: Handles<'_, I, O, S>)
-where
-    I: Stream<Item = Input>,
-    O: Outputs,
-    S: Future<Output = ()>,
-{
+pub async fn run<O: Outputs>(
+    h: Handles<'_, impl Stream<Item = Input>, O, impl Future<Output = ()>>,
+) {
     let Handles {
         io,
         inputs,
         mut events,
         shutdown,
     } = h;
-    let params = io.params.clone();
     let period = ros_plumbing::diagnostics::diagnostics_period;
+    let params = io.params.clone();
     let mut ticker = tokio::time::interval(period(&params));
     let mut param_changes = params.subscribe();
     let mut peer_poll = tokio::time::interval(PEER_POLL);

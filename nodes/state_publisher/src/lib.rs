@@ -141,20 +141,12 @@ pub struct Handles<'a, I, O, S> {
 
 /// The loop: runs until `shutdown` resolves or `inputs` ends. Each input and timer
 /// goes to one handler of [`Node`].
-pub async fn run<I, O, S>(h: Handles<'_, I, O, S>)
-where
-    I: Stream<Item = Input>,
-    O: Outputs,
-    S: Future<Output = ()>,
-{
-    let Handles {
-        description,
-        io,
-        inputs,
-        shutdown,
-    } = h;
-    let params = io.params.clone();
-    let mut node = Node::new(description, io);
+pub async fn run<O: Outputs>(
+    h: Handles<'_, impl Stream<Item = Input>, O, impl Future<Output = ()>>,
+) {
+    let params = h.io.params.clone();
+    let (inputs, shutdown) = (h.inputs, h.shutdown);
+    let mut node = Node::new(h.description, h.io);
     let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
     let period = ros_plumbing::diagnostics::diagnostics_period;
     let mut ticker = tokio::time::interval(period(&params));

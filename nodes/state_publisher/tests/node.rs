@@ -13,26 +13,30 @@ use std::collections::BTreeMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-#[derive(Default)]
-struct Fake {
-    tf: Mutex<Vec<TFMessage>>,
-    tf_static: Mutex<Vec<TFMessage>>,
-    robot_description: Mutex<Vec<String>>,
-    diagnostics: Mutex<Vec<DiagnosticStatus>>,
+/// What the loop published, in order.
+#[derive(Clone, Debug)]
+enum Out {
+    Tf(TFMessage),
+    TfStatic(TFMessage),
+    RobotDescription,
+    Diagnostics(DiagnosticStatus),
 }
+
+#[derive(Default)]
+struct Fake(Mutex<Vec<Out>>);
 
 impl Outputs for Fake {
     fn tf(&self, msg: TFMessage) {
-        self.tf.lock().unwrap().push(msg);
+        self.0.lock().unwrap().push(Out::Tf(msg));
     }
     fn tf_static(&self, msg: TFMessage) {
-        self.tf_static.lock().unwrap().push(msg);
+        self.0.lock().unwrap().push(Out::TfStatic(msg));
     }
-    fn robot_description(&self, urdf: String) {
-        self.robot_description.lock().unwrap().push(urdf);
+    fn robot_description(&self, _urdf: String) {
+        self.0.lock().unwrap().push(Out::RobotDescription);
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
-        self.diagnostics.lock().unwrap().push(status);
+        self.0.lock().unwrap().push(Out::Diagnostics(status));
     }
     fn joint_states_publishers(&self) -> usize {
         1
@@ -40,26 +44,36 @@ impl Outputs for Fake {
 }
 
 impl Fake {
-    fn value(&self, key: &str) -> Option<String> {
-        let d = self.diagnostics.lock().unwrap();
-        d.last()?
-            .values
-            .iter()
-            .find(|kv| kv.key == key)
-            .map(|kv| kv.value.clone())
+    fn out(&self) -> Vec<Out> {
+        self.0.lock().unwrap().clone()
     }
 
-    /// (child frame, z translation: the slider's axis) of every transform of the tf messages so far.
-    fn tf_frames(&self) -> Vec<Vec<(String, f64)>> {
-        self.tf
-            .lock()
-            .unwrap()
-            .iter()
-            .map(|m| {
-                m.transforms
+    /// The newest diagnostics value of `key`.
+    fn value(&self, key: &str) -> Option<String> {
+        self.out().iter().rev().find_map(|o| match o {
+            Out::Diagnostics(d) => Some(
+                d.values
                     .iter()
-                    .map(|t| (t.child_frame_id.clone(), t.transform.translation.z))
-                    .collect()
+                    .find(|kv| kv.key == key)
+                    .map(|kv| kv.value.clone()),
+            ),
+            _ => None,
+        })?
+    }
+
+    /// (child frame, z translation: the slider's axis) of every transform of the tf
+    /// messages so far.
+    fn tf_frames(&self) -> Vec<Vec<(String, f64)>> {
+        self.out()
+            .iter()
+            .filter_map(|o| match o {
+                Out::Tf(m) => Some(
+                    m.transforms
+                        .iter()
+                        .map(|t| (t.child_frame_id.clone(), t.transform.translation.z))
+                        .collect(),
+                ),
+                _ => None,
             })
             .collect()
     }
@@ -126,8 +140,12 @@ async fn every_sample_becomes_a_tf_with_the_prefix_and_bad_ones_are_counted() {
     with_node(
         &[("frame_prefix", ParameterValue::String("r1/".into()))],
         |fake, inputs| async move {
-            assert_eq!(fake.robot_description.lock().unwrap().len(), 1);
-            let statics = fake.tf_static.lock().unwrap()[0].clone();
+            // first the description, then its fixed joints
+            let out = fake.out();
+            assert!(matches!(out[0], Out::RobotDescription), "{out:?}");
+            let Out::TfStatic(statics) = &out[1] else {
+                panic!("{out:?}")
+            };
             assert_eq!(statics.transforms[0].child_frame_id, "r1/mount");
             for x in [0.1, 0.2] {
                 inputs.unbounded_send(slider(x)).unwrap();
@@ -135,7 +153,7 @@ async fn every_sample_becomes_a_tf_with_the_prefix_and_bad_ones_are_counted() {
             inputs
                 .unbounded_send(Input::Unreadable("bad CDR".into()))
                 .unwrap();
-            until("two tf messages", || fake.tf.lock().unwrap().len() == 2).await;
+            until("two tf messages", || fake.tf_frames().len() == 2).await;
             let frames = fake.tf_frames();
             assert_eq!(frames[0], [("r1/carriage".to_string(), 0.1)]);
             assert_eq!(frames[1], [("r1/carriage".to_string(), 0.2)]);
@@ -157,7 +175,7 @@ async fn with_a_publish_frequency_samples_between_two_messages_are_merged() {
             for x in [0.1, 0.2, 0.3] {
                 inputs.unbounded_send(slider(x)).unwrap();
             }
-            until("the merged message", || fake.tf.lock().unwrap().len() == 2).await;
+            until("the merged message", || fake.tf_frames().len() == 2).await;
             let frames = fake.tf_frames();
             assert_eq!(frames[0], [("carriage".to_string(), 0.1)]);
             assert_eq!(frames[1], [("carriage".to_string(), 0.3)], "the newest");
