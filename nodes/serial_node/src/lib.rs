@@ -426,7 +426,13 @@ pub async fn run<O: Outputs>(
                 let Some(first) = input else { break };
                 // a burst (DDS repairing what a network outage held back) moves the
                 // arm to its newest command only; a lone command goes at once
-                node.on_inputs(burst::take_burst(first, &mut inputs));
+                for input in node.coalesce(burst::take_burst(first, &mut inputs)) {
+                    match input {
+                        Input::ServoAngles(msg, received) => node.on_servo_angles(&msg, received),
+                        Input::Estop(engaged) => node.on_estop(engaged),
+                        Input::Unreadable(e) => node.on_unreadable(&e),
+                    }
+                }
             }
         }
     }
@@ -516,9 +522,9 @@ impl<'a, O: Outputs> Node<'a, O> {
         }
     }
 
-    /// Inputs that arrived together: a `servo_angles` followed by a newer one is
-    /// superseded ([`coalesce`]), the rest handled in order.
-    pub fn on_inputs(&mut self, batch: Vec<Input>) {
+    /// Of inputs that arrived together, the ones to handle, in order: a
+    /// `servo_angles` followed by a newer one is superseded ([`coalesce`]) and counted.
+    pub fn coalesce(&mut self, batch: Vec<Input>) -> Vec<Input> {
         let (batch, superseded) = coalesce(batch);
         if superseded > 0 {
             log::debug!(
@@ -526,13 +532,7 @@ impl<'a, O: Outputs> Node<'a, O> {
             );
             self.status.superseded_inputs += superseded as u64;
         }
-        for input in batch {
-            match input {
-                Input::ServoAngles(msg, received) => self.on_servo_angles(&msg, received),
-                Input::Estop(engaged) => self.on_estop(engaged),
-                Input::Unreadable(e) => self.on_unreadable(&e),
-            }
-        }
+        batch
     }
 
     /// A `servo_angles` sample: checked, turned into pulse widths and offered to the
