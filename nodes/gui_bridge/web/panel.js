@@ -432,7 +432,12 @@ $("prog-list").addEventListener("focusout", () => setTimeout(renderProgram, 0));
 $("prog-teach").onclick = () => progSend("teach");
 $("prog-play").onclick = () => progSend("play", { loop: $("prog-loop").checked });
 $("prog-stop").onclick = () => progSend("stop");
-$("prog-save").onclick = () => { pendingSave = $("prog-name").value.trim().replace(/\.csv$/, ""); progSend("save", { name: pendingSave }); };
+$("prog-save").onclick = () => {
+  pendingSave = $("prog-name").value.trim().replace(/\.csv$/, "");
+  // the message shown until the node answers is about this save, not an earlier one
+  $("prog-msg").textContent = `saving ${pendingSave}…`;
+  progSend("save", { name: pendingSave });
+};
 $("prog-files").addEventListener("change", () => { const f = $("prog-files").value; if (f) { progSend("load", { name: f }); $("prog-name").value = f; } $("prog-files").value = ""; });
 
 connect();
