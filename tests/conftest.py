@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -412,6 +413,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "own_process: run this module's tests in a pytest process of their own")
+    config.addinivalue_line("markers", "background: (with own_process) that process may run alongside the other tests")
     config.addinivalue_line("markers", "timeout(seconds): this test's limit for each of setup, call and teardown "
                                        f"(default {TEST_TIMEOUT_S:.0f} s, EEZYBOT_TEST_TIMEOUT)")
     global _STDERR
@@ -419,6 +421,46 @@ def pytest_configure(config):
 
 
 _OWN_PROCESS_RESULTS = {}
+# Such a module marked `background` too (test_link_outages.py: link outages, mostly
+# waited out, whose checks do not depend on how busy the host is) runs in a background
+# thread from the end of collection, alongside the other tests; its results are
+# reported where pytest reaches them. EEZYBOT_OWN_PROCESS_SERIAL=1 runs it where
+# pytest reaches it instead, as every other own_process module is.
+_OWN_PROCESS_DONE = {}  # module -> threading.Event, set when its results are in
+_OWN_PROCESS_RUNNING = []  # the module process under way, to end it if the session ends first
+
+
+def pytest_collection_finish(session):
+    if (os.environ.get("EEZYBOT_OWN_PROCESS") or os.environ.get("EEZYBOT_OWN_PROCESS_SERIAL")
+            or session.config.option.collectonly):
+        return
+    first_items = {}
+    for item in session.items:
+        if item.get_closest_marker("own_process") is not None and item.get_closest_marker("background") is not None:
+            first_items.setdefault(str(item.fspath), item)
+    for module in first_items:
+        _OWN_PROCESS_DONE[module] = threading.Event()
+
+    def run_modules():
+        for module, item in first_items.items():
+            try:
+                _run_module_in_own_process(item)
+            finally:
+                _OWN_PROCESS_DONE[module].set()
+
+    if first_items:
+        threading.Thread(target=run_modules, name="own_process modules", daemon=True).start()
+
+
+def pytest_unconfigure(config):
+    for proc in _OWN_PROCESS_RUNNING:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(10)
 
 
 def _run_module_in_own_process(item):
@@ -430,24 +472,29 @@ def _run_module_in_own_process(item):
             started = time.monotonic()
             # each test there has its own timeout; this bounds the whole module's process
             limit = sum(3 * phase_timeout_s(i) for i in item.session.items if str(i.fspath) == module) + 120
+            argv = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-s", "-o", "junit_logging=all",
+                    f"--junitxml={junit}", *ids]
+            child = subprocess.Popen(argv, cwd=str(item.session.config.rootpath), stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True, env={**os.environ, "EEZYBOT_OWN_PROCESS": "1"})
+            _OWN_PROCESS_RUNNING.append(child)
             try:
-                proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-s", "-o",
-                                       "junit_logging=all", f"--junitxml={junit}", *ids],
-                                      cwd=str(item.session.config.rootpath), capture_output=True, text=True,
-                                      env={**os.environ, "EEZYBOT_OWN_PROCESS": "1"}, timeout=limit)
-            except subprocess.TimeoutExpired as e:
-                proc = subprocess.CompletedProcess(e.cmd, None, _text(e.stdout),
-                                                   _text(e.stderr) + f"\n(killed after {limit:.0f} s)")
+                out, err = child.communicate(timeout=limit)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                try:
+                    out, err = child.communicate(timeout=30)
+                except subprocess.TimeoutExpired:  # its nodes hold the pipes
+                    out, err = "", ""
+                err += f"\n(killed after {limit:.0f} s)"
+            finally:
+                _OWN_PROCESS_RUNNING.remove(child)
+            proc = subprocess.CompletedProcess(argv, child.returncode, out, err)
             cases = {}
             if junit.exists():
                 for case in ET.parse(junit).getroot().iter("testcase"):
                     cases[case.get("name")] = case
             _OWN_PROCESS_RESULTS[module] = (cases, proc, time.monotonic() - started)
     return _OWN_PROCESS_RESULTS[module]
-
-
-def _text(out):
-    return out.decode(errors="replace") if isinstance(out, bytes) else (out or "")
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -457,6 +504,9 @@ def pytest_runtest_protocol(item, nextitem):
     from _pytest.reports import TestReport
 
     item.ihook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
+    done = _OWN_PROCESS_DONE.get(str(item.fspath))
+    if done is not None:
+        done.wait()  # the background run (bounded by its module's limit)
     cases, proc, _ = _run_module_in_own_process(item)
     case = cases.get(item.name)
     outcome, longrepr, duration, sections = "passed", None, 0.0, []

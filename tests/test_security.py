@@ -258,7 +258,7 @@ def test_a_publisher_the_permissions_do_not_grant_fails_with_a_clear_log_line(ho
 # ---------------------------------------------------------------------------------------
 # a link outage: new handshakes
 
-# secured only: test_two_hosts.py cuts the Pi's end for 25 s without security (one
+# secured only: test_link_outages.py cuts the Pi's end for 25 s without security (one
 # trial per outage length there); tests/soak/secure_outages.py runs 20 trials of it,
 # and as many without security with --unsecured
 @pytest.mark.parametrize("secured", [True], ids=["secured"])

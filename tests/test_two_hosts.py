@@ -3,8 +3,9 @@ network namespace `pc` (gui_bridge, compute_ik, state_publisher) and launch_scri
 in `pi` (serial_node), joined by a veth, or by the userspace link emulator linkem.py
 for an impaired Wi-Fi link. A real rclpy operator lives in `pc`.
 
-One trial of each kind here; tests/soak/outages.py runs 20 of each and
-tests/soak/starts.py hundreds of starts (results in BENCHMARKS.md)."""
+One trial of each kind here (the link outages of one graph: test_link_outages.py);
+tests/soak/outages.py runs 20 of each and tests/soak/starts.py hundreds of starts
+(results in BENCHMARKS.md)."""
 import math
 import statistics
 import time
@@ -106,54 +107,6 @@ def test_domain_and_namespace_stay_apart_across_the_link(hosts, domain, other_do
         for s in strangers:
             s.close()
         close_graph(g)
-
-
-@pytest.fixture(scope="module")
-def split_graph(tmp_path_factory):
-    """One graph for every outage trial (pc.sh + pi.sh with the virtual Arduino behind a
-    pty), in a domain and namespaces of its own."""
-    from conftest import DomainLease
-
-    lease = DomainLease()
-    hosts = twohost.TwoHosts(tag="o")
-    g = SplitGraph(hosts, lease.id, tmp_path_factory.mktemp("outages"), device="virtual")
-    yield g
-    try:
-        close_graph(g)
-    finally:
-        hosts.close()
-        lease.release()
-
-
-LEASE_S = 5  # our participants' lease (1 s announcements): longer outages lose peers
-
-
-# One trial per outage length, the cut end alternating (the Pi's end for 3 and 25 s,
-# the PC's for 12 and 60 s; test_security.py cuts the Pi's end for 25 s, secured, and
-# the partition test below for 5 s). tests/soak/outages.py runs every length at both
-# ends, 20 trials each.
-@pytest.mark.parametrize("length,side", [(3, "pi"), (12, "pc"), (25, "pi"), (60, "pc")],
-                         ids=["pi-3", "pc-12", "pi-25", "pc-60"])
-def test_the_graph_resumes_after_a_link_outage(split_graph, length, side):
-    """Pull the cable at one end for `length` s while the operator keeps sending, plug it
-    back (multicast route re-added, as a DHCP client does): the newest target is
-    applied, no stale command from the outage is, peers lost for longer than the lease
-    are reported lost and regained, and an unreachable network is logged once."""
-    r = split_graph.outage(length, side)
-    print(f"\noutage {length} s at {side}: resumed after {r['resume_s']} s, stale {r['stale']}, "
-          f"lost/regained {r['serial_angles_lost']}/{r['serial_angles_regained']}, "
-          f"unreachable log lines {r['unreachable_lines']}")
-    assert r["resumed"], f"no servo_state for a new target after the link returned: {r}\n{split_graph.logs_tail()}"
-    assert r["stale"] == 0, f"commands from the outage applied after it: {r}"
-    assert r["out_of_order"] == 0, r
-    if length > LEASE_S + 2:
-        assert r["serial_angles_lost"] >= 1 and r["serial_angles_regained"] >= 1, \
-            f"serial_node did not report its servo_angles publisher lost and regained: {r}"
-        assert r["ik_angles_lost"] >= 1 and r["ik_angles_regained"] >= 1, \
-            f"compute_ik did not report its servo_angles subscriber lost and regained: {r}"
-    # one WARN per node and failing destination when the network goes away, not ~20/s
-    nodes = {"pc.sh": 3, "pi.sh": 1}
-    assert all(n <= 2 * nodes[script] for script, n in r["unreachable_lines"].items()), r["unreachable_lines"]
 
 
 def test_a_partition_while_streaming_holds_the_arm_then_resumes_ramped(hosts, domain, tmp_path):
