@@ -174,6 +174,8 @@ pub struct Desk {
     file_busy: bool,
     /// the program a save found existing: the panel asks whether to replace it
     confirm_overwrite: Option<String>,
+    /// why compute_ik did not take the move mode last set, for the player's failure
+    mode_error: Option<String>,
 }
 
 impl Desk {
@@ -191,6 +193,7 @@ impl Desk {
             mode_touched: false,
             file_busy: false,
             confirm_overwrite: None,
+            mode_error: None,
         }
     }
 
@@ -434,7 +437,12 @@ impl Desk {
                     out.restore_mode |= std::mem::take(&mut self.mode_touched);
                 }
                 PlayerAction::Failed { index, reason } => {
-                    self.message = format!("stopped at point {}: {reason}", index + 1);
+                    let cause = self.mode_error.take().map(|e| format!(" ({e})"));
+                    self.message = format!(
+                        "stopped at point {}: {reason}{}",
+                        index + 1,
+                        cause.unwrap_or_default()
+                    );
                     out.restore_mode |= std::mem::take(&mut self.mode_touched);
                 }
             }
@@ -445,10 +453,8 @@ impl Desk {
     /// compute_ik took the move mode (or not, with the reason).
     pub fn mode_set(&mut self, result: Result<(), String>) {
         if let Some(p) = self.player.as_mut() {
-            if let Err(e) = &result {
-                self.message = e.clone();
-            }
             p.mode_set(result.is_ok());
+            self.mode_error = result.err();
         }
     }
 

@@ -326,7 +326,7 @@ fn a_move_mode_compute_ik_does_not_take_stops_the_program_with_the_reason_and_pu
     assert_eq!(last["player"]["phase"], "failed");
     assert_eq!(
         last["message"],
-        "stopped at point 1: compute_ik did not take motion:=line"
+        "stopped at point 1: compute_ik did not take motion:=line (compute_ik did not answer)"
     );
     assert!(
         !p.publish_due(at(t0, 4).now),
