@@ -49,6 +49,10 @@ cargo metadata --format-version 1 --locked --manifest-path patches/ros2-client/C
 check_resolution "patches/ros2-client (its Cargo.lock)" rustdds=patches/rustdds <"$metadata"
 
 [[ ${1:-} == --no-tests ]] && exit 0
-export CARGO_TARGET_DIR=$PWD/target/patches CARGO_PROFILE_DEV_DEBUG=line-tables-only
-cargo test --locked --manifest-path patches/rustdds/Cargo.toml --features security --lib
-cargo test --locked --manifest-path patches/ros2-client/Cargo.toml "${patch_rustdds[@]}" --features security --lib
+# debug info as the workspace has it (line tables, none for dependencies): smaller
+# and quicker to build than the crates' default
+export CARGO_TARGET_DIR=$PWD/target/patches
+profile=(--config 'profile.dev.debug="line-tables-only"' --config 'profile.dev.package."*".debug=false')
+cargo test --locked --manifest-path patches/rustdds/Cargo.toml "${profile[@]}" --features security --lib
+cargo test --locked --manifest-path patches/ros2-client/Cargo.toml "${profile[@]}" "${patch_rustdds[@]}" \
+  --features security --lib
