@@ -118,7 +118,15 @@ fn every_topic_of_the_contract_is_written_in_the_docs_with_its_type_and_qos() {
 /// changed in topics.rs fails here even when the generated table and topics.json are
 /// regenerated with it. `None`: the contract leaves it open (volatile is DDS' default
 /// durability; the contract gives no depth for `tf`, `tf_static` and `diagnostics`).
-const WRITTEN: &[(&str, &str, &str, Option<&str>, Option<usize>)] = &[
+/// (topic, type, reliability, durability, depth)
+type Written = (
+    &'static str,
+    &'static str,
+    &'static str,
+    Option<&'static str>,
+    Option<usize>,
+);
+const WRITTEN: &[Written] = &[
     (
         "xyz_target",
         "geometry_msgs/msg/PointStamped",
