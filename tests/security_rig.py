@@ -74,12 +74,14 @@ class SecurePeer:
     """sros2_peer with an enclave (or none: plain DDS), publishing and subscribing our
     topics by their contract names (`xyz_target`)."""
 
-    def __init__(self, domain, enclave=None, pubs=(), subs=(), netns=None, name="sros2_peer"):
+    def __init__(self, domain, enclave=None, pubs=(), subs=(), netns=None, name="sros2_peer", binary=None):
+        """`binary`: another program speaking sros2_peer's protocol (the RustDDS
+        ros_probe example of ros_plumbing, for benchmarks); default the Fast DDS peer."""
         OUTPUT.mkdir(parents=True, exist_ok=True)
         self.name = name
         self.err_path = OUTPUT / f"{name}-{os.getpid()}-{time.monotonic_ns()}.err"
         self.err = open(self.err_path, "w")
-        argv = [str(peer_binary()), "--domain", str(domain), "--name", name]
+        argv = [str(binary or peer_binary()), "--domain", str(domain), "--name", name]
         if enclave is not None:
             argv += ["--enclave", str(enclave)]
         for flag, topics in (("--pub", pubs), ("--sub", subs)):

@@ -80,7 +80,7 @@ def log(s):
 def latency_run(variant, args, tag):
     log(f"--- latency run `{tag}` ({variant}): {args.rate:g} Hz x {args.seconds:g} s, device {args.device}")
     run = S.LatencyRun(tag, A.TargetPath("smooth"), variant, device=args.device,
-                       clock_ppm=e2e.clock_ppm(args), log=log)
+                       clock_ppm=e2e.clock_ppm(args), log=log, probe=args.probe)
     t_start = time.time()
     try:
         run.start()
@@ -99,7 +99,7 @@ def latency_run(variant, args, tag):
     log(f"    done in {time.time() - t_start:.0f} s (first reply {flowing_s:.2f} s after start); "
         f"exit codes {run.exit_codes}")
     r = {"run": run, "cpu": cpu, "t_measure": t_measure, "t_end": t_end, "path": run.path, "layout": "same",
-         "nodes": "graph", "drive": "sros2_peer"}
+         "nodes": "graph", "drive": "sros2_peer" if args.probe == "fastdds" else "ros_probe"}
     out = e2e.analyze(r, args)
     # the peer gives no source timestamp, and (a) is read in Python: drop what e2e.py
     # derives from rclpy's timestamps
@@ -199,7 +199,7 @@ def report(res, args):
         by_v.setdefault(r["variant"], []).append(r)
     if lat:
         print(f"\n== latency, {args.rate:g} Hz x {args.seconds:g} s, same namespace, device {args.device}, "
-              f"probe sros2_peer (Fast DDS 2.9) in both")
+              f"probe {'sros2_peer (Fast DDS 2.9)' if args.probe == 'fastdds' else 'ros_probe (RustDDS)'} in both")
         for name, rs in by_v.items():
             for r in rs:
                 print(f" {name} (run {r['run_tag']}): sent {r['sent']}, sender skipped {r['sender_skipped_slots']}")
@@ -277,6 +277,9 @@ def main():
     ap.add_argument("--outage-seconds", type=float, default=25.0)
     ap.add_argument("--order", default="unsecured,secured")
     ap.add_argument("--device", choices=["simavr", "virtual"], default="simavr")
+    ap.add_argument("--probe", choices=["fastdds", "rust"], default="fastdds",
+                    help="the operator and probe of the latency part: the Fast DDS peer (default) or "
+                         "ros_plumbing's ros_probe example (RustDDS, as gui_bridge)")
     ap.add_argument("--avr-clock-ppm", type=float, help="as e2e.py (default: one sweep of the servo frame a run)")
     ap.add_argument("--keep", action="store_true")
     ap.add_argument("--json")

@@ -37,7 +37,7 @@ sys.path.insert(0, str(HERE))
 
 import e2e_analysis as A  # noqa: E402
 import twohost  # noqa: E402
-from conftest import DomainLease, NodeProcess  # noqa: E402
+from conftest import DomainLease, NodeProcess, bin_path  # noqa: E402
 from e2e_harness import GraphRun, Probe  # noqa: E402
 from security_rig import NO_SECURITY, SecurePeer, dds_topic, make_keystore, security_env  # noqa: E402
 
@@ -76,6 +76,17 @@ def variants(workdir, order="unsecured,secured"):
         else:
             raise ValueError(f"unknown variant {name}")
     return out
+
+
+def probe_binary(kind):
+    """The probe program: "fastdds" (tests/interop/sros2_peer, Debian's Fast DDS: None,
+    SecurePeer's default) or "rust" (ros_plumbing's ros_probe example: ros2-client over
+    RustDDS, as our gui_bridge talks to the graph)."""
+    if kind == "fastdds":
+        return None
+    if kind == "rust":
+        return bin_path("examples/ros_probe")
+    raise ValueError(f"unknown probe {kind}")
 
 
 def start_node(node, variant, domain, netns, ros_args=()):
@@ -152,11 +163,13 @@ class LatencyRun(GraphRun):
     """e2e_harness.GraphRun (layout "same", nodes "graph") with the nodes started
     directly under `variant` and the sros2_peer (same variant) as the operator and probe."""
 
-    def __init__(self, name, path, variant, device="simavr", serial_args=(), clock_ppm=0.0, log=print):
+    def __init__(self, name, path, variant, device="simavr", serial_args=(), clock_ppm=0.0, log=print,
+                 probe="fastdds"):
         super().__init__(name, path, layout="same", device=device, nodes="graph", serial_args=serial_args,
                          clock_ppm=clock_ppm, log=log)
         self.variant = variant
         self.peer = None
+        self.probe = probe
 
     def _start(self):
         if twohost.available():
@@ -169,7 +182,8 @@ class LatencyRun(GraphRun):
                       start_node("serial_node", self.variant, self.lease.id, pc,
                                  ["-p", f"port:={self.serial_port}", *self.serial_args])]
         self.peer = TimedPeer(self.lease.id, enclave=self.variant.peer_enclave(), pubs=("xyz_target",),
-                              subs=("servo_angles", "servo_state"), netns=pc, name=f"peer-{self.name}")
+                              subs=("servo_angles", "servo_state"), netns=pc, name=f"peer-{self.name}",
+                              binary=probe_binary(self.probe))
         self.peer.wait_ready()
 
     # GraphRun.spin spins rclpy observers; here there are none: the peer's thread reads
