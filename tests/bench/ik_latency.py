@@ -71,7 +71,9 @@ def main():
     for i in range(n):
         m = PointStamped()
         m.header.frame_id = "base_link"
-        m.header.stamp.sec, m.header.stamp.nanosec = 1000 + i // 1000, (i % 1000) * 1000
+        # a real stamp (compute_ik refuses targets older than max_target_age), unique per
+        # target: the key its servo_angles are matched by
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
         m.point.x, m.point.y, m.point.z = 0.2 + 0.03 * ((i % 100) / 100), 0.02 * ((i % 50) / 50 - 0.5), 0.15
         sent[(m.header.stamp.sec, m.header.stamp.nanosec)] = time.perf_counter_ns()
         pub.publish(m)
