@@ -229,5 +229,24 @@ pub fn shorten(text: &str, max: usize) -> std::borrow::Cow<'_, str> {
     }
 }
 
+/// Someone else's text (a header value, a file name) for a message or log line: control
+/// characters replaced with `?`, at most `max` characters, `…` after a cut.
+/// ```
+/// use ros_plumbing::logging::printable;
+/// assert_eq!(printable("evil\r\nHost", 64), "evil??Host");
+/// assert_eq!(printable(&"x".repeat(100), 8), "xxxxxxxx…");
+/// ```
+pub fn printable(text: &str, max: usize) -> String {
+    let mut out: String = text
+        .chars()
+        .take(max)
+        .map(|c| if c.is_control() { '?' } else { c })
+        .collect();
+    if text.chars().nth(max).is_some() {
+        out.push('…');
+    }
+    out
+}
+
 /// The length names are cut to in log lines and diagnostics ([`shorten`]).
 pub const NAME_MAX: usize = 64;

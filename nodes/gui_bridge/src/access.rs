@@ -433,15 +433,7 @@ fn forwarded_scheme(value: &str) -> Option<&'static str> {
 /// At most 100 characters of a header value, control characters replaced, for
 /// messages and logs (the value is the client's, not ours).
 fn shorten(s: &str) -> String {
-    let mut out: String = s
-        .chars()
-        .take(100)
-        .map(|c| if c.is_control() { '?' } else { c })
-        .collect();
-    if s.chars().count() > 100 {
-        out.push('…');
-    }
-    out
+    ros_plumbing::logging::printable(s, 100)
 }
 
 /// Scheme, host and port of an origin, normalised for comparison.

@@ -443,11 +443,7 @@ pub fn program_path(dir: &Path, name: &str) -> Result<PathBuf, String> {
 
 /// `name` cut for an error message.
 fn shorten(name: &str) -> String {
-    let mut s: String = name.chars().take(80).collect();
-    if s.len() < name.len() {
-        s.push('…');
-    }
-    s
+    ros_plumbing::logging::printable(name, 80)
 }
 
 /// The programs in `dir`: the names (without `.csv`) of its regular `*.csv` files (not
