@@ -30,6 +30,7 @@ whose datagrams are not found are counted, not guessed. Timing is never asserted
 Needs what secure_e2e.py needs, and tcpdump.
 """
 import argparse
+import bisect
 import json
 import re
 import shutil
@@ -149,26 +150,25 @@ def analyse(name, run, grams, ports, domain, t_measure, cpu):
     hops = {"peer_out": [], "compute_ik": [], "peer_in": [], "total": []}
     missing = {"no reply": 0, "no target datagram": 0, "no reply datagram": 0}
     sent = [t for t, _, phase in run.sent if phase == "measure" and t >= t_measure]
-    j = k = 0
+    def largest_between(grams, after, before):
+        """The time of the largest of the first 8 datagrams in [after, before], or None."""
+        i = bisect.bisect_left(grams, (after, -1))
+        cand = [g for g in grams[i:i + 8] if g[0] <= before]
+        return max(cand, key=lambda g: g[1])[0] if cand else None
+
     for t0 in sent:
         t1 = replies.get(t0)
         if t1 is None:
             missing["no reply"] += 1
             continue
-        while j < len(to_ik) and to_ik[j][0] < t0:
-            j += 1
-        cand = [g for g in to_ik[j:j + 8] if g[0] <= t1]
-        if not cand:
+        w1 = largest_between(to_ik, t0, t1)
+        if w1 is None:
             missing["no target datagram"] += 1
             continue
-        w1 = max(cand, key=lambda g: g[1])[0]
-        while k < len(to_peer) and to_peer[k][0] < w1:
-            k += 1
-        cand = [g for g in to_peer[k:k + 8] if g[0] <= t1]
-        if not cand:
+        w2 = largest_between(to_peer, w1, t1)
+        if w2 is None:
             missing["no reply datagram"] += 1
             continue
-        w2 = max(cand, key=lambda g: g[1])[0]
         hops["peer_out"].append((w1 - t0) / 1e6)
         hops["compute_ik"].append((w2 - w1) / 1e6)
         hops["peer_in"].append((t1 - w2) / 1e6)

@@ -4,15 +4,15 @@
 //! newest command of a burst, never the stale ones on the way. [`take_burst`]
 //! takes what arrived together (never waiting); the node decides which of its inputs
 //! supersede which ([`latest_wins`]); [`Lateness`] recognises a command that arrives late
-//! (its stamp is old), which the node holds back ([`Held`]) for at most [`HOLD_LATE`]
-//! in case a newer one follows.
+//! (its stamp is old), which the node holds back for at most [`HOLD_LATE`] in case a
+//! newer one follows (`command_gate::CommandGate`, the one copy of that rule).
 
 use futures::{FutureExt, Stream, StreamExt};
 
 /// `first` and every input that is ready with it (arrived together: a burst). Never
 /// waits: a lone input, or a live stream at any rate, goes at once. A burst that DDS
-/// repairs in several rounds is handled by [`Lateness`] and [`Held`]: its commands
-/// are late, and each round's newest replaces the one held.
+/// repairs in several rounds is handled by [`Lateness`] and `command_gate::CommandGate`:
+/// its commands are late, and each round's newest replaces the one held.
 pub fn take_burst<T, S>(first: T, inputs: &mut S) -> Vec<T>
 where
     S: Stream<Item = T> + Unpin,
@@ -55,55 +55,8 @@ pub fn latest_wins<T, K: PartialEq>(
     (kept, dropped)
 }
 
-// The late-hold rule lives in `command_gate` (one copy for every node); `Held` stays
-// here for the nodes that have not moved to `command_gate::CommandGate` yet.
+// The late-hold rule lives in `command_gate` (one copy for every node).
 pub use command_gate::{Lateness, HOLD_LATE, LATE_BY};
-
-/// The late command a node holds back for [`HOLD_LATE`] in case a newer one follows.
-/// A later late command replaces it but does not extend the deadline: whatever the
-/// stamps say, the newest command reaches the arm at most [`HOLD_LATE`] after the
-/// first one was held, so a stream that always looks late (coarse stamps, another
-/// clock) is delayed, never starved.
-#[derive(Debug)]
-pub struct Held<T> {
-    held: Option<(T, tokio::time::Instant)>,
-}
-
-impl<T> Default for Held<T> {
-    fn default() -> Self {
-        Self { held: None }
-    }
-}
-
-impl<T> Held<T> {
-    /// Hold `item` (a late command). Returns whether it replaced a held one.
-    pub fn hold(&mut self, item: T, now: tokio::time::Instant) -> bool {
-        let until = self.held.take().map(|(_, until)| until);
-        let replaced = until.is_some();
-        self.held = Some((item, until.unwrap_or(now + HOLD_LATE)));
-        replaced
-    }
-
-    /// Drop the held command (a live one superseded it, or the e-stop). Returns
-    /// whether there was one.
-    pub fn discard(&mut self) -> bool {
-        self.held.take().is_some()
-    }
-
-    /// When the held command is due, if there is one.
-    pub fn deadline(&self) -> Option<tokio::time::Instant> {
-        self.held.as_ref().map(|(_, until)| *until)
-    }
-
-    /// The held command, if its deadline has come.
-    pub fn take_due(&mut self, now: tokio::time::Instant) -> Option<T> {
-        if self.deadline().is_some_and(|until| until <= now) {
-            self.held.take().map(|(item, _)| item)
-        } else {
-            None
-        }
-    }
-}
 
 #[cfg(test)]
 mod tests {
@@ -132,29 +85,6 @@ mod tests {
         assert_eq!(t.elapsed(), Duration::from_millis(1));
         let mut lone = stream::pending::<u32>();
         assert_eq!(take_burst(5, &mut lone), vec![5]);
-    }
-
-    #[test]
-    fn a_stream_of_late_commands_is_delayed_never_starved() {
-        // one late command every 20 ms: each replaces the held one, and the newest
-        // is due 30 ms after the first was held, not 30 ms after the last
-        let t0 = tokio::time::Instant::now();
-        let mut held = Held::default();
-        let mut applied = vec![];
-        for i in 0..10u32 {
-            let now = t0 + Duration::from_millis(20 * u64::from(i));
-            if let Some(c) = held.take_due(now) {
-                applied.push((i, c));
-            }
-            held.hold(i, now);
-        }
-        // every second step applies the newest of the two held since the last one
-        assert_eq!(applied, [(2, 1), (4, 3), (6, 5), (8, 7)]);
-        assert_eq!(held.take_due(t0 + Duration::from_millis(180)), None);
-        assert_eq!(held.take_due(t0 + Duration::from_millis(190)), Some(9));
-        held.hold(10, t0);
-        assert!(held.discard());
-        assert_eq!(held.deadline(), None);
     }
 
     #[test]
