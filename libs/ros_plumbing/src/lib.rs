@@ -24,5 +24,7 @@ pub use error::PlumbingError;
 pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode};
 pub use params::{ParamRange, ParamSpec, Params};
 pub use publisher::TopicPublisher;
-pub use ros2_client::ParameterValue;
+/// The ros2-client types a node's I/O shell names (so that nodes depend on this crate,
+/// not on ros2-client).
+pub use ros2_client::{Node, ParameterValue, Subscription};
 pub use topics::Topic;

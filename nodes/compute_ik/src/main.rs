@@ -7,14 +7,14 @@ use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::StreamExt;
-use ros2_client::Subscription;
+use ros_plumbing::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{topics, RosNode, TopicPublisher};
 use std::process::ExitCode;
 
 struct RosOutputs<'a> {
-    node: &'a ros2_client::Node,
+    node: &'a ros_plumbing::Node,
     xyz: &'a Subscription<PointStamped>,
     joint_states: TopicPublisher<JointState>,
     /// the EezyBot's servos; an arm without a servo mapping has none

@@ -17,7 +17,7 @@ use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::StreamExt;
-use ros2_client::Subscription;
+use ros_plumbing::Subscription;
 use ros_plumbing::feedback;
 use ros_plumbing::remote_params::RemoteParameters;
 use ros_plumbing::{topics, ParameterValue, RosNode};

@@ -173,7 +173,7 @@ pub async fn serve(
 /// The samples of `topic` (read by `subscription`) as the panel's inputs; a sample that
 /// cannot be read becomes [`Input::Unreadable`] (logged and counted).
 fn inputs_of<'a, M: eezybot_msgs::RosMessage>(
-    subscription: &'a ros2_client::Subscription<M>,
+    subscription: &'a ros_plumbing::Subscription<M>,
     topic: &ros_plumbing::Topic<M>,
     input: fn(M) -> Input,
 ) -> futures::stream::BoxStream<'a, Input> {

@@ -3,7 +3,7 @@
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use futures::StreamExt;
-use ros2_client::Subscription;
+use ros_plumbing::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::{topics, RosNode, TopicPublisher};
@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 struct RosOutputs<'a> {
-    node: &'a ros2_client::Node,
+    node: &'a ros_plumbing::Node,
     angles: &'a Subscription<JointState>,
     servo_state: TopicPublisher<JointState>,
     diagnostics: DiagnosticsPublisher,

@@ -6,7 +6,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::String as StringMsg;
 use eezybot_msgs::tf2_msgs::TFMessage;
 use futures::StreamExt;
-use ros2_client::Subscription;
+use ros_plumbing::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::{topics, RosNode, TopicPublisher};
 use state_publisher::{load_urdf, urdf_origin, Input, Outputs};
@@ -14,7 +14,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 struct RosOutputs<'a> {
-    node: &'a ros2_client::Node,
+    node: &'a ros_plumbing::Node,
     joint_states: &'a Subscription<JointState>,
     tf: TopicPublisher<TFMessage>,
     tf_static: TopicPublisher<TFMessage>,
