@@ -7,9 +7,9 @@ use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::StreamExt;
-use ros_plumbing::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
+use ros_plumbing::Subscription;
 use ros_plumbing::{topics, RosNode, TopicPublisher};
 use std::process::ExitCode;
 

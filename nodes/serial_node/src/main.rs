@@ -3,9 +3,9 @@
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use futures::StreamExt;
-use ros_plumbing::Subscription;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
+use ros_plumbing::Subscription;
 use ros_plumbing::{topics, RosNode, TopicPublisher};
 use serial_node::link::{self, Link};
 use serial_node::{Input, Outputs};
