@@ -58,6 +58,13 @@ COMMANDS = qos("xyz_target")  # reliable, volatile, keep last 10
 LATCHED = qos("estop")  # reliable, transient-local, keep last 1
 
 
+def default_sigint():
+    """A child's `preexec_fn`: SIGINT as a terminal delivers it, even when this harness
+    runs in the background (a shell starts background jobs with SIGINT ignored, and a
+    launch script, bash, cannot trap a signal that was ignored when it started)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def bin_path(rel):
     """A binary of ours, from EEZYBOT_BIN_DIR (default target/debug)."""
     path = Path(os.environ.get("EEZYBOT_BIN_DIR", REPO / "target" / "debug")) / rel
@@ -192,11 +199,8 @@ class NodeProcess:
         exe = str(name) if "/" in str(name) else bin_path(name)
         self.argv = [*(["ip", "netns", "exec", netns] if netns else []), exe, *args]
         self.env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), **(env or {})}
-        # SIGINT as a terminal delivers it, even when this harness runs in the
-        # background (a shell starts background jobs with SIGINT ignored, and a
-        # launch script cannot trap a signal ignored on entry)
         self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env,
-                                     preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                                     preexec_fn=default_sigint)
 
     def stop(self, sig=signal.SIGINT, timeout=10):
         if self.proc.poll() is None:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import OUTPUT, REPO, TOPICS, bin_path, descendants
+from conftest import OUTPUT, REPO, TOPICS, bin_path, default_sigint, descendants
 
 KEYSTORE_SH = REPO / "launch_scripts" / "keystore.sh"
 INSTALL_SH = REPO / "deploy" / "install.sh"
@@ -372,7 +372,7 @@ def test_a_node_runs_under_its_enclave_and_is_refused_under_another(keystore, do
     exe = bin_path("serial_node")
     ok = subprocess.Popen([exe, "--ros-args", "-p", "port:=mock", "--enclave", "/eezybot/pi"], env=env,
                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                          preexec_fn=default_sigint)
     try:
         time.sleep(4)
         assert ok.poll() is None, ok.communicate(timeout=10)[0]
@@ -415,7 +415,7 @@ class Script:
         self.proc = subprocess.Popen([str(SCRIPTS / name), *args], stdout=self.log, stderr=subprocess.STDOUT,
                                      env={**os.environ, **NO_SECURITY, "EEZYBOT_BIN_DIR": bin_dir(),
                                           "GUI_BIND": "127.0.0.1:0", "SERIAL_PORT": "mock", **env},
-                                     start_new_session=True)
+                                     start_new_session=True, preexec_fn=default_sigint)
 
     def output(self):
         if not self.log.closed:

@@ -14,7 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
-from conftest import OUTPUT, REPO, bin_path, descendants
+from conftest import OUTPUT, REPO, bin_path, default_sigint, descendants
 
 SCRIPTS = REPO / "launch_scripts"
 
@@ -73,7 +73,7 @@ class Script:
         self.log = open(self.log_path, "w")
         self.proc = subprocess.Popen([str(SCRIPTS / name), *args], stdout=self.log, stderr=subprocess.STDOUT,
                                      env={**os.environ, "EEZYBOT_BIN_DIR": BIN_DIR, "GUI_BIND": "127.0.0.1:0",
-                                          **(env or {})}, start_new_session=True)
+                                          **(env or {})}, start_new_session=True, preexec_fn=default_sigint)
         _STARTED.append(self.proc.pid)
 
     def output(self):
@@ -206,7 +206,8 @@ def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock", "PATH": "/usr/bin:/bin"}
     env.pop("EEZYBOT_BIN_DIR", None)
     proc = subprocess.Popen([str(bundle / "launch_scripts" / "pi.sh")], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, env=env, text=True, start_new_session=True)
+                            stderr=subprocess.STDOUT, env=env, text=True, start_new_session=True,
+                            preexec_fn=default_sigint)
     _STARTED.append(proc.pid)
     try:
         end = time.monotonic() + 20
