@@ -7,6 +7,7 @@
 //!
 //! The values are written again, independently, in `tests/interop/cases.py`.
 
+use eezybot_msgs::cdr::{hex, unhex};
 use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
 use eezybot_msgs::geometry_msgs::{
     Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3,
@@ -315,17 +316,6 @@ fn cases() -> Vec<Case> {
             },
         ),
     ]
-}
-
-fn hex(b: &[u8]) -> String {
-    b.iter().map(|x| format!("{x:02x}")).collect()
-}
-
-fn unhex(s: &str) -> Option<Vec<u8>> {
-    (0..s.len())
-        .step_by(2)
-        .map(|i| s.get(i..i + 2).and_then(|h| u8::from_str_radix(h, 16).ok()))
-        .collect()
 }
 
 fn main() {

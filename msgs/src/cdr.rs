@@ -53,3 +53,26 @@ pub fn decode<M: DeserializeOwned>(bytes: &[u8]) -> Result<M, CdrError> {
         .map_err(|e| CdrError::Cdr(e.to_string()))?;
     Ok(msg)
 }
+
+/// Serialized bytes as lowercase hex, the line format of the interop tools
+/// (`recv TOPIC HEX`).
+/// ```
+/// assert_eq!(eezybot_msgs::cdr::hex(&[0, 1, 0xab]), "0001ab");
+/// ```
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The bytes of a hex string; `None` if it has an odd length or a non-hex digit.
+/// ```
+/// use eezybot_msgs::cdr::unhex;
+/// assert_eq!(unhex("0001ab"), Some(vec![0, 1, 0xab]));
+/// assert_eq!(unhex("0g"), None);
+/// assert_eq!(unhex("abc"), None);
+/// ```
+pub fn unhex(s: &str) -> Option<Vec<u8>> {
+    (0..s.len())
+        .step_by(2)
+        .map(|i| s.get(i..i + 2).and_then(|h| u8::from_str_radix(h, 16).ok()))
+        .collect()
+}

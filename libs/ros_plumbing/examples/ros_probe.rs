@@ -19,7 +19,7 @@
 //! enclave of its keystore (ROS_SECURITY_ENABLE=true, Enforce) and names itself
 //! `gui_bridge`, the operator node whose permissions the `/eezybot/pc` enclave grants.
 
-use eezybot_msgs::cdr;
+use eezybot_msgs::cdr::{self, hex, unhex};
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use futures::StreamExt;
@@ -88,17 +88,6 @@ fn say(line: &str) {
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{line}");
     let _ = out.flush();
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-fn unhex(s: &str) -> Option<Vec<u8>> {
-    (0..s.len())
-        .step_by(2)
-        .map(|i| s.get(i..i + 2).and_then(|h| u8::from_str_radix(h, 16).ok()))
-        .collect()
 }
 
 /// The contract's JointState topic named `dds` (`rt/servo_angles`).
