@@ -38,17 +38,19 @@ pub enum MsgType {
 }
 
 impl MsgType {
+    /// Every message type, in the order of their numbers.
+    pub const ALL: [MsgType; 7] = [
+        MsgType::Hello,
+        MsgType::HelloAck,
+        MsgType::SetPulses,
+        MsgType::Heartbeat,
+        MsgType::State,
+        MsgType::Estop,
+        MsgType::Config,
+    ];
+
     fn from_nibble(n: u8) -> Option<MsgType> {
-        Some(match n {
-            0x1 => MsgType::Hello,
-            0x2 => MsgType::HelloAck,
-            0x3 => MsgType::SetPulses,
-            0x4 => MsgType::Heartbeat,
-            0x5 => MsgType::State,
-            0x6 => MsgType::Estop,
-            0x7 => MsgType::Config,
-            _ => return None,
-        })
+        MsgType::ALL.into_iter().find(|t| *t as u8 == n)
     }
 
     /// The payload length this type must have.
@@ -77,42 +79,40 @@ pub enum StopAction {
 /// What the device does on silence longer than its watchdog timeout.
 pub type WatchdogAction = StopAction;
 
-/// The device's state, as reported in [`Message::State`].
+/// The device's state, as reported in [`Message::State`] (the number: its byte there).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub enum DeviceState {
     /// No pulses and no command to follow: powered up (the pose it reports is its
     /// hold pose) or e-stop released after a detaching e-stop (the last command).
-    Idle,
+    Idle = 0,
     /// Following commands.
-    Running,
+    Running = 1,
     /// Watchdog fired: holding the last pulses.
-    WatchdogHold,
+    WatchdogHold = 2,
     /// Watchdog fired: pulses stopped.
-    WatchdogDetached,
+    WatchdogDetached = 3,
     /// Emergency stop: holding (or, engaged with [`StopAction::Detach`], no
     /// pulses); commands ignored.
-    Estop,
+    Estop = 4,
 }
 
 impl DeviceState {
-    fn to_byte(self) -> u8 {
-        match self {
-            DeviceState::Idle => 0,
-            DeviceState::Running => 1,
-            DeviceState::WatchdogHold => 2,
-            DeviceState::WatchdogDetached => 3,
-            DeviceState::Estop => 4,
-        }
+    /// Every state, in the order of their bytes.
+    pub const ALL: [DeviceState; 5] = [
+        DeviceState::Idle,
+        DeviceState::Running,
+        DeviceState::WatchdogHold,
+        DeviceState::WatchdogDetached,
+        DeviceState::Estop,
+    ];
+
+    /// The state's byte in a STATE payload.
+    pub fn to_byte(self) -> u8 {
+        self as u8
     }
     fn from_byte(b: u8) -> Option<DeviceState> {
-        Some(match b {
-            0 => DeviceState::Idle,
-            1 => DeviceState::Running,
-            2 => DeviceState::WatchdogHold,
-            3 => DeviceState::WatchdogDetached,
-            4 => DeviceState::Estop,
-            _ => return None,
-        })
+        DeviceState::ALL.into_iter().find(|s| s.to_byte() == b)
     }
     /// A short name for logs and diagnostics.
     pub fn name(self) -> &'static str {
