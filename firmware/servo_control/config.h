@@ -4,7 +4,7 @@
 
 #define FIRMWARE_MAJOR 1
 #define FIRMWARE_MINOR 0
-#define PROTOCOL_VERSION 2
+// PROTOCOL_VERSION and the frame constants: protocol.h (written from libs/servo_protocol)
 
 #define SERVO_COUNT 4
 #define SERIAL_BAUD 115200UL

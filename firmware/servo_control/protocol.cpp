@@ -10,19 +10,6 @@ uint8_t proto_crc8(const uint8_t *data, size_t n) {
   return crc;
 }
 
-int8_t proto_payload_len(uint8_t type) {
-  switch (type) {
-    case MSG_HELLO: return 1;
-    case MSG_HELLO_ACK: return 6;
-    case MSG_SET_PULSES: return 8;
-    case MSG_HEARTBEAT: return 0;
-    case MSG_STATE: return 12;
-    case MSG_ESTOP: return 1;
-    case MSG_CONFIG: return 3;
-    default: return -1;
-  }
-}
-
 void proto_decoder_init(Decoder *d) {
   d->n = 0;
   d->errors = 0;

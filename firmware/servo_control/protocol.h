@@ -3,6 +3,10 @@
 #include <stdint.h>
 #include <stddef.h>
 
+// generated: frame constants
+// Written from libs/servo_protocol/src/frame.rs, the one source of these values; after
+// a change there: EEZYBOT_BLESS=1 cargo test -p servo_protocol --test firmware_header
+#define PROTOCOL_VERSION 2
 #define PROTO_SYNC 0xA5
 #define PROTO_MAX_PAYLOAD 15
 #define PROTO_OVERHEAD 4
@@ -17,6 +21,30 @@ enum MsgType {
   MSG_CONFIG = 0x7,
 };
 
+// The state byte of a STATE payload.
+enum DeviceState {
+  STATE_IDLE = 0,
+  STATE_RUNNING = 1,
+  STATE_WATCHDOG_HOLD = 2,
+  STATE_WATCHDOG_DETACHED = 3,
+  STATE_ESTOP = 4,
+};
+
+// Payload length each type must have, or -1 for an unknown type.
+static inline int8_t proto_payload_len(uint8_t type) {
+  switch (type) {
+    case MSG_HELLO: return 1;
+    case MSG_HELLO_ACK: return 6;
+    case MSG_SET_PULSES: return 8;
+    case MSG_HEARTBEAT: return 0;
+    case MSG_STATE: return 12;
+    case MSG_ESTOP: return 1;
+    case MSG_CONFIG: return 3;
+    default: return -1;
+  }
+}
+// end generated: frame constants
+
 struct Frame {
   uint8_t type;
   uint8_t len;
@@ -25,9 +53,6 @@ struct Frame {
 };
 
 uint8_t proto_crc8(const uint8_t *data, size_t n);
-
-// Payload length each type must have, or -1 for an unknown type.
-int8_t proto_payload_len(uint8_t type);
 
 // Streaming decoder (PROTOCOL.md's receiver). Push each byte received, then pop until
 // it returns 0:

@@ -18,14 +18,6 @@
 #include "protocol.h"
 #include "servo_pwm.h"
 
-enum DeviceState {
-  STATE_IDLE = 0,
-  STATE_RUNNING = 1,
-  STATE_WATCHDOG_HOLD = 2,
-  STATE_WATCHDOG_DETACHED = 3,
-  STATE_ESTOP = 4,
-};
-
 static Decoder decoder;
 static uint8_t state = STATE_IDLE;
 // clamped command, ticks (0 = no pulses on that channel); the hold pose before the first
