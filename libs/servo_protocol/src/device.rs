@@ -527,18 +527,21 @@ mod tests {
         assert!((d.horn()[0] - (2944.0 + sixty.floor())).abs() < 1e-9);
     }
 
-    #[test]
-    fn estop_ignores_commands_until_released() {
+    /// A device following a command of 3000 ticks (seq 1, at 0 ms), then e-stopped with
+    /// `action` (seq 2, at 1 ms).
+    fn estopped_while_running(action: StopAction) -> Device {
         let mut d = Device::new(DeviceConfig::default());
         send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
-        send(
-            &mut d,
-            2,
-            Message::Estop {
-                engaged: Some(StopAction::Hold),
-            },
-            ms(1),
-        );
+        let estop = Message::Estop {
+            engaged: Some(action),
+        };
+        send(&mut d, 2, estop, ms(1));
+        d
+    }
+
+    #[test]
+    fn estop_ignores_commands_until_released() {
+        let mut d = estopped_while_running(StopAction::Hold);
         send(&mut d, 3, Message::SetPulses { ticks: [4000; 4] }, ms(2));
         assert_eq!(d.pulses(), [3000; 4]);
         assert_eq!(d.state(), DeviceState::Estop);
@@ -549,16 +552,7 @@ mod tests {
 
     #[test]
     fn a_detaching_estop_stops_the_pulses_and_a_release_waits_for_a_command() {
-        let mut d = Device::new(DeviceConfig::default());
-        send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
-        send(
-            &mut d,
-            2,
-            Message::Estop {
-                engaged: Some(StopAction::Detach),
-            },
-            ms(1),
-        );
+        let mut d = estopped_while_running(StopAction::Detach);
         assert_eq!((d.state(), d.pulses()), (DeviceState::Estop, [0; 4]));
         send(&mut d, 3, Message::Estop { engaged: None }, ms(2));
         assert_eq!((d.state(), d.pulses()), (DeviceState::Idle, [0; 4]));

@@ -728,6 +728,14 @@ mod tests {
         Duration::from_millis(n)
     }
 
+    /// The default config with the velocity guard at `ticks_per_s` on every servo.
+    fn ramping(ticks_per_s: f64) -> HostConfig {
+        HostConfig {
+            max_ticks_per_s: [ticks_per_s; SERVOS],
+            ..HostConfig::default()
+        }
+    }
+
     /// The link against the device model on a fake clock: every frame the link sends
     /// reaches the device at once, its replies come straight back.
     struct Rig {
@@ -965,10 +973,7 @@ mod tests {
     #[test]
     fn a_stream_at_the_velocity_limit_moves_at_the_limit_without_waiting() {
         // 1000 ticks/s: 20 ticks a servo frame, and the planner sends 20-tick steps
-        let config = HostConfig {
-            max_ticks_per_s: [1000.0; SERVOS],
-            ..HostConfig::default()
-        };
+        let config = ramping(1000.0);
         let (r, commands) = jittered_stream(config, 20);
         let pulses = r.pulses_sent();
         for w in pulses.windows(2) {
@@ -995,11 +1000,7 @@ mod tests {
 
     #[test]
     fn a_jump_is_ramped_at_the_velocity_limit_from_the_devices_hold_pose() {
-        let config = HostConfig {
-            max_ticks_per_s: [1000.0; SERVOS],
-            ..HostConfig::default()
-        };
-        let mut r = Rig::new(config);
+        let mut r = Rig::new(ramping(1000.0));
         r.link.command([3944, 2944, 1944, 2325], 1, r.now);
         r.run_until(1500);
         let pulses = r.pulses_sent();
@@ -1073,8 +1074,7 @@ mod tests {
     fn a_detaching_estop_stops_the_pulses_and_the_next_command_ramps_from_the_last() {
         let config = HostConfig {
             estop_action: StopAction::Detach,
-            max_ticks_per_s: [500.0; SERVOS],
-            ..HostConfig::default()
+            ..ramping(500.0)
         };
         let mut r = Rig::new(config);
         r.link.command(HOLD_TICKS, 1, r.now);
@@ -1097,11 +1097,7 @@ mod tests {
 
     #[test]
     fn unplug_and_replug_reconnects_and_resends_the_newest_ramping_from_where_the_device_is() {
-        let config = HostConfig {
-            max_ticks_per_s: [2000.0; SERVOS],
-            ..HostConfig::default()
-        };
-        let mut r = Rig::new(config);
+        let mut r = Rig::new(ramping(2000.0));
         r.link.command([3000; 4], 1, r.now);
         r.run_until(200);
         // unplugged: writes fail, opening fails with back-off up to 500 ms
