@@ -15,13 +15,14 @@ pub mod peers;
 pub mod publisher;
 pub mod qos;
 pub mod remote_params;
+pub mod samples;
 pub mod security;
 pub mod sros2;
 pub mod topics;
 mod value;
 
 pub use error::PlumbingError;
-pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode};
+pub use node::{run_main, shutdown_logged, shutdown_signal, NodeSpec, RosNode, Shutdown};
 pub use params::{ParamRange, ParamSpec, Params};
 pub use publisher::TopicPublisher;
 /// The ros2-client types a node's I/O shell names (so that nodes depend on this crate,

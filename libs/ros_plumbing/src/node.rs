@@ -551,6 +551,33 @@ where
     }
 }
 
+/// The shutdown signal [`main`] hands a node: resolves on SIGINT or SIGTERM, logged
+/// ([`shutdown_logged`]).
+pub type Shutdown = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
+
+/// The whole `main` of a node that takes no arguments of its own: installs the signal
+/// handlers first (Ctrl-C while the node starts stops it cleanly), starts the node from
+/// this process's arguments and environment ([`RosNode::start`]: `--help`, a stray
+/// argument, a bad parameter end it here), runs `body` with the node and the shutdown
+/// signal, and after `body` returned `Ok` (its publishers and subscriptions dropped)
+/// shuts the node down ([`RosNode::shutdown`]). As [`run_main`] it prints an error as
+/// `NAME: error` and exits with 2.
+pub fn main<E>(
+    spec: NodeSpec,
+    body: impl AsyncFnOnce(&mut RosNode, Shutdown) -> Result<(), E>,
+) -> std::process::ExitCode
+where
+    E: From<PlumbingError> + std::fmt::Display,
+{
+    run_main(spec.name, 2, || async move {
+        let shutdown: Shutdown = Box::pin(shutdown_logged());
+        let mut node = RosNode::start(&spec)?;
+        body(&mut node, shutdown).await?;
+        node.shutdown().await;
+        Ok::<(), E>(())
+    })
+}
+
 /// [`shutdown_signal`], logging which signal it was. Like it, the handlers are
 /// installed when this is called, not when the future is first polled.
 pub fn shutdown_logged() -> impl std::future::Future<Output = ()> {
