@@ -6,11 +6,10 @@ use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
-use futures::StreamExt;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Subscription;
-use ros_plumbing::{topics, RosNode, TopicPublisher};
+use ros_plumbing::{samples, topics, RosNode, Shutdown, TopicPublisher};
 use std::process::ExitCode;
 
 struct RosOutputs<'a> {
@@ -45,27 +44,25 @@ impl Outputs for RosOutputs<'_> {
     }
 }
 
-async fn main_async() -> anyhow::Result<()> {
-    let spec = compute_ik::spec();
-    // signal handlers first: Ctrl-C while the node starts stops it cleanly
-    let shutdown = ros_plumbing::shutdown_logged();
-    let node = RosNode::start(&spec)?;
-    if let Some(extra) = node.user_args().first() {
-        anyhow::bail!("unexpected argument `{extra}` (see --help)");
-    }
-    let params = node.params().clone();
-    match Core::from_params(&params).map_err(anyhow::Error::msg)? {
-        Core::EezyBot(core) => serve(*core, node, params, shutdown).await,
-        Core::Urdf(core) => serve(*core, node, params, shutdown).await,
-    }
+fn main() -> ExitCode {
+    ros_plumbing::node::main(
+        compute_ik::spec(),
+        async |node, shutdown| -> anyhow::Result<()> {
+            let params = node.params().clone();
+            match Core::from_params(&params).map_err(anyhow::Error::msg)? {
+                Core::EezyBot(core) => serve(*core, node, params, shutdown).await,
+                Core::Urdf(core) => serve(*core, node, params, shutdown).await,
+            }
+        },
+    )
 }
 
 /// Subscribe, publish and run the node for this arm until `shutdown`.
 async fn serve<M: ArmModel>(
     core: Pipeline<M>,
-    mut node: RosNode,
+    node: &mut RosNode,
     params: ros_plumbing::Params,
-    shutdown: impl std::future::Future<Output = ()>,
+    shutdown: Shutdown,
 ) -> anyhow::Result<()> {
     let arm = core.model();
 
@@ -95,45 +92,21 @@ async fn serve<M: ArmModel>(
     };
 
     let inputs = futures::stream::select_all([
-        xyz.async_stream()
-            .map(|r| match r {
-                Ok((m, _)) => Input::XyzTarget(m),
-                Err(e) => Input::Unreadable(Source::XyzTarget, format!("{e:?}")),
-            })
-            .boxed(),
-        gripper
-            .async_stream()
-            .map(|r| match r {
-                Ok((m, _)) => Input::GripperTarget(m.data, Time::now()),
-                Err(e) => Input::Unreadable(Source::GripperTarget, format!("{e:?}")),
-            })
-            .boxed(),
-        joints
-            .async_stream()
-            .map(|r| match r {
-                Ok((m, _)) => Input::JointTarget(m),
-                Err(e) => Input::Unreadable(Source::JointTarget, format!("{e:?}")),
-            })
-            .boxed(),
-        pose.async_stream()
-            .map(|r| match r {
-                Ok((m, _)) => Input::PoseTarget(m),
-                Err(e) => Input::Unreadable(Source::PoseTarget, format!("{e:?}")),
-            })
-            .boxed(),
-        estop
-            .async_stream()
-            .filter_map(|r| async move {
-                match r {
-                    Ok((m, _)) => Some(Input::Estop(m.data)),
-                    Err(e) => {
-                        // never guess an e-stop state from a broken sample: keep the current one
-                        log::warn!("unreadable sample on estop ignored: {e:?}");
-                        None
-                    }
-                }
-            })
-            .boxed(),
+        samples::inputs(&xyz, Input::XyzTarget, |e| {
+            Input::Unreadable(Source::XyzTarget, e)
+        }),
+        samples::inputs(
+            &gripper,
+            |m| Input::GripperTarget(m.data, Time::now()),
+            |e| Input::Unreadable(Source::GripperTarget, e),
+        ),
+        samples::inputs(&joints, Input::JointTarget, |e| {
+            Input::Unreadable(Source::JointTarget, e)
+        }),
+        samples::inputs(&pose, Input::PoseTarget, |e| {
+            Input::Unreadable(Source::PoseTarget, e)
+        }),
+        samples::readable_inputs(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
     ]);
 
     let diag_name = format!("{}: inverse kinematics", node.resolver().node_name());
@@ -159,11 +132,5 @@ async fn serve<M: ArmModel>(
         shutdown,
     };
     compute_ik::run(core, handles).await;
-    drop((xyz, gripper, joints, pose, estop));
-    node.shutdown().await;
     Ok(())
-}
-
-fn main() -> ExitCode {
-    ros_plumbing::run_main("compute_ik", 2, main_async)
 }

@@ -2,11 +2,10 @@
 
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
-use futures::StreamExt;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Subscription;
-use ros_plumbing::{topics, RosNode, TopicPublisher};
+use ros_plumbing::{samples, topics, RosNode, Shutdown, TopicPublisher};
 use serial_node::link::{self, Link};
 use serial_node::{Input, Outputs};
 use servo_protocol::host::HostConfig;
@@ -36,14 +35,12 @@ impl Outputs for RosOutputs<'_> {
     }
 }
 
-async fn main_async() -> anyhow::Result<()> {
-    let spec = serial_node::spec();
-    // signal handlers first: Ctrl-C while the node starts stops it cleanly
-    let shutdown = ros_plumbing::shutdown_logged();
-    let mut node = RosNode::start(&spec)?;
-    if let Some(extra) = node.user_args().first() {
-        anyhow::bail!("unexpected argument `{extra}` (see --help)");
-    }
+fn main() -> ExitCode {
+    ros_plumbing::node::main(serial_node::spec(), serve)
+}
+
+/// Open the link, subscribe, publish and run the node until `shutdown`.
+async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
     let params = node.params().clone();
     let port = params.string("port").unwrap_or_default();
     let baud = params.i64("baud").unwrap_or(115_200);
@@ -85,19 +82,12 @@ async fn main_async() -> anyhow::Result<()> {
         diagnostics,
     };
     let inputs = futures::stream::select(
-        angles.async_stream().map(|r| match r {
-            Ok((m, _)) => Input::ServoAngles(m, Instant::now()),
-            Err(e) => Input::Unreadable(format!("{e:?}")),
-        }),
-        estop.async_stream().filter_map(|r| async move {
-            match r {
-                Ok((m, _)) => Some(Input::Estop(m.data)),
-                Err(e) => {
-                    log::warn!("unreadable sample on estop ignored: {e:?}");
-                    None
-                }
-            }
-        }),
+        samples::inputs(
+            &angles,
+            |m| Input::ServoAngles(m, Instant::now()),
+            Input::Unreadable,
+        ),
+        samples::readable_inputs(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
     );
     log::info!(
         "{} ready in ROS domain {}: {} -> {} ({}), replies on {}",
@@ -132,12 +122,5 @@ async fn main_async() -> anyhow::Result<()> {
     })
     .await;
     link.shutdown();
-    drop(outputs);
-    drop((angles, estop));
-    node.shutdown().await;
     Ok(())
-}
-
-fn main() -> ExitCode {
-    ros_plumbing::run_main("serial_node", 2, main_async)
 }

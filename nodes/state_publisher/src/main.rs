@@ -5,10 +5,9 @@ use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::String as StringMsg;
 use eezybot_msgs::tf2_msgs::TFMessage;
-use futures::StreamExt;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::Subscription;
-use ros_plumbing::{topics, RosNode, TopicPublisher};
+use ros_plumbing::{samples, topics, RosNode, Shutdown, TopicPublisher};
 use state_publisher::{load_urdf, urdf_origin, Input, Outputs};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -40,14 +39,12 @@ impl Outputs for RosOutputs<'_> {
     }
 }
 
-async fn main_async() -> anyhow::Result<()> {
-    let spec = state_publisher::spec();
-    // signal handlers first: Ctrl-C while the node starts stops it cleanly
-    let shutdown = ros_plumbing::shutdown_logged();
-    let mut node = RosNode::start(&spec)?;
-    if let Some(extra) = node.user_args().first() {
-        anyhow::bail!("unexpected argument `{extra}` (see --help)");
-    }
+fn main() -> ExitCode {
+    ros_plumbing::node::main(state_publisher::spec(), serve)
+}
+
+/// Load the URDF, subscribe, publish and run the node until `shutdown`.
+async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
     let params = node.params().clone();
     let path = params.string("urdf").unwrap_or_default();
     let description = load_urdf(&path)
@@ -66,10 +63,11 @@ async fn main_async() -> anyhow::Result<()> {
         robot_description,
         diagnostics,
     };
-    let inputs = joint_states.async_stream().map(|r| match r {
-        Ok((m, _)) => Input::JointStates(m, Instant::now()),
-        Err(e) => Input::Unreadable(format!("{e:?}")),
-    });
+    let inputs = samples::inputs(
+        &joint_states,
+        |m| Input::JointStates(m, Instant::now()),
+        Input::Unreadable,
+    );
     log::info!(
         "{} ready in ROS domain {}: {} ({} links) on {}, {}, {}",
         node.resolver().node_fqn(),
@@ -95,12 +93,5 @@ async fn main_async() -> anyhow::Result<()> {
         shutdown,
     })
     .await;
-    drop(outputs);
-    drop(joint_states);
-    node.shutdown().await;
     Ok(())
-}
-
-fn main() -> ExitCode {
-    ros_plumbing::run_main("state_publisher", 2, main_async)
 }
