@@ -2,92 +2,23 @@
 //! Each test is a probe that got through before the front existed.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
+mod common;
+
+use common::{
+    advertise, channel_ids, client_message, handshake, message_data, next_json, offers, start,
+    start_with, subscribe, try_connect, WAIT,
+};
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::std_msgs::String as RosString;
-use foxglove_bridge::{
-    Admitted, ClientPublish, FoxgloveBridge, FrontLimits, Gate, Refused, TopicNames,
-};
+use foxglove_bridge::{Admitted, ClientPublish, FrontLimits, Gate, Refused, TopicNames};
 use futures::{SinkExt, StreamExt};
-use serde_json::{json, Value};
 use std::net::SocketAddr;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
-use tokio_tungstenite::tungstenite::client::IntoClientRequest;
-use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::tungstenite::Message;
-use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
-
-type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
-const WAIT: Duration = Duration::from_secs(5);
-
-async fn try_connect(addr: SocketAddr, origin: Option<&str>) -> Result<Ws, String> {
-    let mut request = format!("ws://{addr}").into_client_request().unwrap();
-    let h = request.headers_mut();
-    h.insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
-    if let Some(o) = origin {
-        h.insert("Origin", o.parse().unwrap());
-    }
-    let config = WebSocketConfig::default()
-        .max_message_size(None)
-        .max_frame_size(None);
-    match tokio_tungstenite::connect_async_with_config(request, Some(config), false).await {
-        Ok((ws, _)) => Ok(ws),
-        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => Err(r.status().to_string()),
-        Err(e) => Err(e.to_string()),
-    }
-}
-
-async fn next_json(ws: &mut Ws, op: &str) -> Value {
-    loop {
-        let m = tokio::time::timeout(WAIT, ws.next())
-            .await
-            .unwrap()
-            .unwrap()
-            .unwrap();
-        if let Message::Text(t) = m {
-            let v: Value = serde_json::from_str(&t).unwrap();
-            if v["op"] == op {
-                return v;
-            }
-        }
-    }
-}
-
-/// Every advertised channel: topic → id.
-async fn channel_ids(ws: &mut Ws) -> std::collections::HashMap<String, u64> {
-    let mut ids = std::collections::HashMap::new();
-    while ids.len() < foxglove_bridge::TOPICS.len() {
-        let adv = next_json(ws, "advertise").await;
-        for c in adv["channels"].as_array().unwrap() {
-            ids.insert(
-                c["topic"].as_str().unwrap().to_string(),
-                c["id"].as_u64().unwrap(),
-            );
-        }
-    }
-    ids
-}
-
-async fn subscribe(ws: &mut Ws, id: u64) {
-    let op = json!({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": id}]});
-    ws.send(Message::text(op.to_string())).await.unwrap();
-}
-
-/// A binary messageData within `within`, if any.
-async fn message_data(ws: &mut Ws, within: Duration) -> Option<Vec<u8>> {
-    let end = Instant::now() + within;
-    loop {
-        let left = end.checked_duration_since(Instant::now())?;
-        match tokio::time::timeout(left, ws.next()).await {
-            Ok(Some(Ok(Message::Binary(b)))) if b[0] == 1 => return Some(b.to_vec()),
-            Ok(Some(Ok(_))) => continue,
-            _ => return None,
-        }
-    }
-}
 
 fn urdf() -> Vec<u8> {
     eezybot_msgs::cdr::encode(&RosString {
@@ -96,31 +27,45 @@ fn urdf() -> Vec<u8> {
     .unwrap()
 }
 
-fn target() -> Vec<u8> {
-    let mut frame = vec![1u8];
-    frame.extend_from_slice(&1u32.to_le_bytes());
-    frame.extend_from_slice(&eezybot_msgs::cdr::encode(&PointStamped::default()).unwrap());
-    frame
+/// A target on the client's channel 1 (see [`advertise_xyz`]).
+fn target() -> Message {
+    client_message(
+        1,
+        &eezybot_msgs::cdr::encode(&PointStamped::default()).unwrap(),
+    )
 }
 
 fn advertise_xyz() -> Message {
-    Message::text(
-        json!({"op": "advertise", "channels": [{"id": 1, "topic": "/xyz_target",
-            "encoding": "cdr", "schemaName": "geometry_msgs/msg/PointStamped"}]})
-        .to_string(),
+    advertise(&[(1, "/xyz_target", "geometry_msgs/msg/PointStamped")])
+}
+
+/// A bridge that takes no samples, behind the default gate with `limits`.
+async fn start_limited(limits: FrontLimits) -> foxglove_bridge::FoxgloveBridge {
+    start_with(
+        &TopicNames::default(),
+        ClientPublish::Off,
+        foxglove_bridge::front::programs_only(),
+        limits,
     )
+    .await
+}
+
+/// What the server at `addr` answers to `request` sent over plain TCP, read until it
+/// closes the connection.
+async fn raw_answer(addr: SocketAddr, request: &[u8]) -> String {
+    let mut s = TcpStream::connect(addr).await.unwrap();
+    s.write_all(request).await.unwrap();
+    let mut answer = String::new();
+    tokio::time::timeout(WAIT, s.read_to_string(&mut answer))
+        .await
+        .unwrap()
+        .unwrap();
+    answer
 }
 
 #[tokio::test]
 async fn a_web_page_s_origin_is_refused_with_403() {
-    let bridge = FoxgloveBridge::start(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Off,
-        "t",
-    )
-    .await
-    .unwrap();
+    let bridge = start(ClientPublish::Off).await;
     let r = try_connect(bridge.local_addr(), Some("http://evil.example")).await;
     assert_eq!(r.err().as_deref(), Some("403 Forbidden"));
     assert!(
@@ -141,41 +86,28 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
             reason: "needs the token".into(),
         }),
     });
-    let mut bridge = FoxgloveBridge::start_with(
-        "127.0.0.1:0",
+    let mut bridge = start_with(
         &TopicNames::default(),
         ClientPublish::Targets { queue: 8 },
-        "t",
         gate,
         FrontLimits::default(),
     )
-    .await
-    .unwrap();
+    .await;
     let mut samples = bridge.take_client_samples().unwrap();
     let addr = bridge.local_addr();
-    let connect = |q: &'static str| async move {
-        let mut request = format!("ws://{addr}/{q}").into_client_request().unwrap();
-        request
-            .headers_mut()
-            .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
-        tokio_tungstenite::connect_async(request).await
-    };
-    match connect("").await {
-        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => assert_eq!(r.status(), 401),
-        other => panic!("admitted without a token: {:?}", other.map(|_| ())),
-    }
-    // a watcher: no clientPublish offered, and its samples go nowhere
-    let (mut watcher, _) = connect("?token=watch").await.unwrap();
-    let info = next_json(&mut watcher, "serverInfo").await;
-    assert!(
-        !info["capabilities"]
-            .as_array()
-            .unwrap()
-            .contains(&json!("clientPublish")),
-        "{info}"
+    let connect =
+        |q: &'static str| async move { handshake(&format!("ws://{addr}/{q}"), None).await };
+    assert_eq!(
+        connect("").await.err().as_deref(),
+        Some("401 Unauthorized"),
+        "admitted without a token"
     );
+    // a watcher: no clientPublish offered, and its samples go nowhere
+    let mut watcher = connect("?token=watch").await.unwrap();
+    let info = next_json(&mut watcher, "serverInfo").await;
+    assert!(!offers(&info, "clientPublish"), "{info}");
     watcher.send(advertise_xyz()).await.unwrap();
-    watcher.send(Message::binary(target())).await.unwrap();
+    watcher.send(target()).await.unwrap();
     let status = next_json(&mut watcher, "status").await;
     assert!(
         status["message"]
@@ -185,14 +117,11 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
         "{status}"
     );
     // the publisher's sample arrives, and it is the only one
-    let (mut publisher, _) = connect("?token=good").await.unwrap();
+    let mut publisher = connect("?token=good").await.unwrap();
     let info = next_json(&mut publisher, "serverInfo").await;
-    assert!(info["capabilities"]
-        .as_array()
-        .unwrap()
-        .contains(&json!("clientPublish")));
+    assert!(offers(&info, "clientPublish"));
     publisher.send(advertise_xyz()).await.unwrap();
-    publisher.send(Message::binary(target())).await.unwrap();
+    publisher.send(target()).await.unwrap();
     let s = tokio::time::timeout(WAIT, samples.recv())
         .await
         .unwrap()
@@ -208,14 +137,7 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
 
 #[tokio::test]
 async fn a_connection_to_the_sdk_s_own_port_gets_no_data_and_cannot_publish() {
-    let mut bridge = FoxgloveBridge::start(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Targets { queue: 8 },
-        "t",
-    )
-    .await
-    .unwrap();
+    let mut bridge = start(ClientPublish::Targets { queue: 8 }).await;
     bridge.log("robot_description", &urdf(), 1).unwrap();
     let mut samples = bridge.take_client_samples().unwrap();
     // a page that found the SDK's port by trying ports: its Origin is not checked there
@@ -223,13 +145,19 @@ async fn a_connection_to_the_sdk_s_own_port_gets_no_data_and_cannot_publish() {
         .await
         .unwrap();
     let ids = channel_ids(&mut sneak).await;
-    subscribe(&mut sneak, ids["/robot_description"]).await;
+    sneak
+        .send(subscribe(1, ids["/robot_description"]))
+        .await
+        .unwrap();
     sneak.send(advertise_xyz()).await.unwrap();
-    sneak.send(Message::binary(target())).await.unwrap();
+    sneak.send(target()).await.unwrap();
     // the same through the front gets the latched URDF at once
     let mut front = try_connect(bridge.local_addr(), None).await.unwrap();
     let ids = channel_ids(&mut front).await;
-    subscribe(&mut front, ids["/robot_description"]).await;
+    front
+        .send(subscribe(1, ids["/robot_description"]))
+        .await
+        .unwrap();
     assert!(
         message_data(&mut front, WAIT).await.is_some(),
         "the front's client got nothing"
@@ -253,16 +181,7 @@ async fn connections_over_the_cap_are_refused_with_503() {
         max_clients: 4,
         ..FrontLimits::default()
     };
-    let bridge = FoxgloveBridge::start_with(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Off,
-        "t",
-        foxglove_bridge::front::programs_only(),
-        limits,
-    )
-    .await
-    .unwrap();
+    let bridge = start_limited(limits).await;
     let mut open = Vec::new();
     let mut refused = 0;
     for _ in 0..20 {
@@ -286,14 +205,7 @@ async fn connections_over_the_cap_are_refused_with_503() {
 
 #[tokio::test]
 async fn a_10_mib_message_closes_the_client_with_1009_before_it_is_read() {
-    let bridge = FoxgloveBridge::start(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Off,
-        "t",
-    )
-    .await
-    .unwrap();
+    let bridge = start(ClientPublish::Off).await;
     let mut ws = try_connect(bridge.local_addr(), None).await.unwrap();
     next_json(&mut ws, "serverInfo").await;
     let _ = ws.send(Message::binary(vec![0u8; 10 * 1024 * 1024])).await;
@@ -328,26 +240,13 @@ async fn a_half_open_connection_is_answered_408_when_its_head_times_out() {
         header_timeout: Duration::from_millis(300),
         ..FrontLimits::default()
     };
-    let bridge = FoxgloveBridge::start_with(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Off,
-        "t",
-        foxglove_bridge::front::programs_only(),
-        limits,
-    )
-    .await
-    .unwrap();
-    let mut s = TcpStream::connect(bridge.local_addr()).await.unwrap();
-    s.write_all(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n")
-        .await
-        .unwrap();
-    let mut answer = String::new();
+    let bridge = start_limited(limits).await;
     // the behaviour is a timeout: answered within a generous bound of it
-    tokio::time::timeout(WAIT, s.read_to_string(&mut answer))
-        .await
-        .unwrap()
-        .unwrap();
+    let answer = raw_answer(
+        bridge.local_addr(),
+        b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n",
+    )
+    .await;
     assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
     assert_eq!(
         bridge.front_stats().header_timeouts.load(Ordering::Relaxed),
@@ -357,27 +256,14 @@ async fn a_half_open_connection_is_answered_408_when_its_head_times_out() {
 
 #[tokio::test]
 async fn the_sdk_s_own_refusal_reaches_the_client_whole() {
-    let bridge = FoxgloveBridge::start(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Off,
-        "t",
-    )
-    .await
-    .unwrap();
+    let bridge = start(ClientPublish::Off).await;
     // no subprotocol: the SDK answers 400 with its reason
-    let mut s = TcpStream::connect(bridge.local_addr()).await.unwrap();
-    s.write_all(
+    let answer = raw_answer(
+        bridge.local_addr(),
         b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
           Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
     )
-    .await
-    .unwrap();
-    let mut answer = String::new();
-    tokio::time::timeout(WAIT, s.read_to_string(&mut answer))
-        .await
-        .unwrap()
-        .unwrap();
+    .await;
     assert!(answer.starts_with("HTTP/1.1 400"), "{answer}");
     assert!(answer.contains("sec-websocket-protocol"), "{answer}");
 }

@@ -1,91 +1,21 @@
-//! The Foxglove WebSocket server as a Foxglove client sees it: a client written here from
-//! the protocol's specification (JSON text messages, binary messageData), not the SDK's.
+//! The Foxglove WebSocket server as a Foxglove client sees it (the client of
+//! `common`, written from the protocol's specification, not the SDK's).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
+mod common;
+
+use common::{
+    advertise, channel_ids, channels, client_message, connect, next_json, next_message_data,
+    offers, start, start_in, subscribe, WAIT,
+};
 use eezybot_msgs::geometry_msgs::{Point, PointStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Header, String as RosString};
-use foxglove_bridge::{ros2msg_schema, ClientPublish, FoxgloveBridge, TopicNames, TOPICS};
-use futures::{SinkExt, StreamExt};
-use serde_json::{json, Value};
-use std::collections::HashMap;
-use std::net::SocketAddr;
+use foxglove_bridge::{ros2msg_schema, ClientPublish, TopicNames, TOPICS};
+use futures::SinkExt;
+use serde_json::json;
 use std::time::Duration;
-use tokio::net::TcpStream;
-use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
-use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
-
-type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
-const WAIT: Duration = Duration::from_secs(5);
-
-async fn connect(addr: SocketAddr) -> Ws {
-    let mut request = format!("ws://{addr}").into_client_request().unwrap();
-    request
-        .headers_mut()
-        .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
-    let (ws, response) = tokio_tungstenite::connect_async(request).await.unwrap();
-    assert_eq!(
-        response.headers()["sec-websocket-protocol"],
-        "foxglove.sdk.v1"
-    );
-    ws
-}
-
-enum Received {
-    Json(Value),
-    Binary(Vec<u8>),
-}
-
-async fn next(ws: &mut Ws) -> Received {
-    loop {
-        let m = tokio::time::timeout(WAIT, ws.next())
-            .await
-            .expect("nothing from the server in time")
-            .unwrap()
-            .unwrap();
-        match m {
-            Message::Text(t) => return Received::Json(serde_json::from_str(&t).unwrap()),
-            Message::Binary(b) => return Received::Binary(b.to_vec()),
-            _ => continue,
-        }
-    }
-}
-
-async fn next_json_op(ws: &mut Ws, op: &str) -> Value {
-    loop {
-        if let Received::Json(v) = next(ws).await {
-            if v["op"] == op {
-                return v;
-            }
-        }
-    }
-}
-
-/// (subscription id, log time, payload) of the next messageData (opcode 1).
-async fn next_message_data(ws: &mut Ws) -> (u32, u64, Vec<u8>) {
-    loop {
-        if let Received::Binary(b) = next(ws).await {
-            if b[0] == 1 {
-                let sub = u32::from_le_bytes(b[1..5].try_into().unwrap());
-                let t = u64::from_le_bytes(b[5..13].try_into().unwrap());
-                return (sub, t, b[13..].to_vec());
-            }
-        }
-    }
-}
-
-/// Every advertised channel by topic.
-async fn channels(ws: &mut Ws) -> HashMap<String, Value> {
-    let mut by_topic = HashMap::new();
-    while by_topic.len() < TOPICS.len() {
-        let adv = next_json_op(ws, "advertise").await;
-        for c in adv["channels"].as_array().unwrap() {
-            by_topic.insert(c["topic"].as_str().unwrap().to_string(), c.clone());
-        }
-    }
-    by_topic
-}
 
 fn joint_state(position: f64) -> JointState {
     JointState {
@@ -102,9 +32,7 @@ fn joint_state(position: f64) -> JointState {
 #[tokio::test]
 async fn a_client_sees_every_topic_with_its_ros2msg_schema_and_gets_raw_cdr() {
     let names = TopicNames::in_namespace("/arm2");
-    let bridge = FoxgloveBridge::start("127.0.0.1:0", &names, ClientPublish::Off, "test")
-        .await
-        .unwrap();
+    let bridge = start_in(&names, ClientPublish::Off).await;
     // latched before anyone connects
     let urdf = eezybot_msgs::cdr::encode(&RosString {
         data: "<robot name='eezybot'/>".into(),
@@ -113,12 +41,9 @@ async fn a_client_sees_every_topic_with_its_ros2msg_schema_and_gets_raw_cdr() {
     bridge.log("robot_description", &urdf, 1_000).unwrap();
 
     let mut ws = connect(bridge.local_addr()).await;
-    let info = next_json_op(&mut ws, "serverInfo").await;
+    let info = next_json(&mut ws, "serverInfo").await;
     assert_eq!(info["name"], "test");
-    assert!(!info["capabilities"]
-        .as_array()
-        .unwrap()
-        .contains(&json!("clientPublish")));
+    assert!(!offers(&info, "clientPublish"));
     let channels = channels(&mut ws).await;
     for t in TOPICS {
         let c = &channels[&format!("/arm2/{}", t.topic)];
@@ -163,33 +88,20 @@ async fn a_client_sees_every_topic_with_its_ros2msg_schema_and_gets_raw_cdr() {
 
 #[tokio::test]
 async fn foxglove_panels_publish_targets_and_nothing_else() {
-    let mut bridge = FoxgloveBridge::start(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Targets { queue: 8 },
-        "test",
-    )
-    .await
-    .unwrap();
+    let mut bridge = start(ClientPublish::Targets { queue: 8 }).await;
     let mut samples = bridge.take_client_samples().unwrap();
     let mut ws = connect(bridge.local_addr()).await;
-    let info = next_json_op(&mut ws, "serverInfo").await;
-    assert!(info["capabilities"]
-        .as_array()
-        .unwrap()
-        .contains(&json!("clientPublish")));
+    let info = next_json(&mut ws, "serverInfo").await;
+    assert!(offers(&info, "clientPublish"));
     assert_eq!(info["supportedEncodings"], json!(["cdr"]));
 
-    ws.send(Message::text(
-        json!({"op": "advertise", "channels": [
-            {"id": 1, "topic": "/xyz_target", "encoding": "cdr", "schemaName": "geometry_msgs/msg/PointStamped"},
-            {"id": 2, "topic": "/cmd_vel", "encoding": "cdr", "schemaName": "geometry_msgs/msg/Twist"},
-        ]})
-        .to_string(),
-    ))
+    ws.send(advertise(&[
+        (1, "/xyz_target", "geometry_msgs/msg/PointStamped"),
+        (2, "/cmd_vel", "geometry_msgs/msg/Twist"),
+    ]))
     .await
     .unwrap();
-    let status = next_json_op(&mut ws, "status").await;
+    let status = next_json(&mut ws, "status").await;
     assert!(
         status["message"].as_str().unwrap().contains("/cmd_vel"),
         "{status}"
@@ -208,10 +120,7 @@ async fn foxglove_panels_publish_targets_and_nothing_else() {
     };
     let cdr = eezybot_msgs::cdr::encode(&target).unwrap();
     for channel in [2u32, 1] {
-        let mut frame = vec![1u8];
-        frame.extend_from_slice(&channel.to_le_bytes());
-        frame.extend_from_slice(&cdr);
-        ws.send(Message::binary(frame)).await.unwrap();
+        ws.send(client_message(channel, &cdr)).await.unwrap();
     }
     let sample = tokio::time::timeout(WAIT, samples.recv())
         .await
@@ -227,14 +136,7 @@ async fn foxglove_panels_publish_targets_and_nothing_else() {
 
 #[tokio::test]
 async fn the_watched_topics_follow_the_clients_subscriptions() {
-    let bridge = FoxgloveBridge::start(
-        "127.0.0.1:0",
-        &TopicNames::default(),
-        ClientPublish::Off,
-        "test",
-    )
-    .await
-    .unwrap();
+    let bridge = start(ClientPublish::Off).await;
     let mut watched = bridge.watched();
     assert!(
         watched.borrow().is_empty(),
@@ -257,14 +159,8 @@ async fn the_watched_topics_follow_the_clients_subscriptions() {
 
     let mut a = connect(bridge.local_addr()).await;
     let mut b = connect(bridge.local_addr()).await;
-    let chans = channels(&mut a).await;
-    let id = |topic: &str| chans[topic]["id"].as_u64().unwrap();
-    let subscribe = |sub: u32, topic: &str| {
-        Message::text(
-            json!({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": id(topic)}]})
-                .to_string(),
-        )
-    };
+    let ids = channel_ids(&mut a).await;
+    let subscribe = |sub: u32, topic: &str| subscribe(sub, ids[topic]);
     a.send(subscribe(1, "/joint_states")).await.unwrap();
     a.send(subscribe(2, "/tf")).await.unwrap();
     wait_for(&mut watched, vec!["joint_states", "tf"]).await;
