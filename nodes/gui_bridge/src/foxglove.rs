@@ -325,16 +325,24 @@ pub fn gate(access: AccessPolicy, origins: Vec<String>) -> Gate {
     })
 }
 
-/// The Foxglove WebSocket server of the `foxglove_bind` parameter (`None` when empty),
-/// forwarding every topic a client subscribes until the returned future is dropped.
+/// The Foxglove server at work.
+pub struct Serving<'a> {
+    /// Forwards every topic a client subscribes until it is dropped (it never ends by
+    /// itself).
+    pub forwarding: LocalBoxFuture<'a, ()>,
+    /// Its front's counters (refusals, limits hit), reported with the web panel's.
+    pub front: Arc<foxglove_bridge::FrontStats>,
+}
+
+/// The Foxglove WebSocket server of the `foxglove_bind` parameter (`None` when empty,
+/// or when it cannot listen).
 ///
 /// Every connection passes [`gate`] first (the panel's `access` policy); Foxglove panels
 /// may publish targets only with `foxglove_publish:=true`.
 pub async fn serve<'a>(
     node: &'a RefCell<&mut RosNode>,
     access: AccessPolicy,
-    stats: &crate::web::WebStats,
-) -> anyhow::Result<Option<LocalBoxFuture<'a, ()>>> {
+) -> anyhow::Result<Option<Serving<'a>>> {
     let params = node.borrow().params().clone();
     let bind = params.string("foxglove_bind").unwrap_or_default();
     if bind.trim().is_empty() {
@@ -389,11 +397,12 @@ pub async fn serve<'a>(
             ", loopback only, no token"
         }
     );
-    stats.set_foxglove(bridge.front_stats());
+    let front = bridge.front_stats();
     let from_clients = bridge.take_client_samples();
-    Ok(Some(
-        forward(bridge, node, from_clients, targets).boxed_local(),
-    ))
+    Ok(Some(Serving {
+        forwarding: forward(bridge, node, from_clients, targets).boxed_local(),
+        front,
+    }))
 }
 
 async fn forward(

@@ -20,7 +20,7 @@ use crate::desk::{FileDone, MotionControl};
 use crate::message::Snapshot;
 use crate::panel::{Clock, Effect, Panel};
 use crate::teleop::Command;
-use crate::web::{Requests, WebStats};
+use crate::web::{LogLine, Requests, WebEvent, WebStats};
 use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
@@ -29,8 +29,6 @@ use futures::{Stream, StreamExt};
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::future::Future;
-use std::sync::atomic::Ordering;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, mpsc, watch};
 
@@ -168,8 +166,6 @@ pub struct Reporting<F: Fn() -> Vec<usize>> {
     pub peers: PeerWatch,
     /// Their counts now, in [`watched_topics`]' order.
     pub counts: F,
-    /// The web side's counters (clients, refusals, limits hit).
-    pub web: Arc<WebStats>,
 }
 
 /// The panel's program directory: the `program_dir` parameter, else
@@ -193,8 +189,11 @@ pub fn program_dir(param: &str) -> std::path::PathBuf {
 pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
     /// The ROS inputs.
     pub inputs: I,
-    /// The browsers' requests.
+    /// The browsers' requests, and what happened to their connections.
     pub requests: Requests,
+    /// The web side's counters (clients, refusals, limits hit): the loop owns them and
+    /// counts the [`web::WebEvent`]s of `requests`.
+    pub web: WebStats,
     /// Messages to every browser.
     pub to_browsers: broadcast::Sender<String>,
     /// What a browser that connects gets first (and `/robot.urdf`).
@@ -214,8 +213,10 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
 /// The loop between browsers and ROS, around `panel`; runs until `shutdown` resolves.
 ///
 /// Its work in order of priority: shutdown, e-stop requests, targets due, the periodic
-/// reports, ROS inputs, then other browser requests; so a browser flooding requests
-/// delays neither an e-stop nor the targets nor the live view.
+/// reports, ROS inputs, what happened to the web side's connections (counted in the
+/// loop's own [`WebStats`]: the server's tasks share no lock), then other browser
+/// requests; so a browser flooding requests delays neither an e-stop nor the targets nor
+/// the live view.
 pub async fn run<I, O, F, S>(mut panel: Panel, io: Handles<'_, I, O, F, S>)
 where
     I: Stream<Item = Input>,
@@ -226,6 +227,7 @@ where
     let Handles {
         inputs,
         mut requests,
+        web,
         to_browsers,
         snapshot,
         outputs,
@@ -234,11 +236,11 @@ where
         motion,
         shutdown,
     } = io;
-    let sink = Sink {
+    let mut sink = Sink {
         outputs,
         to_browsers: &to_browsers,
         snapshot: &snapshot,
-        web: &reporting.web,
+        web,
         motion,
     };
     let mut jobs = Jobs {
@@ -295,6 +297,7 @@ where
                 let Some(input) = input else { break };
                 sink.apply(panel.on_input(input, Clock::read()), None, &mut jobs);
             }
+            Some(event) = requests.events.recv() => sink.web_event(event),
             Some(from) = requests.others.recv() => {
                 sink.apply(panel.on_request(from.request, Clock::read()), Some(&from.reply), &mut jobs);
                 // one request at a time, then let the other tasks run (on this node's
@@ -322,12 +325,12 @@ async fn finished<J: Future + Unpin>(job: &mut Option<J>) -> J::Output {
     }
 }
 
-/// Where the panel's effects go.
+/// Where the panel's effects go; the web side's counters.
 struct Sink<'a, 'm, O> {
     outputs: &'a O,
     to_browsers: &'a broadcast::Sender<String>,
     snapshot: &'a watch::Sender<Snapshot>,
-    web: &'a WebStats,
+    web: WebStats,
     motion: &'m dyn MotionControl,
 }
 
@@ -335,7 +338,7 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
     /// Apply `effects`; `reply` answers the request they come from (a full reply queue
     /// drops the answer: the loop never waits for a client).
     fn apply(
-        &self,
+        &mut self,
         effects: Vec<Effect>,
         reply: Option<&mpsc::Sender<String>>,
         jobs: &mut Jobs<'m>,
@@ -354,10 +357,12 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                 Effect::Answer(message) => {
                     let full = reply.map(|r| r.try_send(message.to_text()));
                     if let Some(Err(mpsc::error::TrySendError::Full(_))) = full {
-                        self.web.dropped_replies.fetch_add(1, Ordering::Relaxed);
+                        self.web.dropped_reply();
                     }
                 }
-                Effect::Rejected { kind, reason } => self.web.rejected_request(kind, &reason),
+                Effect::Rejected { kind, reason } => {
+                    log(self.web.rejected_request(kind, &reason, Instant::now()));
+                }
                 Effect::SetMotion(mode) => {
                     let motion = self.motion;
                     jobs.motion = Some(Box::pin(async move { Some(motion.set(mode).await) }));
@@ -382,16 +387,28 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                 Effect::Snapshot(s) => {
                     self.snapshot.send_replace(s);
                 }
-                Effect::Log(level, text) => log::log!(level, "{text}"),
+                Effect::Log(level, text) => log(Some((level, text))),
             }
         }
+    }
+
+    /// Count what happened to a connection of the web side.
+    fn web_event(&mut self, event: WebEvent) {
+        log(self.web.on_event(event, Instant::now()));
     }
 
     /// The panel's `diagnostics`, with the watched topics' peers.
     fn report<F: Fn() -> Vec<usize>>(&self, panel: &Panel, reporting: &Reporting<F>) {
         let now = Instant::now();
-        let mut status = panel.report(&reporting.name, &reporting.url, reporting.web.as_ref(), now);
+        let mut status = panel.report(&reporting.name, &reporting.url, &self.web, now);
         reporting.peers.annotate(&mut status, now);
         self.outputs.diagnostics(status);
+    }
+}
+
+/// Write a line of the panel's or the web side's, if there is one.
+fn log(line: Option<LogLine>) {
+    if let Some((level, text)) = line {
+        log::log!(level, "{text}");
     }
 }

@@ -574,7 +574,7 @@ impl Panel {
         ];
         values.extend(web.values());
         values.extend(self.unreadable.values());
-        let last = web.last_refusal();
+        let last = web.last_refusal().cloned();
         let recent = last
             .clone()
             .filter(|(at, _)| now.saturating_duration_since(*at) < REFUSAL_WARN_FOR);

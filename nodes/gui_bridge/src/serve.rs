@@ -82,9 +82,9 @@ pub async fn serve(
         limits,
     )
     .with_urdf(Arc::new(move || urdf_view.borrow().urdf.clone()));
-    let web_stats = state.stats.clone();
-    let foxglove =
-        crate::foxglove::serve(&node, AccessPolicy::new(token.clone()), &web_stats).await?;
+    let foxglove = crate::foxglove::serve(&node, AccessPolicy::new(token.clone())).await?;
+    let web =
+        crate::web::WebStats::default().with_foxglove(foxglove.as_ref().map(|f| f.front.clone()));
     let url = format!("http://{local}/");
     // no borrow of the node may live across an await: the Foxglove server borrows it
     let (panel_name, xyz_target, servo_state_topic) = {
@@ -136,7 +136,6 @@ pub async fn serve(
                 servo_state.get_publisher_count(ros.node()),
             ]
         },
-        web: web_stats,
     };
     let motion = ComputeIkMotion {
         client: ik_params,
@@ -147,6 +146,7 @@ pub async fn serve(
         crate::Handles {
             inputs,
             requests: req_rx,
+            web,
             to_browsers,
             snapshot,
             outputs: &outputs,
@@ -161,7 +161,7 @@ pub async fn serve(
         Some(foxglove) => {
             tokio::select! {
                 _ = panel => {}
-                _ = foxglove => {}
+                _ = foxglove.forwarding => {}
             }
         }
         None => panel.await,

@@ -7,8 +7,12 @@
 //! bridge loop at a time (a flooding client waits for the loop, so it neither queues
 //! memory nor gets ahead of other clients). E-stop requests travel on their own channel,
 //! which the loop serves before anything else, so no flood delays another client's e-stop.
+//!
+//! What happens to the connections (refusals, bad requests, ends) goes to the bridge
+//! loop as [`WebEvent`]s, on a channel of their own: the loop keeps the counters
+//! ([`WebStats`]), and the server's tasks share no lock.
 
-use crate::access::{self, AccessPolicy, Refusal, RequestFacts};
+use crate::access::{self, AccessPolicy, RequestFacts};
 use axum::extract::ws::{CloseFrame, Message as WsMessage, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
@@ -18,15 +22,16 @@ use axum::routing::get;
 use axum::Extension;
 use axum::Router;
 use futures::SinkExt as _;
-use ros_plumbing::logging::{shorten, Throttle};
+use ros_plumbing::logging::shorten;
 use serde::Deserialize;
-use std::collections::HashSet;
 use std::fmt;
-use std::net::{IpAddr, Ipv4Addr, SocketAddr};
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
 use tokio::sync::{broadcast, mpsc, Semaphore};
+
+pub mod stats;
+pub use stats::{LogLine, WebEvent, WebStats};
 
 /// The page: its HTML, no inline script or style (its Content-Security-Policy allows
 /// none), no build step, no request to any other host.
@@ -201,6 +206,8 @@ pub struct Limits {
     pub request_queue: usize,
     /// E-stop requests queued to the bridge loop.
     pub estop_queue: usize,
+    /// [`WebEvent`]s queued to the bridge loop (a task with one more waits for room).
+    pub event_queue: usize,
     /// Clients connected at once.
     pub max_clients: usize,
     /// Largest amount of outgoing data buffered for one client, bytes.
@@ -216,6 +223,7 @@ impl Default for Limits {
             reply_queue: 32,
             request_queue: 64,
             estop_queue: 16,
+            event_queue: 256,
             max_clients: 32,
             max_write_buffer_bytes: 1024 * 1024,
             send_timeout: Duration::from_secs(10),
@@ -223,20 +231,23 @@ impl Default for Limits {
     }
 }
 
-/// The bridge loop's ends of the request channels.
+/// The bridge loop's ends of the channels from the web server.
 #[derive(Debug)]
 pub struct Requests {
     /// E-stop engage/release: served first.
     pub estops: mpsc::Receiver<FromClient>,
     /// Everything else.
     pub others: mpsc::Receiver<FromClient>,
+    /// What happened to the connections, for the loop's [`WebStats`].
+    pub events: mpsc::Receiver<WebEvent>,
 }
 
-/// The web server's ends of the request channels.
+/// The web server's ends of the channels to the bridge loop.
 #[derive(Clone, Debug)]
 pub struct RequestSenders {
     estops: mpsc::Sender<FromClient>,
     others: mpsc::Sender<FromClient>,
+    events: mpsc::Sender<WebEvent>,
 }
 
 impl RequestSenders {
@@ -259,6 +270,13 @@ impl RequestSenders {
             })
     }
 
+    /// Report what happened to a connection to the loop's [`WebStats`], waiting while
+    /// the queue is full (a flood of refused requests is answered at the pace the loop
+    /// counts it, as a flood of requests is); nothing once the loop has stopped.
+    pub async fn report(&self, event: WebEvent) {
+        let _ = self.events.send(event).await;
+    }
+
     fn channel(&self, request: &ClientRequest) -> &mpsc::Sender<FromClient> {
         if matches!(request, ClientRequest::Estop { .. }) {
             &self.estops
@@ -268,55 +286,23 @@ impl RequestSenders {
     }
 }
 
-/// Bounded request channels between the clients and the bridge loop.
+/// Bounded request (and event) channels between the clients and the bridge loop.
 pub fn request_channels(limits: &Limits) -> (RequestSenders, Requests) {
     let (estop_tx, estops) = mpsc::channel(limits.estop_queue.max(1));
     let (tx, others) = mpsc::channel(limits.request_queue.max(1));
+    let (event_tx, events) = mpsc::channel(limits.event_queue.max(1));
     (
         RequestSenders {
             estops: estop_tx,
             others: tx,
+            events: event_tx,
         },
-        Requests { estops, others },
+        Requests {
+            estops,
+            others,
+            events,
+        },
     )
-}
-
-/// Counters of the web side, for `diagnostics`.
-#[derive(Debug, Default)]
-pub struct WebStats {
-    /// Clients connected now.
-    pub clients: AtomicU64,
-    /// Requests refused for their `Origin`.
-    pub refused_origin: AtomicU64,
-    /// Requests refused for their `Host`.
-    pub refused_host: AtomicU64,
-    /// Requests refused for a missing or wrong token.
-    pub refused_token: AtomicU64,
-    /// WebSocket upgrades refused because [`Limits::max_clients`] were connected.
-    pub refused_busy: AtomicU64,
-    /// Clients closed for a message over [`Limits::max_message_bytes`].
-    pub oversized: AtomicU64,
-    /// Messages that were not a request (counted in [`WebStats::rejected`] too).
-    pub bad_requests: AtomicU64,
-    /// Requests refused: messages that were not a request, and requests refused after
-    /// parsing (unreachable targets, values out of range, joint targets it cannot check).
-    pub rejected: AtomicU64,
-    /// Clients that closed their connection with the closing handshake.
-    pub clients_closed: AtomicU64,
-    /// Clients whose connection ended any other way: gone without closing, a read or
-    /// write error, a message over the limit, stalled (see [`ClientEnd`]).
-    pub clients_dropped: AtomicU64,
-    /// Replies dropped because a client's queue was full.
-    pub dropped_replies: AtomicU64,
-    /// Clients dropped because they did not take their messages.
-    pub stalled: AtomicU64,
-    last_refusal: Mutex<Option<(Instant, String)>>,
-    logged: Mutex<HashSet<(IpAddr, &'static str)>>,
-    last_rejection: Mutex<Option<String>>,
-    last_drop: Mutex<Option<String>>,
-    complaints: Mutex<Throttle>,
-    /// the Foxglove server's front, when it runs (its refusals are reported with ours)
-    foxglove: std::sync::OnceLock<Arc<foxglove_bridge::FrontStats>>,
 }
 
 /// The length reasons are cut to in log lines, diagnostics and answers.
@@ -362,7 +348,7 @@ impl ClientEnd {
         }
     }
 
-    /// Whether the panel dropped the client (counted in [`WebStats::clients_dropped`]),
+    /// Whether the panel dropped the client (counted in `clients_dropped`),
     /// rather than the client or the node ending the connection in order.
     pub fn is_drop(&self) -> bool {
         !matches!(self, ClientEnd::Closed | ClientEnd::Shutdown)
@@ -454,208 +440,6 @@ impl fmt::Display for ClientEnd {
     }
 }
 
-/// Refused clients whose refusal is logged; past this many, refusals are only counted.
-const MAX_LOGGED_REFUSALS: usize = 1024;
-
-impl WebStats {
-    /// Count a refusal; log it the first time this address is refused for this kind of
-    /// reason (a page retrying every second logs one line, not one a second).
-    pub fn refused(&self, who: Option<SocketAddr>, what: &str, refusal: &Refusal) {
-        let counter = match refusal.kind() {
-            "origin" => &self.refused_origin,
-            "host" => &self.refused_host,
-            _ => &self.refused_token,
-        };
-        counter.fetch_add(1, Ordering::Relaxed);
-        self.note(who, refusal.kind(), format!("{what}: {refusal}"));
-    }
-
-    /// Count an upgrade refused for want of room.
-    pub fn refused_busy(&self, who: Option<SocketAddr>, max: usize) {
-        self.refused_busy.fetch_add(1, Ordering::Relaxed);
-        self.note(
-            who,
-            "busy",
-            format!("WebSocket: {max} clients are connected already"),
-        );
-    }
-
-    fn note(&self, who: Option<SocketAddr>, kind: &'static str, reason: String) {
-        let ip = who.map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |a| a.ip());
-        let from = who.map_or_else(|| "unknown address".to_string(), |a| a.ip().to_string());
-        let first = self.logged.lock().is_ok_and(|mut logged| {
-            logged.len() < MAX_LOGGED_REFUSALS && logged.insert((ip, kind))
-        });
-        if first {
-            log::warn!("web panel refused {from}: {reason} (further refusals of {from} for this reason are counted in diagnostics, not logged)");
-        }
-        if let Ok(mut last) = self.last_refusal.lock() {
-            *last = Some((Instant::now(), format!("{from}: {reason}")));
-        }
-    }
-
-    /// Whether a complaint of `kind` is logged now ([`Throttle`]): `Some(n)` with the
-    /// number of the same kind not logged since.
-    fn throttle(&self, kind: &str) -> Option<u64> {
-        self.complaints
-            .lock()
-            .ok()
-            .and_then(|mut t| t.allow(kind, Instant::now()))
-    }
-
-    fn set_last_rejection(&self, reason: String) {
-        if let Ok(mut last) = self.last_rejection.lock() {
-            *last = Some(reason);
-        }
-    }
-
-    /// Count a message from `from` that is no request (`reason`: why not); log it,
-    /// once per [`Throttle::PERIOD`] with the number not logged.
-    pub fn bad_request(&self, from: &str, reason: &str) {
-        self.bad_requests.fetch_add(1, Ordering::Relaxed);
-        self.rejected.fetch_add(1, Ordering::Relaxed);
-        let reason = shorten(reason, REASON_MAX);
-        self.set_last_rejection(format!("bad request: {reason}"));
-        if let Some(quiet) = self.throttle("request/bad_request") {
-            log::warn!(
-                "bad request from {from} refused: {reason}{}",
-                Throttle::suffix(quiet)
-            );
-        }
-    }
-
-    /// Count a request refused after parsing (`kind`:
-    /// [`Refusal::kind`](crate::teleop::Refusal::kind)); log it, once per kind per
-    /// [`Throttle::PERIOD`] (an unreachable target at info: the operator is exploring
-    /// the reach; the others at warn).
-    pub fn rejected_request(&self, kind: &'static str, reason: &str) {
-        self.rejected.fetch_add(1, Ordering::Relaxed);
-        let reason = shorten(reason, REASON_MAX);
-        self.set_last_rejection(reason.to_string());
-        if let Some(quiet) = self.throttle(&format!("request/{kind}")) {
-            let level = if kind == "unreachable" {
-                log::Level::Info
-            } else {
-                log::Level::Warn
-            };
-            log::log!(
-                level,
-                "web request refused ({kind}): {reason}{}",
-                Throttle::suffix(quiet)
-            );
-        }
-    }
-
-    /// The reason of the latest refused request.
-    pub fn last_rejection(&self) -> Option<String> {
-        self.last_rejection.lock().ok().and_then(|l| l.clone())
-    }
-
-    /// Count and log the end of `from`'s connection, after `bad_requests` bad requests
-    /// from it (errors at most once per kind per [`Throttle::PERIOD`]).
-    pub fn client_ended(&self, from: &str, end: &ClientEnd, bad_requests: u64) {
-        let after = if bad_requests > 0 {
-            format!(" after {bad_requests} bad requests")
-        } else {
-            String::new()
-        };
-        if !end.is_drop() {
-            if matches!(end, ClientEnd::Closed) {
-                self.clients_closed.fetch_add(1, Ordering::Relaxed);
-            }
-            log::log!(end.level(), "web client {from} left: {end}{after}");
-            return;
-        }
-        self.clients_dropped.fetch_add(1, Ordering::Relaxed);
-        if let ClientEnd::Oversized { .. } = end {
-            self.oversized.fetch_add(1, Ordering::Relaxed);
-        }
-        if let ClientEnd::Stalled { .. } = end {
-            self.stalled.fetch_add(1, Ordering::Relaxed);
-        }
-        if let Ok(mut last) = self.last_drop.lock() {
-            *last = Some(format!("{from}: {end}"));
-        }
-        if let Some(quiet) = self.throttle(end.kind()) {
-            log::log!(
-                end.level(),
-                "web client {from} dropped: {end}{after}{}",
-                Throttle::suffix(quiet)
-            );
-        }
-    }
-
-    /// Count and log a WebSocket upgrade that failed after the HTTP request was taken.
-    pub fn upgrade_failed(&self, from: &str, error: &str) {
-        self.clients_dropped.fetch_add(1, Ordering::Relaxed);
-        let reason = format!("WebSocket upgrade failed: {}", shorten(error, REASON_MAX));
-        if let Ok(mut last) = self.last_drop.lock() {
-            *last = Some(format!("{from}: {reason}"));
-        }
-        if let Some(quiet) = self.throttle("client/upgrade_failed") {
-            log::warn!(
-                "web client {from} dropped: {reason}{}",
-                Throttle::suffix(quiet)
-            );
-        }
-    }
-
-    /// Report the Foxglove server's front counters with the panel's.
-    pub fn set_foxglove(&self, stats: Arc<foxglove_bridge::FrontStats>) {
-        let _ = self.foxglove.set(stats);
-    }
-
-    /// The latest refusal and when.
-    pub fn last_refusal(&self) -> Option<(Instant, String)> {
-        self.last_refusal.lock().ok().and_then(|l| l.clone())
-    }
-
-    /// All refusals so far.
-    pub fn refused_total(&self) -> u64 {
-        [
-            &self.refused_origin,
-            &self.refused_host,
-            &self.refused_token,
-            &self.refused_busy,
-        ]
-        .iter()
-        .map(|c| c.load(Ordering::Relaxed))
-        .sum()
-    }
-
-    /// The counters as `diagnostics` key/values.
-    pub fn values(&self) -> Vec<(&'static str, String)> {
-        let get = |c: &AtomicU64| c.load(Ordering::Relaxed).to_string();
-        let text =
-            |m: &Mutex<Option<String>>| m.lock().ok().and_then(|l| l.clone()).unwrap_or_default();
-        let mut values = vec![
-            ("clients", get(&self.clients)),
-            ("refused_origin", get(&self.refused_origin)),
-            ("refused_host", get(&self.refused_host)),
-            ("refused_token", get(&self.refused_token)),
-            ("refused_busy", get(&self.refused_busy)),
-            ("clients_closed", get(&self.clients_closed)),
-            ("clients_dropped", get(&self.clients_dropped)),
-            ("last_client_drop", text(&self.last_drop)),
-            ("closed_oversized", get(&self.oversized)),
-            ("closed_stalled", get(&self.stalled)),
-            ("rejected", get(&self.rejected)),
-            ("bad_requests", get(&self.bad_requests)),
-            ("last_rejection", text(&self.last_rejection)),
-            ("dropped_replies", get(&self.dropped_replies)),
-        ];
-        if let Some(f) = self.foxglove.get() {
-            values.extend([
-                ("foxglove_refused", get(&f.refused)),
-                ("foxglove_refused_busy", get(&f.refused_busy)),
-                ("foxglove_closed_oversized", get(&f.closed_oversized)),
-                ("foxglove_header_timeouts", get(&f.header_timeouts)),
-            ]);
-        }
-        values
-    }
-}
-
 /// What every request handler shares.
 #[derive(Clone)]
 pub struct WebState {
@@ -669,9 +453,8 @@ pub struct WebState {
     pub access: Arc<AccessPolicy>,
     /// Per-client limits.
     pub limits: Limits,
-    /// Counters.
-    pub stats: Arc<WebStats>,
-    /// Room for [`Limits::max_clients`] clients.
+    /// Room for [`Limits::max_clients`] clients: the one thing the accept path must know
+    /// at once (a semaphore, no lock); the counters are the bridge loop's ([`WebStats`]).
     pub slots: Arc<Semaphore>,
     /// The URDF the page's 3D view loads from `/robot.urdf` (None: not known yet). Over
     /// HTTP, not in a WebSocket message: a URDF can be larger than a client's write buffer.
@@ -694,7 +477,6 @@ impl WebState {
             access: Arc::new(access),
             slots: Arc::new(Semaphore::new(limits.max_clients)),
             limits,
-            stats: Arc::new(WebStats::default()),
             urdf: Arc::new(|| None),
         }
     }
@@ -877,7 +659,12 @@ async fn guard(State(state): State<WebState>, request: Request, next: Next) -> R
         Ok(_) => next.run(request).await,
         Err(refusal) => {
             let what = format!("{} {}", request.method(), request.uri().path());
-            state.stats.refused(who, &what, &refusal);
+            let event = WebEvent::Refused {
+                who,
+                what,
+                refusal: refusal.clone(),
+            };
+            state.requests.report(event).await;
             let status = StatusCode::from_u16(refusal.status()).unwrap_or(StatusCode::FORBIDDEN);
             let mut response = (
                 status,
@@ -903,7 +690,11 @@ async fn ws_handler(
 ) -> Response {
     let who = connect_info.map(|c| c.0 .0);
     let Ok(slot) = state.slots.clone().try_acquire_owned() else {
-        state.stats.refused_busy(who, state.limits.max_clients);
+        let max_clients = state.limits.max_clients;
+        state
+            .requests
+            .report(WebEvent::Busy { who, max_clients })
+            .await;
         return (
             StatusCode::SERVICE_UNAVAILABLE,
             format!(
@@ -915,21 +706,32 @@ async fn ws_handler(
     };
     let l = state.limits;
     let from = who.map_or_else(|| "(unknown address)".to_string(), |a| a.to_string());
-    let (stats, failed_from) = (state.stats.clone(), from.clone());
+    let (events, failed_from) = (state.requests.clone(), from.clone());
     // the page offers its protocol and `token.…`: the answer names its protocol only
     ws.protocols([access::PANEL_PROTOCOL])
         .max_message_size(l.max_message_bytes)
         .max_frame_size(l.max_message_bytes)
         .max_write_buffer_size(l.max_write_buffer_bytes)
-        .on_failed_upgrade(move |e: axum::Error| stats.upgrade_failed(&failed_from, &e.to_string()))
+        .on_failed_upgrade(move |e: axum::Error| {
+            let event = WebEvent::UpgradeFailed {
+                from: failed_from,
+                error: e.to_string(),
+            };
+            // called where it cannot wait: the report waits in a task of its own
+            tokio::spawn(async move { events.report(event).await });
+        })
         .on_upgrade(move |socket| async move {
-            state.stats.clients.fetch_add(1, Ordering::Relaxed);
-            let mut bad = 0;
-            let end = client(socket, &state, &from, &mut bad).await;
-            state.stats.clients.fetch_sub(1, Ordering::Relaxed);
-            // a broken connection ends this client's task only: counted, logged, gone
-            state.stats.client_ended(&from, &end, bad);
+            state.requests.report(WebEvent::Connected).await;
+            let mut bad_requests = 0;
+            let end = client(socket, &state, &from, &mut bad_requests).await;
             drop(slot);
+            // a broken connection ends this client's task only: counted, logged, gone
+            let event = WebEvent::Ended {
+                from,
+                end,
+                bad_requests,
+            };
+            state.requests.report(event).await;
         })
 }
 
@@ -956,6 +758,24 @@ fn refused(reason: &str) -> WsMessage {
     WsMessage::Text(answer.to_text().into())
 }
 
+/// A message from `from` that is no request (`reason`: why not): counted in `bad`,
+/// reported, refused.
+async fn bad_request(
+    socket: &mut WebSocket,
+    state: &WebState,
+    from: &str,
+    bad: &mut u64,
+    reason: &str,
+) -> Result<(), ClientEnd> {
+    *bad += 1;
+    let event = WebEvent::BadRequest {
+        from: from.to_string(),
+        reason: reason.to_string(),
+    };
+    state.requests.report(event).await;
+    send(socket, refused(&format!("bad request: {reason}")), state).await
+}
+
 /// Serve one client until its connection ends; how it ended. `bad` counts the
 /// messages from it that were no request.
 async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u64) -> ClientEnd {
@@ -978,10 +798,8 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
                     }
                     Some(Ok(WsMessage::Text(text))) => text,
                     Some(Ok(WsMessage::Binary(_))) => {
-                        *bad += 1;
-                        let reason = "bad request: binary messages are not understood";
-                        state.stats.bad_request(from, "binary messages are not understood");
-                        if let Err(end) = send(&mut socket, refused(reason), state).await { return end }
+                        let reason = "binary messages are not understood";
+                        if let Err(end) = bad_request(&mut socket, state, from, bad, reason).await { return end }
                         continue;
                     }
                     Some(Ok(_)) => continue, // ping/pong: answered by the library
@@ -1004,10 +822,8 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
                         }
                     }
                     Err(e) => {
-                        *bad += 1;
                         let reason = shorten(&e.to_string(), REASON_MAX).into_owned();
-                        state.stats.bad_request(from, &reason);
-                        if let Err(end) = send(&mut socket, refused(&format!("bad request: {reason}")), state).await { return end }
+                        if let Err(end) = bad_request(&mut socket, state, from, bad, &reason).await { return end }
                     }
                 }
             }

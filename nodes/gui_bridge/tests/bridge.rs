@@ -7,15 +7,14 @@ use eezybot_msgs::Time;
 use futures::StreamExt;
 use gui_bridge::panel::Panel;
 use gui_bridge::web::{
-    request_channels, ClientRequest, FromClient, Limits, ProgramOp, Requests, WebStats,
+    request_channels, ClientRequest, FromClient, Limits, ProgramOp, RequestSenders, Requests,
+    WebStats,
 };
 use gui_bridge::{Handles, Outputs, Reporting};
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Params;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
-use std::sync::atomic::Ordering;
-use std::sync::Arc;
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 /// Records e-stops with the number of replies the loop had given by then.
@@ -58,40 +57,48 @@ fn handles<'a, I, O, S>(
     inputs: I,
     requests: Requests,
     outputs: &'a O,
-    web: Arc<WebStats>,
     shutdown: S,
 ) -> Handles<'a, I, O, impl Fn() -> Vec<usize>, S> {
     Handles {
         inputs,
         requests,
+        web: WebStats::default(),
         to_browsers: broadcast::channel(16).0,
         snapshot: watch::channel(panel().snapshot()).0,
         outputs,
         params: Params::new(BTreeMap::new()),
-        reporting: reporting(web),
+        reporting: Reporting {
+            name: "gui_bridge: operator panel".into(),
+            url: "http://127.0.0.1:8080/".into(),
+            peers: PeerWatch::new(&[]),
+            counts: Vec::new,
+        },
         motion: &NoMotionControl,
         shutdown,
     }
 }
 
-fn reporting(web: Arc<WebStats>) -> Reporting<impl Fn() -> Vec<usize>> {
-    Reporting {
-        name: "gui_bridge: operator panel".into(),
-        url: "http://127.0.0.1:8080/".into(),
-        peers: PeerWatch::new(&[]),
-        counts: Vec::new,
-        web,
+/// Request channels with `n` reachability checks queued, answered on `reply`.
+fn checks_queued(n: usize, reply: &mpsc::Sender<String>) -> (RequestSenders, Requests) {
+    let limits = Limits {
+        request_queue: n,
+        ..Limits::default()
+    };
+    let (senders, requests) = request_channels(&limits);
+    for i in 0..n {
+        let request = ClientRequest::Check {
+            xyz: [0.2, 0.0, 0.1 + i as f64 * 1e-5],
+        };
+        let reply = reply.clone();
+        senders.try_send(FromClient { request, reply }).unwrap();
     }
+    (senders, requests)
 }
 
 #[tokio::test]
 async fn an_estop_is_served_before_a_thousand_queued_requests() {
-    let limits = Limits {
-        request_queue: 1000,
-        ..Limits::default()
-    };
-    let (senders, requests) = request_channels(&limits);
     let (reply, mut replies) = mpsc::channel(1000);
+    let (senders, requests) = checks_queued(1000, &reply);
     let (done_tx, done_rx) = oneshot::channel();
     let fake = Fake {
         replies: reply.clone(),
@@ -99,27 +106,15 @@ async fn an_estop_is_served_before_a_thousand_queued_requests() {
         estops: RefCell::new(vec![]),
         done: RefCell::new(Some(done_tx)),
     };
-    for i in 0..1000 {
-        let request = ClientRequest::Check {
-            xyz: [0.2, 0.0, 0.1 + i as f64 * 1e-5],
-        };
-        senders
-            .try_send(FromClient {
-                request,
-                reply: reply.clone(),
-            })
-            .unwrap();
-    }
     senders
         .try_send(FromClient {
             request: ClientRequest::Estop { on: true },
             reply: reply.clone(),
         })
         .unwrap();
-    let stats = Arc::new(WebStats::default());
     gui_bridge::run(
         panel(),
-        handles(futures::stream::pending(), requests, &fake, stats, async {
+        handles(futures::stream::pending(), requests, &fake, async {
             let _ = done_rx.await;
         }),
     )
@@ -136,52 +131,21 @@ async fn an_estop_is_served_before_a_thousand_queued_requests() {
 
 #[tokio::test]
 async fn a_client_that_reads_nothing_loses_replies_and_stalls_nothing() {
-    let limits = Limits {
-        request_queue: 100,
-        ..Limits::default()
-    };
-    let (senders, requests) = request_channels(&limits);
     let (reply, _replies) = mpsc::channel(4); // never read
-    let (probe, _probe_rx) = mpsc::channel(1);
-    let fake = Fake {
-        replies: probe,
-        capacity: 1,
-        estops: RefCell::new(vec![]),
-        done: RefCell::new(None),
-    };
-    for _ in 0..100 {
-        senders
-            .try_send(FromClient {
-                request: ClientRequest::Check {
-                    xyz: [0.2, 0.0, 0.15],
-                },
-                reply: reply.clone(),
-            })
-            .unwrap();
-    }
-    let stats = Arc::new(WebStats::default());
-    let through = {
-        let stats = stats.clone();
-        async move {
-            while stats.dropped_replies.load(Ordering::Relaxed) < 96 {
-                tokio::task::yield_now().await;
-            }
+    let (_senders, requests) = checks_queued(100, &reply);
+    let recorder = Recorder::default();
+    let through = async {
+        while recorder.last_value("dropped_replies").as_deref() != Some("96") {
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
         }
     };
     let run = gui_bridge::run(
         panel(),
-        handles(
-            futures::stream::pending(),
-            requests,
-            &fake,
-            stats.clone(),
-            through,
-        ),
+        handles(futures::stream::pending(), requests, &recorder, through),
     );
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
         .await
         .expect("the loop stalled on a client that reads nothing");
-    assert_eq!(stats.dropped_replies.load(Ordering::Relaxed), 96);
 }
 
 /// Records what the loop publishes.
@@ -236,7 +200,6 @@ async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published()
     }])
     .chain(futures::stream::pending());
     let recorder = Recorder::default();
-    let stats = Arc::new(WebStats::default());
     let counted = async {
         while !(recorder.last_value("rejected").as_deref() == Some("3")
             && recorder.last_value("unreadable_samples").as_deref() == Some("1"))
@@ -244,10 +207,7 @@ async fn a_joint_target_it_cannot_check_is_refused_counted_and_never_published()
             tokio::time::sleep(std::time::Duration::from_millis(20)).await;
         }
     };
-    let run = gui_bridge::run(
-        panel(),
-        handles(inputs, requests, &recorder, stats.clone(), counted),
-    );
+    let run = gui_bridge::run(panel(), handles(inputs, requests, &recorder, counted));
     tokio::time::timeout(std::time::Duration::from_secs(10), run)
         .await
         .expect("no diagnostics counting the refusals and the unreadable sample");
@@ -302,14 +262,7 @@ async fn a_save_runs_off_the_loop_and_every_browser_and_a_later_hello_hear_of_it
         }
     };
     let recorder = Recorder::default();
-    let stats = Arc::new(WebStats::default());
-    let mut io = handles(
-        futures::stream::pending(),
-        requests,
-        &recorder,
-        stats,
-        saved,
-    );
+    let mut io = handles(futures::stream::pending(), requests, &recorder, saved);
     io.to_browsers = to_browsers;
     io.snapshot = snapshot;
     tokio::time::timeout(

@@ -2,6 +2,7 @@
 #![allow(clippy::unwrap_used)]
 
 use gui_bridge::web::*;
+use std::time::Instant;
 
 #[test]
 fn requests_parse() {
@@ -62,15 +63,23 @@ fn value(stats: &WebStats, key: &str) -> String {
         .unwrap_or_else(|| panic!("no {key} in {:?}", stats.values()))
 }
 
+fn bad_request(reason: &str) -> WebEvent {
+    WebEvent::BadRequest {
+        from: "127.0.0.1:5000".into(),
+        reason: reason.into(),
+    }
+}
+
 #[test]
 fn every_refused_request_is_counted_and_the_last_named() {
-    let stats = WebStats::default();
+    let (mut stats, now) = (WebStats::default(), Instant::now());
     assert_eq!(value(&stats, "rejected"), "0");
     assert_eq!(value(&stats, "last_rejection"), "");
-    stats.bad_request("127.0.0.1:5000", "expected value at line 1 column 1");
+    stats.on_event(bad_request("expected value at line 1 column 1"), now);
     stats.rejected_request(
         "bad_joint_target",
         "gripper_joint = 1e300 is outside its limits 0.0 … 0.6",
+        now,
     );
     assert_eq!(value(&stats, "rejected"), "2");
     assert_eq!(value(&stats, "bad_requests"), "1");
@@ -79,7 +88,7 @@ fn every_refused_request_is_counted_and_the_last_named() {
         "gripper_joint = 1e300 is outside its limits 0.0 … 0.6"
     );
     // a long reason is cut to a readable length
-    stats.bad_request("127.0.0.1:5000", &"x".repeat(1 << 20));
+    stats.on_event(bad_request(&"x".repeat(1 << 20)), now);
     let last = value(&stats, "last_rejection");
     assert!(
         last.starts_with("bad request: xxx") && last.len() < REASON_MAX + 64,
@@ -90,28 +99,37 @@ fn every_refused_request_is_counted_and_the_last_named() {
 
 #[test]
 fn client_ends_are_counted_by_kind() {
-    let stats = WebStats::default();
-    stats.client_ended("127.0.0.1:5000", &ClientEnd::Closed, 0);
-    stats.client_ended("127.0.0.1:5001", &ClientEnd::Shutdown, 0);
-    assert_eq!(value(&stats, "clients_closed"), "1");
-    assert_eq!(value(&stats, "clients_dropped"), "0");
+    let (mut stats, now) = (WebStats::default(), Instant::now());
+    let mut ended = |port: u16, end: &ClientEnd, bad_requests: u64| {
+        let from = format!("127.0.0.1:{port}");
+        stats.on_event(WebEvent::Connected, now);
+        let end = end.clone();
+        stats.on_event(
+            WebEvent::Ended {
+                from,
+                end,
+                bad_requests,
+            },
+            now,
+        );
+    };
+    ended(5000, &ClientEnd::Closed, 0);
+    ended(5001, &ClientEnd::Shutdown, 0);
     let pipe = tungstenite::Error::Io(std::io::ErrorKind::BrokenPipe.into());
     let end = ClientEnd::from_error(&pipe, false, 65536);
     assert!(
         matches!(end, ClientEnd::Gone(_)) && end.is_drop(),
         "{end:?}"
     );
-    stats.client_ended("127.0.0.1:5002", &end, 3);
-    stats.client_ended(
-        "127.0.0.1:5003",
-        &ClientEnd::Oversized { max_bytes: 65536 },
-        0,
-    );
+    ended(5002, &end, 3);
+    ended(5003, &ClientEnd::Oversized { max_bytes: 65536 }, 0);
     let protocol =
         tungstenite::Error::Protocol(tungstenite::error::ProtocolError::NonZeroReservedBits);
     let end = ClientEnd::from_error(&protocol, true, 65536);
     assert!(matches!(end, ClientEnd::ReadError(_)), "{end:?}");
-    stats.client_ended("127.0.0.1:5004", &end, 0);
+    ended(5004, &end, 0);
+    assert_eq!(value(&stats, "clients"), "0");
+    assert_eq!(value(&stats, "clients_closed"), "1");
     assert_eq!(value(&stats, "clients_dropped"), "3");
     assert_eq!(value(&stats, "closed_oversized"), "1");
     assert!(value(&stats, "last_client_drop").starts_with("127.0.0.1:5004: read error: "));
