@@ -1519,6 +1519,36 @@ mod tests {
         Program { points }
     }
 
+    /// A player of `points`, started at `t0`.
+    fn start(points: Vec<ProgramPoint>, looping: bool, t0: Instant) -> Player {
+        Player::start(&program(points), looping, t0).unwrap()
+    }
+
+    /// A player of A (dwelling `dwell_s`) then B, started at `t0`, that has sent A; the
+    /// arm arrived at A at `arrived_ms` when that is given.
+    fn a_then_b(dwell_s: f64, looping: bool, t0: Instant, arrived_ms: Option<u64>) -> Player {
+        let points = vec![
+            point("", A, None, dwell_s, None),
+            point("", B, None, 0.0, None),
+        ];
+        let mut pl = start(points, looping, t0);
+        assert_eq!(pl.step(t0, None), [target(0, A)]);
+        if let Some(at) = arrived_ms {
+            pl.step(ms(t0, at), Some(A));
+        }
+        pl
+    }
+
+    /// The state of a player with no failure.
+    fn state(index: usize, phase: PlayerPhase, loops: usize) -> PlayerState {
+        PlayerState {
+            index,
+            phase,
+            loops,
+            reason: None,
+        }
+    }
+
     fn target(index: usize, xyz: [f64; 3]) -> PlayerAction {
         PlayerAction::Target { index, xyz }
     }
@@ -1540,27 +1570,22 @@ mod tests {
     #[test]
     fn three_points_with_dwell_play_in_order() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.5, None),
-            point("", B, None, 1.0, None),
-            point("", C, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
+        let mut pl = start(
+            vec![
+                point("", A, None, 0.5, None),
+                point("", B, None, 1.0, None),
+                point("", C, None, 0.0, None),
+            ],
+            false,
+            t0,
+        );
         assert_eq!(pl.next_wakeup(), Some(t0), "due at once");
         assert_eq!(pl.state().phase, PlayerPhase::Moving);
         assert_eq!(pl.step(t0, Some(C)), [target(0, A)]);
         assert_eq!(pl.next_wakeup(), Some(t0 + MOVE_TIMEOUT));
         assert_eq!(pl.step(ms(t0, 100), Some([0.2, 0.01, 0.15])), []);
         assert_eq!(pl.step(ms(t0, 200), Some(A)), [arrived(0)]);
-        assert_eq!(
-            pl.state(),
-            PlayerState {
-                index: 0,
-                phase: PlayerPhase::Dwelling,
-                loops: 0,
-                reason: None
-            }
-        );
+        assert_eq!(pl.state(), state(0, PlayerPhase::Dwelling, 0));
         assert_eq!(pl.step(ms(t0, 699), None), []);
         assert_eq!(pl.step(ms(t0, 700), None), [target(1, B)]);
         assert_eq!(pl.step(ms(t0, 900), Some(B)), [arrived(1)]);
@@ -1581,11 +1606,11 @@ mod tests {
     #[test]
     fn arrival_counts_only_within_tolerance_and_after_the_target() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.0, None),
-            point("", A, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
+        let mut pl = start(
+            vec![point("", A, None, 0.0, None), point("", A, None, 0.0, None)],
+            false,
+            t0,
+        );
         // already there when it starts: the observation of the step that sent the target
         // does not count
         assert_eq!(pl.step(t0, Some(A)), [target(0, A)]);
@@ -1610,13 +1635,16 @@ mod tests {
     #[test]
     fn the_mode_is_set_only_when_it_changes() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.0, Some(MoveMode::Line)),
-            point("", B, None, 0.0, Some(MoveMode::Line)),
-            point("", C, None, 0.0, None),
-            point("", A, None, 0.0, Some(MoveMode::Joint)),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
+        let mut pl = start(
+            vec![
+                point("", A, None, 0.0, Some(MoveMode::Line)),
+                point("", B, None, 0.0, Some(MoveMode::Line)),
+                point("", C, None, 0.0, None),
+                point("", A, None, 0.0, Some(MoveMode::Joint)),
+            ],
+            false,
+            t0,
+        );
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         assert_eq!(pl.state().phase, PlayerPhase::SettingMode);
         assert_eq!(pl.next_wakeup(), Some(t0 + MODE_TIMEOUT));
@@ -1651,14 +1679,16 @@ mod tests {
     #[test]
     fn a_base_mode_is_restored_for_points_without_one() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.0, None),
-            point("", B, None, 0.0, Some(MoveMode::Line)),
-            point("", C, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0)
-            .unwrap()
-            .with_base_mode(MoveMode::Joint);
+        let mut pl = start(
+            vec![
+                point("", A, None, 0.0, None),
+                point("", B, None, 0.0, Some(MoveMode::Line)),
+                point("", C, None, 0.0, None),
+            ],
+            false,
+            t0,
+        )
+        .with_base_mode(MoveMode::Joint);
         assert_eq!(pl.step(t0, None), [target(0, A)], "joint already");
         assert_eq!(
             pl.step(ms(t0, 10), Some(A)),
@@ -1675,11 +1705,14 @@ mod tests {
     #[test]
     fn the_gripper_is_set_after_arrival_then_the_dwell() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, Some(0.25), 2.0, None),
-            point("", B, Some(1.0), 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
+        let mut pl = start(
+            vec![
+                point("", A, Some(0.25), 2.0, None),
+                point("", B, Some(1.0), 0.0, None),
+            ],
+            false,
+            t0,
+        );
         assert_eq!(pl.step(t0, None), [target(0, A)]);
         assert_eq!(
             pl.step(ms(t0, 500), Some(A)),
@@ -1700,13 +1733,7 @@ mod tests {
     #[test]
     fn next_wakeup_is_the_end_of_the_dwell() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 1.5, None),
-            point("", B, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
-        pl.step(t0, None);
-        pl.step(ms(t0, 300), Some(A));
+        let mut pl = a_then_b(1.5, false, t0, Some(300));
         assert_eq!(pl.state().phase, PlayerPhase::Dwelling);
         assert_eq!(pl.next_wakeup(), Some(ms(t0, 1800)));
         // observations during the dwell change nothing
@@ -1719,11 +1746,14 @@ mod tests {
     #[test]
     fn looping_starts_over_at_point_0() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.0, Some(MoveMode::Line)),
-            point("", B, None, 0.0, Some(MoveMode::Joint)),
-        ]);
-        let mut pl = Player::start(&p, true, t0).unwrap();
+        let mut pl = start(
+            vec![
+                point("", A, None, 0.0, Some(MoveMode::Line)),
+                point("", B, None, 0.0, Some(MoveMode::Joint)),
+            ],
+            true,
+            t0,
+        );
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         pl.mode_set(true);
         assert_eq!(pl.step(t0, None), [target(0, A)]);
@@ -1738,15 +1768,7 @@ mod tests {
             pl.step(ms(t0, 30), Some(B)),
             [arrived(1), PlayerAction::SetMode(MoveMode::Line)]
         );
-        assert_eq!(
-            pl.state(),
-            PlayerState {
-                index: 0,
-                phase: PlayerPhase::SettingMode,
-                loops: 1,
-                reason: None
-            }
-        );
+        assert_eq!(pl.state(), state(0, PlayerPhase::SettingMode, 1));
         pl.mode_set(true);
         assert_eq!(pl.step(ms(t0, 40), None), [target(0, A)]);
         assert_eq!(
@@ -1765,23 +1787,9 @@ mod tests {
     #[test]
     fn stop_ends_the_playback() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 5.0, None),
-            point("", B, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, true, t0).unwrap();
-        pl.step(t0, None);
-        pl.step(ms(t0, 100), Some(A));
+        let mut pl = a_then_b(5.0, true, t0, Some(100));
         pl.stop();
-        assert_eq!(
-            pl.state(),
-            PlayerState {
-                index: 0,
-                phase: PlayerPhase::Stopped,
-                loops: 0,
-                reason: None
-            }
-        );
+        assert_eq!(pl.state(), state(0, PlayerPhase::Stopped, 0));
         assert_eq!(pl.next_wakeup(), None);
         assert_eq!(pl.step(ms(t0, 6000), Some(B)), []);
         pl.refused("late");
@@ -1793,13 +1801,7 @@ mod tests {
     #[test]
     fn a_point_not_reached_in_time_fails() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.0, None),
-            point("", B, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
-        pl.step(t0, None);
-        pl.step(ms(t0, 100), Some(A));
+        let mut pl = a_then_b(0.0, false, t0, Some(100));
         let sent = ms(t0, 100);
         assert_eq!(pl.next_wakeup(), Some(sent + MOVE_TIMEOUT));
         assert_eq!(
@@ -1821,12 +1823,7 @@ mod tests {
     #[test]
     fn a_refused_target_fails() {
         let t0 = Instant::now();
-        let p = program(vec![
-            point("", A, None, 0.0, None),
-            point("", B, None, 0.0, None),
-        ]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
-        pl.step(t0, None);
+        let mut pl = a_then_b(0.0, false, t0, None);
         pl.refused("the line leaves the workspace");
         assert_eq!(pl.state().phase, PlayerPhase::Failed);
         assert_eq!(pl.next_wakeup(), Some(t0), "the failure is due at once");
@@ -1845,8 +1842,8 @@ mod tests {
     #[test]
     fn a_mode_not_taken_fails() {
         let t0 = Instant::now();
-        let p = program(vec![point("", A, None, 0.0, Some(MoveMode::Line))]);
-        let mut pl = Player::start(&p, false, t0).unwrap();
+        let line = || vec![point("", A, None, 0.0, Some(MoveMode::Line))];
+        let mut pl = start(line(), false, t0);
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         pl.mode_set(false);
         let out = pl.step(ms(t0, 10), None);
@@ -1855,7 +1852,7 @@ mod tests {
         };
         assert!(reason.contains("motion:=line"), "{reason}");
         // and one never confirmed times out
-        let mut pl = Player::start(&p, false, t0).unwrap();
+        let mut pl = start(line(), false, t0);
         pl.step(t0, None);
         assert_eq!(
             pl.step(t0 + MODE_TIMEOUT - Duration::from_millis(1), None),

@@ -9,6 +9,25 @@ fn teleop() -> Teleop {
     Teleop::new(Arm::default(), 50.0)
 }
 
+/// Joint mode's event for these (name, position).
+fn joints(q: &[(&str, f64)]) -> Event {
+    let positions = q.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    Event::Joints { positions }
+}
+
+/// The Kinova Jaco's model (a URDF arm that is not the EezyBot).
+fn jaco() -> eezybot_kinematics::urdf::RobotModel {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../urdf/jaco.urdf");
+    eezybot_kinematics::urdf::RobotModel::load(std::path::Path::new(path)).unwrap()
+}
+
+/// A teleop that took the target `xyz`.
+fn teleop_at(xyz: [f64; 3]) -> Teleop {
+    let mut t = teleop();
+    t.handle_event(Event::SetTarget { xyz }).unwrap();
+    t
+}
+
 #[test]
 fn unreachable_targets_send_nothing_and_keep_the_target() {
     let mut t = teleop();
@@ -25,11 +44,7 @@ fn unreachable_targets_send_nothing_and_keep_the_target() {
 
 #[test]
 fn jog_moves_by_the_step_from_the_current_target() {
-    let mut t = teleop();
-    t.handle_event(Event::SetTarget {
-        xyz: [0.2, 0.0, 0.15],
-    })
-    .unwrap();
+    let mut t = teleop_at([0.2, 0.0, 0.15]);
     t.handle_event(Event::Jog {
         dxyz: [0.0, 0.01, 0.0],
     })
@@ -40,12 +55,8 @@ fn jog_moves_by_the_step_from_the_current_target() {
 
 #[test]
 fn latest_wins_within_the_rate_limit() {
-    let mut t = teleop();
+    let mut t = teleop_at([0.2, 0.0, 0.15]);
     let t0 = Instant::now();
-    t.handle_event(Event::SetTarget {
-        xyz: [0.2, 0.0, 0.15],
-    })
-    .unwrap();
     assert_eq!(t.take_due(t0).len(), 1);
     for y in [0.01, 0.02, 0.03] {
         t.handle_event(Event::SetTarget {
@@ -69,11 +80,7 @@ fn latest_wins_within_the_rate_limit() {
 
 #[test]
 fn estop_goes_out_at_once() {
-    let mut t = teleop();
-    t.handle_event(Event::SetTarget {
-        xyz: [0.2, 0.0, 0.15],
-    })
-    .unwrap();
+    let mut t = teleop_at([0.2, 0.0, 0.15]);
     let t0 = Instant::now();
     t.take_due(t0);
     t.handle_event(Event::Estop { engaged: true }).unwrap();
@@ -83,31 +90,15 @@ fn estop_goes_out_at_once() {
 #[test]
 fn joint_mode_checks_limits() {
     let mut t = teleop();
-    assert!(t
-        .handle_event(Event::Joints {
-            positions: vec![("shoulder_joint".into(), 2.5)]
-        })
-        .is_err());
-    assert!(t
-        .handle_event(Event::Joints {
-            positions: vec![("wrist_joint".into(), 0.0)]
-        })
-        .is_err());
-    let f = t
-        .handle_event(Event::Joints {
-            positions: vec![("base_joint".into(), 0.2)],
-        })
-        .unwrap();
+    assert!(t.handle_event(joints(&[("shoulder_joint", 2.5)])).is_err());
+    assert!(t.handle_event(joints(&[("wrist_joint", 0.0)])).is_err());
+    let f = t.handle_event(joints(&[("base_joint", 0.2)])).unwrap();
     assert!((f.joints.base_rad - 0.2).abs() < 1e-15);
 }
 
 #[test]
 fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
-    let jaco = eezybot_kinematics::urdf::RobotModel::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../urdf/jaco.urdf"
-    )))
-    .unwrap();
+    let jaco = jaco();
     let mut t = teleop();
     assert!(t.is_eezybot() && t.joint_sliders().len() == 3);
     let view = t.set_robot(&jaco).clone();
@@ -121,22 +112,11 @@ fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
             .collect::<Vec<_>>()
     );
     // the EezyBot's joints are not this arm's
-    let e = t
-        .handle_event(Event::Joints {
-            positions: vec![("base_joint".into(), 0.1)],
-        })
-        .unwrap_err();
+    let e = t.handle_event(joints(&[("base_joint", 0.1)])).unwrap_err();
     assert!(e.to_string().contains("this arm's: jaco_joint_1"), "{e}");
     // its URDF limits apply
-    assert!(t
-        .handle_event(Event::Joints {
-            positions: vec![("jaco_joint_2".into(), 4.0)],
-        })
-        .is_err());
-    t.handle_event(Event::Joints {
-        positions: vec![("jaco_joint_2".into(), 1.0)],
-    })
-    .unwrap();
+    assert!(t.handle_event(joints(&[("jaco_joint_2", 4.0)])).is_err());
+    t.handle_event(joints(&[("jaco_joint_2", 1.0)])).unwrap();
     assert_eq!(
         t.take_due(Instant::now()),
         vec![Command::Joints(vec![("jaco_joint_2".into(), 1.0)])]
@@ -155,19 +135,11 @@ fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
 #[test]
 fn joint_targets_it_cannot_check_are_refused_and_change_nothing() {
     let mut t = teleop();
-    t.handle_event(Event::Joints {
-        positions: vec![("base_joint".into(), 0.2), ("gripper_joint".into(), 0.3)],
-    })
-    .unwrap();
+    t.handle_event(joints(&[("base_joint", 0.2), ("gripper_joint", 0.3)]))
+        .unwrap();
     t.take_due(Instant::now());
-    let (target, joints) = (
-        t.target(),
-        t.handle_event(Event::Joints { positions: vec![] }),
-    );
-    assert!(
-        matches!(joints, Err(Refusal::NoJoints { .. })),
-        "{joints:?}"
-    );
+    let (target, none) = (t.target(), t.handle_event(joints(&[])));
+    assert!(matches!(none, Err(Refusal::NoJoints { .. })), "{none:?}");
     for (positions, says) in [
         (
             vec![("gripper_joint".to_string(), 1e300)],
@@ -210,10 +182,7 @@ fn joint_targets_it_cannot_check_are_refused_and_change_nothing() {
         .unwrap_err();
     assert!(e.to_string().len() < 300, "{} bytes", e.to_string().len());
     // the claw within its range is taken
-    t.handle_event(Event::Joints {
-        positions: vec![("gripper_joint".into(), 0.6)],
-    })
-    .unwrap();
+    t.handle_event(joints(&[("gripper_joint", 0.6)])).unwrap();
     assert_eq!(
         t.take_due(Instant::now() + Duration::from_secs(1)),
         vec![Command::Joints(vec![("gripper_joint".into(), 0.6)])]
@@ -253,26 +222,16 @@ fn check_joint_positions_takes_the_limits_inclusive() {
 
 #[test]
 fn a_urdf_arm_refuses_a_joint_target_naming_no_joint() {
-    let jaco = eezybot_kinematics::urdf::RobotModel::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../urdf/jaco.urdf"
-    )))
-    .unwrap();
+    let jaco = jaco();
     let mut t = teleop();
     t.set_robot(&jaco);
-    let e = t
-        .handle_event(Event::Joints { positions: vec![] })
-        .unwrap_err();
+    let e = t.handle_event(joints(&[])).unwrap_err();
     assert!(
         e.to_string()
             .contains("names no joint (this arm's: jaco_joint_1"),
         "{e}"
     );
     // the claw of the EezyBot is not this arm's
-    assert!(t
-        .handle_event(Event::Joints {
-            positions: vec![("gripper_joint".into(), 0.1)],
-        })
-        .is_err());
+    assert!(t.handle_event(joints(&[("gripper_joint", 0.1)])).is_err());
     assert!(t.take_due(Instant::now()).is_empty());
 }
