@@ -149,7 +149,7 @@ pub async fn play(
 }
 
 /// Run `work` until it ends or `shutdown` (Ctrl-C: exit 0).
-async fn until_shutdown(
+pub async fn until_shutdown(
     work: impl Future<Output = anyhow::Result<()>>,
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<()> {

@@ -519,8 +519,5 @@ pub async fn play_mcap(
         println!("played {n} targets from {shown}");
         anyhow::Ok(())
     };
-    tokio::select! {
-        r = work => r,
-        _ = shutdown => Ok(()),
-    }
+    crate::delivery::until_shutdown(work, shutdown).await
 }
