@@ -12,7 +12,7 @@ use crate::security::{self, SecurityEnv, SecurityError, SecurityPlan, Strategy};
 use crate::topics::{self, Topic};
 use eezybot_msgs::RosMessage;
 use ros2_client::{
-    Context, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription,
+    Context, CreateResult, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription,
 };
 
 /// What a node is: its default name, a one-line description and its parameters.
@@ -458,16 +458,28 @@ impl RosNode {
         }
     }
 
+    /// An endpoint of `topic` (expanded in the node's namespace and remapped), made by
+    /// `create`; a failure says what it was to `action` (`publish on`).
+    fn endpoint<M: RosMessage, E>(
+        &mut self,
+        topic: &str,
+        qos: QosProfile,
+        action: &'static str,
+        create: impl FnOnce(&mut Node, &rustdds::Topic, QosProfile) -> CreateResult<E>,
+    ) -> Result<E, PlumbingError> {
+        let (resolved, t) = self.topic::<M>(topic, &qos)?;
+        create(&mut self.node, &t, qos).map_err(|e| self.endpoint_error(action, resolved, e))
+    }
+
     /// A publisher on `topic` (expanded in the node's namespace and remapped).
     pub fn publisher<M: RosMessage>(
         &mut self,
         topic: &str,
         qos: QosProfile,
     ) -> Result<Publisher<M>, PlumbingError> {
-        let (resolved, t) = self.topic::<M>(topic, &qos)?;
-        self.node
-            .create_publisher::<M>(&t, Some(qos))
-            .map_err(|e| self.endpoint_error("publish on", resolved, e))
+        self.endpoint::<M, _>(topic, qos, "publish on", |node, t, qos| {
+            node.create_publisher(t, Some(qos))
+        })
     }
 
     /// A subscription to `topic` (expanded in the node's namespace and remapped).
@@ -476,10 +488,9 @@ impl RosNode {
         topic: &str,
         qos: QosProfile,
     ) -> Result<Subscription<M>, PlumbingError> {
-        let (resolved, t) = self.topic::<M>(topic, &qos)?;
-        self.node
-            .create_subscription::<M>(&t, Some(qos))
-            .map_err(|e| self.endpoint_error("subscribe to", resolved, e))
+        self.endpoint::<M, _>(topic, qos, "subscribe to", |node, t, qos| {
+            node.create_subscription(t, Some(qos))
+        })
     }
 
     /// A publisher on a topic of the contract, with its name, type and QoS (expanded

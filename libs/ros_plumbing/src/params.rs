@@ -4,7 +4,7 @@
 use crate::args::RosArgs;
 use crate::error::PlumbingError;
 use crate::logging::shorten;
-use crate::value::yaml_to_parameter;
+use crate::value::{yaml_to_parameter, ParamType};
 use eezybot_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
 use ros2_client::{NumericRange, ParameterDescriptor, ParameterValue};
 use std::collections::BTreeMap;
@@ -390,36 +390,29 @@ impl Params {
         self.values.read().ok().and_then(|v| v.get(name).cloned())
     }
 
+    /// Current value of a parameter of type `T`; `None` when it has another type.
+    pub fn get_as<T: ParamType>(&self, name: &str) -> Option<T> {
+        self.get(name).and_then(|v| T::from_value(v).ok())
+    }
+
     /// Current value of a double parameter.
     pub fn f64(&self, name: &str) -> Option<f64> {
-        match self.get(name) {
-            Some(ParameterValue::Double(d)) => Some(d),
-            _ => None,
-        }
+        self.get_as(name)
     }
 
     /// Current value of an integer parameter.
     pub fn i64(&self, name: &str) -> Option<i64> {
-        match self.get(name) {
-            Some(ParameterValue::Integer(i)) => Some(i),
-            _ => None,
-        }
+        self.get_as(name)
     }
 
     /// Current value of a string parameter.
     pub fn string(&self, name: &str) -> Option<String> {
-        match self.get(name) {
-            Some(ParameterValue::String(s)) => Some(s),
-            _ => None,
-        }
+        self.get_as(name)
     }
 
     /// Current value of a bool parameter.
     pub fn bool(&self, name: &str) -> Option<bool> {
-        match self.get(name) {
-            Some(ParameterValue::Boolean(b)) => Some(b),
-            _ => None,
-        }
+        self.get_as(name)
     }
 
     /// Store a value (already checked) and wake [`Params::subscribe`]rs.

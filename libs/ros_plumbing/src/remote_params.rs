@@ -12,7 +12,9 @@ use crate::{PlumbingError, RosNode};
 use ros2_client::rcl_interfaces::{
     GetParametersRequest, GetParametersResponse, SetParametersRequest, SetParametersResponse,
 };
-use ros2_client::{parameters::raw, Client, Name, ParameterValue, ServiceMapping, ServiceTypeName};
+use ros2_client::{
+    parameters::raw, Client, Message, Name, ParameterValue, ServiceMapping, ServiceTypeName,
+};
 use std::time::Duration;
 
 /// Why a remote parameter could not be read or set.
@@ -77,36 +79,7 @@ pub enum RemoteParamError {
     },
 }
 
-/// A Rust type that is one ROS 2 parameter type.
-pub trait ParamType: Sized {
-    /// The ROS 2 type's name, for errors (`string`).
-    const NAME: &'static str;
-    /// As a parameter value.
-    fn into_value(self) -> ParameterValue;
-    /// From a parameter value of this type; the value back otherwise.
-    fn from_value(value: ParameterValue) -> Result<Self, ParameterValue>;
-}
-
-macro_rules! param_type {
-    ($t:ty, $variant:ident, $name:literal) => {
-        impl ParamType for $t {
-            const NAME: &'static str = $name;
-            fn into_value(self) -> ParameterValue {
-                ParameterValue::$variant(self)
-            }
-            fn from_value(value: ParameterValue) -> Result<Self, ParameterValue> {
-                match value {
-                    ParameterValue::$variant(v) => Ok(v),
-                    other => Err(other),
-                }
-            }
-        }
-    };
-}
-param_type!(bool, Boolean, "bool");
-param_type!(i64, Integer, "integer");
-param_type!(f64, Double, "double");
-param_type!(String, String, "string");
+pub use crate::value::ParamType;
 
 /// A client of one node's parameter services.
 pub struct RemoteParameters {
@@ -119,38 +92,22 @@ impl RemoteParameters {
     /// The parameters of `node` (a name in our namespace, or absolute).
     pub fn new(ros: &mut RosNode, node: &str) -> Result<Self, PlumbingError> {
         let node_name = ros.resolver().resolve(node)?;
-        let service = |what: &str| {
-            Name::parse(&format!("{node_name}/{what}")).map_err(|e| PlumbingError::Name {
-                name: format!("{node_name}/{what}"),
-                why: format!("{e:?}"),
-            })
-        };
-        let qos = crate::qos::SERVICES;
-        let get = ros
-            .node_mut()
-            .create_client(
-                ServiceMapping::Enhanced,
-                &service("get_parameters")?,
-                &ServiceTypeName::new("rcl_interfaces", "GetParameters"),
-                qos.clone(),
-                qos.clone(),
-            )
-            .map_err(|e| PlumbingError::Ros(format!("{node_name}/get_parameters: {e:?}")))?;
-        let set = ros
-            .node_mut()
-            .create_client(
-                ServiceMapping::Enhanced,
-                &service("set_parameters")?,
-                &ServiceTypeName::new("rcl_interfaces", "SetParameters"),
-                qos.clone(),
-                qos,
-            )
-            .map_err(|e| PlumbingError::Ros(format!("{node_name}/set_parameters: {e:?}")))?;
+        let get = client(ros, &node_name, "get_parameters", "GetParameters")?;
+        let set = client(ros, &node_name, "set_parameters", "SetParameters")?;
         Ok(Self {
             node_name,
             get,
             set,
         })
+    }
+
+    /// A call of `service` that failed.
+    fn call_error(&self, service: &'static str, e: impl std::fmt::Debug) -> RemoteParamError {
+        RemoteParamError::Call {
+            node: self.node_name.clone(),
+            service,
+            why: format!("{e:?}"),
+        }
     }
 
     /// The node's full name.
@@ -180,11 +137,7 @@ impl RemoteParameters {
                 names: vec![name.to_string()],
             })
             .await
-            .map_err(|e| RemoteParamError::Call {
-                node: self.node_name.clone(),
-                service: "get_parameters",
-                why: format!("{e:?}"),
-            })?;
+            .map_err(|e| self.call_error("get_parameters", e))?;
         Ok(present(
             resp.values.into_iter().next().map(ParameterValue::from),
         ))
@@ -224,11 +177,7 @@ impl RemoteParameters {
                 }],
             })
             .await
-            .map_err(|e| RemoteParamError::Call {
-                node: self.node_name.clone(),
-                service: "set_parameters",
-                why: format!("{e:?}"),
-            })?;
+            .map_err(|e| self.call_error("set_parameters", e))?;
         set_outcome(&self.node_name, name, resp.results.into_iter().next())
     }
 
@@ -248,6 +197,30 @@ impl RemoteParameters {
     pub async fn set(&self, name: &str, value: ParameterValue) -> Result<(), String> {
         self.set_value(name, value).await.map_err(|e| e.to_string())
     }
+}
+
+/// A client of `node`'s `service` (`get_parameters`), of type rcl_interfaces/`type_name`.
+fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
+    ros: &mut RosNode,
+    node: &str,
+    service: &str,
+    type_name: &str,
+) -> Result<Client<Req, Resp>, PlumbingError> {
+    let full = format!("{node}/{service}");
+    let name = Name::parse(&full).map_err(|e| PlumbingError::Name {
+        name: full.clone(),
+        why: format!("{e:?}"),
+    })?;
+    let qos = crate::qos::SERVICES;
+    ros.node_mut()
+        .create_client(
+            ServiceMapping::Enhanced,
+            &name,
+            &ServiceTypeName::new("rcl_interfaces", type_name),
+            qos.clone(),
+            qos,
+        )
+        .map_err(|e| PlumbingError::Ros(format!("{full}: {e:?}")))
 }
 
 /// A get's value, `None` when the node does not have the parameter (`NotSet`).

@@ -662,8 +662,11 @@ mod tests {
         check_enclave(&plan, dir, keystore::now())
     }
 
-    fn named(e: &SecurityError, file: &str) -> bool {
-        e.to_string().contains(&format!("/{file}:"))
+    /// Why `dir` is refused; the refusal must name `file`.
+    fn refusal(dir: &Path, file: &str) -> SecurityError {
+        let e = checked(dir).unwrap_err();
+        assert!(e.to_string().contains(&format!("/{file}:")), "{e}");
+        e
     }
 
     #[test]
@@ -677,17 +680,11 @@ mod tests {
         let ca = keystore::Ca::new("ca");
         let dir = keystore::enclave("corrupt-key", &ca);
         keystore::write(&dir, "key.pem", b"-----BEGIN PRIVATE KEY-----\nAAAA\n");
-        let e = checked(&dir).unwrap_err();
-        assert!(
-            matches!(e, SecurityError::Malformed { .. }) && named(&e, "key.pem"),
-            "{e}"
-        );
+        let e = refusal(&dir, "key.pem");
+        assert!(matches!(e, SecurityError::Malformed { .. }), "{e}");
         std::fs::remove_file(dir.join("key.pem")).unwrap();
-        let e = checked(&dir).unwrap_err();
-        assert!(
-            matches!(e, SecurityError::Unreadable { .. }) && named(&e, "key.pem"),
-            "{e}"
-        );
+        let e = refusal(&dir, "key.pem");
+        assert!(matches!(e, SecurityError::Unreadable { .. }), "{e}");
         assert!(e.to_string().contains("no such file"), "{e}");
     }
 
@@ -700,11 +697,8 @@ mod tests {
             "key.pem",
             &keystore::key().private_key_to_pem_pkcs8().unwrap(),
         );
-        let e = checked(&dir).unwrap_err();
-        assert!(
-            matches!(e, SecurityError::Mismatch { .. }) && named(&e, "key.pem"),
-            "{e}"
-        );
+        let e = refusal(&dir, "key.pem");
+        assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
     }
 
     #[test]
@@ -713,33 +707,17 @@ mod tests {
         let dir = keystore::enclave("expired", &ca);
         let key = keystore::key();
         let t = keystore::now();
-        let expired = keystore::cert(
-            "/eezybot/pc",
-            &key,
-            Some((&ca.cert, &ca.key)),
-            t - 30 * keystore::DAY,
-            t - keystore::DAY,
-        );
-        keystore::write(&dir, "cert.pem", &expired.to_pem().unwrap());
+        let write_cert = |from, to| {
+            let cert = keystore::cert("/eezybot/pc", &key, Some((&ca.cert, &ca.key)), from, to);
+            keystore::write(&dir, "cert.pem", &cert.to_pem().unwrap());
+        };
+        write_cert(t - 30 * keystore::DAY, t - keystore::DAY);
         keystore::write(&dir, "key.pem", &key.private_key_to_pem_pkcs8().unwrap());
-        let e = checked(&dir).unwrap_err();
-        assert!(
-            matches!(e, SecurityError::Expired { .. }) && named(&e, "cert.pem"),
-            "{e}"
-        );
-        let future = keystore::cert(
-            "/eezybot/pc",
-            &key,
-            Some((&ca.cert, &ca.key)),
-            t + keystore::DAY,
-            t + 30 * keystore::DAY,
-        );
-        keystore::write(&dir, "cert.pem", &future.to_pem().unwrap());
-        let e = checked(&dir).unwrap_err();
-        assert!(
-            matches!(e, SecurityError::NotYetValid { .. }) && named(&e, "cert.pem"),
-            "{e}"
-        );
+        let e = refusal(&dir, "cert.pem");
+        assert!(matches!(e, SecurityError::Expired { .. }), "{e}");
+        write_cert(t + keystore::DAY, t + 30 * keystore::DAY);
+        let e = refusal(&dir, "cert.pem");
+        assert!(matches!(e, SecurityError::NotYetValid { .. }), "{e}");
         assert!(e.to_string().contains("clock"), "{e}");
     }
 
@@ -753,11 +731,8 @@ mod tests {
             "identity_ca.cert.pem",
             &foreign.cert.to_pem().unwrap(),
         );
-        let e = checked(&dir).unwrap_err();
-        assert!(
-            matches!(e, SecurityError::Mismatch { .. }) && named(&e, "cert.pem"),
-            "{e}"
-        );
+        let e = refusal(&dir, "cert.pem");
+        assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
     }
 
     #[test]
@@ -772,17 +747,11 @@ mod tests {
                 file,
                 &keystore::signed(doc, &foreign.cert, &foreign.key),
             );
-            let e = checked(&dir).unwrap_err();
-            assert!(
-                matches!(e, SecurityError::Mismatch { .. }) && named(&e, file),
-                "{e}"
-            );
+            let e = refusal(&dir, file);
+            assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
             keystore::write(&dir, file, b"<dds/>");
-            let e = checked(&dir).unwrap_err();
-            assert!(
-                matches!(e, SecurityError::Malformed { .. }) && named(&e, file),
-                "{e}"
-            );
+            let e = refusal(&dir, file);
+            assert!(matches!(e, SecurityError::Malformed { .. }), "{e}");
         }
     }
 }

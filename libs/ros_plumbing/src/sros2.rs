@@ -403,24 +403,20 @@ fn namespace_problem(ns: &str) -> Option<String> {
 
 /// Check an enclave path (`/eezybot/pi`).
 pub fn check_enclave(enclave: &str) -> Result<(), Sros2Error> {
-    match namespace_problem(enclave) {
-        Some(why) => Err(Sros2Error::Enclave {
-            enclave: enclave.to_string(),
-            why,
-        }),
-        None => Ok(()),
-    }
+    checked(enclave, |enclave, why| Sros2Error::Enclave { enclave, why })
 }
 
 /// Check a namespace (`/`, `/arm2`).
 pub fn check_namespace(namespace: &str) -> Result<(), Sros2Error> {
-    match namespace_problem(namespace) {
-        Some(why) => Err(Sros2Error::Namespace {
-            namespace: namespace.to_string(),
-            why,
-        }),
-        None => Ok(()),
-    }
+    checked(namespace, |namespace, why| Sros2Error::Namespace {
+        namespace,
+        why,
+    })
+}
+
+/// `ns`'s [`namespace_problem`], if any, as the `error` of it and why.
+fn checked(ns: &str, error: fn(String, String) -> Sros2Error) -> Result<(), Sros2Error> {
+    namespace_problem(ns).map_or(Ok(()), |why| Err(error(ns.to_string(), why)))
 }
 
 /// The node of a role in the contract (`gui_bridge (record)` → `gui_bridge`).
