@@ -184,13 +184,23 @@ function create(container, options = {}) {
     const key = new DirectionalLight(0xffffff, 1.6);
     scene.add(key, key.target);
 
+    // Takes obj (if any) out of the scene and frees its GPU resources; null, for the
+    // variable that held it.
+    function discard(obj) {
+        if (obj) {
+            scene.remove(obj);
+            disposeTree(obj);
+        }
+        return null;
+    }
+
     // Ground grid in the x-y plane and small axes at the origin.
     let grid = null;
     let gridSize = 0;
     function setGrid(size) {
         size = Math.max(1, Math.ceil(size));
         if (grid && size === gridSize) return;
-        if (grid) { scene.remove(grid); disposeTree(grid); }
+        discard(grid);
         grid = new GridHelper(size, Math.round(size / CELL), 0xa8a8b4, 0xdcdce3);
         grid.rotation.x = Math.PI / 2; // GridHelper lies in x-z; ROS ground is x-y
         grid.position.z = -0.0005;
@@ -333,16 +343,9 @@ function create(container, options = {}) {
     }
 
     // ---- robot --------------------------------------------------------------------------------
-    function clearRobot() {
-        if (!robot) return;
-        scene.remove(robot);
-        disposeTree(robot);
-        robot = null;
-    }
-
     function setRobot(urdfText) {
         if (disposed) return;
-        if (urdfText == null || urdfText === '') { clearRobot(); wake(); return; }
+        if (urdfText == null || urdfText === '') { robot = discard(robot); wake(); return; }
         const doc = new DOMParser().parseFromString(String(urdfText), 'text/xml');
         const err = doc.getElementsByTagName('parsererror')[0];
         if (err) {
@@ -361,7 +364,7 @@ function create(container, options = {}) {
         const r = loader.parse(doc);
         if (!r) throw new Error('EezyViewer3D.setRobot: URDF parse failed');
 
-        clearRobot();
+        discard(robot);
         robot = r;
 
         // urdf-loader stores URDF rgba as linear; URDF colours are meant as display (sRGB) values.
@@ -463,13 +466,6 @@ function create(container, options = {}) {
     }
 
     // ---- envelope -----------------------------------------------------------------------------
-    function clearEnvelope() {
-        if (!envelope) return;
-        scene.remove(envelope);
-        disposeTree(envelope);
-        envelope = null;
-    }
-
     function latheEnvelope(env) {
         const prof = (env.profile || []).filter((p) => Array.isArray(p) && Number.isFinite(+p[0]) && Number.isFinite(+p[1]))
             .map((p) => new Vector2(Math.max(0, +p[0]), +p[1]));
@@ -538,7 +534,7 @@ function create(container, options = {}) {
 
     function setEnvelope(env) {
         if (disposed) return;
-        clearEnvelope();
+        envelope = discard(envelope);
         if (env && env.kind === 'lathe') envelope = latheEnvelope(env);
         else if (env && env.kind === 'points') envelope = pointsEnvelope(env);
         if (envelope) scene.add(envelope);
@@ -562,8 +558,8 @@ function create(container, options = {}) {
         canvas.removeEventListener('webglcontextlost', onLost);
         canvas.removeEventListener('webglcontextrestored', onRestored);
         controls.dispose();
-        clearRobot();
-        clearEnvelope();
+        robot = discard(robot);
+        envelope = discard(envelope);
         disposeTree(scene);
         renderer.dispose();
         renderer.forceContextLoss();
