@@ -35,6 +35,9 @@ pub enum ParamRange {
 /// A further check of a parameter value; the error says why it is refused.
 pub type ValueCheck = fn(&ParameterValue) -> Result<(), String>;
 
+/// A further check of a string parameter's value; the error says why it is refused.
+pub type TextCheck = fn(&str) -> Result<(), String>;
+
 /// A declared parameter.
 #[derive(Clone, Debug)]
 pub struct ParamSpec {
@@ -53,6 +56,8 @@ pub struct ParamSpec {
     pub constraints: &'static str,
     /// A further check of the value (e.g. that a file loads), after type and range.
     pub validator: Option<ValueCheck>,
+    /// A further check of a string value ([`ParamSpec::text_check`]).
+    pub text_check: Option<TextCheck>,
 }
 
 impl ParamSpec {
@@ -70,6 +75,7 @@ impl ParamSpec {
             read_only: false,
             constraints: "",
             validator: None,
+            text_check: None,
         }
     }
 
@@ -82,6 +88,13 @@ impl ParamSpec {
     /// With a further check of the value.
     pub fn validator(mut self, check: ValueCheck) -> ParamSpec {
         self.validator = Some(check);
+        self
+    }
+
+    /// With a further check of the value, a string (e.g. that the file it names loads):
+    /// [`ParamSpec::validator`] for a string parameter.
+    pub fn text_check(mut self, check: TextCheck) -> ParamSpec {
+        self.text_check = Some(check);
         self
     }
 
@@ -156,6 +169,9 @@ impl ParamSpec {
         }?;
         if let Some(check) = self.validator {
             check(&value)?;
+        }
+        if let (Some(check), ParameterValue::String(text)) = (self.text_check, &value) {
+            check(text)?;
         }
         Ok(value)
     }
@@ -495,6 +511,26 @@ mod tests {
             assert!(err.contains(needle), "{bad}: {err}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_text_check_sees_string_values() {
+        let spec =
+            ParamSpec::new("mode", ParameterValue::String("a".into()), "").text_check(
+                |s| match s {
+                    "a" | "b" => Ok(()),
+                    _ => Err("must be `a` or `b`".into()),
+                },
+            );
+        assert!(spec.check(&ParameterValue::String("b".into())).is_ok());
+        assert_eq!(
+            spec.check(&ParameterValue::String("c".into())),
+            Err("must be `a` or `b`".into())
+        );
+        assert_eq!(
+            spec.check(&ParameterValue::Integer(1)),
+            Err("expected a string, got an integer".into())
+        );
     }
 
     #[test]

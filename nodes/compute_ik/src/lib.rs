@@ -40,16 +40,10 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "arm geometry, limits and servo calibration YAML; empty = the shipped config/arm.yaml",
             )
             .constraints("empty, or an arm_config YAML file that loads")
-            .validator(|v| match v {
-                ParameterValue::String(p) => ArmConfig::load_or_shipped(p).map(|_| ()).map_err(|e| e.to_string()),
-                _ => Ok(()),
-            }),
+            .text_check(|p| ArmConfig::load_or_shipped(p).map(|_| ()).map_err(|e| e.to_string())),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame xyz_target must be given in")
                 .constraints("not empty")
-                .validator(|v| match v {
-                    ParameterValue::String(s) if s.is_empty() => Err("must not be empty".into()),
-                    _ => Ok(()),
-                }),
+                .text_check(|s| if s.is_empty() { Err("must not be empty".into()) } else { Ok(()) }),
             ros_plumbing::diagnostics::diagnostics_period_param(),
             ParamSpec::new(
                 "motion",
@@ -57,10 +51,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "how xyz targets are moved to: `joint` (every servo within its limits, together) or `line` (the tool on a straight line, refused if any point of it is unreachable)",
             )
             .constraints("one of: joint, line")
-            .validator(|v| match v {
-                ParameterValue::String(s) if MotionMode::parse(s).is_some() => Ok(()),
-                _ => Err("must be `joint` or `line`".into()),
-            }),
+            .text_check(|s| MotionMode::parse(s).map(|_| ()).ok_or_else(|| "must be `joint` or `line`".into())),
             ParamSpec::new(
                 "motion_rate",
                 ParameterValue::Double(50.0),
@@ -79,10 +70,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "IK of xyz_target and pose_target: `analytic` (the EezyBot's closed form; dls for an arm without one), `jacobian` (pseudo-inverse), `dls` (damped least squares), `newton` (Newton-Raphson); switchable while running",
             )
             .constraints("one of: analytic, jacobian, dls, newton")
-            .validator(|v| match v {
-                ParameterValue::String(s) => Solver::check(s).map(|_| ()),
-                _ => Ok(()),
-            }),
+            .text_check(|s| Solver::check(s).map(|_| ())),
             ParamSpec::new(
                 "urdf",
                 ParameterValue::String(String::new()),
@@ -90,11 +78,9 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .read_only()
             .constraints("empty, or a URDF file that loads")
-            .validator(|v| match v {
-                ParameterValue::String(p) if !p.is_empty() => RobotModel::load(std::path::Path::new(p))
-                    .map(|_| ())
-                    .map_err(|e| e.to_string()),
-                _ => Ok(()),
+            .text_check(|p| match p {
+                "" => Ok(()),
+                p => RobotModel::load(std::path::Path::new(p)).map(|_| ()).map_err(|e| e.to_string()),
             }),
             ParamSpec::new(
                 "tip_link",

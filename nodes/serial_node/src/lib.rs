@@ -30,6 +30,15 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             .range(ParamRange::Integer { min, max })
             .read_only()
     };
+    let stop_action = |name, what| {
+        ParamSpec::new(name, ParameterValue::String("hold".into()), what)
+            .constraints("one of: hold, detach")
+            .text_check(|s| match s {
+                "hold" | "detach" => Ok(()),
+                _ => Err("must be `hold` or `detach`".into()),
+            })
+            .read_only()
+    };
     ros_plumbing::NodeSpec {
         name: "serial_node",
         description: "servo_angles -> the Arduino (servo_control firmware) over a serial port; its replies -> servo_state",
@@ -46,20 +55,8 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 .range(ParamRange::Double { min: 1.0, max: 500.0 })
                 .read_only(),
             int("watchdog_ms", 500, 20, 60_000, "device holds/detaches after this much silence"),
-            ParamSpec::new("watchdog_action", ParameterValue::String("hold".into()), "`hold` or `detach` on watchdog")
-                .constraints("one of: hold, detach")
-                .validator(|v| match v {
-                    ParameterValue::String(s) if s == "hold" || s == "detach" => Ok(()),
-                    _ => Err("must be `hold` or `detach`".into()),
-                })
-                .read_only(),
-            ParamSpec::new("estop_action", ParameterValue::String("hold".into()), "`hold` (the servos keep their position) or `detach` (the pulses stop, servos go limp) on e-stop")
-                .constraints("one of: hold, detach")
-                .validator(|v| match v {
-                    ParameterValue::String(s) if s == "hold" || s == "detach" => Ok(()),
-                    _ => Err("must be `hold` or `detach`".into()),
-                })
-                .read_only(),
+            stop_action("watchdog_action", "`hold` or `detach` on watchdog"),
+            stop_action("estop_action", "`hold` (the servos keep their position) or `detach` (the pulses stop, servos go limp) on e-stop"),
             ParamSpec::new("heartbeat_period", ParameterValue::Double(0.1), "seconds of silence before a HEARTBEAT")
                 .range(ParamRange::Double { min: 0.01, max: 10.0 })
                 .read_only(),
@@ -69,10 +66,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "servo calibration (pulse ranges) and motion limits (the velocity guard) YAML; empty = the shipped config/arm.yaml",
             )
             .constraints("empty, or an arm_config YAML file that loads")
-            .validator(|v| match v {
-                ParameterValue::String(p) => load_calibration(p).map(|_| ()),
-                _ => Ok(()),
-            }),
+            .text_check(|p| load_calibration(p).map(|_| ())),
             ros_plumbing::diagnostics::diagnostics_period_param(),
         ],
     }

@@ -40,10 +40,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "path of the URDF to publish; empty = the EezyBotArm URDF built into this binary (urdf/eezybot.urdf)",
             )
                 .constraints("empty, or a URDF file that loads")
-                .validator(|v| match v {
-                    ParameterValue::String(p) => load_urdf(p).map(|_| ()),
-                    _ => Ok(()),
-                }),
+                .text_check(|p| load_urdf(p).map(|_| ())),
             ParamSpec::new("frame_prefix", ParameterValue::String(String::new()), "prefix for every frame id, e.g. arm2/"),
             ParamSpec::new(
                 "publish_frequency",
