@@ -1539,6 +1539,24 @@ mod tests {
         pl
     }
 
+    /// The arm arrives at point `i` (at `xyz`) at `at`: the player asks for `mode`, and
+    /// once it is set, sends point `j` 10 ms later.
+    fn switch_mode(
+        pl: &mut Player,
+        at: Instant,
+        (i, xyz): (usize, [f64; 3]),
+        mode: MoveMode,
+        (j, next): (usize, [f64; 3]),
+    ) {
+        let asked = [arrived(i), PlayerAction::SetMode(mode)];
+        assert_eq!(pl.step(at, Some(xyz)), asked);
+        pl.mode_set(true);
+        assert_eq!(
+            pl.step(at + Duration::from_millis(10), None),
+            [target(j, next)]
+        );
+    }
+
     /// The state of a player with no failure.
     fn state(index: usize, phase: PlayerPhase, loops: usize) -> PlayerState {
         PlayerState {
@@ -1664,12 +1682,7 @@ mod tests {
             [arrived(1), target(2, C)],
             "no mode: as it is"
         );
-        assert_eq!(
-            pl.step(ms(t0, 50), Some(C)),
-            [arrived(2), PlayerAction::SetMode(MoveMode::Joint)]
-        );
-        pl.mode_set(true);
-        assert_eq!(pl.step(ms(t0, 60), None), [target(3, A)]);
+        switch_mode(&mut pl, ms(t0, 50), (2, C), MoveMode::Joint, (3, A));
         assert_eq!(
             pl.step(ms(t0, 70), Some(A)),
             [arrived(3), PlayerAction::Finished]
@@ -1690,12 +1703,7 @@ mod tests {
         )
         .with_base_mode(MoveMode::Joint);
         assert_eq!(pl.step(t0, None), [target(0, A)], "joint already");
-        assert_eq!(
-            pl.step(ms(t0, 10), Some(A)),
-            [arrived(0), PlayerAction::SetMode(MoveMode::Line)]
-        );
-        pl.mode_set(true);
-        assert_eq!(pl.step(ms(t0, 20), None), [target(1, B)]);
+        switch_mode(&mut pl, ms(t0, 10), (0, A), MoveMode::Line, (1, B));
         assert_eq!(
             pl.step(ms(t0, 30), Some(B)),
             [arrived(1), PlayerAction::SetMode(MoveMode::Joint)]
@@ -1757,12 +1765,7 @@ mod tests {
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         pl.mode_set(true);
         assert_eq!(pl.step(t0, None), [target(0, A)]);
-        assert_eq!(
-            pl.step(ms(t0, 10), Some(A)),
-            [arrived(0), PlayerAction::SetMode(MoveMode::Joint)]
-        );
-        pl.mode_set(true);
-        assert_eq!(pl.step(ms(t0, 20), None), [target(1, B)]);
+        switch_mode(&mut pl, ms(t0, 10), (0, A), MoveMode::Joint, (1, B));
         // after the last point: point 0 again, no Finished, the loop counted
         assert_eq!(
             pl.step(ms(t0, 30), Some(B)),
