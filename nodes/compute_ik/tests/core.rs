@@ -31,6 +31,11 @@ fn target(x: f64, y: f64, z: f64, frame: &str) -> PointStamped {
     }
 }
 
+/// Aim `c` at (x, y, z) in `frame`, stamped now.
+fn aim(c: &mut IkCore, x: f64, y: f64, z: f64, frame: &str) -> Result<Output, Rejection> {
+    c.handle_xyz_target(&target(x, y, z, frame), now())
+}
+
 /// Step the planned motion until the arm rests; the outputs of every step.
 fn settle(c: &mut IkCore) -> Vec<Output> {
     let mut out = vec![];
@@ -44,9 +49,7 @@ fn settle(c: &mut IkCore) -> Vec<Output> {
 #[test]
 fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
     let mut c = core();
-    let out = c
-        .handle_xyz_target(&target(0.2, 0.05, 0.15, "base_link"), now())
-        .unwrap();
+    let out = aim(&mut c, 0.2, 0.05, 0.15, "base_link").unwrap();
     assert_eq!(
         out.joint_states.header.stamp,
         Time::from_nanos(1_700_000_000_123_456_789)
@@ -88,9 +91,7 @@ fn reachable_target_gives_both_outputs_with_the_cause_stamp() {
 
 #[test]
 fn empty_frame_means_base_link() {
-    assert!(core()
-        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""), now())
-        .is_ok());
+    assert!(aim(&mut core(), 0.2, 0.0, 0.15, "").is_ok());
 }
 
 #[test]
@@ -103,7 +104,7 @@ fn a_1mb_name_is_cut_in_the_rejection_and_diagnostics() {
         ..JointState::default()
     };
     let rejections = [
-        c.handle_xyz_target(&target(0.2, 0.0, 0.15, &huge), now()),
+        aim(&mut c, 0.2, 0.0, 0.15, &huge),
         c.handle_joint_target(&joints(vec![huge.clone()]), now()),
         c.handle_joint_target(&joints(vec![huge.clone(), huge.clone()]), now()),
     ];
@@ -119,18 +120,14 @@ fn a_1mb_name_is_cut_in_the_rejection_and_diagnostics() {
         assert!(d.message.len() < 1024 && longest < 1024);
     }
     c.set_base_frame(&huge);
-    let text = c
-        .handle_xyz_target(&target(0.2, 0.0, 0.15, "map"), now())
-        .unwrap_err()
-        .to_string();
+    let text = aim(&mut c, 0.2, 0.0, 0.15, "map").unwrap_err().to_string();
     assert!(text.len() < 1024, "{}", &text[..text.len().min(300)]);
 }
 
 #[test]
 fn every_bad_input_is_refused_and_keeps_the_state() {
     let mut c = core();
-    c.handle_xyz_target(&target(0.2, 0.0, 0.15, "base_link"), now())
-        .unwrap();
+    aim(&mut c, 0.2, 0.0, 0.15, "base_link").unwrap();
     settle(&mut c);
     let good = *c.state();
     let bad_joint = |names: &[&str], pos: &[f64]| JointState {
@@ -139,24 +136,18 @@ fn every_bad_input_is_refused_and_keeps_the_state() {
         ..JointState::default()
     };
     let cases: Vec<(Result<Output, Rejection>, &str)> = vec![
+        (aim(&mut c, 1.0, 0.0, 0.15, "base_link"), "too_far"),
         (
-            c.handle_xyz_target(&target(1.0, 0.0, 0.15, "base_link"), now()),
-            "too_far",
-        ),
-        (
-            c.handle_xyz_target(&target(f64::NAN, 0.0, 0.15, "base_link"), now()),
+            aim(&mut c, f64::NAN, 0.0, 0.15, "base_link"),
             "non_finite_target",
         ),
         (
-            c.handle_xyz_target(&target(0.2, f64::INFINITY, 0.15, "base_link"), now()),
+            aim(&mut c, 0.2, f64::INFINITY, 0.15, "base_link"),
             "non_finite_target",
         ),
+        (aim(&mut c, 0.2, 0.0, 0.15, "map"), "wrong_frame"),
         (
-            c.handle_xyz_target(&target(0.2, 0.0, 0.15, "map"), now()),
-            "wrong_frame",
-        ),
-        (
-            c.handle_xyz_target(&target(-0.2, 0.0, 0.15, "base_link"), now()),
+            aim(&mut c, -0.2, 0.0, 0.15, "base_link"),
             "out_of_limits:base_joint",
         ),
         (
@@ -244,15 +235,11 @@ fn joint_mode_keeps_unnamed_joints() {
 fn estop_refuses_everything_until_released() {
     let mut c = core();
     c.set_estop(true);
-    let r = c
-        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""), now())
-        .unwrap_err();
+    let r = aim(&mut c, 0.2, 0.0, 0.15, "").unwrap_err();
     assert_eq!(r.reason, Reason::EmergencyStop);
     assert_eq!(c.diagnostic_status("x").level, DiagnosticStatus::WARN);
     c.set_estop(false);
-    assert!(c
-        .handle_xyz_target(&target(0.2, 0.0, 0.15, ""), now())
-        .is_ok());
+    assert!(aim(&mut c, 0.2, 0.0, 0.15, "").is_ok());
 }
 
 #[test]
@@ -340,17 +327,12 @@ fn a_jump_is_planned_as_a_motion_within_the_servo_limits() {
 #[test]
 fn a_new_target_mid_move_replans_from_the_current_state_within_the_limits() {
     let mut c = core();
-    let first = c
-        .handle_xyz_target(&target(0.2, 0.08, 0.15, ""), now())
-        .unwrap();
+    let first = aim(&mut c, 0.2, 0.08, 0.15, "").unwrap();
     let mut outs = vec![];
     for _ in 0..8 {
         outs.push(c.step(now()).unwrap());
     }
-    outs.push(
-        c.handle_xyz_target(&target(0.16, -0.08, 0.22, ""), now())
-            .unwrap(),
-    );
+    outs.push(aim(&mut c, 0.16, -0.08, 0.22, "").unwrap());
     outs.extend(settle(&mut c));
     let trace = servo_trace(first, outs);
     assert_within_servo_limits(&home_servos(), &trace, 0.02);
@@ -361,8 +343,7 @@ fn a_new_target_mid_move_replans_from_the_current_state_within_the_limits() {
 #[test]
 fn estop_stops_the_motion_where_it_is() {
     let mut c = core();
-    c.handle_xyz_target(&target(0.2, 0.08, 0.15, ""), now())
-        .unwrap();
+    aim(&mut c, 0.2, 0.08, 0.15, "").unwrap();
     for _ in 0..5 {
         c.step(now()).unwrap();
     }
@@ -406,13 +387,10 @@ fn a_straight_line_is_followed_or_refused_before_the_move() {
         mode: MotionMode::Line,
         ..c.motion()
     });
-    c.handle_xyz_target(&target(0.2, -0.1, 0.15, ""), now())
-        .unwrap();
+    aim(&mut c, 0.2, -0.1, 0.15, "").unwrap();
     settle(&mut c);
     // from (0.2, -0.1, 0.15) to (0.2, 0.1, 0.15): the tool stays on the segment
-    let first = c
-        .handle_xyz_target(&target(0.2, 0.1, 0.15, ""), now())
-        .unwrap();
+    let first = aim(&mut c, 0.2, 0.1, 0.15, "").unwrap();
     let arm = Arm::default();
     let mut outs = vec![first];
     outs.extend(settle(&mut c));
@@ -430,11 +408,10 @@ fn a_straight_line_is_followed_or_refused_before_the_move() {
     assert!(outs.len() > 10);
     // a line that crosses the unreachable region around the base's axis (r < 0.102 m
     // at this height): refused, nothing moves
-    c.handle_xyz_target(&target(0.08, 0.075, 0.15, ""), now())
-        .unwrap();
+    aim(&mut c, 0.08, 0.075, 0.15, "").unwrap();
     settle(&mut c);
     let before = *c.state();
-    let r = c.handle_xyz_target(&target(0.08, -0.075, 0.15, ""), now());
+    let r = aim(&mut c, 0.08, -0.075, 0.15, "");
     let err = r.unwrap_err();
     assert_eq!(err.reason.code(), "line_leaves_workspace", "{err}");
     assert!(err.to_string().contains("% along the line"), "{err}");

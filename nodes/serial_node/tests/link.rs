@@ -23,20 +23,28 @@ struct Rig {
 }
 
 impl Rig {
+    /// A link with `config` to a virtual Arduino, connected.
     fn new(config: HostConfig) -> Rig {
         let device = VirtualArduino::new(DeviceConfig::default());
         let (tx, events) = unbounded_channel();
         let link = Link::start(link::mock_opener(device.clone()), config, tx).unwrap();
-        Rig {
+        let mut rig = Rig {
             device,
             link: Some(link),
             events,
             seen: vec![],
-        }
+        };
+        assert!(rig.wait_for(Duration::from_secs(2), connected).is_some());
+        rig
     }
 
     fn link(&self) -> &Link {
         self.link.as_ref().unwrap()
+    }
+
+    /// Command `ticks`, stamped `n` s, now.
+    fn command(&self, ticks: [u16; 4], n: i32) {
+        self.link().command(ticks, stamp(n), Instant::now());
     }
 
     /// Collect events until `pred` holds for one of them, or `timeout`.
@@ -87,8 +95,7 @@ fn answers(n: i32) -> impl Fn(&LinkEvent) -> bool {
 #[test]
 fn a_command_is_acknowledged_with_its_stamp() {
     let mut r = Rig::new(HostConfig::default());
-    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
-    r.link().command([3000; 4], stamp(7), Instant::now());
+    r.command([3000; 4], 7);
     let e = r.wait_for(Duration::from_secs(2), answers(7));
     assert!(e.is_some(), "{:?}", r.seen);
     assert_eq!(r.device_state(), (DeviceState::Running, [3000; 4]));
@@ -103,9 +110,8 @@ fn a_jump_is_ramped_within_the_velocity_limit() {
         max_ticks_per_s: [2000.0; 4],
         ..HostConfig::default()
     });
-    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
     let target = [3944, 2944, 2944, 2325];
-    r.link().command(target, stamp(1), Instant::now());
+    r.command(target, 1);
     let reached = r.wait_for(
         Duration::from_secs(5),
         |e| matches!(e, LinkEvent::State { ticks, .. } if *ticks == target),
@@ -136,8 +142,7 @@ fn a_jump_is_ramped_within_the_velocity_limit() {
 #[test]
 fn estop_holds_drops_commands_and_after_release_waits_for_a_new_one() {
     let mut r = Rig::new(HostConfig::default());
-    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
-    r.link().command([3000; 4], stamp(1), Instant::now());
+    r.command([3000; 4], 1);
     assert!(r.wait_for(Duration::from_secs(2), answers(1)).is_some());
     r.link().set_estop(true);
     assert!(r
@@ -149,7 +154,7 @@ fn estop_holds_drops_commands_and_after_release_waits_for_a_new_one() {
             }
         ))
         .is_some());
-    r.link().command([4000; 4], stamp(2), Instant::now());
+    r.command([4000; 4], 2);
     r.settle(Duration::from_millis(200));
     assert_eq!(r.device_state(), (DeviceState::Estop, [3000; 4]));
     assert!(r.seen.iter().any(|(_, e)| *e == LinkEvent::DroppedInEstop));
@@ -160,7 +165,7 @@ fn estop_holds_drops_commands_and_after_release_waits_for_a_new_one() {
         (DeviceState::Running, [3000; 4]),
         "moved after the release"
     );
-    r.link().command([3100; 4], stamp(3), Instant::now());
+    r.command([3100; 4], 3);
     assert!(r.wait_for(Duration::from_secs(1), answers(3)).is_some());
     assert_eq!(r.device_state().1, [3100; 4]);
 }
@@ -171,8 +176,7 @@ fn a_detaching_estop_stops_the_pulses() {
         estop_action: StopAction::Detach,
         ..HostConfig::default()
     });
-    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
-    r.link().command([3000; 4], stamp(1), Instant::now());
+    r.command([3000; 4], 1);
     assert!(r.wait_for(Duration::from_secs(2), answers(1)).is_some());
     r.link().set_estop(true);
     r.settle(Duration::from_millis(100));
@@ -185,15 +189,13 @@ fn unplug_and_replug_twenty_times_while_streaming() {
         max_ticks_per_s: [6000.0; 4],
         ..HostConfig::default()
     });
-    assert!(r.wait_for(Duration::from_secs(2), connected).is_some());
     let mut reconnect_ms = vec![];
     let mut n = 0;
     for cycle in 0..20 {
         // streaming before, while and after the cable is out
         for _ in 0..5 {
             n += 1;
-            r.link()
-                .command([2944 + 10 * (n % 50) as u16; 4], stamp(n), Instant::now());
+            r.command([2944 + 10 * (n % 50) as u16; 4], n);
             r.settle(Duration::from_millis(20));
         }
         r.device.set_plugged(false);
@@ -207,8 +209,7 @@ fn unplug_and_replug_twenty_times_while_streaming() {
         );
         for _ in 0..3 {
             n += 1;
-            r.link()
-                .command([3300 + (n % 7) as u16; 4], stamp(n), Instant::now());
+            r.command([3300 + (n % 7) as u16; 4], n);
             r.settle(Duration::from_millis(50));
         }
         let newest = n;
