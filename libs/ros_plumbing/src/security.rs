@@ -611,6 +611,18 @@ mod tests {
         }
 
         /// Writes a good enclave for `/eezybot/pc` into a new directory.
+        /// `dir`'s key.pem.
+        pub fn write_key(dir: &Path, key: &PKey<Private>) {
+            write(dir, "key.pem", &key.private_key_to_pem_pkcs8().unwrap());
+        }
+
+        /// `dir`'s cert.pem: `/eezybot/pc`'s certificate of `key`, issued by `ca`, valid
+        /// from `from` to `to` (s since the epoch).
+        pub fn write_cert(dir: &Path, key: &PKey<Private>, ca: &Ca, from: i64, to: i64) {
+            let cert = cert("/eezybot/pc", key, Some((&ca.cert, &ca.key)), from, to);
+            write(dir, "cert.pem", &cert.to_pem().unwrap());
+        }
+
         pub fn enclave(test: &str, ca: &Ca) -> PathBuf {
             let dir = std::env::temp_dir().join(format!(
                 "eezybot-security-{}-{test}/enclaves/eezybot/pc",
@@ -619,16 +631,8 @@ mod tests {
             let _ = std::fs::remove_dir_all(&dir);
             std::fs::create_dir_all(&dir).unwrap();
             let key = key();
-            let t = now();
-            let cert = cert(
-                "/eezybot/pc",
-                &key,
-                Some((&ca.cert, &ca.key)),
-                t - DAY,
-                t + 365 * DAY,
-            );
-            write(&dir, "key.pem", &key.private_key_to_pem_pkcs8().unwrap());
-            write(&dir, "cert.pem", &cert.to_pem().unwrap());
+            write_key(&dir, &key);
+            write_cert(&dir, &key, ca, now() - DAY, now() + 365 * DAY);
             write(&dir, "identity_ca.cert.pem", &ca.cert.to_pem().unwrap());
             write(&dir, "permissions_ca.cert.pem", &ca.cert.to_pem().unwrap());
             write(
@@ -662,6 +666,13 @@ mod tests {
         check_enclave(&plan, dir, keystore::now())
     }
 
+    /// A CA and a good enclave of it, for `test`.
+    fn good_enclave(test: &str) -> (keystore::Ca, PathBuf) {
+        let ca = keystore::Ca::new("ca");
+        let dir = keystore::enclave(test, &ca);
+        (ca, dir)
+    }
+
     /// Why `dir` is refused; the refusal must name `file`.
     fn refusal(dir: &Path, file: &str) -> SecurityError {
         let e = checked(dir).unwrap_err();
@@ -671,14 +682,12 @@ mod tests {
 
     #[test]
     fn a_good_enclave_passes() {
-        let ca = keystore::Ca::new("ca");
-        assert_eq!(checked(&keystore::enclave("good", &ca)), Ok(()));
+        assert_eq!(checked(&good_enclave("good").1), Ok(()));
     }
 
     #[test]
     fn a_missing_or_corrupt_key_is_named() {
-        let ca = keystore::Ca::new("ca");
-        let dir = keystore::enclave("corrupt-key", &ca);
+        let (_, dir) = good_enclave("corrupt-key");
         keystore::write(&dir, "key.pem", b"-----BEGIN PRIVATE KEY-----\nAAAA\n");
         let e = refusal(&dir, "key.pem");
         assert!(matches!(e, SecurityError::Malformed { .. }), "{e}");
@@ -690,32 +699,22 @@ mod tests {
 
     #[test]
     fn the_key_of_another_certificate_is_a_mismatch() {
-        let ca = keystore::Ca::new("ca");
-        let dir = keystore::enclave("other-key", &ca);
-        keystore::write(
-            &dir,
-            "key.pem",
-            &keystore::key().private_key_to_pem_pkcs8().unwrap(),
-        );
+        let (_, dir) = good_enclave("other-key");
+        keystore::write_key(&dir, &keystore::key());
         let e = refusal(&dir, "key.pem");
         assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
     }
 
     #[test]
     fn an_expired_or_future_certificate_is_named_with_its_dates() {
-        let ca = keystore::Ca::new("ca");
-        let dir = keystore::enclave("expired", &ca);
+        let (ca, dir) = good_enclave("expired");
         let key = keystore::key();
         let t = keystore::now();
-        let write_cert = |from, to| {
-            let cert = keystore::cert("/eezybot/pc", &key, Some((&ca.cert, &ca.key)), from, to);
-            keystore::write(&dir, "cert.pem", &cert.to_pem().unwrap());
-        };
-        write_cert(t - 30 * keystore::DAY, t - keystore::DAY);
-        keystore::write(&dir, "key.pem", &key.private_key_to_pem_pkcs8().unwrap());
+        keystore::write_key(&dir, &key);
+        keystore::write_cert(&dir, &key, &ca, t - 30 * keystore::DAY, t - keystore::DAY);
         let e = refusal(&dir, "cert.pem");
         assert!(matches!(e, SecurityError::Expired { .. }), "{e}");
-        write_cert(t + keystore::DAY, t + 30 * keystore::DAY);
+        keystore::write_cert(&dir, &key, &ca, t + keystore::DAY, t + 30 * keystore::DAY);
         let e = refusal(&dir, "cert.pem");
         assert!(matches!(e, SecurityError::NotYetValid { .. }), "{e}");
         assert!(e.to_string().contains("clock"), "{e}");
@@ -723,8 +722,7 @@ mod tests {
 
     #[test]
     fn a_certificate_of_another_ca_is_a_mismatch() {
-        let ca = keystore::Ca::new("ca");
-        let dir = keystore::enclave("wrong-ca", &ca);
+        let (_, dir) = good_enclave("wrong-ca");
         let foreign = keystore::Ca::new("foreign");
         keystore::write(
             &dir,

@@ -72,6 +72,13 @@ impl<M: RosMessage> Topic<M> {
         }
     }
 
+    /// Declare an operator target ([`Topic::as_target`]), published by `publishers`:
+    /// every target has the commands' QoS and is subscribed by compute_ik, recorded by
+    /// `gui_bridge record` and offered to Foxglove.
+    pub const fn new_target(name: &'static str, publishers: &'static [&'static str]) -> Self {
+        Topic::new(name, qos::COMMANDS, publishers, &[IK, RECORD, FOXGLOVE]).as_target()
+    }
+
     /// Latched: published transient-local, so a late subscriber gets the last sample.
     pub fn latched(&self) -> bool {
         is_latched(&self.qos)
@@ -148,27 +155,13 @@ const RECORD: &str = "gui_bridge (record)";
 const FOXGLOVE: &str = "gui_bridge (Foxglove)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.
-pub const XYZ_TARGET: Topic<PointStamped> =
-    Topic::new("xyz_target", qos::COMMANDS, &[GUI], &[IK, RECORD, FOXGLOVE]).as_target();
+pub const XYZ_TARGET: Topic<PointStamped> = Topic::new_target("xyz_target", &[GUI]);
 /// Desired pose of the tip link (arms with orientation, `ros2 topic pub`).
-pub const POSE_TARGET: Topic<PoseStamped> =
-    Topic::new("pose_target", qos::COMMANDS, &[], &[IK, RECORD, FOXGLOVE]).as_target();
+pub const POSE_TARGET: Topic<PoseStamped> = Topic::new_target("pose_target", &[]);
 /// Claw opening, 0.0 closed … 1.0 open.
-pub const GRIPPER_TARGET: Topic<Float64> = Topic::new(
-    "gripper_target",
-    qos::COMMANDS,
-    &[GUI],
-    &[IK, RECORD, FOXGLOVE],
-)
-.as_target();
+pub const GRIPPER_TARGET: Topic<Float64> = Topic::new_target("gripper_target", &[GUI]);
 /// Joint mode: positions of named actuated joints, rad.
-pub const JOINT_TARGET: Topic<JointState> = Topic::new(
-    "joint_target",
-    qos::COMMANDS,
-    &[GUI],
-    &[IK, RECORD, FOXGLOVE],
-)
-.as_target();
+pub const JOINT_TARGET: Topic<JointState> = Topic::new_target("joint_target", &[GUI]);
 /// Emergency stop, latched: `true` = no servo moves until `false`.
 pub const ESTOP: Topic<Bool> = Topic::new("estop", qos::ESTOP, &[GUI], &[IK, SERIAL, GUI]);
 /// Every non-fixed URDF joint, rad.
