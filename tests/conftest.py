@@ -180,6 +180,21 @@ class Observer:
         rclpy.shutdown(context=self.context)
 
 
+def latest_status(diags, node):
+    """The newest DiagnosticStatus of `node` (its name starts with it) among `diags`, an
+    Observer.sub list of DiagnosticArray (other nodes publish there too), or None."""
+    for _, arr in reversed(diags):
+        for s in arr.status:
+            if s.name.startswith(node):
+                return s
+    return None
+
+
+def status_values(status):
+    """A DiagnosticStatus's values as {key: value} ({} for None)."""
+    return {kv.key: kv.value for kv in status.values} if status is not None else {}
+
+
 @pytest.fixture
 def observer(domain):
     o = Observer(domain)

@@ -18,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
-from conftest import REPO
+from conftest import REPO, latest_status, status_values
 from interop.servo_link import ESTOP, SET_PULSES, Decoder, SimulatedUno
 
 FIRMWARE = REPO / "firmware" / "servo_control"
@@ -29,6 +29,9 @@ SERVO_PERIOD_S = 0.020
 US_PER_DEG = (2400 - 544) / 180
 # firmware/servo_control/config.h: the pose a board reports before its first command
 HOLD_US = [1472.0, 1472.0, 1472.0, 1162.5]
+# two poses (servo horn degrees) a move of about 0.3 s apart at the servos' speed
+A = [60.0, 70.0, 110.0, 60.0]
+B = [130.0, 110.0, 80.0, 140.0]
 
 
 def pulse_us(deg):
@@ -128,22 +131,35 @@ def sent_ticks(events):
     return [(c, struct.unpack("<4H", p)) for t, _, p, c in events.frames() if t == SET_PULSES]
 
 
-class Rig:
-    """serial_node (launched by the test's `launch`) on a board in simavr; rclpy streams."""
+class SerialNodeRig:
+    """serial_node (launched by the test's `launch`) on `port`, and rclpy's ends of its
+    topics: servo_state and diagnostics read, servo_angles and estop written."""
 
-    def __init__(self, launch, observer, tmp_path, *params, start_board=True):
-        self.tmp, self.o, self.launch = Path(tmp_path), observer, launch
-        self.boots = []
-        if start_board:
-            self.boot()
-        self.node = launch("serial_node", "--ros-args", "-p", f"port:={self.tmp / 'tty'}",
-                           "-p", "diagnostics_period:=0.1", *params)
+    def __init__(self, launch, observer, port, diagnostics_period, *params):
+        self.o = observer
+        self.node = launch("serial_node", "--ros-args", "-p", f"port:={port}",
+                           "-p", f"diagnostics_period:={diagnostics_period}", *params)
         self.state = observer.sub("/servo_state", JointState)
         self.diags = observer.sub("/diagnostics", DiagnosticArray)
         self.angles = observer.pub("/servo_angles", JointState)
         self.estop = observer.pub("/estop", Bool)  # the contract's QoS: latched
         observer.wait_matched(self.angles)
         observer.wait_publisher("/diagnostics")
+
+    def status(self):
+        """serial_node's latest diagnostics entry, or None."""
+        return latest_status(self.diags, "serial_node")
+
+
+class Rig(SerialNodeRig):
+    """serial_node on a board in simavr; rclpy streams."""
+
+    def __init__(self, launch, observer, tmp_path, *params, start_board=True):
+        self.tmp, self.launch = Path(tmp_path), launch
+        self.boots = []
+        if start_board:
+            self.boot()
+        super().__init__(launch, observer, self.tmp / "tty", 0.1, *params)
         self.target = None
         self.next_send = 0.0
 
@@ -159,11 +175,63 @@ class Rig:
         return BoardEvents(self.boots[boot].events_path)
 
     def diag(self):
-        for _, arr in reversed(self.diags):
-            for s in arr.status:
-                if s.name.startswith("serial_node"):
-                    return {kv.key: kv.value for kv in s.values}
-        return {}
+        return status_values(self.status())
+
+    def connected(self, reconnects=0):
+        """serial_node reports the board connected, after `reconnects` reconnects."""
+        d = self.diag()
+        return d.get("connection") == "connected" and int(d.get("reconnects") or 0) == reconnects
+
+    def estop_mid_move(self):
+        """At A, a move towards B and 0.1 s into it the e-stop published; returns the wall
+        time just before the publish, once the board reports the e-stop engaged."""
+        self.target = A
+        assert self.spin(until=lambda: self.at(A), timeout=5), self.acked_deg()
+        self.target = B  # a move of 0.3 s at the servos' speed
+        self.spin(0.1)
+        t_pub = time.time_ns()
+        self.estop.publish(Bool(data=True))
+        assert self.spin(until=lambda: self.diag().get("device_state") == "e-stop", timeout=5), self.diag()
+        return t_pub
+
+    def release_estop(self):
+        """The stream stopped and the e-stop released; returns once the board runs again."""
+        self.target = None
+        self.estop.publish(Bool(data=False))
+        assert self.spin(until=lambda: self.diag().get("device_state") in ("running", "idle"), timeout=5), self.diag()
+
+    def hotplug_cycles(self, kind, cycles):
+        """Once connected and at A, `cycles` hot-plug cycles (hotplug_cycle) of `kind`;
+        returns the wall time each was plugged back (or booted)."""
+        assert self.spin(until=self.connected, timeout=15), self.diag()
+        self.target = A
+        assert self.spin(until=lambda: self.at(A), timeout=5), self.acked_deg()
+        up_at = []
+        for i in range(cycles):
+            self.hotplug_cycle(kind, i, up_at)
+        return up_at
+
+    def hotplug_cycle(self, kind, i, up_at):
+        """Hot-plug cycle `i` of 0, 1, ...: a move towards B (even i) or A (odd i), 0.1 s
+        into it the USB cable pulled (kind "cable"; the board runs on) or the board
+        stopped (kind "reset"), for 0.3 s; then plugged back (the wall time appended to
+        `up_at`) or booted again. Returns when serial_node has reconnected (its i + 1-th
+        reconnect) and the board is at the target."""
+        self.target = B if i % 2 == 0 else A
+        self.spin(0.1)  # mid-move
+        if kind == "cable":
+            self.board.toggle_cable(False)
+        else:
+            self.board.stop()
+        assert self.spin(until=lambda: self.diag().get("connection") == "disconnected", timeout=5), f"cycle {i}: {self.diag()}"
+        self.spin(0.3)
+        up_at.append(time.time_ns())
+        if kind == "cable":
+            self.board.toggle_cable(True)
+        else:
+            self.boot()
+        assert self.spin(until=lambda: self.connected(i + 1), timeout=10), f"cycle {i}: {self.diag()}"
+        assert self.spin(until=lambda: self.at(self.target), timeout=5), f"cycle {i}: {self.acked_deg()}"
 
     def spin(self, seconds=None, until=None, timeout=10.0):
         """Spin rclpy, publishing the current target at 50 Hz (stamped now) when there
@@ -198,3 +266,15 @@ def engaged_estop_frames(events):
 
 def set_pulses_cycles(events):
     return [c for t, _, _, c in events.frames() if t == SET_PULSES]
+
+
+def reconnect_ms(rig, kind, up_at):
+    """Per hot-plug cycle of `kind` (Rig.hotplug_cycles, which returned `up_at`): the time
+    from plugging back (or booting) to the first SET_PULSES the board received after it, ms."""
+    if kind == "cable":
+        ev = rig.events()
+        plugs = [c for c, plugged in ev.cable if plugged]
+        sends = set_pulses_cycles(ev)
+        return [(ev.wall_ns(next(c for c in sends if c > c_plug)) - t_up) / 1e6 for t_up, c_plug in zip(up_at, plugs)]
+    boots = [rig.events(boot) for boot in range(1, len(up_at) + 1)]
+    return [(ev.wall_ns(set_pulses_cycles(ev)[0]) - t_up) / 1e6 for ev, t_up in zip(boots, up_at)]

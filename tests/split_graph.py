@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
-from conftest import REPO, NodeProcess, Observer, bin_path
+from conftest import REPO, NodeProcess, Observer, bin_path, latest_status, status_values
 from interop.servo_link import SimulatedUno
 
 FIRMWARE = REPO / "firmware" / "servo_control"
@@ -151,11 +151,8 @@ class SplitGraph:
 
     def diag_values(self, node_prefix):
         """The latest diagnostics entry of a node: (level, message, {key: value})."""
-        for _, arr in reversed(self.diags):
-            for s in arr.status:
-                if s.name.startswith(node_prefix):
-                    return s.level, s.message, {kv.key: kv.value for kv in s.values}
-        return None, None, {}
+        s = latest_status(self.diags, node_prefix)
+        return (None, None, {}) if s is None else (s.level, s.message, status_values(s))
 
     def unreachable_lines(self):
         """Log lines about an unreachable network, per launch script."""

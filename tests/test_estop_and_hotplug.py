@@ -10,25 +10,18 @@ import pytest
 from std_msgs.msg import Bool
 
 from conftest import OUTPUT
-from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, Rig, engaged_estop_frames, pulse_us,
-                        sent_ticks, set_pulses_cycles, step_allowed_us, velocity_limits_us_per_s,
+from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, A, B, Rig, engaged_estop_frames, pulse_us,
+                        reconnect_ms, sent_ticks, step_allowed_us, velocity_limits_us_per_s,
                         velocity_violations)
 from interop.servo_link import ESTOP
 
 LIMITS = velocity_limits_us_per_s()
-A = [60.0, 70.0, 110.0, 60.0]
-B = [130.0, 110.0, 80.0, 140.0]
 
 
 def record(name, **figures):
     OUTPUT.mkdir(parents=True, exist_ok=True)
     with open(OUTPUT / f"{name}.jsonl", "a") as f:
         f.write(json.dumps(figures) + "\n")
-
-
-def connected(rig, reconnects=0):
-    d = rig.diag()
-    return d.get("connection") == "connected" and int(d.get("reconnects") or 0) == reconnects
 
 
 def rises(events):
@@ -39,19 +32,11 @@ def rises(events):
 def test_estop_stops_the_arm_mid_move_and_a_release_moves_nothing(launch, observer, tmp_path, action):
     rig = Rig(launch, observer, tmp_path, "-p", f"estop_action:={action}")
     try:
-        assert rig.spin(until=lambda: connected(rig), timeout=15)
-        rig.target = A
-        assert rig.spin(until=lambda: rig.at(A), timeout=5)
-        rig.target = B  # a move of 0.3 s at the servos' speed
-        rig.spin(0.1)
-        t_pub = time.time_ns()
-        rig.estop.publish(Bool(data=True))
-        assert rig.spin(until=lambda: rig.diag().get("device_state") == "e-stop", timeout=5)
+        assert rig.spin(until=rig.connected, timeout=15)
+        t_pub = rig.estop_mid_move()
         rig.spin(0.5)  # the stream goes on; serial_node drops it
         assert int(rig.diag()["inputs_dropped_in_estop"]) > 0
-        rig.target = None
-        rig.estop.publish(Bool(data=False))
-        assert rig.spin(until=lambda: rig.diag().get("device_state") in ("running", "idle"), timeout=5)
+        rig.release_estop()
         rig.spin(0.5)  # released: nothing moves until a new command
         new = [100.0, 90.0, 95.0, 100.0]
         rig.target = new
@@ -93,7 +78,7 @@ def test_a_serial_node_started_during_an_estop_moves_nothing(launch, observer, t
     estop.publish(Bool(data=True))
     rig = Rig(launch, observer, tmp_path)
     try:
-        assert rig.spin(until=lambda: connected(rig) and rig.diag().get("device_state") == "e-stop", timeout=15)
+        assert rig.spin(until=lambda: rig.connected() and rig.diag().get("device_state") == "e-stop", timeout=15)
         assert rig.diag()["estop"] == "true"
         rig.target = B
         rig.spin(1.0)
@@ -121,27 +106,8 @@ def test_hot_plug_while_streaming(launch, observer, tmp_path, kind):
     board says the arm is."""
     cycles = 20
     rig = Rig(launch, observer, tmp_path)
-    up_at = []
     try:
-        assert rig.spin(until=lambda: connected(rig), timeout=15)
-        rig.target = A
-        assert rig.spin(until=lambda: rig.at(A), timeout=5)
-        for i in range(cycles):
-            rig.target = B if i % 2 == 0 else A
-            rig.spin(0.1)  # mid-move
-            if kind == "cable":
-                rig.board.toggle_cable(False)
-            else:
-                rig.board.stop()
-            assert rig.spin(until=lambda: rig.diag().get("connection") == "disconnected", timeout=5)
-            rig.spin(0.3)
-            up_at.append(time.time_ns())
-            if kind == "cable":
-                rig.board.toggle_cable(True)
-            else:
-                rig.boot()
-            assert rig.spin(until=lambda: connected(rig, i + 1), timeout=10), f"cycle {i}: {rig.diag()}"
-            assert rig.spin(until=lambda: rig.at(rig.target), timeout=5), f"cycle {i}: {rig.acked_deg()}"
+        up_at = rig.hotplug_cycles(kind, cycles)
         rig.spin(0.1)
         d = rig.diag()
         assert d["reconnects"] == str(cycles)
@@ -149,21 +115,13 @@ def test_hot_plug_while_streaming(launch, observer, tmp_path, kind):
     finally:
         rig.stop()
 
-    reconnect_ms = []
     if kind == "cable":
         ev = rig.events()
-        plugs = [c for c, plugged in ev.cable if plugged]
-        assert len(plugs) == cycles
-        sends = set_pulses_cycles(ev)
-        for t_up, c_plug in zip(up_at, plugs):
-            c = next(c for c in sends if c > c_plug)
-            reconnect_ms.append((ev.wall_ns(c) - t_up) / 1e6)
+        assert len([c for c, plugged in ev.cable if plugged]) == cycles
         # the pulses never step faster than the velocity limit: not across a reconnect either
         assert velocity_violations(ev, LIMITS) == []
     else:
-        for boot, t_up in enumerate(up_at, start=1):
-            ev = rig.events(boot)
-            reconnect_ms.append((ev.wall_ns(set_pulses_cycles(ev)[0]) - t_up) / 1e6)
-            assert velocity_violations(ev, LIMITS, start_us=HOLD_US) == [], f"boot {boot}"
-    record("hotplug", kind=kind, cycles=cycles, reconnect_ms=reconnect_ms,
+        for boot in range(1, cycles + 1):
+            assert velocity_violations(rig.events(boot), LIMITS, start_us=HOLD_US) == [], f"boot {boot}"
+    record("hotplug", kind=kind, cycles=cycles, reconnect_ms=reconnect_ms(rig, kind, up_at),
            counters={k: d[k] for k in ("reconnects", "frames_sent", "frames_ramped_by_velocity_limit")})

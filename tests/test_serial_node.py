@@ -8,13 +8,13 @@ import subprocess
 import time
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
-from conftest import REPO, bin_path
+from conftest import REPO, bin_path, status_values
 from interop.servo_link import HELLO, HELLO_ACK, STATE, Decoder, SimulatedUno, frame, pulses
+from safety_rig import SerialNodeRig
 import struct
 
 SERVOS = ["base_servo", "shoulder_servo", "elbow_servo", "gripper_servo"]
@@ -32,24 +32,14 @@ def pulse_us(deg):
     return 544 + (2400 - 544) * deg / 180
 
 
-class SerialRig:
+class SerialRig(SerialNodeRig):
     def __init__(self, launch, observer, port="mock", *extra):
-        self.proc = launch("serial_node", "--ros-args", "-p", f"port:={port}", "-p", "diagnostics_period:=0.2", *extra)
-        self.o = observer
-        self.state = observer.sub("/servo_state", JointState)
-        self.diags = observer.sub("/diagnostics", DiagnosticArray)
-        self.angles = observer.pub("/servo_angles", JointState)
-        self.estop = observer.pub("/estop", Bool)  # the contract's QoS: latched
-        observer.wait_matched(self.angles)
-        observer.wait_publisher("/diagnostics")
+        super().__init__(launch, observer, port, 0.2, *extra)
 
     def diag(self):
-        """serial_node's latest diagnostics entry (other nodes publish there too)."""
-        for _, arr in reversed(self.diags):
-            for s in arr.status:
-                if s.name.startswith("serial_node"):
-                    return s, {kv.key: kv.value for kv in s.values}
-        return None, {}
+        """serial_node's latest diagnostics entry (other nodes publish there too): (status, values)."""
+        s = self.status()
+        return s, status_values(s)
 
     def wait_diag(self, pred, timeout=10):
         return self.o.spin_until(lambda: self.diag()[0] is not None and pred(*self.diag()), timeout)
@@ -87,7 +77,7 @@ def test_bad_servo_angles_are_refused_and_nothing_is_sent(launch, observer):
         assert text in rig.diag()[1]["last_rejection"].lower()
     observer.spin_for(0.3)
     assert rig.diag()[1]["frames_sent"] == "1"
-    assert rig.proc.proc.poll() is None
+    assert rig.node.proc.poll() is None
 
 
 def test_latest_wins_at_1khz(launch, observer):
@@ -164,7 +154,7 @@ def test_missing_port_then_unplug_and_replug(launch, observer, tmp_path):
         assert rig.wait_diag(lambda s, v: v.get("connection") == "connected" and v["reconnects"] == "1", 15)
         assert observer.spin_until(lambda: len(rig.state) > n_state
                                    and [round(math.degrees(p)) for p in rig.state[-1][1].position] == [70, 95, 85, 100], 10)
-        assert rig.proc.proc.poll() is None
+        assert rig.node.proc.poll() is None
     finally:
         dev.send_signal(signal.SIGINT)
         assert dev.wait(5) == 0
@@ -206,7 +196,7 @@ def test_garbage_from_the_device_is_counted_and_ignored(launch, observer, tmp_pa
         rig.angles.publish(angles([90, 90, 90, 90], sec=5))
         serve(1.0)
         assert any(m.header.stamp.sec == 5 for _, m in rig.state)
-        assert rig.proc.proc.poll() is None
+        assert rig.node.proc.poll() is None
     finally:
         os.close(master)
         os.close(slave)

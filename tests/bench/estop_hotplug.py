@@ -33,14 +33,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "release"))
 
-from std_msgs.msg import Bool  # noqa: E402
-
 from conftest import DomainLease, NodeProcess, Observer  # noqa: E402
-from interop.servo_link import ESTOP  # noqa: E402
-from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, Rig, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
-
-A = [60.0, 70.0, 110.0, 60.0]
-B = [130.0, 110.0, 80.0, 140.0]
+from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, A, Rig, engaged_estop_frames, reconnect_ms, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
 
 
 def stats(xs):
@@ -62,30 +56,17 @@ class Launcher:
         return [p.stop() for p in self.procs]
 
 
-def connected(rig, reconnects=0):
-    d = rig.diag()
-    return d.get("connection") == "connected" and int(d.get("reconnects") or 0) == reconnects
-
-
 def estop_trials(domain, action, trials, tmp):
     o = Observer(domain)
     launch = Launcher(domain)
     rig = Rig(launch, o, tmp, "-p", f"estop_action:={action}")
     published = []
     try:
-        assert rig.spin(until=lambda: connected(rig), timeout=15), "serial_node did not connect"
+        assert rig.spin(until=rig.connected, timeout=15), "serial_node did not connect"
         for i in range(trials):
-            rig.target = A
-            assert rig.spin(until=lambda: rig.at(A), timeout=5)
-            rig.target = B
-            rig.spin(0.1)
-            published.append(time.time_ns())
-            rig.estop.publish(Bool(data=True))
-            assert rig.spin(until=lambda: rig.diag().get("device_state") == "e-stop", timeout=5)
+            published.append(rig.estop_mid_move())
             rig.spin(0.2)
-            rig.target = None
-            rig.estop.publish(Bool(data=False))
-            assert rig.spin(until=lambda: rig.diag().get("device_state") in ("running", "idle"), timeout=5)
+            rig.release_estop()
         rig.target = A
         assert rig.spin(until=lambda: rig.at(A), timeout=5)
     finally:
@@ -93,10 +74,9 @@ def estop_trials(domain, action, trials, tmp):
         launch.stop()
         o.close()
     ev = rig.events()
-    frames = ev.frames()
     # serial_node may resend an ESTOP frame (the device's STATE did not show it yet):
     # each trial's stop is the first one after its publish
-    stops = [c for t, _, p, c in frames if t == ESTOP and p[0] in (1, 2)]
+    stops = [c for _, c in engaged_estop_frames(ev)]
     engaged = [next(c for c in stops if ev.wall_ns(c) >= t_pub) for t_pub in published]
     assert len(set(engaged)) == trials, (len(stops), trials)
     sends = sent_ticks(ev)
@@ -122,40 +102,14 @@ def hotplug_cycles(domain, kind, cycles, tmp):
     o = Observer(domain)
     launch = Launcher(domain)
     rig = Rig(launch, o, tmp)
-    up = []
     try:
-        assert rig.spin(until=lambda: connected(rig), timeout=15)
-        rig.target = A
-        assert rig.spin(until=lambda: rig.at(A), timeout=5)
-        for i in range(cycles):
-            rig.target = B if i % 2 == 0 else A
-            rig.spin(0.1)
-            if kind == "cable":
-                rig.board.toggle_cable(False)
-            else:
-                rig.board.stop()
-            assert rig.spin(until=lambda: rig.diag().get("connection") == "disconnected", timeout=5)
-            rig.spin(0.3)
-            up.append(time.time_ns())
-            rig.board.toggle_cable(True) if kind == "cable" else rig.boot()
-            assert rig.spin(until=lambda: connected(rig, i + 1), timeout=10)
-            assert rig.spin(until=lambda: rig.at(rig.target), timeout=5)
+        up = rig.hotplug_cycles(kind, cycles)
         counters = {k: rig.diag()[k] for k in ("reconnects", "frames_sent", "frames_ramped_by_velocity_limit")}
     finally:
         rig.stop()
         launch.stop()
         o.close()
-    ms = []
-    if kind == "cable":
-        ev = rig.events()
-        plugs = [c for c, p in ev.cable if p]
-        sends = [c for c, _ in sent_ticks(ev)]
-        ms = [(ev.wall_ns(next(c for c in sends if c > cp)) - t) / 1e6 for t, cp in zip(up, plugs)]
-    else:
-        for boot, t in enumerate(up, start=1):
-            ev = rig.events(boot)
-            ms.append((ev.wall_ns(sent_ticks(ev)[0][0]) - t) / 1e6)
-    return {"reconnect_ms": stats(ms), "counters": counters}
+    return {"reconnect_ms": stats(reconnect_ms(rig, kind, up)), "counters": counters}
 
 
 def main():
