@@ -13,8 +13,8 @@ from geometry_msgs.msg import PointStamped, PoseStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from conftest import REPO, TfListener, compose_chain
-from test_launch_scripts import Script, alive
+from conftest import REPO, TfListener, compose_chain, latest_status, status_values
+from launch_script import Script, alive, graph_ends, reap_scripts  # noqa: F401 (fixture)
 
 JACO_URDF = REPO / "urdf" / "jaco.urdf"
 TIP = "jaco_end_effector"
@@ -106,11 +106,7 @@ class JacoRig:
         observer.wait_publisher("/tf")
 
     def values(self):
-        for _, a in reversed(self.diagnostics):
-            for s in a.status:
-                if s.name.startswith("compute_ik"):
-                    return {kv.key: kv.value for kv in s.values}
-        return {}
+        return status_values(latest_status(self.diagnostics, "compute_ik"))
 
     def tip(self):
         return compose_chain(self.tf.transforms(), "base_link", TIP)
@@ -200,12 +196,8 @@ def test_run_graph_arm_jaco_starts_the_jaco_graph(domain, observer):
     s = Script("run_graph.sh", "--arm", "jaco", env={"ROS_DOMAIN_ID": str(domain)})
     try:
         kids = s.children(3)
-        pose = observer.pub("/pose_target", PoseStamped)
-        states = observer.sub("/joint_states", JointState)
-        observer.wait_matched(pose)
-        observer.wait_publisher("/joint_states")
-        assert observer.spin_until(lambda: {"compute_ik", "state_publisher", "gui_bridge"}
-                                   <= set(observer.node.get_node_names()), 15), observer.node.get_node_names()
+        pose, states = graph_ends(observer, "/pose_target", PoseStamped, "/joint_states", JointState,
+                                  {"compute_ik", "state_publisher", "gui_bridge"})
         assert "serial_node" not in observer.node.get_node_names()
         msg = pose_msg(dh_fk([0.2, 0.3, -0.3, 0.1, 0.4, 0.0]))
         pose.publish(msg)

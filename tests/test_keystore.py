@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from conftest import OUTPUT, REPO, TOPICS, bin_path, default_sigint, descendants
+from conftest import REPO, TOPICS, bin_path, default_sigint
+from launch_script import Script, node_processes, reap_scripts  # noqa: F401 (fixture)
 
 KEYSTORE_SH = REPO / "launch_scripts" / "keystore.sh"
 INSTALL_SH = REPO / "deploy" / "install.sh"
-SCRIPTS = REPO / "launch_scripts"
 ENCLAVE_FILES = ("cert.pem", "key.pem", "identity_ca.cert.pem", "permissions_ca.cert.pem", "governance.p7s",
                  "permissions.p7s", "permissions.xml")
 PC_NODES = {"gui_bridge", "compute_ik", "state_publisher"}
@@ -390,58 +390,11 @@ def test_a_node_runs_under_its_enclave_and_is_refused_under_another(keystore, do
 # ---------------------------------------------------------------------------------------
 # launch scripts
 
-NODES = {"compute_ik", "state_publisher", "gui_bridge", "serial_node"}
+class KeystoreScript(Script):
+    """A launch script with security off unless `env` turns it on, on the virtual Arduino."""
 
-
-def node_cmdlines(pid):
-    """{node name: argv} of the node processes below `pid`."""
-    out = {}
-    for k in descendants(pid):
-        try:
-            exe = Path(os.readlink(f"/proc/{k}/exe")).name
-            argv = Path(f"/proc/{k}/cmdline").read_bytes().split(b"\0")[:-1]
-        except OSError:
-            continue
-        if exe in NODES:
-            out[exe] = [a.decode() for a in argv]
-    return out
-
-
-class Script:
     def __init__(self, name, env, *args):
-        OUTPUT.mkdir(parents=True, exist_ok=True)
-        self.log_path = OUTPUT / f"keystore-{name}-{os.getpid()}-{time.monotonic_ns()}.log"
-        self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen([str(SCRIPTS / name), *args], stdout=self.log, stderr=subprocess.STDOUT,
-                                     env={**os.environ, **NO_SECURITY, "EEZYBOT_BIN_DIR": bin_dir(),
-                                          "GUI_BIND": "127.0.0.1:0", "SERIAL_PORT": "mock", **env},
-                                     start_new_session=True, preexec_fn=default_sigint)
-
-    def output(self):
-        if not self.log.closed:
-            self.log.flush()
-        return self.log_path.read_text()
-
-    def nodes(self, n, timeout=20):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and self.proc.poll() is None:
-            found = node_cmdlines(self.proc.pid)
-            if len(found) >= n:
-                return found
-            time.sleep(0.1)
-        raise AssertionError(f"expected {n} nodes:\n{self.output()}")
-
-    def stop(self):
-        try:
-            if self.proc.poll() is None:
-                self.proc.send_signal(signal.SIGINT)
-            return self.proc.wait(20)
-        finally:
-            try:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            self.log.close()
+        super().__init__(name, *args, env={**NO_SECURITY, "SERIAL_PORT": "mock", **env}, log_prefix="keystore-")
 
 
 def enclave_of(argv):
@@ -459,7 +412,7 @@ def test_scripts_give_each_node_its_enclave_and_say_security_is_on(script, expec
     """ROS_SECURITY_ENABLE=true: the script says security is on (keystore, enclave,
     strategy), each node runs with --enclave of its machine and stays up under Enforce
     (the keystore is good), and Ctrl-C stops them with 0."""
-    s = Script(script, {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
+    s = KeystoreScript(script, {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
                         "ROS_SECURITY_STRATEGY": "Enforce", "ROS_SECURITY_KEYSTORE": str(keystore)},
                "--log-level", "info")
     try:
@@ -486,11 +439,11 @@ def test_enforce_without_the_enclave_exits_2_before_starting_anything(script, tm
     (tmp_path / "empty").mkdir()
     for keystore, says in ((str(tmp_path / "empty"), f"{tmp_path / 'empty'}/enclaves/eezybot/p"),
                            ("", "ROS_SECURITY_KEYSTORE is not set")):
-        s = Script(script, {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
+        s = KeystoreScript(script, {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
                             "ROS_SECURITY_STRATEGY": "Enforce", "ROS_SECURITY_KEYSTORE": keystore})
         try:
             code = s.proc.wait(30)
-            assert not node_cmdlines(s.proc.pid)
+            assert not node_processes(s.proc.pid)
         finally:
             s.stop()
         assert code == 2, s.output()
@@ -500,7 +453,7 @@ def test_enforce_without_the_enclave_exits_2_before_starting_anything(script, tm
 
 def test_enforce_names_a_missing_enclave_file(fresh, domain):
     (enclave(fresh, "/eezybot/pi") / "permissions.p7s").unlink()
-    s = Script("pi.sh", {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
+    s = KeystoreScript("pi.sh", {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
                          "ROS_SECURITY_STRATEGY": "Enforce", "ROS_SECURITY_KEYSTORE": str(fresh)})
     try:
         code = s.proc.wait(30)
@@ -513,7 +466,7 @@ def test_enforce_names_a_missing_enclave_file(fresh, domain):
 def test_permissive_without_a_keystore_warns_and_runs(tmp_path, domain):
     """Any strategy but Enforce: a missing keystore is a warning; the node starts (and,
     as rcl, runs unsecured)."""
-    s = Script("pi.sh", {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
+    s = KeystoreScript("pi.sh", {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
                          "ROS_SECURITY_STRATEGY": "Permissive", "ROS_SECURITY_KEYSTORE": str(tmp_path / "none")})
     try:
         found = s.nodes(1)
@@ -528,7 +481,7 @@ def test_permissive_without_a_keystore_warns_and_runs(tmp_path, domain):
 def test_security_not_enabled_changes_nothing(value, domain):
     """ROS_SECURITY_ENABLE unset, or anything but exactly `true` (rcl): no --enclave, no
     security line; a value that looks meant to enable it is warned about."""
-    s = Script("pi.sh", {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": value,
+    s = KeystoreScript("pi.sh", {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": value,
                          "ROS_SECURITY_STRATEGY": "Enforce", "ROS_SECURITY_KEYSTORE": "/nonexistent"})
     try:
         found = s.nodes(1)

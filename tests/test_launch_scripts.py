@@ -14,98 +14,25 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
-from conftest import OUTPUT, REPO, bin_path, default_sigint, descendants
-
-SCRIPTS = REPO / "launch_scripts"
+from conftest import bin_path, default_sigint, latest_status, status_values
+from launch_script import SCRIPTS, STARTED, Script, alive, graph_ends, node_processes, reap_scripts  # noqa: F401 (fixture)
 
 
 def now_stamp():
     t = time.time()
     return int(t), int((t % 1) * 1e9)
-BIN_DIR = str(Path(bin_path("compute_ik")).parent)
 
 
-NODES = {"compute_ik", "state_publisher", "gui_bridge", "serial_node", "virtual_arduino"}
-
-
-def nodes(pid):
-    """The node processes below `pid` (not the scripts' own short-lived helpers such as
-    dirname or hostname)."""
-    out = []
-    for kid in descendants(pid):
-        try:
-            exe = os.readlink(f"/proc/{kid}/exe")
-        except OSError:
-            continue
-        if Path(exe).name in NODES:
-            out.append(kid)
-    return out
-
-
-_STARTED = []
-
-
-@pytest.fixture(autouse=True)
-def reap_scripts():
-    """Whatever a test does or fails at, no script's process group outlives it: a node
-    left running would answer the next test in the same ROS domain."""
-    yield
-    while _STARTED:
-        pgid = _STARTED.pop()
-        try:
-            os.killpg(pgid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-
-
-def alive(pid):
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
-class Script:
-    def __init__(self, name, *args, env=None):
-        OUTPUT.mkdir(parents=True, exist_ok=True)
-        self.log_path = OUTPUT / f"{name}-{os.getpid()}-{time.monotonic_ns()}.log"
-        self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen([str(SCRIPTS / name), *args], stdout=self.log, stderr=subprocess.STDOUT,
-                                     env={**os.environ, "EEZYBOT_BIN_DIR": BIN_DIR, "GUI_BIND": "127.0.0.1:0",
-                                          **(env or {})}, start_new_session=True, preexec_fn=default_sigint)
-        _STARTED.append(self.proc.pid)
-
-    def output(self):
-        if not self.log.closed:
-            self.log.flush()
-        return self.log_path.read_text()
-
-    def wait_output(self, text, timeout=20):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and text not in self.output():
-            if self.proc.poll() is not None:
-                break
-            time.sleep(0.1)
-        return text in self.output()
-
-    def children(self, n, timeout=20):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            kids = nodes(self.proc.pid)
-            if len(kids) >= n:
-                return kids
-            time.sleep(0.1)
-        raise AssertionError(f"{len(nodes(self.proc.pid))} nodes running, expected {n}:\n{self.output()}")
-
-    def stop(self, sig=signal.SIGINT, timeout=20):
-        self.proc.send_signal(sig)
-        try:
-            return self.proc.wait(timeout)
-        finally:
-            if self.proc.poll() is None:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-            self.log.close()
+def target_answered(observer, xyz, state, y):
+    """A target at (0.2, y, 0.15) stamped now, published on `xyz`: whether servo_state
+    answers it (with its stamp) on `state` within 10 s."""
+    m = PointStamped()
+    m.header.frame_id = "base_link"
+    m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
+    m.point.x, m.point.y, m.point.z = 0.2, y, 0.15
+    xyz.publish(m)
+    stamp = (m.header.stamp.sec, m.header.stamp.nanosec)
+    return observer.spin_until(lambda: any((x.header.stamp.sec, x.header.stamp.nanosec) == stamp for _, x in state), 10)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl_c", "sigterm"])
@@ -116,19 +43,10 @@ def test_run_graph_runs_every_node_with_the_ros_arguments_and_stops_them_all(sig
     s = Script("run_graph.sh", "-r", "__ns:=/arm2", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": ""})
     try:
         kids = s.children(4)
-        xyz = observer.pub("/arm2/xyz_target", PointStamped)
-        state = observer.sub("/arm2/servo_state", JointState)
-        observer.wait_matched(xyz)
-        observer.wait_publisher("/arm2/servo_state")
-        assert observer.spin_until(lambda: {"compute_ik", "state_publisher", "serial_node", "gui_bridge"}
-                                   <= set(observer.node.get_node_names()), 15), observer.node.get_node_names()
+        xyz, state = graph_ends(observer, "/arm2/xyz_target", PointStamped, "/arm2/servo_state", JointState,
+                                {"compute_ik", "state_publisher", "serial_node", "gui_bridge"})
         assert {ns for n, ns in observer.node.get_node_names_and_namespaces() if n == "compute_ik"} == {"/arm2"}
-        m = PointStamped()
-        m.header.frame_id = "base_link"
-        m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
-        m.point.x, m.point.y, m.point.z = 0.2, 0.0, 0.15
-        xyz.publish(m)
-        assert observer.spin_until(lambda: any((x.header.stamp.sec, x.header.stamp.nanosec) == (m.header.stamp.sec, m.header.stamp.nanosec) for _, x in state), 10)
+        assert target_answered(observer, xyz, state, 0.0)
         out = s.output()
         assert f"ROS domain {domain}" in out and "virtual Arduino" in out
         for node in ("compute_ik", "state_publisher", "gui_bridge", "serial_node"):
@@ -149,16 +67,9 @@ def test_pc_and_pi_scripts_split_the_graph(domain, observer):
     try:
         assert len(pc.children(3)) == 3
         assert len(pi.children(1)) == 1
-        xyz = observer.pub("/xyz_target", PointStamped)
-        state = observer.sub("/servo_state", JointState)
-        observer.wait_matched(xyz)
-        observer.wait_publisher("/servo_state")
-        m = PointStamped()
-        m.header.frame_id = "base_link"
-        m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
-        m.point.x, m.point.y, m.point.z = 0.2, 0.05, 0.15
-        xyz.publish(m)
-        assert observer.spin_until(lambda: any((x.header.stamp.sec, x.header.stamp.nanosec) == (m.header.stamp.sec, m.header.stamp.nanosec) for _, x in state), 10)
+        xyz, state = graph_ends(observer, "/xyz_target", PointStamped, "/servo_state", JointState,
+                                {"compute_ik", "state_publisher", "serial_node", "gui_bridge"})
+        assert target_answered(observer, xyz, state, 0.05)
         assert "running here (operator PC): compute_ik, state_publisher, gui_bridge" in pc.output()
         assert "expected on the Pi" in pc.output()
         assert "serial_node with the built-in virtual Arduino" in pi.output()
@@ -179,15 +90,8 @@ def test_pi_script_never_falls_back_to_the_virtual_arduino(domain, observer):
         assert pi.wait_output("WARNING: no Arduino")
         observer.wait_publisher("/diagnostics")
 
-        def serial():
-            for _, a in reversed(diags):
-                for st in a.status:
-                    if st.name.startswith("serial_node"):
-                        return {kv.key: kv.value for kv in st.values}
-            return None
-
-        assert observer.spin_until(lambda: serial() is not None, 10)
-        values = serial()
+        assert observer.spin_until(lambda: latest_status(diags, "serial_node") is not None, 10)
+        values = status_values(latest_status(diags, "serial_node"))
         assert values["port"] == "/dev/eezybot"
         assert values["connection"] != "connected"
         assert "virtual" not in pi.output().split("WARNING")[1].split("\n")[0]
@@ -208,12 +112,12 @@ def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
     proc = subprocess.Popen([str(bundle / "launch_scripts" / "pi.sh")], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, env=env, text=True, start_new_session=True,
                             preexec_fn=default_sigint)
-    _STARTED.append(proc.pid)
+    STARTED.append(proc.pid)
     try:
         end = time.monotonic() + 20
-        while time.monotonic() < end and not nodes(proc.pid):
+        while time.monotonic() < end and not node_processes(proc.pid):
             time.sleep(0.1)
-        kids = nodes(proc.pid)
+        kids = list(node_processes(proc.pid))
         assert kids, "pi.sh started nothing"
         exe = os.readlink(f"/proc/{kids[0]}/exe")
         assert exe == str(bundle / "bin" / "serial_node")
