@@ -2,6 +2,7 @@
 observed by real rclpy; its access rules and per-client limits; and the command-line
 driver (once, play, record)."""
 import base64
+import contextlib
 import http.server
 import json
 import math
@@ -23,7 +24,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from diagnostic_msgs.msg import DiagnosticArray
 
-from conftest import LATCHED, OUTPUT, REPO, bin_path
+from conftest import LATCHED, OUTPUT, REPO, bin_path, latest_status, status_values
 
 CHROMIUM = "/usr/bin/chromium"
 # --enable-unsafe-swiftshader: WebGL (the 3D view) through SwiftShader, Chromium's software
@@ -117,6 +118,14 @@ class Panel:
     def set_slider(self, sid, value):
         self.page.eval_on_selector(f"#{sid}", "(el, v) => { el.value = v; el.dispatchEvent(new Event('input')); }", value)
 
+    def set_sliders(self, **xyz):
+        """Moves the sliders named (x=, y=, z=, in the order given); returns once rclpy's
+        newest xyz_target has the last one's value."""
+        for sid, value in xyz.items():
+            self.set_slider(sid, value)
+        axis, value = list(xyz.items())[-1]
+        assert self.spin_until(lambda: self.xyz and abs(getattr(self.xyz[-1][1].point, axis) - value) < 1e-9)
+
     def spin_until(self, pred, timeout=5):
         return self.o.spin_until(pred, timeout)
 
@@ -168,10 +177,7 @@ def test_slider_moves_reach_rclpy_with_their_values(panel):
 
 
 def test_keyboard_jog_moves_the_target_by_the_step(panel):
-    panel.set_slider("x", 0.2)
-    panel.set_slider("y", 0.0)
-    panel.set_slider("z", 0.15)
-    assert panel.spin_until(lambda: panel.xyz and abs(panel.xyz[-1][1].point.z - 0.15) < 1e-9)
+    panel.set_sliders(x=0.2, y=0.0, z=0.15)
     panel.o.spin_for(0.1)
     panel.page.evaluate("() => document.activeElement && document.activeElement.blur()")
     n = len(panel.xyz)
@@ -194,10 +200,7 @@ def test_keyboard_jog_moves_the_target_by_the_step(panel):
 
 
 def test_gamepad_moves_only_while_the_deadman_is_held(panel):
-    panel.set_slider("x", 0.2)
-    panel.set_slider("y", 0.0)
-    panel.set_slider("z", 0.15)
-    assert panel.spin_until(lambda: panel.xyz and abs(panel.xyz[-1][1].point.z - 0.15) < 1e-9)
+    panel.set_sliders(x=0.2, y=0.0, z=0.15)
     panel.o.spin_for(0.2)
     n = len(panel.xyz)
     panel.page.evaluate("() => { window.__pad.axes[1] = -1; }")  # stick forward, deadman released
@@ -216,9 +219,7 @@ def test_gamepad_moves_only_while_the_deadman_is_held(panel):
 
 
 def test_unreachable_position_shows_the_reason_and_sends_nothing(panel):
-    panel.set_slider("x", 0.2)
-    panel.set_slider("z", 0.15)
-    assert panel.spin_until(lambda: panel.xyz and abs(panel.xyz[-1][1].point.z - 0.15) < 1e-9)
+    panel.set_sliders(x=0.2, z=0.15)
     panel.o.spin_for(0.2)
     n = len(panel.xyz)
     panel.set_slider("x", 0.3)
@@ -639,14 +640,39 @@ def start_panel(launch, observer, *ros_args, bind_host="127.0.0.1"):
     return proc, port
 
 
+@contextlib.contextmanager
+def another_site(body, seen=None):
+    """A web server of another origin on 127.0.0.1 (as another site's page in the
+    operator's browser) that answers every GET with `body` (HTML) and appends the
+    request's (path, headers) to `seen`; yields its port."""
+    class Page(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            if seen is not None:
+                seen.append((self.path, dict(self.headers)))
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Page)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        yield server.server_address[1]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def panel_status(diags):
     """gui_bridge's latest diagnostics entry: (level, message, values)."""
-    for _, arr in reversed(diags):
-        for s in arr.status:
-            if s.name.startswith("gui_bridge"):
-                level = s.level[0] if isinstance(s.level, bytes) else s.level
-                return level, s.message, {kv.key: kv.value for kv in s.values}
-    return None
+    s = latest_status(diags, "gui_bridge")
+    if s is None:
+        return None
+    level = s.level[0] if isinstance(s.level, bytes) else s.level
+    return level, s.message, status_values(s)
 
 
 def rss_kib(pid):
@@ -673,28 +699,17 @@ def test_websocket_from_another_origin_is_refused_and_moves_nothing(launch, obse
     # the same attack from a real page of another origin in Chromium: a page of another
     # web server on this machine (Chromium keeps pages of public sites from loopback
     # addresses unless the user allows it, so those need that permission or DNS rebinding)
-    class EvilPage(http.server.BaseHTTPRequestHandler):
-        def do_GET(self):
-            self.send_response(200)
-            self.send_header("Content-Type", "text/html")
-            self.end_headers()
-            self.wfile.write(b"<!DOCTYPE html><title>another site</title>")
-
-        def log_message(self, *args):
-            pass
-    evil_server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), EvilPage)
-    threading.Thread(target=evil_server.serve_forever, daemon=True).start()
-    page = browser.new_page()
-    console = []
-    page.on("console", lambda m: console.append(m.text))
-    page.goto(f"http://127.0.0.1:{evil_server.server_address[1]}/")
-    outcome = page.evaluate("""(port) => new Promise((done) => {
-        const ws = new WebSocket(`ws://127.0.0.1:${port}/ws`);
-        ws.onopen = () => { ws.send(JSON.stringify({t: "target", xyz: [0.2, 0, 0.15]})); done("opened"); };
-        ws.onerror = () => done("refused");
-    })""", port)
-    page.close()
-    evil_server.shutdown()
+    with another_site(b"<!DOCTYPE html><title>another site</title>") as evil_port:
+        page = browser.new_page()
+        console = []
+        page.on("console", lambda m: console.append(m.text))
+        page.goto(f"http://127.0.0.1:{evil_port}/")
+        outcome = page.evaluate("""(port) => new Promise((done) => {
+            const ws = new WebSocket(`ws://127.0.0.1:${port}/ws`);
+            ws.onopen = () => { ws.send(JSON.stringify({t: "target", xyz: [0.2, 0, 0.15]})); done("opened"); };
+            ws.onerror = () => done("refused");
+        })""", port)
+        page.close()
     assert any("403" in c for c in console), console
     assert outcome == "refused"
     observer.spin_for(1.0)
@@ -1087,10 +1102,7 @@ def test_phone_layout_touch_joystick_moves_only_while_move_is_held(launch, obser
             b = page.locator("#estop").bounding_box()
             assert b and b["y"] >= 0 and b["y"] + b["height"] <= 844 and b["width"] > 300, b
         assert page.evaluate("() => document.documentElement.scrollWidth <= window.innerWidth + 1"), "wider than the phone"
-        p.set_slider("x", 0.2)
-        p.set_slider("y", 0.0)
-        p.set_slider("z", 0.15)
-        assert p.spin_until(lambda: p.xyz and abs(p.xyz[-1][1].point.z - 0.15) < 1e-9)
+        p.set_sliders(x=0.2, y=0.0, z=0.15)
         page.locator("#touch").scroll_into_view_if_needed()
         cdp = p.context.new_cdp_session(page)
         sx, sy = centre(page, "#stick")

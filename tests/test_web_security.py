@@ -1,12 +1,10 @@
 """The web side probed as an attacker would, on loopback (issue 18 item 7): each probe that
 got through is a test here, run against the real gui_bridge binary. The panel's own
 guards (Origin, DNS rebinding, token, floods) are tests/test_gui_bridge.py's."""
-import http.server
 import os
 import re
 import socket
 import struct
-import threading
 import time
 
 from geometry_msgs.msg import PointStamped
@@ -14,7 +12,7 @@ from rclpy.serialization import serialize_message
 
 from conftest import LATCHED, REPO
 from foxglove_client import free_port
-from test_gui_bridge import RawWs, browser, http_get, panel_status, rss_kib, start_panel  # noqa: F401 (fixture)
+from test_gui_bridge import RawWs, another_site, browser, http_get, panel_status, rss_kib, start_panel  # noqa: F401 (fixture)
 
 FOXGLOVE = {"Sec-WebSocket-Protocol": "foxglove.sdk.v1"}
 
@@ -40,6 +38,18 @@ def printed_token(proc, port):
     return m.group(1)
 
 
+def start_panel_with_foxglove(launch, observer, host, *params):
+    """gui_bridge with its Foxglove server on `host` and a free port, once that server
+    runs: (process, panel port, Foxglove port)."""
+    fox = free_port()
+    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:={host}:{fox}", *params)
+    deadline = time.monotonic() + 10
+    while "Foxglove WebSocket server on" not in proc.output():
+        assert time.monotonic() < deadline, proc.output()
+        time.sleep(0.05)
+    return proc, port, fox
+
+
 def try_to_publish(ws, observer, xyz, seconds=3.0):
     """Advertise xyz_target and publish a target on it for a while (as the issue's probe)."""
     target = PointStamped()
@@ -60,12 +70,7 @@ def test_foxglove_on_the_network_publishes_only_with_the_panel_s_token(launch, o
     turned. Now a Foxglove server beyond loopback makes the panel's token required for
     both, and every Foxglove client passes the panel's rules."""
     xyz = observer.sub("/xyz_target", PointStamped)
-    fox = free_port()
-    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=0.0.0.0:{fox}", "-p", "foxglove_publish:=true")
-    deadline = time.monotonic() + 10
-    while "Foxglove WebSocket server on" not in proc.output():
-        assert time.monotonic() < deadline, proc.output()
-        time.sleep(0.05)
+    proc, port, fox = start_panel_with_foxglove(launch, observer, "0.0.0.0", "-p", "foxglove_publish:=true")
     for headers, path, status in (({"Origin": "http://evil.example"}, "/", 403),
                                   ({}, "/", 401),
                                   ({}, "/?token=" + "0" * 48, 403),
@@ -99,12 +104,7 @@ def test_foxglove_refuses_other_origins_rebinding_and_connections_over_its_cap(l
     connections."""
     from diagnostic_msgs.msg import DiagnosticArray
     diags = observer.sub("/diagnostics", DiagnosticArray)
-    fox = free_port()
-    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=127.0.0.1:{fox}")
-    deadline = time.monotonic() + 10
-    while "Foxglove WebSocket server on" not in proc.output():
-        assert time.monotonic() < deadline, proc.output()
-        time.sleep(0.05)
+    proc, port, fox = start_panel_with_foxglove(launch, observer, "127.0.0.1")
     evil = foxglove_ws(fox, headers={"Origin": "http://evil.example"})
     assert evil.status == 403 and "evil.example" in evil.body, (evil.status, evil.body)
     rebound = foxglove_ws(fox, headers={"Host": f"evil.example:{fox}", "Origin": f"http://evil.example:{fox}"})
@@ -140,12 +140,7 @@ def test_foxglove_refuses_other_origins_rebinding_and_connections_over_its_cap(l
 def test_a_10_mib_foxglove_message_closes_that_client_and_memory_stays_flat(launch, observer):
     """Medium: the Foxglove server read 10 MiB messages (RSS 19 -> 101 MB). Now a message
     over 1 MiB closes the client at its header, before its payload is read."""
-    fox = free_port()
-    proc, port = start_panel(launch, observer, "-p", f"foxglove_bind:=127.0.0.1:{fox}")
-    deadline = time.monotonic() + 10
-    while "Foxglove WebSocket server on" not in proc.output():
-        assert time.monotonic() < deadline, proc.output()
-        time.sleep(0.05)
+    proc, port, fox = start_panel_with_foxglove(launch, observer, "127.0.0.1")
     before, peak_before = rss_kib(proc.proc.pid), peak_rss_kib(proc.proc.pid)
     big = RawWs.frame(b"\0" * (10 * 1024 * 1024), opcode=0x2)
     for _ in range(5):
@@ -181,21 +176,7 @@ def test_the_token_goes_to_no_other_server_and_not_into_urls(launch, observer, b
     server on 127.0.0.1 received it; the ?token= URL stayed in the history. Now the page
     keeps it in its origin's localStorage and sends it as a WebSocket subprotocol."""
     seen = []
-
-    class Recorder(http.server.BaseHTTPRequestHandler):
-        def do_GET(self):
-            seen.append((self.path, dict(self.headers)))
-            self.send_response(200)
-            self.send_header("Content-Type", "text/html")
-            self.end_headers()
-            self.wfile.write(b"<p>another server</p>")
-
-        def log_message(self, *args):
-            pass
-
-    other = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Recorder)
-    threading.Thread(target=other.serve_forever, daemon=True).start()
-    try:
+    with another_site(b"<p>another server</p>", seen) as other_port:
         proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
         token = printed_token(proc, port)
         context = browser.new_context()
@@ -211,13 +192,11 @@ def test_the_token_goes_to_no_other_server_and_not_into_urls(launch, observer, b
         page.reload()
         page.wait_for_function("() => document.getElementById('ws-dot').className.includes('up')")
         # another server of this host, visited by the same browser, gets nothing of it
-        page.goto(f"http://127.0.0.1:{other.server_address[1]}/")
+        page.goto(f"http://127.0.0.1:{other_port}/")
         assert seen, "the other server was not visited"
         leaked = [(p, h) for p, h in seen if token in p or any(token in v for v in h.values())]
         assert not leaked, leaked
         context.close()
-    finally:
-        other.shutdown()
 
 
 def program_message(ws, pred, timeout=10.0):
