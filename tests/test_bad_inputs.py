@@ -1370,7 +1370,10 @@ def campaign(tmp_path_factory):
 
         # ---- the WebSocket's protocol violations and HTTP junk, each on its own connection
         r["ws_protocol"] = []
-        for name, make in WS_PROTOCOL_JUNK:
+
+        def send_on_new_connection(name, make):
+            """A new WebSocket client that sends make()'s bytes; None (the failure
+            recorded) when the send fails."""
             c = WsClient(g.port, name)
             r["sent"]["ws"] += 1
             try:
@@ -1378,18 +1381,17 @@ def campaign(tmp_path_factory):
             except OSError as e:
                 r["ws_protocol"].append((name, f"send failed: {e!r}", c.close_reason))
                 c.sock.close()
+                return None
+            return c
+
+        for name, make in WS_PROTOCOL_JUNK:
+            if (c := send_on_new_connection(name, make)) is None:
                 continue
             closed = c.closed.wait(5)
             r["ws_protocol"].append((name, "closed" if closed else "open", c.close_reason))
             c.sock.close()
         for name, make in WS_ODD_FRAMING:
-            c = WsClient(g.port, name)
-            r["sent"]["ws"] += 1
-            try:
-                c.sock.sendall(make())
-            except OSError as e:
-                r["ws_protocol"].append((name, f"send failed: {e!r}", c.close_reason))
-                c.sock.close()
+            if (c := send_on_new_connection(name, make)) is None:
                 continue
             answered = g.wait(lambda: c.answers(), 10)
             answer = c.answers()[0] if answered else None
@@ -1711,27 +1713,22 @@ def logged(reasons):
     return sum(1 + int(m.group(1)) if (m := QUIET.search(x)) else 1 for x in reasons)
 
 
-def test_compute_ik_counts_and_names_every_rejection(campaign):
+@pytest.mark.parametrize("node,line,counter,over,diagnostics_over", [
+    ("compute_ik", COMPUTE_IK_LINE, "rejected", 1000, 20),
+    ("serial_node", SERIAL_LINE, "inputs_rejected", 300, 5),
+])
+def test_node_counts_and_names_every_rejection(campaign, node, line, counter, over, diagnostics_over):
+    """Over `over` rejections counted in `counter`, logged (`line`: the reason is its last
+    group) with a reason each, every expected reason among them; diagnostics seen over
+    `diagnostics_over` times; each rejection sent alone named as expected."""
     r = campaign
-    lines = [COMPUTE_IK_LINE.search(line) for line in log_segment(r, "compute_ik").splitlines()]
-    reasons = [m.group(2) for m in lines if m]
-    assert 0 < logged(reasons) <= delta(r, "compute_ik", "rejected") and delta(r, "compute_ik", "rejected") > 1000
+    reasons = [m.groups()[-1] for m in map(line.search, log_segment(r, node).splitlines()) if m]
+    assert 0 < logged(reasons) <= delta(r, node, counter) and delta(r, node, counter) > over
     assert all(x.strip() for x in reasons)
-    for regex, n in r["expect_reasons"]["compute_ik"].items():
+    for regex, n in r["expect_reasons"][node].items():
         assert any(re.search(regex, x) for x in reasons), f"no rejection says /{regex}/ ({n} sent)"
-    assert len(r["diag_seen"]["compute_ik"]) > 20, r["diag_seen"]["compute_ik"]
-    bad = [x for x in r["reasons"] if x[0] == "compute_ik" and not x[3]]
-    assert not bad, bad
-
-
-def test_serial_node_counts_and_names_every_rejection(campaign):
-    r = campaign
-    reasons = [m.group(1) for m in map(SERIAL_LINE.search, log_segment(r, "serial_node").splitlines()) if m]
-    assert 0 < logged(reasons) <= delta(r, "serial_node", "inputs_rejected") and delta(r, "serial_node", "inputs_rejected") > 300
-    for regex, n in r["expect_reasons"]["serial_node"].items():
-        assert any(re.search(regex, x) for x in reasons), f"no rejection says /{regex}/ ({n} sent)"
-    assert len(r["diag_seen"]["serial_node"]) > 5, r["diag_seen"]["serial_node"]
-    bad = [x for x in r["reasons"] if x[0] == "serial_node" and not x[3]]
+    assert len(r["diag_seen"][node]) > diagnostics_over, r["diag_seen"][node]
+    bad = [x for x in r["reasons"] if x[0] == node and not x[3]]
     assert not bad, bad
 
 
