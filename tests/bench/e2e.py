@@ -680,6 +680,18 @@ def print_cases(cases, res, args):
 
 
 # ---------------------------------------------------------------- main
+def print_load_and_write_json(meta, targets, res, args, lead=""):
+    """The end of a benchmark run: the load average at its start and end (`meta`, from
+    machine(), with loadavg_end), after `lead`; the machine, `targets` and the results
+    `res` written to --json if given."""
+    print(f"\n{lead}load average at start {meta['loadavg_start']}, at end {meta['loadavg_end']} "
+          f"({meta['cores']} cores; other work on this machine shows in these figures)")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"machine": meta, "targets": targets, "results": res}, indent=1,
+                                              default=str))
+        print(f"wrote {args.json}")
+
+
 def machine():
     cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                 if line.startswith("model name")), platform.processor())
@@ -764,12 +776,7 @@ def main():
         res["g"] = precision(raw.get("same"), raw.get("split"), raw.get("seed"))
     meta["loadavg_end"] = os.getloadavg()
     print_cases(cases, res, args)
-    print(f"\nload average at start {meta['loadavg_start']}, at end {meta['loadavg_end']} "
-          f"({meta['cores']} cores; other work on this machine shows in these figures)")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"machine": meta, "targets": TARGETS, "results": res}, indent=1,
-                                              default=str))
-        print(f"wrote {args.json}")
+    print_load_and_write_json(meta, TARGETS, res, args)
 
 
 if __name__ == "__main__":

@@ -17,9 +17,10 @@ import time
 
 def main():
     import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
+
+    from rclpy_main import spinning
 
     out_path, status_path, topics = sys.argv[1], sys.argv[2], sys.argv[3:]
     rclpy.init()
@@ -41,21 +42,16 @@ def main():
     for t in topics:
         node.create_subscription(JointState, t, keep(tables[t]), qos)
     matched = False
-    try:
+    with spinning(node):
         while rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.1)
             if not matched and all(node.count_publishers(t) > 0 for t in topics):
                 matched = True
                 with open(status_path, "w") as f:
                     f.write("matched\n")
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     with open(out_path, "w") as f:
         json.dump({"tables": {t: {str(k): v for k, v in tab.items()} for t, tab in tables.items()},
                    "duplicates": dup[0]}, f)
-    node.destroy_node()
-    if rclpy.ok():
-        rclpy.shutdown()
     return 0
 
 

@@ -48,7 +48,6 @@ g++ and libfastrtps-dev (the peer), launch_scripts/keystore.sh and openssl, and 
 --device simavr the firmware and its harness (make -C firmware/servo_control all sim).
 """
 import argparse
-import json
 import os
 import shutil
 import signal
@@ -319,12 +318,7 @@ def main():
         shutil.rmtree(work, ignore_errors=True)
     meta["loadavg_end"] = os.getloadavg()
     report(res, args)
-    print(f"\n{time.time() - t0:.0f} s in all; load average at start {meta['loadavg_start']}, at end "
-          f"{meta['loadavg_end']} ({meta['cores']} cores; other work on this machine shows in these figures)")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"machine": meta, "targets": TARGETS, "results": res}, indent=1,
-                                              default=str))
-        print(f"wrote {args.json}")
+    e2e.print_load_and_write_json(meta, TARGETS, res, args, lead=f"{time.time() - t0:.0f} s in all; ")
 
 
 if __name__ == "__main__":

@@ -77,9 +77,10 @@ def main():
 
     import rclpy
     from geometry_msgs.msg import PointStamped
-    from rclpy.executors import ExternalShutdownException
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
+
+    from rclpy_main import spinning
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--cap", choices=["loop", "gate"], default="loop")
@@ -119,14 +120,9 @@ def main():
     node.create_subscription(PointStamped, "xyz_target", on_target, qos)
     if args.cap == "loop":
         node.create_timer(1.0 / RATE_HZ, cycle)
-    try:
+    with spinning(node):
         rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     sys.stderr.write(f"[seed_compute_ik] {errors[0]} targets failed in the seed's equations\n")
-    node.destroy_node()
-    if rclpy.ok():
-        rclpy.shutdown()
     return 0
 
 

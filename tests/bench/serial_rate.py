@@ -36,8 +36,13 @@ def main():
     ap.add_argument("--mock", action="store_true")
     ap.add_argument("--seconds", type=float, default=10.0)
     args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        bench(args, tmp)
+
+
+def bench(args, tmp):
+    """The three runs, the virtual Arduino's pty in the directory `tmp`."""
     lease = DomainLease()
-    tmp = tempfile.mkdtemp()
     dev = None
     if args.mock:
         port = "mock"
