@@ -58,6 +58,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 using namespace eprosima::fastdds::dds;
@@ -379,31 +380,40 @@ int main(int argc, char** argv)
     std::vector<std::unique_ptr<ReaderListener>> reader_listeners;
     std::map<std::string, DataWriter*> writers;
     std::vector<DataReader*> readers;
-    for (auto& [topic, type] : pubs) {
+    // A writer or reader (`what`) of `topic` with the topic's QoS and a listener of its
+    // own kept in `listeners`, made by `create`; nullptr, complained about and counted
+    // in `failed`, when it cannot be made.
+    auto endpoint = [&](const std::string& topic, const std::string& type, const char* what, auto qos,
+                        auto& listeners, auto create) {
         Topic* t = topic_of(topic, type);
-        DataWriterQos qos = DATAWRITER_QOS_DEFAULT;
         history(topic, qos);
-        writer_listeners.push_back(std::make_unique<WriterListener>(topic));
-        DataWriter* w = t ? publisher->create_datawriter(t, qos, writer_listeners.back().get()) : nullptr;
-        if (w == nullptr) {
-            complain("cannot create a writer of " + topic + " (" + type + "): denied by the permissions?");
+        using Listener = typename std::decay_t<decltype(listeners)>::value_type::element_type;
+        listeners.push_back(std::make_unique<Listener>(topic));
+        auto* made = t ? create(t, qos, listeners.back().get()) : nullptr;
+        if (made == nullptr) {
+            complain(std::string("cannot create a ") + what + " of " + topic + " (" + type +
+                     "): denied by the permissions?");
             ++failed;
-            continue;
         }
-        writers[topic] = w;
+        return made;
+    };
+    for (auto& [topic, type] : pubs) {
+        DataWriter* w = endpoint(topic, type, "writer", DATAWRITER_QOS_DEFAULT, writer_listeners,
+                                 [&](Topic* t, const DataWriterQos& qos, WriterListener* l) {
+                                     return publisher->create_datawriter(t, qos, l);
+                                 });
+        if (w != nullptr) {
+            writers[topic] = w;
+        }
     }
     for (auto& [topic, type] : subs) {
-        Topic* t = topic_of(topic, type);
-        DataReaderQos qos = DATAREADER_QOS_DEFAULT;
-        history(topic, qos);
-        reader_listeners.push_back(std::make_unique<ReaderListener>(topic));
-        DataReader* r = t ? subscriber->create_datareader(t, qos, reader_listeners.back().get()) : nullptr;
-        if (r == nullptr) {
-            complain("cannot create a reader of " + topic + " (" + type + "): denied by the permissions?");
-            ++failed;
-            continue;
+        DataReader* r = endpoint(topic, type, "reader", DATAREADER_QOS_DEFAULT, reader_listeners,
+                                 [&](Topic* t, const DataReaderQos& qos, ReaderListener* l) {
+                                     return subscriber->create_datareader(t, qos, l);
+                                 });
+        if (r != nullptr) {
+            readers.push_back(r);
         }
-        readers.push_back(r);
     }
     if (failed) {
         Log::Flush();
