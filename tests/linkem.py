@@ -58,6 +58,7 @@ import json
 import os
 import random
 import select
+import shutil
 import signal
 import struct
 import subprocess
@@ -359,22 +360,30 @@ class ImpairedLink:
         with open(os.path.join(self._dir, "stderr"), "w") as err:
             self.proc = subprocess.Popen(self.argv + ["--stats", self.stats_path], stdin=subprocess.DEVNULL,
                                          stdout=subprocess.PIPE, stderr=err, bufsize=0)
-        deadline = time.monotonic() + timeout
-        line = b""
-        while not line.endswith(b"\n"):
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([self.proc.stdout], [], [], left)[0]:
+        try:
+            deadline = time.monotonic() + timeout
+            line = b""
+            while not line.endswith(b"\n"):
+                left = deadline - time.monotonic()
+                if left <= 0 or not select.select([self.proc.stdout], [], [], left)[0]:
+                    self._kill()
+                    raise TimeoutError(f"linkem not ready after {timeout} s: {self._stderr()}")
+                chunk = self.proc.stdout.read(64)
+                if not chunk:
+                    self.proc.wait(10)
+                    raise RuntimeError(f"linkem exited with {self.proc.returncode} before ready: {self._stderr()}")
+                line += chunk
+            if line.strip() != b"ready":
                 self._kill()
-                raise TimeoutError(f"linkem not ready after {timeout} s: {self._stderr()}")
-            chunk = self.proc.stdout.read(64)
-            if not chunk:
-                self.proc.wait(10)
-                raise RuntimeError(f"linkem exited with {self.proc.returncode} before ready: {self._stderr()}")
-            line += chunk
-        if line.strip() != b"ready":
-            self._kill()
-            raise RuntimeError(f"linkem said {line!r} instead of ready: {self._stderr()}")
+                raise RuntimeError(f"linkem said {line!r} instead of ready: {self._stderr()}")
+        except BaseException:
+            self._remove_dir()  # the error has its stderr already
+            raise
         return self
+
+    def _remove_dir(self):
+        """The temporary directory of this run (stats and stderr), gone."""
+        shutil.rmtree(self._dir, ignore_errors=True)
 
     def _kill(self):
         if self.proc and self.proc.poll() is None:
@@ -401,11 +410,7 @@ class ImpairedLink:
         except (OSError, ValueError):
             self.stats = None
         finally:
-            for name in ("stats.json", "stderr"):
-                with contextlib.suppress(OSError):
-                    os.unlink(os.path.join(self._dir, name))
-            with contextlib.suppress(OSError):
-                os.rmdir(self._dir)
+            self._remove_dir()
         if self.returncode != 0 or self.stats is None:
             raise RuntimeError(f"linkem exited with {self.returncode}, stats {'missing' if self.stats is None else 'written'}: {err}")
         return self.stats
