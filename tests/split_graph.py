@@ -10,7 +10,6 @@ Targets are stamped with the wall clock; serial_node copies a command's stamp in
 how long the round trip took (one machine, one clock).
 """
 import math
-import os
 import re
 import subprocess
 import time

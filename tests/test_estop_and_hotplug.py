@@ -4,7 +4,6 @@ in simavr while rclpy streams servo_angles at 50 Hz.
 No timing is asserted: each test writes what it measured (e-stop latency, reconnect times)
 to test-output/; tests/bench/estop_hotplug.py repeats them for BENCHMARKS.md."""
 import json
-import time
 
 import pytest
 from std_msgs.msg import Bool
