@@ -100,10 +100,18 @@ def udp_ports(netns, pid):
 
 # ---------------------------------------------------------------- one run
 def hops_run(variant, args, tag):
+    """One run, its capture in a temporary directory removed whether or not it succeeds."""
+    pcap_dir = Path(tempfile.mkdtemp(prefix="secure-hops-"))
+    try:
+        return captured_run(variant, args, tag, pcap_dir / f"{tag}.pcap")
+    finally:
+        shutil.rmtree(pcap_dir, ignore_errors=True)
+
+
+def captured_run(variant, args, tag, pcap):
     log(f"--- run `{tag}` ({variant}): {args.rate:g} Hz x {args.seconds:g} s, capture on the pc namespace's lo")
     run = S.LatencyRun(tag, A.TargetPath("smooth"), variant, device=args.device, clock_ppm=e2e.clock_ppm(args),
                        log=log)
-    pcap = Path(tempfile.mkdtemp(prefix="secure-hops-")) / f"{tag}.pcap"
     dump = None
     domain = None
     try:
@@ -129,7 +137,6 @@ def hops_run(variant, args, tag):
             dump.wait(timeout=10)
         run.stop()
     grams = read_pcap(pcap)
-    shutil.rmtree(pcap.parent, ignore_errors=True)
     shutil.rmtree(run.workdir, ignore_errors=True)
     return analyse(variant.name, run, grams, ports, domain, t_measure, cpu)
 
