@@ -623,12 +623,31 @@ mod tests {
             write(dir, "cert.pem", &cert.to_pem().unwrap());
         }
 
-        pub fn enclave(test: &str, ca: &Ca) -> PathBuf {
-            let dir = std::env::temp_dir().join(format!(
-                "eezybot-security-{}-{test}/enclaves/eezybot/pc",
-                std::process::id()
-            ));
-            let _ = std::fs::remove_dir_all(&dir);
+        /// A keystore's enclave directory for one test; the keystore is deleted when
+        /// this is dropped.
+        pub struct Enclave {
+            keystore: PathBuf,
+            dir: PathBuf,
+        }
+
+        impl std::ops::Deref for Enclave {
+            type Target = Path;
+            fn deref(&self) -> &Path {
+                &self.dir
+            }
+        }
+
+        impl Drop for Enclave {
+            fn drop(&mut self) {
+                let _ = std::fs::remove_dir_all(&self.keystore);
+            }
+        }
+
+        pub fn enclave(test: &str, ca: &Ca) -> Enclave {
+            let keystore = std::env::temp_dir()
+                .join(format!("eezybot-security-{}-{test}", std::process::id()));
+            let dir = keystore.join("enclaves/eezybot/pc");
+            let _ = std::fs::remove_dir_all(&keystore);
             std::fs::create_dir_all(&dir).unwrap();
             let key = key();
             write_key(&dir, &key);
@@ -649,7 +668,7 @@ mod tests {
                     &ca.key,
                 ),
             );
-            dir
+            Enclave { keystore, dir }
         }
 
         pub fn write(dir: &Path, name: &str, bytes: &[u8]) {
@@ -667,7 +686,7 @@ mod tests {
     }
 
     /// A CA and a good enclave of it, for `test`.
-    fn good_enclave(test: &str) -> (keystore::Ca, PathBuf) {
+    fn good_enclave(test: &str) -> (keystore::Ca, keystore::Enclave) {
         let ca = keystore::Ca::new("ca");
         let dir = keystore::enclave(test, &ca);
         (ca, dir)
