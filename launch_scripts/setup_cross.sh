@@ -25,14 +25,7 @@ fi
 # qemu-arm, the cargo runners), perl and make (OpenSSL's own build, which openssl-src runs
 # for the target: the Pi binaries link OpenSSL statically for DDS Security).
 EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu libc6-dev-arm64-cross gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user perl make}
-_missing=()
-for p in $EEZYBOT_CROSS_APT_PACKAGES; do
-  dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
-done
-if [ ${#_missing[@]} -gt 0 ]; then
-  _log "installing Debian packages: ${_missing[*]}"
-  export DEBIAN_FRONTEND=noninteractive
-  _out=$( { apt-get update -qq && apt-get install -y -qq --no-install-recommends "${_missing[@]}"; } 2>&1) \
-    || { echo "$_out" >&2; exit 1; }
-fi
+. "$(dirname "${BASH_SOURCE[0]}")/apt_missing.sh"
+# shellcheck disable=SC2086 # a list of words
+apt_missing setup_cross $EEZYBOT_CROSS_APT_PACKAGES
 unset _installed _missing _out

@@ -14,16 +14,9 @@ _log() { echo "[setup] $*" >&2; }
 # peer: the PyPI Fast DDS and Cyclone wheels are built without security) and tcpdump
 # (the wire captures of tests/test_security.py).
 EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump}
-_missing=()
-for p in $EEZYBOT_APT_PACKAGES; do
-  dpkg -s "$p" >/dev/null 2>&1 || _missing+=("$p")
-done
-if [ ${#_missing[@]} -gt 0 ]; then
-  _log "installing Debian packages: ${_missing[*]}"
-  export DEBIAN_FRONTEND=noninteractive
-  apt-get update -qq >/dev/null
-  apt-get install -y -qq --no-install-recommends "${_missing[@]}" >/dev/null
-fi
+. "$_here/launch_scripts/apt_missing.sh"
+# shellcheck disable=SC2086 # a list of words
+apt_missing setup $EEZYBOT_APT_PACKAGES
 
 # Python venv, cached per requirements file content.
 _req="$_here/tests/requirements.txt"
