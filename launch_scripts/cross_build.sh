@@ -8,7 +8,8 @@
 #   armv7:   armv7-unknown-linux-gnueabihf, 32-bit Raspberry Pi OS (Pi 2, 3, 4, Zero 2 W)
 #
 # Installs what it needs (launch_scripts/setup_cross.sh), builds with the `pi` profile of
-# Cargo.toml (stripped, LTO) and DDS Security (SROS2) built in: OpenSSL is compiled from
+# Cargo.toml (stripped, LTO; EEZYBOT_PI_PROFILE=pi-check: the test command's quicker
+# check build, not for the Pi) and DDS Security (SROS2) built in: OpenSSL is compiled from
 # source for the target and linked statically (feature ros_plumbing/vendored-openssl), so
 # the Pi needs no libssl and this PC no target libssl. Checks that the binaries start
 # (under qemu-user), and writes
@@ -59,17 +60,23 @@ qemu() {
 . launch_scripts/setup_cross.sh
 
 bins=(serial_node virtual_arduino)
+profile=${EEZYBOT_PI_PROFILE:-pi}
+case "$profile" in
+  pi) built_as="profile pi (release: fat LTO, stripped)" ;;
+  pi-check) built_as="profile pi-check (the test command's check build: NOT optimised for the Pi; build the release with launch_scripts/cross_build.sh)" ;;
+  *) _say "EEZYBOT_PI_PROFILE=$profile: pi or pi-check"; exit 2 ;;
+esac
 version=$(git describe --always --dirty 2>/dev/null || echo unknown)
 declare -A need_glibc
 mkdir -p dist
 for arch in "${arches[@]}"; do
   t=$(triple "$arch")
-  _say "building ${bins[*]} for $t (profile pi, with DDS Security; the first build takes several minutes, OpenSSL among them)"
+  _say "building ${bins[*]} for $t (profile $profile, with DDS Security; the first build takes several minutes, OpenSSL among them)"
   # CC_<triple>/AR_<triple>: what the cc crate would guess for these triples, said
   # explicitly, so OpenSSL is never configured with the host's gcc
   env "CC_${t//-/_}=$(cc_of "$arch")" "AR_${t//-/_}=$(ar_of "$arch")" \
-    cargo build -q --profile pi --target "$t" -p serial_node --bins --features ros_plumbing/vendored-openssl
-  out="target/$t/pi"
+    cargo build -q --profile "$profile" --target "$t" -p serial_node --bins --features ros_plumbing/vendored-openssl
+  out="target/$t/$profile"
 
   # The binaries start on the target's CPU and name no file of this build tree.
   if ! help=$($(qemu "$arch") "$out/serial_node" --help 2>&1) || ! grep -q "^serial_node" <<<"$help"; then
@@ -82,7 +89,7 @@ for arch in "${arches[@]}"; do
   # are read only if an engine or provider module is loaded by name (none is: the
   # providers are built in, and OPENSSL_ENGINES/OPENSSL_MODULES would override them).
   root_re=$(printf '%s' "$root" | sed 's/[][\.*^$+?(){}|/]/\\&/g')
-  openssl_dirs="^$root_re/target/$t/pi/build/openssl-sys-[0-9a-f]+/out/openssl-build/install/lib/(engines-3|ossl-modules)\$"
+  openssl_dirs="^$root_re/target/$t/$profile/build/openssl-sys-[0-9a-f]+/out/openssl-build/install/lib/(engines-3|ossl-modules)\$"
   for b in "${bins[@]}"; do
     leaks=$(grep -aoE "$root_re/[[:print:]]*" "$out/$b" | grep -vE "$openssl_dirs" | sort -u || true)
     if [ -n "$leaks" ]; then
@@ -106,7 +113,7 @@ for arch in "${arches[@]}"; do
   install -m 0644 docs/raspberry_pi.md "$bundle/raspberry_pi.md"
   cat >"$bundle/README.txt" <<EOF
 EezyBot teleop: the Raspberry Pi half (serial_node), prebuilt for $t
-(version $version). No Rust toolchain is needed on the Pi; the binaries need glibc
+(version $version, $built_as). No Rust toolchain is needed on the Pi; the binaries need glibc
 $glibc or later (\`ldd --version\`: Raspberry Pi OS bookworm, Ubuntu 22.04 and later).
 
   bin/serial_node        the ROS 2 node that drives the Arduino over USB serial; DDS
@@ -141,7 +148,7 @@ _say "stripped binaries:"
 for arch in "${arches[@]}"; do
   t=$(triple "$arch")
   for b in "${bins[@]}"; do
-    printf '  %-30s %-16s %6s KiB\n' "$t" "$b" $(( $(stat -c %s "target/$t/pi/$b") / 1024 )) >&2
+    printf '  %-30s %-16s %6s KiB\n' "$t" "$b" $(( $(stat -c %s "target/$t/$profile/$b") / 1024 )) >&2
   done
   printf '  %-47s %6s KiB  (needs glibc >= %s)\n' "dist/eezybot-pi-$arch.tar.gz" \
     $(( $(stat -c %s "dist/eezybot-pi-$arch.tar.gz") / 1024 )) "${need_glibc[$arch]}" >&2

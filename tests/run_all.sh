@@ -6,18 +6,43 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . launch_scripts/setup_env.sh
 export CARGO_TERM_QUIET=true
-echo "== firmware (avr-gcc) and its simavr harness"
+# each stage says how long the one before it took, and the total at the end
+stage_start=$SECONDS
+stage() {
+  [ -z "${stage_name:-}" ] || echo "   ($stage_name: $((SECONDS - stage_start)) s)"
+  stage_name=$1 stage_start=$SECONDS
+  [ -z "$1" ] || echo "== $1"
+}
+trap 'stage ""; echo "== all stages: $SECONDS s"' EXIT
+stage "firmware (avr-gcc) and its simavr harness"
 make -s -C firmware/servo_control all sim
-echo "== cargo build"
+stage "cargo build"
 cargo build --workspace --bins --examples
-echo "== cargo test"
+stage "cargo test"
 cargo test --workspace
-echo "== patched crates: resolved from patches/, and their unit tests (tests/check_patches.sh)"
-tests/check_patches.sh
-echo "== Raspberry Pi: cross-build (aarch64, profile pi), pure crates' tests under qemu-aarch64"
+# The patched crates' checks and tests (tests/check_patches.sh: a dependency tree and
+# target directory of their own) build alongside the Raspberry Pi stage, whose OpenSSL
+# build and emulated tests leave a core idle much of the time; their output follows it.
+stage "Raspberry Pi: cross-build (aarch64, profile pi-check), pure crates' tests under qemu-aarch64; alongside: the patched crates (tests/check_patches.sh)"
+patches_log=$(mktemp)
+tests/check_patches.sh >"$patches_log" 2>&1 &
+patches_pid=$!
+# (stopped with its cargo if a stage before its end fails)
+trap '[ -z "$patches_pid" ] || pkill -TERM -P "$patches_pid" cargo 2>/dev/null || true
+      [ -z "$patches_pid" ] || kill "$patches_pid" 2>/dev/null || true
+      rm -f "$patches_log"; stage ""; echo "== all stages: $SECONDS s"' EXIT
 . launch_scripts/setup_cross.sh
-launch_scripts/cross_build.sh aarch64
+# pi-check (Cargo.toml): the release's toolchain, OpenSSL and checks in less time than
+# profile pi; the tests under qemu share its dependencies
+EEZYBOT_PI_PROFILE=pi-check launch_scripts/cross_build.sh aarch64
 # the IK properties with 25 cases each under emulation (200 natively, above)
-PROPTEST_CASES=25 cargo test --target aarch64-unknown-linux-gnu -p eezybot_kinematics -p servo_protocol -p eezybot_msgs
-echo "== integration tests (real ROS 2)"
+PROPTEST_CASES=25 cargo test --profile pi-check --target aarch64-unknown-linux-gnu \
+  -p eezybot_kinematics -p servo_protocol -p eezybot_msgs
+stage "patched crates: resolved from patches/, and their unit tests (tests/check_patches.sh, started above)"
+patches_code=0
+wait "$patches_pid" || patches_code=$?
+patches_pid=
+cat "$patches_log"
+[ "$patches_code" = 0 ] || { echo "tests/check_patches.sh failed (exit $patches_code)"; exit 1; }
+stage "integration tests (real ROS 2)"
 "$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider --durations=15 "$@"
