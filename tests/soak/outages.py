@@ -15,19 +15,12 @@ were logged. One graph lives through every trial, as in a long teleoperation ses
 
 20 trials of 3, 12, 25 and 60 s at each end take about 75 minutes.
 """
-import argparse
-import json
-import statistics
-import sys
 import tempfile
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-import twohost  # noqa: E402
-from conftest import DomainLease  # noqa: E402
-from split_graph import SplitGraph  # noqa: E402
+import soaklib  # first: it puts tests/ on sys.path
+import twohost
+from split_graph import SplitGraph
 
 RESUME_WITHIN_S = 5.0  # issue 8: the graph resumes within 5 s of the link returning
 
@@ -36,12 +29,10 @@ def summarize(results):
     rows = []
     for key in sorted({(r["length_s"], r["side"]) for r in results}):
         rs = [r for r in results if (r["length_s"], r["side"]) == key]
-        resume = sorted(r["resume_s"] for r in rs if r["resume_s"] is not None)
         rows.append({
             "length_s": key[0], "side": key[1], "trials": len(rs),
             "resumed_within_5s": sum(1 for r in rs if r["resume_s"] is not None and r["resume_s"] <= RESUME_WITHIN_S),
-            "resume_p50_s": statistics.median(resume) if resume else None,
-            "resume_max_s": resume[-1] if resume else None,
+            **soaklib.p50_max("resume", (r["resume_s"] for r in rs)),
             "stale_applied": sum(r["stale"] for r in rs),
             "out_of_order": sum(r["out_of_order"] for r in rs),
             "lost_and_regained_reported": sum(1 for r in rs if (r["serial_angles_lost"] or 0) >= 1
@@ -52,21 +43,14 @@ def summarize(results):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--trials", type=int, default=20)
-    ap.add_argument("--lengths", default="3,12,25,60")
-    ap.add_argument("--sides", default="pc,pi")
-    ap.add_argument("--json", type=Path)
-    args = ap.parse_args()
-    if twohost.available():
-        sys.exit(f"cannot run: {twohost.available()}")
+    args = soaklib.arguments(__doc__, trials=20, lengths="3,12,25,60", sides="pc,pi")
+    soaklib.need_two_hosts()
     lengths = [float(x) for x in args.lengths.split(",")]
     sides = args.sides.split(",")
-    lease = DomainLease()
     results = []
     t_start = time.time()
-    with tempfile.TemporaryDirectory() as work, twohost.TwoHosts(tag="q") as hosts:
-        g = SplitGraph(hosts, lease.id, work, device="virtual")
+    with soaklib.domain() as domain, tempfile.TemporaryDirectory() as work, twohost.TwoHosts(tag="q") as hosts:
+        g = SplitGraph(hosts, domain, work, device="virtual")
         try:
             g.wait_flowing(60)
             for trial in range(args.trials):
@@ -81,7 +65,6 @@ def main():
                               f"unreachable lines {r['unreachable_lines']}", flush=True)
         finally:
             codes = g.close()
-            lease.release()
     summary = summarize(results)
     print(f"\n{'outage':>7} {'side':>4} {'resumed<=5s':>12} {'p50 s':>6} {'max s':>6} {'stale':>5} "
           f"{'lost+regained':>13} {'unreach.':>8}")
@@ -91,9 +74,7 @@ def main():
               f"{row['stale_applied']:5d} {row['lost_and_regained_reported']:>9}/{row['trials']:<3} "
               f"{row['unreachable_lines_max']:8d}")
     print(f"exit codes {codes}, {time.time() - t_start:.0f} s in all")
-    if args.json:
-        args.json.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "summary": summary,
-                                         "trials": results, "exit_codes": codes}, indent=1))
+    soaklib.write_json(args.json, summary, trials=results, exit_codes=codes)
 
 
 if __name__ == "__main__":

@@ -21,16 +21,14 @@ many handshakes it completed after. One graph lives through every trial.
 target (resume within 5 s, 20 of 20) is met.
 """
 import argparse
-import json
 import signal
-import statistics
 import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-sys.path.insert(0, str(HERE.parent / "bench"))
+import soaklib  # first: it puts tests/ on sys.path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 
 import secure_harness as S  # noqa: E402
 import twohost  # noqa: E402
@@ -52,8 +50,7 @@ def main():
     # stopped and the namespaces deleted (a shell starts background jobs with SIGINT ignored)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.default_int_handler)
-    if twohost.available():
-        sys.exit(f"cannot run: {twohost.available()}")
+    soaklib.need_two_hosts()
     work = S.keystore_dir()
     name = "unsecured" if args.unsecured else "secured"
     variant = S.variants(work, name)[name]
@@ -95,15 +92,12 @@ def main():
         lease.release()
         import shutil
         shutil.rmtree(work, ignore_errors=True)
-    resume = sorted(r["resume_s"] for r in results if r["resume_s"] is not None)
-    first = sorted(r["first_servo_state_s"] for r in results if r["first_servo_state_s"] is not None)
+    resume = [r["resume_s"] for r in results if r["resume_s"] is not None]
     within = sum(1 for v in resume if v <= RESUME_WITHIN_S)
     summary = {"variant": name, "trials": len(results), "length_s": args.length, "resumed": len(resume),
                "resumed_within_5s": within,
-               "resume_p50_s": statistics.median(resume) if resume else None,
-               "resume_max_s": resume[-1] if resume else None,
-               "first_servo_state_p50_s": statistics.median(first) if first else None,
-               "first_servo_state_max_s": first[-1] if first else None,
+               **soaklib.p50_max("resume", resume),
+               **soaklib.p50_max("first_servo_state", (r["first_servo_state_s"] for r in results)),
                "handshakes_after_min": min((r["handshakes_after"] for r in results), default=None),
                "sender_skipped_slots": skipped, "exit_codes": codes}
     print(f"\n{name}: {len(results)} outages of {args.length:g} s at pi: resumed within 5 s {within}/{len(results)} "
@@ -111,9 +105,7 @@ def main():
           f"resume p50 {fmt(summary['resume_p50_s'])}, max {fmt(summary['resume_max_s'])}; first servo_state p50 "
           f"{fmt(summary['first_servo_state_p50_s'])}, max {fmt(summary['first_servo_state_max_s'])}")
     print(f"exit codes {codes}, sender skipped {skipped} slots, {time.time() - t_start:.0f} s in all")
-    if args.json:
-        args.json.write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M:%S"), "summary": summary,
-                                         "trials": results}, indent=1))
+    soaklib.write_json(args.json, summary, "%Y-%m-%d %H:%M:%S", trials=results)
 
 
 def fmt(v):

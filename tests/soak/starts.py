@@ -14,40 +14,24 @@ No node is ever restarted.
 
 The starts are spread evenly over every (order, hosts) combination; ~5 s each.
 """
-import argparse
 import itertools
-import json
-import statistics
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-import twohost  # noqa: E402
-from conftest import DomainLease  # noqa: E402
-from startup import run_in_subprocess  # noqa: E402
+import soaklib  # first: it puts tests/ on sys.path
+from startup import run_in_subprocess
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--starts", type=int, default=204)
-    ap.add_argument("--orders", default="together,rclpy_first,nodes_first")
-    ap.add_argument("--hosts", default="one,split")
-    ap.add_argument("--json", type=Path)
-    args = ap.parse_args()
+    args = soaklib.arguments(__doc__, starts=204, orders="together,rclpy_first,nodes_first", hosts="one,split")
     combos = list(itertools.product(args.orders.split(","), args.hosts.split(",")))
-    if any(h == "split" for _, h in combos) and twohost.available():
-        sys.exit(f"cannot run split starts: {twohost.available()}")
+    if any(h == "split" for _, h in combos):
+        soaklib.need_two_hosts("run split starts")
     results = []
     t0 = time.time()
     for i in range(args.starts):
         order, where = combos[i % len(combos)]
-        lease = DomainLease()
-        try:
-            r = run_in_subprocess(lease.id, order=order, split=where == "split")
-        finally:
-            lease.release()
+        with soaklib.domain() as domain:
+            r = run_in_subprocess(domain, order=order, split=where == "split")
         results.append(r)
         bad = r["missing_nodes"] or r["missing_endpoints"]
         print(f"start {i + 1:3d} {order:>11} {where:>5}: node list {r['node_list_s'] and round(r['node_list_s'], 2)} s, "
@@ -59,13 +43,11 @@ def main():
           f"{'node list p50/max s':>20} {'endpoints p50/max s':>20}")
     for order, where in combos:
         rs = [r for r in results if r["order"] == order and r["hosts"] == ("split" if where == "split" else "one")]
-        nl = sorted(r["node_list_s"] for r in rs if r["node_list_s"] is not None)
-        ep = sorted(r["endpoints_s"] for r in rs if r["endpoints_s"] is not None)
         row = {"order": order, "hosts": where, "starts": len(rs),
                "node_list_failures": sum(1 for r in rs if r["missing_nodes"]),
                "endpoint_failures": sum(1 for r in rs if r["missing_endpoints"]),
-               "node_list_p50_s": statistics.median(nl) if nl else None, "node_list_max_s": nl[-1] if nl else None,
-               "endpoints_p50_s": statistics.median(ep) if ep else None, "endpoints_max_s": ep[-1] if ep else None}
+               **soaklib.p50_max("node_list", (r["node_list_s"] for r in rs)),
+               **soaklib.p50_max("endpoints", (r["endpoints_s"] for r in rs))}
         summary.append(row)
         print(f"{order:>11} {where:>5} {len(rs):6d} {row['node_list_failures']:17d} {row['endpoint_failures']:17d} "
               f"{row['node_list_p50_s'] or float('nan'):9.2f}/{row['node_list_max_s'] or float('nan'):<9.2f} "
@@ -73,9 +55,7 @@ def main():
     total = len(results)
     print(f"all: {total} starts, node list missing in {sum(r['node_list_failures'] for r in summary)}, "
           f"endpoints missing in {sum(r['endpoint_failures'] for r in summary)}; {time.time() - t0:.0f} s")
-    if args.json:
-        args.json.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "summary": summary, "starts": results},
-                                        indent=1))
+    soaklib.write_json(args.json, summary, starts=results)
 
 
 if __name__ == "__main__":
