@@ -56,9 +56,7 @@ def main():
             for trial in range(args.trials):
                 for length in lengths:
                     for side in sides:
-                        r = g.outage(length, side)
-                        r["trial"] = trial
-                        results.append(r)
+                        r = soaklib.outage(g, results, trial, length, side)
                         print(f"trial {trial + 1:2d}  {length:4.0f} s at {side}: resumed after "
                               f"{r['resume_s'] if r['resume_s'] is None else round(r['resume_s'], 2)} s, "
                               f"stale {r['stale']}, lost/regained {r['serial_angles_lost']}/{r['serial_angles_regained']}, "

@@ -71,10 +71,7 @@ def main():
                     time.sleep(args.settle)
                     # is the graph answering before this cut (after a trial that did not resume)?
                     before = len([1 for t, _ in g.peer.said("recv rt/servo_state ") if t >= t_settle])
-                    r = g.outage(args.length, "pi")
-                    r["trial"] = trial
-                    r["servo_state_in_the_settle_before"] = before
-                    results.append(r)
+                    r = soaklib.outage(g, results, trial, args.length, "pi", servo_state_in_the_settle_before=before)
                     print(f"trial {trial + 1:2d}: first servo_state {fmt(r['first_servo_state_s'])} after link-up, "
                           f"resumed (a new target answered) after {fmt(r['resume_s'])}; participants dropped "
                           f"{r['participants_dropped_during']}, handshakes after {r['handshakes_after']}; servo_state samples in the "

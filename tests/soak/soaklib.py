@@ -1,5 +1,6 @@
 """What the soak scripts share: their command line, the ROS domain they hold, the
-p50 and maximum of a measurement, and the JSON record they write.
+record of an outage trial, the p50 and maximum of a measurement, and the JSON record
+they write.
 
 Imported by outages.py, secure_outages.py and starts.py (this folder is on sys.path when
 one of them runs); it puts tests/ on sys.path for twohost, conftest and the harnesses.
@@ -42,6 +43,16 @@ def domain():
         yield lease.id
     finally:
         lease.release()
+
+
+def outage(graph, results, trial, length, side, **extra):
+    """One trial: `graph.outage(length, side)`'s record with the trial's number and
+    `extra`, added to `results` and returned."""
+    r = graph.outage(length, side)
+    r["trial"] = trial
+    r.update(extra)
+    results.append(r)
+    return r
 
 
 def p50_max(name, values):
