@@ -75,12 +75,7 @@ impl Default for MotionLimits {
 impl MotionLimits {
     /// One servo's limits.
     pub fn get(&self, servo: ServoId) -> &ServoMotionLimits {
-        match servo {
-            ServoId::Base => &self.base,
-            ServoId::Shoulder => &self.shoulder,
-            ServoId::Elbow => &self.elbow,
-            ServoId::Gripper => &self.gripper,
-        }
+        servo.of([&self.base, &self.shoulder, &self.elbow, &self.gripper])
     }
 
     /// Limits of what the servos drive, in `ServoId::ALL` order: base joint,

@@ -27,11 +27,22 @@ impl ServoId {
 
     /// Name on `servo_angles` / `servo_state`.
     pub fn name(self) -> &'static str {
+        self.of([
+            "base_servo",
+            "shoulder_servo",
+            "elbow_servo",
+            "gripper_servo",
+        ])
+    }
+
+    /// This servo's one of four things given in `ServoId::ALL` order (the base's,
+    /// the shoulder's, the elbow's, the gripper's).
+    pub fn of<T>(self, [base, shoulder, elbow, gripper]: [T; 4]) -> T {
         match self {
-            ServoId::Base => "base_servo",
-            ServoId::Shoulder => "shoulder_servo",
-            ServoId::Elbow => "elbow_servo",
-            ServoId::Gripper => "gripper_servo",
+            ServoId::Base => base,
+            ServoId::Shoulder => shoulder,
+            ServoId::Elbow => elbow,
+            ServoId::Gripper => gripper,
         }
     }
 }
@@ -139,12 +150,7 @@ pub struct ServoAngles {
 impl ServoCalibrations {
     /// The calibration of one servo.
     pub fn get(&self, servo: ServoId) -> &ServoCalibration {
-        match servo {
-            ServoId::Base => &self.base,
-            ServoId::Shoulder => &self.shoulder,
-            ServoId::Elbow => &self.elbow,
-            ServoId::Gripper => &self.gripper,
-        }
+        servo.of([&self.base, &self.shoulder, &self.elbow, &self.gripper])
     }
 
     /// Servo angles for an arm state, or the first servo that would leave its range.
@@ -200,12 +206,12 @@ impl ServoCalibrations {
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
         for servo in ServoId::ALL {
             let c = self.get(servo);
-            let field = match servo {
-                ServoId::Base => "servos.base",
-                ServoId::Shoulder => "servos.shoulder",
-                ServoId::Elbow => "servos.elbow",
-                ServoId::Gripper => "servos.gripper",
-            };
+            let field = servo.of([
+                "servos.base",
+                "servos.shoulder",
+                "servos.elbow",
+                "servos.gripper",
+            ]);
             let invalid = |why: &'static str| ConfigError::Invalid {
                 origin: origin.to_string(),
                 field,
