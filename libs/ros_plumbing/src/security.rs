@@ -692,11 +692,15 @@ mod tests {
         (ca, dir)
     }
 
-    /// Why `dir` is refused; the refusal must name `file`.
-    fn refusal(dir: &Path, file: &str) -> SecurityError {
-        let e = checked(dir).unwrap_err();
-        assert!(e.to_string().contains(&format!("/{file}:")), "{e}");
-        e
+    /// Why `dir` is refused; the refusal must name `file` and be a
+    /// `SecurityError::$kind`.
+    macro_rules! refused {
+        ($dir:expr, $file:expr, $kind:ident) => {{
+            let e = checked($dir).unwrap_err();
+            assert!(e.to_string().contains(&format!("/{}:", $file)), "{e}");
+            assert!(matches!(e, SecurityError::$kind { .. }), "{e}");
+            e
+        }};
     }
 
     #[test]
@@ -708,11 +712,9 @@ mod tests {
     fn a_missing_or_corrupt_key_is_named() {
         let (_, dir) = good_enclave("corrupt-key");
         keystore::write(&dir, "key.pem", b"-----BEGIN PRIVATE KEY-----\nAAAA\n");
-        let e = refusal(&dir, "key.pem");
-        assert!(matches!(e, SecurityError::Malformed { .. }), "{e}");
+        refused!(&dir, "key.pem", Malformed);
         std::fs::remove_file(dir.join("key.pem")).unwrap();
-        let e = refusal(&dir, "key.pem");
-        assert!(matches!(e, SecurityError::Unreadable { .. }), "{e}");
+        let e = refused!(&dir, "key.pem", Unreadable);
         assert!(e.to_string().contains("no such file"), "{e}");
     }
 
@@ -720,8 +722,7 @@ mod tests {
     fn the_key_of_another_certificate_is_a_mismatch() {
         let (_, dir) = good_enclave("other-key");
         keystore::write_key(&dir, &keystore::key());
-        let e = refusal(&dir, "key.pem");
-        assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
+        refused!(&dir, "key.pem", Mismatch);
     }
 
     #[test]
@@ -731,11 +732,9 @@ mod tests {
         let t = keystore::now();
         keystore::write_key(&dir, &key);
         keystore::write_cert(&dir, &key, &ca, t - 30 * keystore::DAY, t - keystore::DAY);
-        let e = refusal(&dir, "cert.pem");
-        assert!(matches!(e, SecurityError::Expired { .. }), "{e}");
+        refused!(&dir, "cert.pem", Expired);
         keystore::write_cert(&dir, &key, &ca, t + keystore::DAY, t + 30 * keystore::DAY);
-        let e = refusal(&dir, "cert.pem");
-        assert!(matches!(e, SecurityError::NotYetValid { .. }), "{e}");
+        let e = refused!(&dir, "cert.pem", NotYetValid);
         assert!(e.to_string().contains("clock"), "{e}");
     }
 
@@ -748,8 +747,7 @@ mod tests {
             "identity_ca.cert.pem",
             &foreign.cert.to_pem().unwrap(),
         );
-        let e = refusal(&dir, "cert.pem");
-        assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
+        refused!(&dir, "cert.pem", Mismatch);
     }
 
     #[test]
@@ -764,11 +762,9 @@ mod tests {
                 file,
                 &keystore::signed(doc, &foreign.cert, &foreign.key),
             );
-            let e = refusal(&dir, file);
-            assert!(matches!(e, SecurityError::Mismatch { .. }), "{e}");
+            refused!(&dir, file, Mismatch);
             keystore::write(&dir, file, b"<dds/>");
-            let e = refusal(&dir, file);
-            assert!(matches!(e, SecurityError::Malformed { .. }), "{e}");
+            refused!(&dir, file, Malformed);
         }
     }
 }
