@@ -79,6 +79,19 @@ impl ParamSpec {
         }
     }
 
+    /// A read-write string parameter naming a file to load, empty by default (empty:
+    /// the shipped or built-in one); `constraints` says so in words, `check` loads it.
+    pub fn file(
+        name: &'static str,
+        description: &'static str,
+        constraints: &'static str,
+        check: TextCheck,
+    ) -> ParamSpec {
+        ParamSpec::new(name, ParameterValue::String(String::new()), description)
+            .constraints(constraints)
+            .text_check(check)
+    }
+
     /// With a range.
     pub fn range(mut self, range: ParamRange) -> ParamSpec {
         self.range = range;

@@ -34,13 +34,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                       joint_states + servo_angles",
         usage: "",
         params: vec![
-            ParamSpec::new(
+            ParamSpec::file(
                 "arm_config",
-                ParameterValue::String(String::new()),
                 "arm geometry, limits and servo calibration YAML; empty = the shipped config/arm.yaml",
-            )
-            .constraints("empty, or an arm_config YAML file that loads")
-            .text_check(|p| ArmConfig::load_or_shipped(p).map(|_| ()).map_err(|e| e.to_string())),
+                "empty, or an arm_config YAML file that loads",
+                |p| ArmConfig::load_or_shipped(p).map(|_| ()).map_err(|e| e.to_string()),
+            ),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame xyz_target must be given in")
                 .constraints("not empty")
                 .text_check(|s| if s.is_empty() { Err("must not be empty".into()) } else { Ok(()) }),
@@ -71,17 +70,16 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .constraints("one of: analytic, jacobian, dls, newton")
             .text_check(|s| Solver::check(s).map(|_| ())),
-            ParamSpec::new(
+            ParamSpec::file(
                 "urdf",
-                ParameterValue::String(String::new()),
                 "the arm's URDF; empty = the EezyBot (closed form, servo mapping); any other arm is solved numerically on the chain base_link -> tip_link and publishes no servo_angles",
+                "empty, or a URDF file that loads",
+                |p| match p {
+                    "" => Ok(()),
+                    p => RobotModel::load(std::path::Path::new(p)).map(|_| ()).map_err(|e| e.to_string()),
+                },
             )
-            .read_only()
-            .constraints("empty, or a URDF file that loads")
-            .text_check(|p| match p {
-                "" => Ok(()),
-                p => RobotModel::load(std::path::Path::new(p)).map(|_| ()).map_err(|e| e.to_string()),
-            }),
+            .read_only(),
             ParamSpec::new(
                 "tip_link",
                 ParameterValue::String(String::new()),

@@ -60,13 +60,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new("heartbeat_period", ParameterValue::Double(0.1), "seconds of silence before a HEARTBEAT")
                 .range(ParamRange::Double { min: 0.01, max: 10.0 })
                 .read_only(),
-            ParamSpec::new(
+            ParamSpec::file(
                 "arm_config",
-                ParameterValue::String(String::new()),
                 "servo calibration (pulse ranges) and motion limits (the velocity guard) YAML; empty = the shipped config/arm.yaml",
-            )
-            .constraints("empty, or an arm_config YAML file that loads")
-            .text_check(|p| load_calibration(p).map(|_| ())),
+                "empty, or an arm_config YAML file that loads",
+                |p| load_calibration(p).map(|_| ()),
+            ),
             ros_plumbing::diagnostics::diagnostics_period_param(),
         ],
     }

@@ -34,13 +34,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
         description: "URDF + joint_states -> tf, tf_static and robot_description (like robot_state_publisher)",
         usage: "",
         params: vec![
-            ParamSpec::new(
+            ParamSpec::file(
                 "urdf",
-                ParameterValue::String(String::new()),
                 "path of the URDF to publish; empty = the EezyBotArm URDF built into this binary (urdf/eezybot.urdf)",
-            )
-                .constraints("empty, or a URDF file that loads")
-                .text_check(|p| load_urdf(p).map(|_| ())),
+                "empty, or a URDF file that loads",
+                |p| load_urdf(p).map(|_| ()),
+            ),
             ParamSpec::new("frame_prefix", ParameterValue::String(String::new()), "prefix for every frame id, e.g. arm2/"),
             ParamSpec::new(
                 "publish_frequency",
