@@ -5,8 +5,8 @@
 mod common;
 
 use common::{
-    advertise, channel_ids, client_message, handshake, message_data, next_json, offers, start,
-    start_with, subscribe, try_connect, WAIT,
+    advertise, assert_no_sample, channel_ids, client_message, handshake, message_data, next_json,
+    next_sample, offers, start, start_with, subscribe, try_connect, Ws, WAIT,
 };
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::std_msgs::String as RosString;
@@ -37,6 +37,20 @@ fn target() -> Message {
 
 fn advertise_xyz() -> Message {
     advertise(&[(1, "/xyz_target", "geometry_msgs/msg/PointStamped")])
+}
+
+/// Advertise the client's channel 1 as `xyz_target` and send a target on it.
+async fn send_target(ws: &mut Ws) {
+    ws.send(advertise_xyz()).await.unwrap();
+    ws.send(target()).await.unwrap();
+}
+
+/// Subscribe to the robot description (subscription 1).
+async fn subscribe_urdf(ws: &mut Ws) {
+    let ids = channel_ids(ws).await;
+    ws.send(subscribe(1, ids["/robot_description"]))
+        .await
+        .unwrap();
 }
 
 /// A bridge that takes no samples, behind the default gate with `limits`.
@@ -106,8 +120,7 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
     let mut watcher = connect("?token=watch").await.unwrap();
     let info = next_json(&mut watcher, "serverInfo").await;
     assert!(!offers(&info, "clientPublish"), "{info}");
-    watcher.send(advertise_xyz()).await.unwrap();
-    watcher.send(target()).await.unwrap();
+    send_target(&mut watcher).await;
     let status = next_json(&mut watcher, "status").await;
     assert!(
         status["message"]
@@ -120,18 +133,10 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
     let mut publisher = connect("?token=good").await.unwrap();
     let info = next_json(&mut publisher, "serverInfo").await;
     assert!(offers(&info, "clientPublish"));
-    publisher.send(advertise_xyz()).await.unwrap();
-    publisher.send(target()).await.unwrap();
-    let s = tokio::time::timeout(WAIT, samples.recv())
-        .await
-        .unwrap()
-        .unwrap();
-    assert_eq!(s.topic, "xyz_target");
+    send_target(&mut publisher).await;
+    assert_eq!(next_sample(&mut samples).await.topic, "xyz_target");
     tokio::time::sleep(Duration::from_millis(200)).await;
-    assert!(
-        samples.try_recv().is_err(),
-        "the watcher's sample reached the node"
-    );
+    assert_no_sample(&mut samples, "the watcher's sample");
     bridge.stop().await;
 }
 
@@ -144,20 +149,11 @@ async fn a_connection_to_the_sdk_s_own_port_gets_no_data_and_cannot_publish() {
     let mut sneak = try_connect(bridge.sdk_addr(), Some("http://evil.example"))
         .await
         .unwrap();
-    let ids = channel_ids(&mut sneak).await;
-    sneak
-        .send(subscribe(1, ids["/robot_description"]))
-        .await
-        .unwrap();
-    sneak.send(advertise_xyz()).await.unwrap();
-    sneak.send(target()).await.unwrap();
+    subscribe_urdf(&mut sneak).await;
+    send_target(&mut sneak).await;
     // the same through the front gets the latched URDF at once
     let mut front = try_connect(bridge.local_addr(), None).await.unwrap();
-    let ids = channel_ids(&mut front).await;
-    front
-        .send(subscribe(1, ids["/robot_description"]))
-        .await
-        .unwrap();
+    subscribe_urdf(&mut front).await;
     assert!(
         message_data(&mut front, WAIT).await.is_some(),
         "the front's client got nothing"
@@ -168,10 +164,7 @@ async fn a_connection_to_the_sdk_s_own_port_gets_no_data_and_cannot_publish() {
         None,
         "data leaked"
     );
-    assert!(
-        samples.try_recv().is_err(),
-        "a sample from the SDK's port reached the node"
-    );
+    assert_no_sample(&mut samples, "a sample from the SDK's port");
     bridge.stop().await;
 }
 

@@ -3,13 +3,16 @@
 //! messageData), not the SDK's.
 #![allow(dead_code)] // each test file uses some of it
 
-use foxglove_bridge::{ClientPublish, FoxgloveBridge, FrontLimits, Gate, TopicNames, TOPICS};
+use foxglove_bridge::{
+    ClientPublish, ClientSample, FoxgloveBridge, FrontLimits, Gate, TopicNames, TOPICS,
+};
 use futures::StreamExt;
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 use tokio::net::TcpStream;
+use tokio::sync::mpsc;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::tungstenite::Message;
@@ -144,6 +147,19 @@ pub async fn channels(ws: &mut Ws) -> HashMap<String, Value> {
         }
     }
     by_topic
+}
+
+/// The next sample a client published to the node (within [`WAIT`]).
+pub async fn next_sample(samples: &mut mpsc::Receiver<ClientSample>) -> ClientSample {
+    tokio::time::timeout(WAIT, samples.recv())
+        .await
+        .unwrap()
+        .unwrap()
+}
+
+/// No (further) client sample has reached the node; `what` names the one that would have.
+pub fn assert_no_sample(samples: &mut mpsc::Receiver<ClientSample>, what: &str) {
+    assert!(samples.try_recv().is_err(), "{what} reached the node");
 }
 
 /// Every advertised channel's id by topic.
