@@ -1034,6 +1034,21 @@ mod tests {
         }
     }
 
+    /// A point at `xyz` with no name, claw, dwell or mode.
+    fn to(xyz: [f64; 3]) -> ProgramPoint {
+        point("", xyz, None, 0.0, None)
+    }
+
+    /// [`to`] `xyz` in line mode.
+    fn line(xyz: [f64; 3]) -> ProgramPoint {
+        point("", xyz, None, 0.0, Some(MoveMode::Line))
+    }
+
+    /// [`to`] `xyz` in joint mode.
+    fn joint(xyz: [f64; 3]) -> ProgramPoint {
+        point("", xyz, None, 0.0, Some(MoveMode::Joint))
+    }
+
     fn three() -> Program {
         Program {
             points: vec![
@@ -1527,10 +1542,7 @@ mod tests {
     /// A player of A (dwelling `dwell_s`) then B, started at `t0`, that has sent A; the
     /// arm arrived at A at `arrived_ms` when that is given.
     fn a_then_b(dwell_s: f64, looping: bool, t0: Instant, arrived_ms: Option<u64>) -> Player {
-        let points = vec![
-            point("", A, None, dwell_s, None),
-            point("", B, None, 0.0, None),
-        ];
+        let points = vec![point("", A, None, dwell_s, None), to(B)];
         let mut pl = start(points, looping, t0);
         assert_eq!(pl.step(t0, None), [target(0, A)]);
         if let Some(at) = arrived_ms {
@@ -1592,7 +1604,7 @@ mod tests {
             vec![
                 point("", A, None, 0.5, None),
                 point("", B, None, 1.0, None),
-                point("", C, None, 0.0, None),
+                to(C),
             ],
             false,
             t0,
@@ -1624,11 +1636,7 @@ mod tests {
     #[test]
     fn arrival_counts_only_within_tolerance_and_after_the_target() {
         let t0 = Instant::now();
-        let mut pl = start(
-            vec![point("", A, None, 0.0, None), point("", A, None, 0.0, None)],
-            false,
-            t0,
-        );
+        let mut pl = start(vec![to(A), to(A)], false, t0);
         // already there when it starts: the observation of the step that sent the target
         // does not count
         assert_eq!(pl.step(t0, Some(A)), [target(0, A)]);
@@ -1653,16 +1661,7 @@ mod tests {
     #[test]
     fn the_mode_is_set_only_when_it_changes() {
         let t0 = Instant::now();
-        let mut pl = start(
-            vec![
-                point("", A, None, 0.0, Some(MoveMode::Line)),
-                point("", B, None, 0.0, Some(MoveMode::Line)),
-                point("", C, None, 0.0, None),
-                point("", A, None, 0.0, Some(MoveMode::Joint)),
-            ],
-            false,
-            t0,
-        );
+        let mut pl = start(vec![line(A), line(B), to(C), joint(A)], false, t0);
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         assert_eq!(pl.state().phase, PlayerPhase::SettingMode);
         assert_eq!(pl.next_wakeup(), Some(t0 + MODE_TIMEOUT));
@@ -1692,16 +1691,7 @@ mod tests {
     #[test]
     fn a_base_mode_is_restored_for_points_without_one() {
         let t0 = Instant::now();
-        let mut pl = start(
-            vec![
-                point("", A, None, 0.0, None),
-                point("", B, None, 0.0, Some(MoveMode::Line)),
-                point("", C, None, 0.0, None),
-            ],
-            false,
-            t0,
-        )
-        .with_base_mode(MoveMode::Joint);
+        let mut pl = start(vec![to(A), line(B), to(C)], false, t0).with_base_mode(MoveMode::Joint);
         assert_eq!(pl.step(t0, None), [target(0, A)], "joint already");
         switch_mode(&mut pl, ms(t0, 10), (0, A), MoveMode::Line, (1, B));
         assert_eq!(
@@ -1754,14 +1744,7 @@ mod tests {
     #[test]
     fn looping_starts_over_at_point_0() {
         let t0 = Instant::now();
-        let mut pl = start(
-            vec![
-                point("", A, None, 0.0, Some(MoveMode::Line)),
-                point("", B, None, 0.0, Some(MoveMode::Joint)),
-            ],
-            true,
-            t0,
-        );
+        let mut pl = start(vec![line(A), joint(B)], true, t0);
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         pl.mode_set(true);
         assert_eq!(pl.step(t0, None), [target(0, A)]);
@@ -1779,7 +1762,7 @@ mod tests {
             [arrived(0), PlayerAction::SetMode(MoveMode::Joint)]
         );
         // a single point looping without dwell: one target a step, never a busy loop
-        let one = program(vec![point("", A, None, 0.0, None)]);
+        let one = program(vec![to(A)]);
         let mut pl = Player::start(&one, true, t0).unwrap();
         assert_eq!(pl.step(t0, Some(A)), [target(0, A)]);
         assert_eq!(pl.step(ms(t0, 10), Some(A)), [arrived(0), target(0, A)]);
@@ -1845,8 +1828,7 @@ mod tests {
     #[test]
     fn a_mode_not_taken_fails() {
         let t0 = Instant::now();
-        let line = || vec![point("", A, None, 0.0, Some(MoveMode::Line))];
-        let mut pl = start(line(), false, t0);
+        let mut pl = start(vec![line(A)], false, t0);
         assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
         pl.mode_set(false);
         let out = pl.step(ms(t0, 10), None);
@@ -1855,7 +1837,7 @@ mod tests {
         };
         assert!(reason.contains("motion:=line"), "{reason}");
         // and one never confirmed times out
-        let mut pl = start(line(), false, t0);
+        let mut pl = start(vec![line(A)], false, t0);
         pl.step(t0, None);
         assert_eq!(
             pl.step(t0 + MODE_TIMEOUT - Duration::from_millis(1), None),
