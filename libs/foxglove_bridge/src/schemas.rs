@@ -22,135 +22,44 @@ pub struct MessageDefinition {
     pub uses: &'static [&'static str],
 }
 
-const fn def(
-    name: &'static str,
-    text: &'static str,
-    uses: &'static [&'static str],
-) -> MessageDefinition {
-    MessageDefinition { name, text, uses }
+/// The message types: each a `pub const` documented with its name (and a note in
+/// parentheses), and [`DEFINITIONS`], every one of them in this order.
+macro_rules! definitions {
+    ($($constant:ident $(($note:literal))? = $name:literal, $text:literal, [$($uses:literal),*];)*) => {
+        $(
+            #[doc = concat!("`", $name, "`", $(" (", $note, ")",)? ".")]
+            pub const $constant: MessageDefinition = MessageDefinition {
+                name: $name,
+                text: $text,
+                uses: &[$($uses),*],
+            };
+        )*
+
+        /// Every message type the graph's topics use, directly or in a field.
+        pub const DEFINITIONS: &[MessageDefinition] = &[$($constant),*];
+    };
 }
 
-/// `builtin_interfaces/msg/Time`.
-pub const TIME: MessageDefinition = def(
-    "builtin_interfaces/msg/Time",
-    "int32 sec\nuint32 nanosec\n",
-    &[],
-);
-/// `std_msgs/msg/Header`.
-pub const HEADER: MessageDefinition = def(
-    "std_msgs/msg/Header",
-    "builtin_interfaces/Time stamp\nstring frame_id\n",
-    &["builtin_interfaces/msg/Time"],
-);
-/// `std_msgs/msg/String`.
-pub const STRING: MessageDefinition = def("std_msgs/msg/String", "string data\n", &[]);
-/// `std_msgs/msg/Float64`.
-pub const FLOAT64: MessageDefinition = def("std_msgs/msg/Float64", "float64 data\n", &[]);
-/// `std_msgs/msg/Bool`.
-pub const BOOL: MessageDefinition = def("std_msgs/msg/Bool", "bool data\n", &[]);
-/// `geometry_msgs/msg/Vector3`.
-pub const VECTOR3: MessageDefinition = def(
-    "geometry_msgs/msg/Vector3",
-    "float64 x\nfloat64 y\nfloat64 z\n",
-    &[],
-);
-/// `geometry_msgs/msg/Point`.
-pub const POINT: MessageDefinition = def(
-    "geometry_msgs/msg/Point",
-    "float64 x\nfloat64 y\nfloat64 z\n",
-    &[],
-);
-/// `geometry_msgs/msg/Quaternion` (default values as upstream: the identity).
-pub const QUATERNION: MessageDefinition = def(
-    "geometry_msgs/msg/Quaternion",
-    "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
-    &[],
-);
-/// `geometry_msgs/msg/Pose`.
-pub const POSE: MessageDefinition = def(
-    "geometry_msgs/msg/Pose",
-    "Point position\nQuaternion orientation\n",
-    &["geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"],
-);
-/// `geometry_msgs/msg/Transform`.
-pub const TRANSFORM: MessageDefinition = def(
-    "geometry_msgs/msg/Transform",
-    "Vector3 translation\nQuaternion rotation\n",
-    &["geometry_msgs/msg/Vector3", "geometry_msgs/msg/Quaternion"],
-);
-/// `geometry_msgs/msg/TransformStamped`.
-pub const TRANSFORM_STAMPED: MessageDefinition = def(
-    "geometry_msgs/msg/TransformStamped",
-    "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
-    &["std_msgs/msg/Header", "geometry_msgs/msg/Transform"],
-);
-/// `geometry_msgs/msg/PointStamped`.
-pub const POINT_STAMPED: MessageDefinition = def(
-    "geometry_msgs/msg/PointStamped",
-    "std_msgs/Header header\nPoint point\n",
-    &["std_msgs/msg/Header", "geometry_msgs/msg/Point"],
-);
-/// `geometry_msgs/msg/PoseStamped`.
-pub const POSE_STAMPED: MessageDefinition = def(
-    "geometry_msgs/msg/PoseStamped",
-    "std_msgs/Header header\nPose pose\n",
-    &["std_msgs/msg/Header", "geometry_msgs/msg/Pose"],
-);
-/// `tf2_msgs/msg/TFMessage`.
-pub const TF_MESSAGE: MessageDefinition = def(
-    "tf2_msgs/msg/TFMessage",
-    "geometry_msgs/TransformStamped[] transforms\n",
-    &["geometry_msgs/msg/TransformStamped"],
-);
-/// `sensor_msgs/msg/JointState`.
-pub const JOINT_STATE: MessageDefinition = def(
-    "sensor_msgs/msg/JointState",
-    "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n",
-    &["std_msgs/msg/Header"],
-);
-/// `diagnostic_msgs/msg/KeyValue`.
-pub const KEY_VALUE: MessageDefinition = def(
-    "diagnostic_msgs/msg/KeyValue",
-    "string key\nstring value\n",
-    &[],
-);
-/// `diagnostic_msgs/msg/DiagnosticStatus`.
-pub const DIAGNOSTIC_STATUS: MessageDefinition = def(
-    "diagnostic_msgs/msg/DiagnosticStatus",
-    "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\nbyte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n",
-    &["diagnostic_msgs/msg/KeyValue"],
-);
-/// `diagnostic_msgs/msg/DiagnosticArray`.
-pub const DIAGNOSTIC_ARRAY: MessageDefinition = def(
-    "diagnostic_msgs/msg/DiagnosticArray",
-    "std_msgs/Header header\nDiagnosticStatus[] status\n",
-    &[
-        "std_msgs/msg/Header",
-        "diagnostic_msgs/msg/DiagnosticStatus",
-    ],
-);
-
-/// Every message type the graph's topics use, directly or in a field.
-pub const DEFINITIONS: &[MessageDefinition] = &[
-    TIME,
-    HEADER,
-    STRING,
-    FLOAT64,
-    BOOL,
-    VECTOR3,
-    POINT,
-    QUATERNION,
-    POSE,
-    TRANSFORM,
-    TRANSFORM_STAMPED,
-    POINT_STAMPED,
-    POSE_STAMPED,
-    TF_MESSAGE,
-    JOINT_STATE,
-    KEY_VALUE,
-    DIAGNOSTIC_STATUS,
-    DIAGNOSTIC_ARRAY,
-];
+definitions! {
+    TIME = "builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec\n", [];
+    HEADER = "std_msgs/msg/Header", "builtin_interfaces/Time stamp\nstring frame_id\n", ["builtin_interfaces/msg/Time"];
+    STRING = "std_msgs/msg/String", "string data\n", [];
+    FLOAT64 = "std_msgs/msg/Float64", "float64 data\n", [];
+    BOOL = "std_msgs/msg/Bool", "bool data\n", [];
+    VECTOR3 = "geometry_msgs/msg/Vector3", "float64 x\nfloat64 y\nfloat64 z\n", [];
+    POINT = "geometry_msgs/msg/Point", "float64 x\nfloat64 y\nfloat64 z\n", [];
+    QUATERNION ("default values as upstream: the identity") = "geometry_msgs/msg/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n", [];
+    POSE = "geometry_msgs/msg/Pose", "Point position\nQuaternion orientation\n", ["geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"];
+    TRANSFORM = "geometry_msgs/msg/Transform", "Vector3 translation\nQuaternion rotation\n", ["geometry_msgs/msg/Vector3", "geometry_msgs/msg/Quaternion"];
+    TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform\n", ["std_msgs/msg/Header", "geometry_msgs/msg/Transform"];
+    POINT_STAMPED = "geometry_msgs/msg/PointStamped", "std_msgs/Header header\nPoint point\n", ["std_msgs/msg/Header", "geometry_msgs/msg/Point"];
+    POSE_STAMPED = "geometry_msgs/msg/PoseStamped", "std_msgs/Header header\nPose pose\n", ["std_msgs/msg/Header", "geometry_msgs/msg/Pose"];
+    TF_MESSAGE = "tf2_msgs/msg/TFMessage", "geometry_msgs/TransformStamped[] transforms\n", ["geometry_msgs/msg/TransformStamped"];
+    JOINT_STATE = "sensor_msgs/msg/JointState", "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n", ["std_msgs/msg/Header"];
+    KEY_VALUE = "diagnostic_msgs/msg/KeyValue", "string key\nstring value\n", [];
+    DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus", "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\nbyte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n", ["diagnostic_msgs/msg/KeyValue"];
+    DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray", "std_msgs/Header header\nDiagnosticStatus[] status\n", ["std_msgs/msg/Header", "diagnostic_msgs/msg/DiagnosticStatus"];
+}
 
 /// The definition of `pkg/msg/Type`, if it is one of [`DEFINITIONS`].
 pub fn definition(type_name: &str) -> Option<&'static MessageDefinition> {
