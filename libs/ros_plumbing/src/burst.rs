@@ -1,17 +1,18 @@
-//! Commands that arrive together are a burst: after a network outage, DDS repairs
-//! what the outage held back, in datagrams a fraction of a millisecond apart and
-//! in rounds some milliseconds apart. A node that moves an arm applies only the
+//! Commands that arrive together are a burst: after a network outage, the datagrams
+//! the sender's kernel queued for the unreachable host, then DDS' repairs of what the
+//! outage held back, a fraction of a millisecond apart and in rounds some milliseconds
+//! apart. A node that moves an arm applies only the
 //! newest command of a burst, never the stale ones on the way. [`take_burst`]
 //! takes what arrived together (never waiting); the node decides which of its inputs
 //! supersede which ([`latest_wins`]); [`Lateness`] recognises a command that arrives late
-//! (its stamp is old), which the node holds back for at most [`HOLD_LATE`] in case a
-//! newer one follows (`command_gate::CommandGate`, the one copy of that rule).
+//! (its stamp is old), which the node holds back until no newer one followed for
+//! [`HOLD_LATE`] (`command_gate::CommandGate`, the one copy of that rule).
 
 use futures::{FutureExt, Stream, StreamExt};
 
 /// `first` and every input that is ready with it (arrived together: a burst). Never
-/// waits: a lone input, or a live stream at any rate, goes at once. A burst that DDS
-/// repairs in several rounds is handled by [`Lateness`] and `command_gate::CommandGate`:
+/// waits: a lone input, or a live stream at any rate, goes at once. A burst that comes
+/// in several rounds is handled by [`Lateness`] and `command_gate::CommandGate`:
 /// its commands are late, and each round's newest replaces the one held.
 pub fn take_burst<T, S>(first: T, inputs: &mut S) -> Vec<T>
 where

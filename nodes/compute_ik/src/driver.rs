@@ -38,9 +38,9 @@ pub struct Driver<M: ArmModel> {
     core: Pipeline<M>,
     /// when the planned motion steps next (one step per period while moving)
     next_step: Option<Instant>,
-    /// a Cartesian target (xyz or pose) that arrived late (repaired after a network
-    /// outage) is held back for [`command_gate::HOLD_LATE`] in case a newer one
-    /// follows; too old ones are the pipeline's to refuse (`max_target_age`)
+    /// a Cartesian target (xyz or pose) that arrived late (held back by a network
+    /// outage) is held until no newer one followed for [`command_gate::HOLD_LATE`];
+    /// too old ones are the pipeline's to refuse (`max_target_age`)
     gate: CommandGate<Input>,
     complaints: Throttle,
     last_immediate: Option<Instant>,
