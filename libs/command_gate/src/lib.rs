@@ -370,11 +370,17 @@ mod tests {
         (verdicts, due)
     }
 
-    #[test]
-    fn a_repaired_burst_is_held_and_its_newest_applied_once_the_burst_is_over() {
+    /// A gate that saw 200 ms of live commands from an operator whose clock is 5 s ahead.
+    fn after_live() -> (Instant, CommandGate<u32>) {
         let t0 = Instant::now();
         let mut gate = CommandGate::new();
         live(&mut gate, t0, 0, 10, 5.0);
+        (t0, gate)
+    }
+
+    #[test]
+    fn a_repaired_burst_is_held_and_its_newest_applied_once_the_burst_is_over() {
+        let (t0, mut gate) = after_live();
         // 3 s outage; commands stamped 2.8, 2.78, 2.76 s before arrive 10 ms apart
         let back = 3200u64;
         let (verdicts, due) = burst(
@@ -417,9 +423,7 @@ mod tests {
     /// burst and a command from the outage went out before the newer ones.
     #[test]
     fn a_long_burst_on_a_busy_host_goes_out_as_its_newest_only() {
-        let t0 = Instant::now();
-        let mut gate = CommandGate::new();
-        live(&mut gate, t0, 0, 10, 5.0);
+        let (t0, mut gate) = after_live();
         let back = 3200u64;
         // 110 commands 20 ms of stamps apart, newest 80 ms old; arriving in groups of
         // 10, one group every 6 ms, with an 8 ms gap more in the middle
@@ -441,9 +445,7 @@ mod tests {
 
     #[test]
     fn bursts_back_to_back_are_held_at_most_hold_max() {
-        let t0 = Instant::now();
-        let mut gate = CommandGate::new();
-        live(&mut gate, t0, 0, 10, 5.0);
+        let (t0, mut gate) = after_live();
         // a command every 40 ms, each stamped 100 ms after the one before, all late
         let arrivals: Vec<(u64, f64)> = (0..10u64)
             .map(|k| (3200 + 40 * k, 2.0 - 0.06 * k as f64))
