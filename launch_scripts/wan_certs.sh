@@ -1,0 +1,151 @@
+#!/usr/bin/env bash
+# Certificates for the WAN mode (wan/README.md): a CA, the Zenoh router's certificate
+# valid for each HOST (an IP address or a DNS name the bridges connect to), and client
+# certificates for the bridges `pc` and `pi`; mutual TLS: the router admits only clients
+# whose certificate this CA signed, the bridges only a router this CA signed for HOST.
+#
+#   launch_scripts/wan_certs.sh DIR HOST...              CA, router, pc, pi
+#   launch_scripts/wan_certs.sh DIR HOST... --client pc2  one more client (e.g. a second PC)
+#
+# Running it again keeps what exists (CA, keys, certificates); the router's certificate
+# is issued again when the HOST list differs from the one it was made for.
+#
+# Layout (ZENOH_TLS_DIR of router.sh, pc.sh and pi.sh):
+#   ca.pem                   the CA's certificate (every party needs it)
+#   router.pem, router.key   for the router (launch_scripts/router.sh)
+#   pc.pem, pc.key           for the operator PC's bridge
+#   pi.pem, pi.key           for the Raspberry Pi's bridge
+#   private/ca.key           the CA's key: keep it here, copy it nowhere
+# Copy to each machine ca.pem and its own pair only. Keys: EC prime256v1, PKCS#8,
+# mode 0600; certificates valid from a day ago (a clock a little behind still accepts
+# them; a Pi has no real-time clock) for 3650 days (the CA) or 825 days.
+#
+# Exit status: 0 done, 1 a step failed, 2 usage error.
+set -euo pipefail
+EEZYBOT_SCRIPT=wan_certs.sh
+. "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+# no nodes here: lib.sh's signal handling is for them
+trap 'exit 130' INT
+trap 'exit 143' TERM
+trap - EXIT
+
+usage() { sed -n '2,/^# Exit status/s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; }
+bad_usage() {
+  eezybot_say "$*"
+  eezybot_say "usage: wan_certs.sh DIR HOST... [--client NAME]... (--help)"
+  exit 2
+}
+
+DIR=""
+HOSTS=()
+CLIENTS=(pc pi)
+while [ $# -gt 0 ]; do
+  case $1 in
+    -h|--help) usage; exit 0 ;;
+    --client)
+      [ $# -ge 2 ] || bad_usage "--client needs a NAME"
+      if ! [[ $2 =~ ^[A-Za-z0-9_-]+$ ]] || [ "$2" = router ] || [ "$2" = ca ]; then
+        bad_usage "client name '$2': letters, digits, _ and -, not router or ca"
+      fi
+      CLIENTS+=("$2"); shift 2 ;;
+    -*) bad_usage "unknown option $1" ;;
+    *) if [ -z "$DIR" ]; then DIR=$1; else HOSTS+=("$1"); fi; shift ;;
+  esac
+done
+[ -n "$DIR" ] || bad_usage "no DIR"
+[ ${#HOSTS[@]} -gt 0 ] || bad_usage "no HOST: the router's address(es) as the bridges reach it (IP or DNS name)"
+SANS=()
+for h in "${HOSTS[@]}"; do
+  if [[ $h =~ ^[0-9]+\.[0-9]+\.[0-9]+\.[0-9]+$ ]] || [[ $h == *:* ]]; then
+    SANS+=("IP:$h")
+  elif [[ $h =~ ^[A-Za-z0-9]([A-Za-z0-9.-]*[A-Za-z0-9])?$ ]]; then
+    SANS+=("DNS:$h")
+  else
+    bad_usage "HOST '$h' is neither an IP address nor a DNS name"
+  fi
+done
+command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }
+
+mkdir -p "$DIR/private"
+DIR=$(cd "$DIR" && pwd)
+chmod 700 "$DIR/private"
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+
+NOW=$(date -u +%s)
+stamp() { date -u -d "@$1" +%Y%m%d%H%M%SZ; }
+START=$(stamp $((NOW - 86400)))
+
+new_key() { (umask 077 && openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:prime256v1 \
+  -pkeyopt ec_param_enc:named_curve -out "$1" 2>"$WORK/err") || { cat "$WORK/err" >&2; return 1; }; }
+
+# issue CN KEY OUT EXTENSIONS DAYS [CA_CERT CA_KEY]: a certificate for KEY, subject CN,
+# with the given extension lines, signed by the CA (self-signed without one), through
+# `openssl ca` so that its start can be back-dated.
+issue() {
+  local cn=$1 key=$2 out=$3 ext=$4 days=$5 ca_cert=${6:-} ca_key=${7:-} w
+  w=$(mktemp -d "$WORK/ca.XXXXXX")
+  : >"$w/index.txt"
+  cat >"$w/ca.cnf" <<EOF
+[ca]
+default_ca = eezybot
+[eezybot]
+database = $w/index.txt
+new_certs_dir = $w
+rand_serial = yes
+default_md = sha256
+policy = policy_cn
+unique_subject = no
+copy_extensions = none
+email_in_dn = no
+[policy_cn]
+commonName = supplied
+[req]
+prompt = no
+distinguished_name = dn
+[dn]
+CN = $cn
+[ext]
+$ext
+EOF
+  openssl req -new -key "$key" -config "$w/ca.cnf" -out "$w/req.csr" 2>"$w/err" || { cat "$w/err" >&2; return 1; }
+  local sign=(-selfsign -keyfile "$key")
+  [ -z "$ca_cert" ] || sign=(-cert "$ca_cert" -keyfile "$ca_key")
+  openssl ca -batch -config "$w/ca.cnf" "${sign[@]}" -in "$w/req.csr" -out "$w/cert.pem" \
+    -startdate "$START" -enddate "$(stamp $((NOW + days * 86400)))" -extensions ext -notext \
+    2>"$w/err" || { cat "$w/err" >&2; return 1; }
+  install -m 0644 "$w/cert.pem" "$out"
+}
+
+made=()
+if [ ! -s "$DIR/ca.pem" ] || [ ! -s "$DIR/private/ca.key" ]; then
+  new_key "$DIR/private/ca.key"
+  issue "EezyBot WAN CA" "$DIR/private/ca.key" "$DIR/ca.pem" \
+    $'basicConstraints = critical, CA:TRUE, pathlen:0\nkeyUsage = critical, keyCertSign, cRLSign\nsubjectKeyIdentifier = hash' 3650
+  made+=(ca.pem)
+fi
+CA=("$DIR/ca.pem" "$DIR/private/ca.key")
+LEAF=$'basicConstraints = critical, CA:FALSE\nkeyUsage = critical, digitalSignature\nsubjectKeyIdentifier = hash\nauthorityKeyIdentifier = keyid'
+
+# the router: again when the host list changed (or a new CA was made)
+want=$(printf '%s\n' "${SANS[@]}")
+if [ ! -s "$DIR/router.pem" ] || [ ! -s "$DIR/router.key" ] || [ "$(cat "$DIR/router.hosts" 2>/dev/null)" != "$want" ] ||
+   ! openssl verify -CAfile "$DIR/ca.pem" "$DIR/router.pem" >/dev/null 2>&1; then
+  [ -s "$DIR/router.key" ] || new_key "$DIR/router.key"
+  issue "eezybot-wan-router" "$DIR/router.key" "$DIR/router.pem" \
+    "$LEAF"$'\nextendedKeyUsage = serverAuth\nsubjectAltName = '"$(IFS=,; echo "${SANS[*]}")" 825 "${CA[@]}"
+  printf '%s\n' "$want" >"$DIR/router.hosts"
+  made+=(router.pem)
+fi
+
+for c in "${CLIENTS[@]}"; do
+  if [ ! -s "$DIR/$c.pem" ] || [ ! -s "$DIR/$c.key" ] ||
+     ! openssl verify -CAfile "$DIR/ca.pem" "$DIR/$c.pem" >/dev/null 2>&1; then
+    [ -s "$DIR/$c.key" ] || new_key "$DIR/$c.key"
+    issue "$c" "$DIR/$c.key" "$DIR/$c.pem" "$LEAF"$'\nextendedKeyUsage = clientAuth' 825 "${CA[@]}"
+    made+=("$c.pem")
+  fi
+done
+
+eezybot_say "${made[*]:+made ${made[*]}; }files in $DIR (ZENOH_TLS_DIR), router valid for ${SANS[*]}"
+eezybot_say "router: ca.pem router.pem router.key; $(for c in "${CLIENTS[@]}"; do printf '%s: ca.pem %s.pem %s.key; ' "$c" "$c" "$c"; done)CA key private/ca.key stays here"
