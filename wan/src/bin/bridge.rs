@@ -1,0 +1,213 @@
+//! `eezybot_wan_bridge pc|pi`: the DDS graph of one site (the operator's PC or the
+//! Raspberry Pi) joined to the other through a Zenoh router, hosting
+//! zenoh-plugin-ros2dds as the official zenoh-bridge-ros2dds does. Only the topics of
+//! [`eezybot_wan::CROSSING`] cross, each in its direction; nothing else (no services,
+//! actions or parameters). See wan/README.md.
+//!
+//! Configuration (a flag wins over its environment variable):
+//!   --router EP     ZENOH_ROUTER   tls/HOST:PORT (or tcp/HOST:PORT, unencrypted, for tests)
+//!   --tls-dir DIR   ZENOH_TLS_DIR  ca.pem, NAME.pem, NAME.key (launch_scripts/wan_certs.sh)
+//!   --cert NAME                    client certificate name (default: the side, pc or pi)
+//!   --domain N      ROS_DOMAIN_ID  DDS domain (default 0)
+//!   --namespace NS                 the nodes' ROS namespace (-r __ns:=NS), default /
+//!   --print-config                 print the Zenoh configuration and exit
+//! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint).
+
+use eezybot_wan::{
+    check_endpoint, check_namespace, fail, json, json_path, topic_regex, Side, TlsFiles,
+};
+use zenoh::config::Config;
+use zenoh::internal::plugins::PluginsManager;
+use zenoh::internal::runtime::RuntimeBuilder;
+use zenoh_plugin_trait::Plugin;
+
+const PROGRAM: &str = "eezybot_wan_bridge";
+const USAGE: &str = "usage: eezybot_wan_bridge pc|pi [--router tls/HOST:PORT] [--tls-dir DIR] \
+[--cert NAME] [--domain N] [--namespace /NS] [--print-config]";
+
+struct Args {
+    side: Side,
+    router: Option<String>,
+    tls_dir: Option<String>,
+    cert: Option<String>,
+    domain: Option<String>,
+    namespace: String,
+    print_config: bool,
+}
+
+fn parse_args() -> Args {
+    let mut args = std::env::args().skip(1);
+    let mut side = None;
+    let mut router = None;
+    let mut tls_dir = None;
+    let mut cert = None;
+    let mut domain = None;
+    let mut namespace = "/".to_string();
+    let mut print_config = false;
+    while let Some(arg) = args.next() {
+        let mut value = |name: &str| {
+            args.next()
+                .unwrap_or_else(|| fail(PROGRAM, format!("{name} needs a value\n{USAGE}")))
+        };
+        match arg.as_str() {
+            "--router" => router = Some(value("--router")),
+            "--tls-dir" => tls_dir = Some(value("--tls-dir")),
+            "--cert" => cert = Some(value("--cert")),
+            "--domain" => domain = Some(value("--domain")),
+            "--namespace" => namespace = value("--namespace"),
+            "--print-config" => print_config = true,
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                std::process::exit(0)
+            }
+            s if side.is_none() && !s.starts_with('-') => {
+                side = Some(s.parse::<Side>().unwrap_or_else(|e| fail(PROGRAM, e)))
+            }
+            s => fail(PROGRAM, format!("unexpected argument `{s}`\n{USAGE}")),
+        }
+    }
+    let env = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());
+    Args {
+        side: side.unwrap_or_else(|| fail(PROGRAM, format!("which side: pc or pi?\n{USAGE}"))),
+        router: router.or_else(|| env("ZENOH_ROUTER")),
+        tls_dir: tls_dir.or_else(|| env("ZENOH_TLS_DIR")),
+        cert,
+        domain: domain.or_else(|| env("ROS_DOMAIN_ID")),
+        namespace,
+        print_config,
+    }
+}
+
+/// Set `key` to the JSON5 `value`; a failure is ours (a key Zenoh does not know).
+fn set(config: &mut Config, key: &str, value: &str) {
+    if let Err(e) = config.insert_json5(key, value) {
+        fail(PROGRAM, format!("Zenoh configuration {key} = {value}: {e}"))
+    }
+}
+
+fn config(args: &Args) -> Config {
+    let router = args.router.as_deref().unwrap_or_else(|| {
+        fail(PROGRAM, "ZENOH_ROUTER is not set: the router's endpoint, tls/HOST:PORT")
+    });
+    let router = check_endpoint("ZENOH_ROUTER", router).unwrap_or_else(|e| fail(PROGRAM, e));
+    let domain = match args.domain.as_deref() {
+        None => 0,
+        Some(d) => match d.parse::<u32>() {
+            Ok(n) if n <= 232 => n,
+            _ => fail(PROGRAM, format!("ROS_DOMAIN_ID=`{d}` is not 0…232")),
+        },
+    };
+    let ns = check_namespace(&args.namespace).unwrap_or_else(|e| fail(PROGRAM, e));
+    let side = args.side;
+    let regexes = |topics: Vec<&str>| {
+        let list: Vec<String> = topics.iter().map(|t| json(topic_regex(&ns, t))).collect();
+        format!("[{}]", list.join(", "))
+    };
+
+    let mut c = Config::default();
+    set(&mut c, "mode", r#""client""#);
+    set(&mut c, "connect/endpoints", &format!("[{}]", json(&router.text)));
+    // Keep trying the router forever, at start and after a loss (an outage of the WAN).
+    set(&mut c, "connect/timeout_ms", "-1");
+    set(&mut c, "connect/exit_on_failure", "false");
+    set(
+        &mut c,
+        "connect/retry",
+        "{ period_init_ms: 500, period_max_ms: 2000, period_increase_factor: 2 }",
+    );
+    // Only the router: no Zenoh scouting on the LAN, no listening.
+    set(&mut c, "listen/endpoints", "[]");
+    set(&mut c, "scouting/multicast/enabled", "false");
+    set(&mut c, "scouting/gossip/enabled", "false");
+    // As zenoh-bridge-ros2dds: timestamps (the plugin's cache of transient-local
+    // publications needs them), the admin space and the plugin.
+    set(&mut c, "timestamping/enabled", "true");
+    set(&mut c, "adminspace/enabled", "true");
+    set(&mut c, "plugins_loading/enabled", "true");
+    if router.tls {
+        let name = args.cert.as_deref().unwrap_or(side.name());
+        let dir = args.tls_dir.as_deref().unwrap_or_else(|| {
+            fail(PROGRAM, format!("ZENOH_TLS_DIR is not set: the directory with ca.pem, {name}.pem and {name}.key (launch_scripts/wan_certs.sh)"))
+        });
+        let tls = TlsFiles::load(dir, name, eezybot_wan::Role::Client).unwrap_or_else(|e| fail(PROGRAM, e));
+        set(&mut c, "transport/link/tls/root_ca_certificate", &json_path(&tls.ca));
+        set(&mut c, "transport/link/tls/connect_certificate", &json_path(&tls.cert));
+        set(&mut c, "transport/link/tls/connect_private_key", &json_path(&tls.key));
+        set(&mut c, "transport/link/tls/enable_mtls", "true");
+        set(&mut c, "transport/link/tls/verify_name_on_connect", "true");
+    } else {
+        eprintln!("{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)", router.text);
+    }
+    let plugin = format!(
+        r#"{{
+            nodename: {node},
+            domain: {domain},
+            allow: {{
+                publishers: {out},
+                subscribers: {inc},
+                service_servers: [], service_clients: [],
+                action_servers: [], action_clients: [],
+            }},
+        }}"#,
+        node = json(format!("eezybot_wan_bridge_{}", side.name())),
+        out = regexes(side.outgoing()),
+        inc = regexes(side.incoming()),
+    );
+    set(&mut c, "plugins/ros2dds", &plugin);
+    c
+}
+
+#[tokio::main]
+async fn main() {
+    zenoh::init_log_from_env_or("warn,zenoh_plugin_ros2dds=info");
+    let args = parse_args();
+    let config = config(&args);
+    if args.print_config {
+        println!("{config}");
+        return;
+    }
+    // The plugin reads ROS_DISTRO for the format of ros_discovery_info ("assuming iron"
+    // otherwise); we target Jazzy.
+    if std::env::var_os("ROS_DISTRO").is_none() {
+        std::env::set_var("ROS_DISTRO", "jazzy");
+    }
+    let side = args.side;
+    eprintln!(
+        "{PROGRAM}: {} side, ROS domain {}, router {}; out: {}; in: {}",
+        side.name(),
+        args.domain.as_deref().unwrap_or("0"),
+        args.router.as_deref().unwrap_or_default(),
+        side.outgoing().join(", "),
+        side.incoming().join(", ")
+    );
+    let mut plugins = PluginsManager::static_plugins_only();
+    plugins.declare_static_plugin::<zenoh_plugin_ros2dds::ROS2Plugin, &str>("ros2dds", true);
+    tracing::info!("zenoh-plugin-ros2dds {}", zenoh_plugin_ros2dds::ROS2Plugin::PLUGIN_LONG_VERSION);
+    let mut runtime = match RuntimeBuilder::new(config).plugins_manager(plugins).build().await {
+        Ok(r) => r,
+        Err(e) => fail(PROGRAM, format!("starting Zenoh: {e}")),
+    };
+    tokio::select! {
+        started = runtime.start() => {
+            if let Err(e) = started {
+                fail(PROGRAM, format!("starting Zenoh: {e}"))
+            }
+        }
+        _ = signal() => std::process::exit(0),
+    }
+    eprintln!("{PROGRAM}: connected to the router");
+    signal().await;
+    std::process::exit(0)
+}
+
+/// Ctrl-C or SIGTERM.
+async fn signal() {
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+        Ok(t) => t,
+        Err(e) => fail(PROGRAM, format!("SIGTERM handler: {e}")),
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = term.recv() => {}
+    }
+}

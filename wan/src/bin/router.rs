@@ -1,0 +1,96 @@
+//! `eezybot_wan_router`: the Zenoh router both sites' bridges connect to
+//! (launch_scripts/router.sh). Listens on one endpoint, TLS with mutual authentication:
+//! only a client whose certificate the CA signed (launch_scripts/wan_certs.sh) joins.
+//!
+//!   --listen EP     ZENOH_LISTEN   default tls/0.0.0.0:7447 (tcp/… unencrypted, tests only)
+//!   --tls-dir DIR   ZENOH_TLS_DIR  ca.pem, router.pem, router.key
+//!   --print-config                 print the Zenoh configuration and exit
+//! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint,
+//! an address it cannot listen on).
+
+use eezybot_wan::{check_endpoint, fail, json, json_path, TlsFiles};
+use zenoh::config::Config;
+
+const PROGRAM: &str = "eezybot_wan_router";
+const USAGE: &str = "usage: eezybot_wan_router [--listen tls/0.0.0.0:7447] [--tls-dir DIR] [--print-config]";
+
+fn set(config: &mut Config, key: &str, value: &str) {
+    if let Err(e) = config.insert_json5(key, value) {
+        fail(PROGRAM, format!("Zenoh configuration {key} = {value}: {e}"))
+    }
+}
+
+#[tokio::main]
+async fn main() {
+    zenoh::init_log_from_env_or("warn");
+    let env = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());
+    let mut listen = env("ZENOH_LISTEN");
+    let mut tls_dir = env("ZENOH_TLS_DIR");
+    let mut print_config = false;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        let mut value = |name: &str| {
+            args.next()
+                .unwrap_or_else(|| fail(PROGRAM, format!("{name} needs a value\n{USAGE}")))
+        };
+        match arg.as_str() {
+            "--listen" => listen = Some(value("--listen")),
+            "--tls-dir" => tls_dir = Some(value("--tls-dir")),
+            "--print-config" => print_config = true,
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                return;
+            }
+            s => fail(PROGRAM, format!("unexpected argument `{s}`\n{USAGE}")),
+        }
+    }
+    let listen = listen.unwrap_or_else(|| "tls/0.0.0.0:7447".to_string());
+    let endpoint = check_endpoint("ZENOH_LISTEN", &listen).unwrap_or_else(|e| fail(PROGRAM, e));
+
+    let mut c = Config::default();
+    set(&mut c, "mode", r#""router""#);
+    set(&mut c, "listen/endpoints", &format!("[{}]", json(&endpoint.text)));
+    set(&mut c, "listen/exit_on_failure", "true");
+    set(&mut c, "connect/endpoints", "[]");
+    set(&mut c, "scouting/multicast/enabled", "false");
+    set(&mut c, "scouting/gossip/enabled", "false");
+    // The bridges' transient-local caches need timestamps on what they publish; a
+    // router with timestamping keeps them consistent.
+    set(&mut c, "timestamping/enabled", "true");
+    if endpoint.tls {
+        let dir = tls_dir.unwrap_or_else(|| {
+            fail(PROGRAM, "ZENOH_TLS_DIR is not set: the directory with ca.pem, router.pem and router.key (launch_scripts/wan_certs.sh)")
+        });
+        let tls = TlsFiles::load(&dir, "router", eezybot_wan::Role::Server).unwrap_or_else(|e| fail(PROGRAM, e));
+        set(&mut c, "transport/link/tls/root_ca_certificate", &json_path(&tls.ca));
+        set(&mut c, "transport/link/tls/listen_certificate", &json_path(&tls.cert));
+        set(&mut c, "transport/link/tls/listen_private_key", &json_path(&tls.key));
+        set(&mut c, "transport/link/tls/enable_mtls", "true");
+    } else {
+        eprintln!("{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)", endpoint.text);
+    }
+    if print_config {
+        println!("{c}");
+        return;
+    }
+    let session = match zenoh::open(c).await {
+        Ok(s) => s,
+        Err(e) => fail(PROGRAM, format!("cannot listen on {}: {e}", endpoint.text)),
+    };
+    eprintln!(
+        "{PROGRAM}: listening on {}{} (id {})",
+        endpoint.text,
+        if endpoint.tls { ", TLS with client certificates" } else { "" },
+        session.zid()
+    );
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+        Ok(t) => t,
+        Err(e) => fail(PROGRAM, format!("SIGTERM handler: {e}")),
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = term.recv() => {}
+    }
+    eprintln!("{PROGRAM}: stopping");
+    let _ = session.close().await;
+}

@@ -1,0 +1,295 @@
+//! What the WAN router (`eezybot_wan_router`) and bridge (`eezybot_wan_bridge`) share:
+//! which topics cross and in which direction ([`Side`]), the TLS files of
+//! `launch_scripts/wan_certs.sh` ([`TlsFiles`]), the endpoint check and the exit status
+//! of a configuration error ([`fail`]).
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use rustls::pki_types::{CertificateDer, UnixTime};
+
+/// Exit status for a configuration error: a missing or unusable TLS file, a bad
+/// endpoint, a bad argument.
+pub const CONFIG_ERROR: i32 = 2;
+
+/// Print `error: MESSAGE` on stderr and exit with [`CONFIG_ERROR`].
+pub fn fail(program: &str, message: impl fmt::Display) -> ! {
+    eprintln!("{program}: error: {message}");
+    std::process::exit(CONFIG_ERROR)
+}
+
+/// Which half of the graph a bridge serves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// The operator's PC: compute_ik, state_publisher, gui_bridge (launch_scripts/pc.sh).
+    Pc,
+    /// The Raspberry Pi: serial_node (launch_scripts/pi.sh).
+    Pi,
+}
+
+/// The topics that cross the WAN, each with the side whose nodes publish it: the part of
+/// the topic contract (libs/ros_plumbing/src/topics.rs) where a publisher runs on one
+/// side and a subscriber on the other. Everything else stays on its LAN: the targets,
+/// joint_states, robot_description, tf and tf_static have publishers and subscribers on
+/// the PC only. No services, actions or parameters cross.
+///
+/// | topic | from | to | QoS |
+/// |---|---|---|---|
+/// | `servo_angles` | PC (compute_ik) | Pi (serial_node) | reliable, volatile |
+/// | `estop` | PC (gui_bridge) | Pi (serial_node) | reliable, transient-local (latched) |
+/// | `servo_state` | Pi (serial_node) | PC (gui_bridge) | reliable, volatile |
+/// | `diagnostics` | Pi (serial_node) | PC (gui_bridge) | the PC's own stay on the PC |
+pub const CROSSING: &[(&str, Side)] = &[
+    ("servo_angles", Side::Pc),
+    ("estop", Side::Pc),
+    ("servo_state", Side::Pi),
+    ("diagnostics", Side::Pi),
+];
+
+impl Side {
+    /// The name on the command line and of the client certificate (`pc`, `pi`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Pc => "pc",
+            Side::Pi => "pi",
+        }
+    }
+
+    /// Topics whose local publishers this side's bridge sends out ([`CROSSING`]).
+    pub fn outgoing(self) -> Vec<&'static str> {
+        CROSSING.iter().filter(|(_, s)| *s == self).map(|(t, _)| *t).collect()
+    }
+
+    /// Topics whose local subscribers this side's bridge feeds from the WAN.
+    pub fn incoming(self) -> Vec<&'static str> {
+        CROSSING.iter().filter(|(_, s)| *s != self).map(|(t, _)| *t).collect()
+    }
+}
+
+impl FromStr for Side {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "pc" => Ok(Side::Pc),
+            "pi" => Ok(Side::Pi),
+            _ => Err(format!("unknown side `{s}`: pc or pi")),
+        }
+    }
+}
+
+/// A ROS namespace as given with `-r __ns:=/arm2`: `/` or `/a/b`, no trailing slash.
+pub fn check_namespace(ns: &str) -> Result<String, String> {
+    let trimmed = ns.trim_end_matches('/');
+    let ok = ns.starts_with('/')
+        && trimmed.split('/').skip(1).all(|part| {
+            !part.is_empty()
+                && part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                && !part.starts_with(|c: char| c.is_ascii_digit())
+        });
+    if ok {
+        Ok(trimmed.to_string())
+    } else {
+        Err(format!(
+            "bad ROS namespace `{ns}`: / or /name[/name…], names of letters, digits and _"
+        ))
+    }
+}
+
+/// The plugin's allow-list entry for `topic` in namespace `ns` (from [`check_namespace`]):
+/// a regular expression matching exactly the full topic name.
+pub fn topic_regex(ns: &str, topic: &str) -> String {
+    format!("{ns}/{topic}")
+}
+
+/// A Zenoh endpoint the router listens on or a bridge connects to: `tls/HOST:PORT` or
+/// `tcp/HOST:PORT` (plain, unauthenticated: for tests only).
+#[derive(Clone, Debug)]
+pub struct Endpoint {
+    /// As given, for Zenoh's configuration.
+    pub text: String,
+    /// `tls` or `tcp`.
+    pub tls: bool,
+}
+
+/// Check an endpoint ([`Endpoint`]); `what` names it in the error (`ZENOH_ROUTER`).
+pub fn check_endpoint(what: &str, text: &str) -> Result<Endpoint, String> {
+    let bad = |why: &str| {
+        format!("{what}=`{text}` is not an endpoint tls/HOST:PORT (or tcp/HOST:PORT): {why}")
+    };
+    let (proto, addr) = text.split_once('/').ok_or_else(|| bad("no protocol/"))?;
+    let tls = match proto {
+        "tls" => true,
+        "tcp" => false,
+        _ => return Err(bad(&format!("protocol `{proto}` is neither tls nor tcp"))),
+    };
+    let addr = addr.split(['?', '#']).next().unwrap_or_default();
+    let (host, port) = addr.rsplit_once(':').ok_or_else(|| bad("no :PORT"))?;
+    if host.is_empty() || host == "[]" {
+        return Err(bad("no HOST"));
+    }
+    match port.parse::<u16>() {
+        Ok(p) if p > 0 => {}
+        _ => return Err(bad(&format!("port `{port}` is not 1…65535"))),
+    }
+    zenoh::config::EndPoint::from_str(text).map_err(|e| bad(&e.to_string()))?;
+    Ok(Endpoint {
+        text: text.to_string(),
+        tls,
+    })
+}
+
+/// The TLS files of one party, from `ZENOH_TLS_DIR` as `launch_scripts/wan_certs.sh`
+/// writes it: `ca.pem` (the CA's certificate) and `NAME.pem` + `NAME.key` (the party's
+/// certificate and private key; NAME is `router`, `pc` or `pi`).
+#[derive(Clone, Debug)]
+pub struct TlsFiles {
+    /// The CA's certificate: the only issuer the other end may present.
+    pub ca: PathBuf,
+    /// Own certificate, signed by the CA.
+    pub cert: PathBuf,
+    /// Own private key.
+    pub key: PathBuf,
+}
+
+fn read(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    std::fs::read(path).map_err(|e| {
+        format!(
+            "{what} {}: {e} (make the files with launch_scripts/wan_certs.sh DIR HOST…)",
+            path.display()
+        )
+    })
+}
+
+fn first_cert(path: &Path, what: &str) -> Result<CertificateDer<'static>, String> {
+    let pem = read(path, what)?;
+    let first = rustls_pemfile::certs(&mut pem.as_slice()).next();
+    first
+        .and_then(Result::ok)
+        .ok_or_else(|| format!("{what} {} holds no PEM certificate", path.display()))
+}
+
+/// Whose files: the router's must be a TLS server's, a bridge's a client's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// `router.pem`: extended key usage serverAuth.
+    Server,
+    /// `pc.pem`, `pi.pem`: clientAuth.
+    Client,
+}
+
+impl TlsFiles {
+    /// The files of `name` in `dir`, checked as the other end will: readable PEM, the
+    /// certificate signed by the CA of `ca.pem`, valid now and for `role`, the key the
+    /// certificate's.
+    pub fn load(dir: &str, name: &str, role: Role) -> Result<TlsFiles, String> {
+        let dir = Path::new(dir);
+        if !dir.is_dir() {
+            return Err(format!(
+                "ZENOH_TLS_DIR={} is not a directory (make it with launch_scripts/wan_certs.sh {} HOST…)",
+                dir.display(),
+                dir.display()
+            ));
+        }
+        let files = TlsFiles {
+            ca: dir.join("ca.pem"),
+            cert: dir.join(format!("{name}.pem")),
+            key: dir.join(format!("{name}.key")),
+        };
+        let ca = first_cert(&files.ca, "CA certificate")?;
+        let cert = first_cert(&files.cert, &format!("{name}'s certificate"))?;
+        let key_pem = read(&files.key, &format!("{name}'s private key"))?;
+        let key = rustls_pemfile::private_key(&mut key_pem.as_slice())
+            .ok()
+            .flatten()
+            .ok_or_else(|| {
+                format!("{name}'s private key {} holds no PEM private key", files.key.display())
+            })?;
+        let anchor = webpki::anchor_from_trusted_cert(&ca).map_err(|e| {
+            format!("CA certificate {} is not usable: {e}", files.ca.display())
+        })?;
+        let end_entity = webpki::EndEntityCert::try_from(&cert).map_err(|e| {
+            format!("{name}'s certificate {} is not usable: {e}", files.cert.display())
+        })?;
+        let usage = match role {
+            Role::Server => webpki::KeyUsage::server_auth(),
+            Role::Client => webpki::KeyUsage::client_auth(),
+        };
+        end_entity
+            .verify_for_usage(
+                webpki::ALL_VERIFICATION_ALGS,
+                &[anchor],
+                &[],
+                UnixTime::now(),
+                usage,
+                None,
+                None,
+            )
+            .map_err(|e| {
+                format!(
+                    "{name}'s certificate {} is not valid under the CA of {} ({e}): the other end would refuse it; make both with the same launch_scripts/wan_certs.sh DIR",
+                    files.cert.display(),
+                    files.ca.display()
+                )
+            })?;
+        rustls::sign::CertifiedKey::from_der(
+            vec![cert],
+            key,
+            &rustls::crypto::ring::default_provider(),
+        )
+        .map_err(|e| {
+            format!(
+                "{name}'s private key {} does not go with {} ({e})",
+                files.key.display(),
+                files.cert.display()
+            )
+        })?;
+        Ok(files)
+    }
+}
+
+/// A JSON string literal (for Zenoh's `insert_json5`).
+pub fn json(s: impl AsRef<str>) -> String {
+    serde_json::Value::String(s.as_ref().to_string()).to_string()
+}
+
+/// A path as a JSON string literal.
+pub fn json_path(p: &Path) -> String {
+    json(p.to_string_lossy())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_crossing_topic_goes_out_on_one_side_and_in_on_the_other() {
+        for side in [Side::Pc, Side::Pi] {
+            let other = if side == Side::Pc { Side::Pi } else { Side::Pc };
+            assert_eq!(side.outgoing(), other.incoming());
+        }
+        assert_eq!(Side::Pc.outgoing(), ["servo_angles", "estop"]);
+        assert_eq!(Side::Pi.outgoing(), ["servo_state", "diagnostics"]);
+    }
+
+    #[test]
+    fn endpoints() {
+        assert!(check_endpoint("E", "tls/example.org:7447").unwrap().tls);
+        assert!(!check_endpoint("E", "tcp/10.0.0.1:7447").unwrap().tls);
+        assert!(check_endpoint("E", "tls/[::1]:7447").is_ok());
+        for bad in ["", "example.org:7447", "udp/h:1", "tls/h", "tls/h:0", "tls/:7447", "tls/h:x"] {
+            assert!(check_endpoint("E", bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn namespaces() {
+        assert_eq!(check_namespace("/").unwrap(), "");
+        assert_eq!(check_namespace("/arm2").unwrap(), "/arm2");
+        assert_eq!(topic_regex("", "estop"), "/estop");
+        assert_eq!(topic_regex("/arm2", "estop"), "/arm2/estop");
+        for bad in ["", "arm2", "/a//b", "/a-b", "/2a"] {
+            assert!(check_namespace(bad).is_err(), "{bad}");
+        }
+    }
+}
