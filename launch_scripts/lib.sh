@@ -47,6 +47,37 @@ eezybot_find_binaries() {
   fi
 }
 
+# The WAN mode's binaries (wan/, its own Cargo project: Zenoh and Cyclone DDS, not in the
+# main workspace), in this order:
+#  1. EEZYBOT_WAN_BIN_DIR, if set;
+#  2. bin/ next to launch_scripts/ (a bundle), if it holds the first one;
+#  3. in a source tree with cargo: `cargo build --release` in wan/ (the first build takes
+#     several minutes: cmake and libclang-dev are needed), then wan/target/release;
+#  4. else wan/target/release, if it holds them.
+#   eezybot_find_wan_binaries BIN... -> sets EEZYBOT_WAN_BIN (a directory)
+eezybot_find_wan_binaries() {
+  local b missing
+  if [ -n "${EEZYBOT_WAN_BIN_DIR:-}" ]; then
+    EEZYBOT_WAN_BIN="$EEZYBOT_WAN_BIN_DIR"
+  elif [ -x "$EEZYBOT_ROOT/bin/$1" ]; then
+    EEZYBOT_WAN_BIN="$EEZYBOT_ROOT/bin"
+  elif [ -f "$EEZYBOT_ROOT/wan/Cargo.toml" ] && command -v cargo >/dev/null 2>&1; then
+    [ -x "$EEZYBOT_ROOT/wan/target/release/$1" ] ||
+      eezybot_say "building wan/: cargo build --release (the first build takes several minutes; needs cmake and libclang-dev)"
+    (cd "$EEZYBOT_ROOT/wan" && cargo build --release --quiet) || {
+      eezybot_say "the build of wan/ failed (Debian: apt install cmake libclang-dev)"; exit 1; }
+    EEZYBOT_WAN_BIN="$EEZYBOT_ROOT/wan/target/release"
+  else
+    EEZYBOT_WAN_BIN="$EEZYBOT_ROOT/wan/target/release"
+  fi
+  missing=()
+  for b in "$@"; do [ -x "$EEZYBOT_WAN_BIN/$b" ] || missing+=("$b"); done
+  if [ ${#missing[@]} -gt 0 ]; then
+    eezybot_say "missing in $EEZYBOT_WAN_BIN: ${missing[*]} (build them: cd wan && cargo build --release)"
+    exit 1
+  fi
+}
+
 # The script's own arguments are ROS arguments for every node. A leading --ros-args is
 # accepted and dropped (the nodes get one --ros-args block each).
 eezybot_ros_args() {

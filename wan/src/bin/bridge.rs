@@ -187,15 +187,31 @@ async fn main() {
         Ok(r) => r,
         Err(e) => fail(PROGRAM, format!("starting Zenoh: {e}")),
     };
-    tokio::select! {
-        started = runtime.start() => {
-            if let Err(e) = started {
-                fail(PROGRAM, format!("starting Zenoh: {e}"))
+    // start() returns once connected to the router (it retries forever); until then,
+    // say so every 10 s: a refused certificate or plain TCP to a TLS router is only
+    // logged at debug level by Zenoh.
+    let router = args.router.as_deref().unwrap_or_default();
+    let began = std::time::Instant::now();
+    let mut tick = tokio::time::interval(std::time::Duration::from_secs(10));
+    tick.tick().await;
+    let start = runtime.start();
+    tokio::pin!(start);
+    loop {
+        tokio::select! {
+            started = &mut start => {
+                if let Err(e) = started {
+                    fail(PROGRAM, format!("starting Zenoh: {e}"))
+                }
+                break;
             }
+            _ = tick.tick() => eprintln!(
+                "{PROGRAM}: not connected to the router {router} after {} s, still trying: is it running and reachable, and were its certificate and ours made by the same CA (wan_certs.sh)? The reason of each attempt: RUST_LOG=zenoh::net::runtime::orchestrator=debug",
+                began.elapsed().as_secs()
+            ),
+            _ = signal() => std::process::exit(0),
         }
-        _ = signal() => std::process::exit(0),
     }
-    eprintln!("{PROGRAM}: connected to the router");
+    eprintln!("{PROGRAM}: connected to the router {router}");
     signal().await;
     std::process::exit(0)
 }
