@@ -48,7 +48,7 @@ use zenoh::{
     Result as ZResult, Session,
 };
 use zenoh_ext::SubscriberBuilderExt;
-use zenoh_plugin_trait::{plugin_long_version, plugin_version, Plugin, PluginControl};
+use zenoh_plugin_trait::{plugin_version, Plugin, PluginControl};
 
 pub mod config;
 mod dds_discovery;
@@ -158,7 +158,10 @@ impl Plugin for ROS2Plugin {
     type Instance = RunningPlugin;
 
     const PLUGIN_VERSION: &'static str = plugin_version!();
-    const PLUGIN_LONG_VERSION: &'static str = plugin_long_version!();
+    // eezybot patch: not git_version! (plugin_long_version!): inside our repository it
+    // runs `git describe` on it, and every commit to it rebuilt the plugin
+    const PLUGIN_LONG_VERSION: &'static str =
+        concat!("v", env!("CARGO_PKG_VERSION"), "-eezybot-patched");
     const DEFAULT_NAME: &'static str = "ros2dds";
 
     fn start(name: &str, runtime: &Self::StartArgs) -> ZResult<RunningPlugin> {
