@@ -58,12 +58,20 @@ impl Side {
 
     /// Topics whose local publishers this side's bridge sends out ([`CROSSING`]).
     pub fn outgoing(self) -> Vec<&'static str> {
-        CROSSING.iter().filter(|(_, s)| *s == self).map(|(t, _)| *t).collect()
+        CROSSING
+            .iter()
+            .filter(|(_, s)| *s == self)
+            .map(|(t, _)| *t)
+            .collect()
     }
 
     /// Topics whose local subscribers this side's bridge feeds from the WAN.
     pub fn incoming(self) -> Vec<&'static str> {
-        CROSSING.iter().filter(|(_, s)| *s != self).map(|(t, _)| *t).collect()
+        CROSSING
+            .iter()
+            .filter(|(_, s)| *s != self)
+            .map(|(t, _)| *t)
+            .collect()
     }
 }
 
@@ -203,13 +211,18 @@ impl TlsFiles {
             .ok()
             .flatten()
             .ok_or_else(|| {
-                format!("{name}'s private key {} holds no PEM private key", files.key.display())
+                format!(
+                    "{name}'s private key {} holds no PEM private key",
+                    files.key.display()
+                )
             })?;
-        let anchor = webpki::anchor_from_trusted_cert(&ca).map_err(|e| {
-            format!("CA certificate {} is not usable: {e}", files.ca.display())
-        })?;
+        let anchor = webpki::anchor_from_trusted_cert(&ca)
+            .map_err(|e| format!("CA certificate {} is not usable: {e}", files.ca.display()))?;
         let end_entity = webpki::EndEntityCert::try_from(&cert).map_err(|e| {
-            format!("{name}'s certificate {} is not usable: {e}", files.cert.display())
+            format!(
+                "{name}'s certificate {} is not usable: {e}",
+                files.cert.display()
+            )
         })?;
         let usage = match role {
             Role::Server => webpki::KeyUsage::server_auth(),
@@ -277,7 +290,15 @@ mod tests {
         assert!(check_endpoint("E", "tls/example.org:7447").unwrap().tls);
         assert!(!check_endpoint("E", "tcp/10.0.0.1:7447").unwrap().tls);
         assert!(check_endpoint("E", "tls/[::1]:7447").is_ok());
-        for bad in ["", "example.org:7447", "udp/h:1", "tls/h", "tls/h:0", "tls/:7447", "tls/h:x"] {
+        for bad in [
+            "",
+            "example.org:7447",
+            "udp/h:1",
+            "tls/h",
+            "tls/h:0",
+            "tls/:7447",
+            "tls/h:x",
+        ] {
             assert!(check_endpoint("E", bad).is_err(), "{bad}");
         }
     }

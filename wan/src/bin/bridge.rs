@@ -87,7 +87,10 @@ fn set(config: &mut Config, key: &str, value: &str) {
 
 fn config(args: &Args) -> Config {
     let router = args.router.as_deref().unwrap_or_else(|| {
-        fail(PROGRAM, "ZENOH_ROUTER is not set: the router's endpoint, tls/HOST:PORT")
+        fail(
+            PROGRAM,
+            "ZENOH_ROUTER is not set: the router's endpoint, tls/HOST:PORT",
+        )
     });
     let router = check_endpoint("ZENOH_ROUTER", router).unwrap_or_else(|e| fail(PROGRAM, e));
     let domain = match args.domain.as_deref() {
@@ -106,7 +109,11 @@ fn config(args: &Args) -> Config {
 
     let mut c = Config::default();
     set(&mut c, "mode", r#""client""#);
-    set(&mut c, "connect/endpoints", &format!("[{}]", json(&router.text)));
+    set(
+        &mut c,
+        "connect/endpoints",
+        &format!("[{}]", json(&router.text)),
+    );
     // Keep trying the router forever, at start and after a loss (an outage of the WAN).
     set(&mut c, "connect/timeout_ms", "-1");
     set(&mut c, "connect/exit_on_failure", "false");
@@ -129,14 +136,30 @@ fn config(args: &Args) -> Config {
         let dir = args.tls_dir.as_deref().unwrap_or_else(|| {
             fail(PROGRAM, format!("ZENOH_TLS_DIR is not set: the directory with ca.pem, {name}.pem and {name}.key (launch_scripts/wan_certs.sh)"))
         });
-        let tls = TlsFiles::load(dir, name, eezybot_wan::Role::Client).unwrap_or_else(|e| fail(PROGRAM, e));
-        set(&mut c, "transport/link/tls/root_ca_certificate", &json_path(&tls.ca));
-        set(&mut c, "transport/link/tls/connect_certificate", &json_path(&tls.cert));
-        set(&mut c, "transport/link/tls/connect_private_key", &json_path(&tls.key));
+        let tls = TlsFiles::load(dir, name, eezybot_wan::Role::Client)
+            .unwrap_or_else(|e| fail(PROGRAM, e));
+        set(
+            &mut c,
+            "transport/link/tls/root_ca_certificate",
+            &json_path(&tls.ca),
+        );
+        set(
+            &mut c,
+            "transport/link/tls/connect_certificate",
+            &json_path(&tls.cert),
+        );
+        set(
+            &mut c,
+            "transport/link/tls/connect_private_key",
+            &json_path(&tls.key),
+        );
         set(&mut c, "transport/link/tls/enable_mtls", "true");
         set(&mut c, "transport/link/tls/verify_name_on_connect", "true");
     } else {
-        eprintln!("{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)", router.text);
+        eprintln!(
+            "{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)",
+            router.text
+        );
     }
     let plugin = format!(
         r#"{{
@@ -182,8 +205,15 @@ async fn main() {
     );
     let mut plugins = PluginsManager::static_plugins_only();
     plugins.declare_static_plugin::<zenoh_plugin_ros2dds::ROS2Plugin, &str>("ros2dds", true);
-    tracing::info!("zenoh-plugin-ros2dds {}", zenoh_plugin_ros2dds::ROS2Plugin::PLUGIN_LONG_VERSION);
-    let mut runtime = match RuntimeBuilder::new(config).plugins_manager(plugins).build().await {
+    tracing::info!(
+        "zenoh-plugin-ros2dds {}",
+        zenoh_plugin_ros2dds::ROS2Plugin::PLUGIN_LONG_VERSION
+    );
+    let mut runtime = match RuntimeBuilder::new(config)
+        .plugins_manager(plugins)
+        .build()
+        .await
+    {
         Ok(r) => r,
         Err(e) => fail(PROGRAM, format!("starting Zenoh: {e}")),
     };

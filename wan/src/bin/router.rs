@@ -12,7 +12,8 @@ use eezybot_wan::{check_endpoint, fail, json, json_path, TlsFiles};
 use zenoh::config::Config;
 
 const PROGRAM: &str = "eezybot_wan_router";
-const USAGE: &str = "usage: eezybot_wan_router [--listen tls/0.0.0.0:7447] [--tls-dir DIR] [--print-config]";
+const USAGE: &str =
+    "usage: eezybot_wan_router [--listen tls/0.0.0.0:7447] [--tls-dir DIR] [--print-config]";
 
 fn set(config: &mut Config, key: &str, value: &str) {
     if let Err(e) = config.insert_json5(key, value) {
@@ -49,7 +50,11 @@ async fn main() {
 
     let mut c = Config::default();
     set(&mut c, "mode", r#""router""#);
-    set(&mut c, "listen/endpoints", &format!("[{}]", json(&endpoint.text)));
+    set(
+        &mut c,
+        "listen/endpoints",
+        &format!("[{}]", json(&endpoint.text)),
+    );
     set(&mut c, "listen/exit_on_failure", "true");
     set(&mut c, "connect/endpoints", "[]");
     set(&mut c, "scouting/multicast/enabled", "false");
@@ -61,13 +66,29 @@ async fn main() {
         let dir = tls_dir.unwrap_or_else(|| {
             fail(PROGRAM, "ZENOH_TLS_DIR is not set: the directory with ca.pem, router.pem and router.key (launch_scripts/wan_certs.sh)")
         });
-        let tls = TlsFiles::load(&dir, "router", eezybot_wan::Role::Server).unwrap_or_else(|e| fail(PROGRAM, e));
-        set(&mut c, "transport/link/tls/root_ca_certificate", &json_path(&tls.ca));
-        set(&mut c, "transport/link/tls/listen_certificate", &json_path(&tls.cert));
-        set(&mut c, "transport/link/tls/listen_private_key", &json_path(&tls.key));
+        let tls = TlsFiles::load(&dir, "router", eezybot_wan::Role::Server)
+            .unwrap_or_else(|e| fail(PROGRAM, e));
+        set(
+            &mut c,
+            "transport/link/tls/root_ca_certificate",
+            &json_path(&tls.ca),
+        );
+        set(
+            &mut c,
+            "transport/link/tls/listen_certificate",
+            &json_path(&tls.cert),
+        );
+        set(
+            &mut c,
+            "transport/link/tls/listen_private_key",
+            &json_path(&tls.key),
+        );
         set(&mut c, "transport/link/tls/enable_mtls", "true");
     } else {
-        eprintln!("{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)", endpoint.text);
+        eprintln!(
+            "{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)",
+            endpoint.text
+        );
     }
     if print_config {
         println!("{c}");
@@ -80,7 +101,11 @@ async fn main() {
     eprintln!(
         "{PROGRAM}: listening on {}{} (id {})",
         endpoint.text,
-        if endpoint.tls { ", TLS with client certificates" } else { "" },
+        if endpoint.tls {
+            ", TLS with client certificates"
+        } else {
+            ""
+        },
         session.zid()
     );
     let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
