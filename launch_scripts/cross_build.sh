@@ -11,9 +11,10 @@
 # Cargo.toml (stripped, LTO; EEZYBOT_PI_PROFILE=pi-check: the test command's quicker
 # check build, not for the Pi) and DDS Security (SROS2) built in: OpenSSL is compiled from
 # source for the target and linked statically (feature ros_plumbing/vendored-openssl), so
-# the Pi needs no libssl and this PC no target libssl. Checks that the binaries start
-# (under qemu-user), and writes
-# per target a bundle dist/eezybot-pi-ARCH/ and its tarball dist/eezybot-pi-ARCH.tar.gz:
+# the Pi needs no libssl and this PC no target libssl; its build is kept in
+# ~/.cache/eezybot/openssl for the next cross-build (EEZYBOT_OPENSSL_CACHE: another
+# directory, or off). Checks that the binaries start (under qemu-user), and writes per
+# target a bundle dist/eezybot-pi-ARCH/ and its tarball dist/eezybot-pi-ARCH.tar.gz:
 # bin/, launch_scripts/{lib.sh,pi.sh}, deploy/ (systemd unit, udev rule, install.sh),
 # README.txt and raspberry_pi.md. Copy the tarball to the Pi, unpack it and follow
 # README.txt (docs/raspberry_pi.md).
@@ -27,7 +28,7 @@ case "${1:-all}" in
   aarch64) arches=(aarch64) ;;
   armv7) arches=(armv7) ;;
   all) arches=(aarch64 armv7) ;;
-  -h|--help) sed -n '2,15s/^# \{0,1\}//p' "$0"; exit 0 ;;
+  -h|--help) sed -n '2,21s/^# \{0,1\}//p' "$0"; exit 0 ;;
   *) _say "unknown target '$1': aarch64, armv7 or all"; exit 2 ;;
 esac
 [ $# -le 1 ] || { _say "one argument at most: aarch64, armv7 or all"; exit 2; }
@@ -71,12 +72,37 @@ declare -A need_glibc
 mkdir -p dist
 for arch in "${arches[@]}"; do
   t=$(triple "$arch")
-  _say "building ${bins[*]} for $t (profile $profile, with DDS Security; the first build takes several minutes, OpenSSL among them)"
+  T=$(tr 'a-z-' 'A-Z_' <<<"$t")
+  # OpenSSL's own build (openssl-src, about 2 minutes on 2 cores) is kept per machine,
+  # outside target/, for this OpenSSL release, target, profile and cross compiler:
+  # openssl-sys links the kept one (<TRIPLE>_OPENSSL_DIR, static) instead of building
+  # it again. EEZYBOT_OPENSSL_CACHE=off builds it every time.
+  openssl_version=$(awk '/^name = "openssl-src"$/ { getline; gsub(/"/, "", $3); print $3 }' Cargo.lock)
+  compiler=$("$(cc_of "$arch")" --version | head -1 | cksum | cut -d' ' -f1)
+  openssl_cache=${EEZYBOT_OPENSSL_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/eezybot/openssl}
+  openssl_kept=$openssl_cache/$openssl_version-$t-$profile-$compiler
+  openssl_env=()
+  if [ "$openssl_cache" != off ] && [ -f "$openssl_kept/lib/libssl.a" ]; then
+    openssl_env=("${T}_OPENSSL_NO_VENDOR=1" "${T}_OPENSSL_DIR=$openssl_kept" "${T}_OPENSSL_STATIC=1")
+    _say "building ${bins[*]} for $t (profile $profile, with DDS Security; OpenSSL $openssl_version built before, kept in $openssl_kept)"
+  else
+    _say "building ${bins[*]} for $t (profile $profile, with DDS Security; the first build takes several minutes, OpenSSL among them)"
+  fi
   # CC_<triple>/AR_<triple>: what the cc crate would guess for these triples, said
   # explicitly, so OpenSSL is never configured with the host's gcc
-  env "CC_${t//-/_}=$(cc_of "$arch")" "AR_${t//-/_}=$(ar_of "$arch")" \
+  env "CC_${t//-/_}=$(cc_of "$arch")" "AR_${t//-/_}=$(ar_of "$arch")" "${openssl_env[@]}" \
     cargo build -q --profile "$profile" --target "$t" -p serial_node --bins --features ros_plumbing/vendored-openssl
   out="target/$t/$profile"
+  if [ "$openssl_cache" != off ] && [ ${#openssl_env[@]} = 0 ]; then
+    for built in "$out"/build/openssl-sys-*/out/openssl-build/install; do
+      [ -f "$built/lib/libssl.a" ] || continue
+      mkdir -p "$openssl_cache"
+      tmp=$(mktemp -d "$openssl_cache/.new.XXXXXX")
+      cp -a "$built/include" "$built/lib" "$tmp/"
+      mv -T "$tmp" "$openssl_kept" 2>/dev/null || rm -rf "$tmp"  # another build kept it first
+      break
+    done
+  fi
 
   # The binaries start on the target's CPU and name no file of this build tree.
   if ! help=$($(qemu "$arch") "$out/serial_node" --help 2>&1) || ! grep -q "^serial_node" <<<"$help"; then
