@@ -108,59 +108,7 @@ trap 'rm -rf "$WORK"' EXIT
 mkdir -p "$DIR/public" "$DIR/private" "$DIR/enclaves"
 chmod 700 "$DIR/private"
 
-# Validity: from a day ago (as sros2: a peer whose clock is a little behind still takes
-# the certificate) for 3650 days. openssl ca wants YYYYMMDDHHMMSSZ.
-NOW=$(date -u +%s)
-stamp() { date -u -d "@$1" +%Y%m%d%H%M%SZ; }
-START=$(stamp $((NOW - 86400)))
-END=$(stamp $((NOW + 3650 * 86400)))
-
-# A new EC prime256v1 key (PKCS#8 PEM, unencrypted, as sros2), owner-only.
-new_key() { (umask 077 && openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:prime256v1 \
-  -pkeyopt ec_param_enc:named_curve -out "$1" 2>"$WORK/err") || { cat "$WORK/err" >&2; return 1; }; }
-
-# issue CN KEY OUT EXTENSION [CA_CERT CA_KEY]: a certificate for KEY with subject CN=CN,
-# signed by the CA (self-signed without one), through `openssl ca` so that its start can
-# be back-dated.
-issue() {
-  local cn=$1 key=$2 out=$3 ext=$4 ca_cert=${5:-} ca_key=${6:-} w
-  w=$(mktemp -d "$WORK/ca.XXXXXX")
-  : >"$w/index.txt"
-  cat >"$w/ca.cnf" <<EOF
-[ca]
-default_ca = eezybot
-[eezybot]
-database = $w/index.txt
-new_certs_dir = $w
-rand_serial = yes
-default_md = sha256
-policy = policy_cn
-unique_subject = no
-copy_extensions = none
-email_in_dn = no
-[policy_cn]
-commonName = supplied
-[req]
-prompt = no
-distinguished_name = dn
-[dn]
-CN = $cn
-[ext_ca]
-basicConstraints = critical, CA:TRUE, pathlen:1
-[ext_enclave]
-basicConstraints = CA:FALSE
-EOF
-  openssl req -new -key "$key" -config "$w/ca.cnf" -out "$w/req.csr" 2>"$w/err" || { cat "$w/err" >&2; return 1; }
-  if [ -z "$ca_cert" ]; then
-    openssl ca -batch -config "$w/ca.cnf" -selfsign -keyfile "$key" -in "$w/req.csr" -out "$w/cert.pem" \
-      -startdate "$START" -enddate "$END" -extensions "$ext" -notext 2>"$w/err" || { cat "$w/err" >&2; return 1; }
-  else
-    openssl ca -batch -config "$w/ca.cnf" -cert "$ca_cert" -keyfile "$ca_key" -in "$w/req.csr" -out "$w/cert.pem" \
-      -startdate "$START" -enddate "$END" -extensions "$ext" -notext 2>"$w/err" || { cat "$w/err" >&2; return 1; }
-  fi
-  install -m 0644 "$w/cert.pem" "$out"
-}
-
+. "$(dirname "${BASH_SOURCE[0]}")/certs.sh"
 # sign XML P7S: S/MIME-sign with the permissions CA, as sros2 (text/plain, detached).
 sign() {
   openssl smime -sign -text -md sha256 -in "$1" -out "$2.tmp" \
@@ -183,8 +131,9 @@ elif [ -e "$DIR/public/ca.cert.pem" ] || [ -e "$DIR/private/ca.key.pem" ] \
   eezybot_say "(a new CA would orphan every enclave: use a new directory, or restore the CA files)"
   exit 1
 else
-  new_key "$DIR/private/ca.key.pem"
-  issue sros2CA "$DIR/private/ca.key.pem" "$DIR/public/ca.cert.pem" ext_ca
+  certs_new_key "$DIR/private/ca.key.pem"
+  certs_issue sros2CA "$DIR/private/ca.key.pem" "$DIR/public/ca.cert.pem" 3650 \
+    "basicConstraints = critical, CA:TRUE, pathlen:1"
   eezybot_say "CA: created $DIR/public/ca.cert.pem (CN=sros2CA, EC prime256v1, until $(openssl x509 -noout -enddate -in "$DIR/public/ca.cert.pem" | cut -d= -f2))"
 fi
 for which in identity permissions; do
@@ -213,8 +162,9 @@ for enclave in "${ENCLAVES[@]}"; do
   link "$(realpath --relative-to="$d" "$DIR/enclaves")/governance.p7s" "$d/governance.p7s"
   what=kept
   if [ ! -f "$d/cert.pem" ] || [ ! -f "$d/key.pem" ]; then
-    new_key "$d/key.pem"
-    issue "$enclave" "$d/key.pem" "$d/cert.pem" ext_enclave "$DIR/public/identity_ca.cert.pem" "$DIR/private/identity_ca.key.pem"
+    certs_new_key "$d/key.pem"
+    certs_issue "$enclave" "$d/key.pem" "$d/cert.pem" 3650 "basicConstraints = CA:FALSE" \
+      "$DIR/public/identity_ca.cert.pem" "$DIR/private/identity_ca.key.pem"
     what=created
   fi
   chmod 600 "$d/key.pem"

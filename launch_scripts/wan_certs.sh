@@ -72,56 +72,13 @@ chmod 700 "$DIR/private"
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 
-NOW=$(date -u +%s)
-stamp() { date -u -d "@$1" +%Y%m%d%H%M%SZ; }
-START=$(stamp $((NOW - 86400)))
-
-new_key() { (umask 077 && openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:prime256v1 \
-  -pkeyopt ec_param_enc:named_curve -out "$1" 2>"$WORK/err") || { cat "$WORK/err" >&2; return 1; }; }
-
-# issue CN KEY OUT EXTENSIONS DAYS [CA_CERT CA_KEY]: a certificate for KEY, subject CN,
-# with the given extension lines, signed by the CA (self-signed without one), through
-# `openssl ca` so that its start can be back-dated.
-issue() {
-  local cn=$1 key=$2 out=$3 ext=$4 days=$5 ca_cert=${6:-} ca_key=${7:-} w
-  w=$(mktemp -d "$WORK/ca.XXXXXX")
-  : >"$w/index.txt"
-  cat >"$w/ca.cnf" <<EOF
-[ca]
-default_ca = eezybot
-[eezybot]
-database = $w/index.txt
-new_certs_dir = $w
-rand_serial = yes
-default_md = sha256
-policy = policy_cn
-unique_subject = no
-copy_extensions = none
-email_in_dn = no
-[policy_cn]
-commonName = supplied
-[req]
-prompt = no
-distinguished_name = dn
-[dn]
-CN = $cn
-[ext]
-$ext
-EOF
-  openssl req -new -key "$key" -config "$w/ca.cnf" -out "$w/req.csr" 2>"$w/err" || { cat "$w/err" >&2; return 1; }
-  local sign=(-selfsign -keyfile "$key")
-  [ -z "$ca_cert" ] || sign=(-cert "$ca_cert" -keyfile "$ca_key")
-  openssl ca -batch -config "$w/ca.cnf" "${sign[@]}" -in "$w/req.csr" -out "$w/cert.pem" \
-    -startdate "$START" -enddate "$(stamp $((NOW + days * 86400)))" -extensions ext -notext \
-    2>"$w/err" || { cat "$w/err" >&2; return 1; }
-  install -m 0644 "$w/cert.pem" "$out"
-}
+. "$(dirname "${BASH_SOURCE[0]}")/certs.sh"
 
 made=()
 if [ ! -s "$DIR/ca.pem" ] || [ ! -s "$DIR/private/ca.key" ]; then
-  new_key "$DIR/private/ca.key"
-  issue "EezyBot WAN CA" "$DIR/private/ca.key" "$DIR/ca.pem" \
-    $'basicConstraints = critical, CA:TRUE, pathlen:0\nkeyUsage = critical, keyCertSign, cRLSign\nsubjectKeyIdentifier = hash' 3650
+  certs_new_key "$DIR/private/ca.key"
+  certs_issue "EezyBot WAN CA" "$DIR/private/ca.key" "$DIR/ca.pem" 3650 \
+    $'basicConstraints = critical, CA:TRUE, pathlen:0\nkeyUsage = critical, keyCertSign, cRLSign\nsubjectKeyIdentifier = hash'
   made+=(ca.pem)
 fi
 CA=("$DIR/ca.pem" "$DIR/private/ca.key")
@@ -131,9 +88,9 @@ LEAF=$'basicConstraints = critical, CA:FALSE\nkeyUsage = critical, digitalSignat
 want=$(printf '%s\n' "${SANS[@]}")
 if [ ! -s "$DIR/router.pem" ] || [ ! -s "$DIR/router.key" ] || [ "$(cat "$DIR/router.hosts" 2>/dev/null)" != "$want" ] ||
    ! openssl verify -CAfile "$DIR/ca.pem" "$DIR/router.pem" >/dev/null 2>&1; then
-  [ -s "$DIR/router.key" ] || new_key "$DIR/router.key"
-  issue "eezybot-wan-router" "$DIR/router.key" "$DIR/router.pem" \
-    "$LEAF"$'\nextendedKeyUsage = serverAuth\nsubjectAltName = '"$(IFS=,; echo "${SANS[*]}")" 825 "${CA[@]}"
+  [ -s "$DIR/router.key" ] || certs_new_key "$DIR/router.key"
+  certs_issue "eezybot-wan-router" "$DIR/router.key" "$DIR/router.pem" 825 \
+    "$LEAF"$'\nextendedKeyUsage = serverAuth\nsubjectAltName = '"$(IFS=,; echo "${SANS[*]}")" "${CA[@]}"
   printf '%s\n' "$want" >"$DIR/router.hosts"
   made+=(router.pem)
 fi
@@ -141,8 +98,8 @@ fi
 for c in "${CLIENTS[@]}"; do
   if [ ! -s "$DIR/$c.pem" ] || [ ! -s "$DIR/$c.key" ] ||
      ! openssl verify -CAfile "$DIR/ca.pem" "$DIR/$c.pem" >/dev/null 2>&1; then
-    [ -s "$DIR/$c.key" ] || new_key "$DIR/$c.key"
-    issue "$c" "$DIR/$c.key" "$DIR/$c.pem" "$LEAF"$'\nextendedKeyUsage = clientAuth' 825 "${CA[@]}"
+    [ -s "$DIR/$c.key" ] || certs_new_key "$DIR/$c.key"
+    certs_issue "$c" "$DIR/$c.key" "$DIR/$c.pem" 825 "$LEAF"$'\nextendedKeyUsage = clientAuth' "${CA[@]}"
     made+=("$c.pem")
   fi
 done
