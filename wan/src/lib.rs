@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use rustls::pki_types::{CertificateDer, UnixTime};
+use zenoh::config::Config;
 
 /// Exit status for a configuration error: a missing or unusable TLS file, a bad
 /// endpoint, a bad argument.
@@ -258,6 +259,43 @@ impl TlsFiles {
             )
         })?;
         Ok(files)
+    }
+}
+
+/// Set `key` of a Zenoh configuration to the JSON5 `value`; a failure is ours (a key
+/// Zenoh does not know): `program` exits with [`CONFIG_ERROR`].
+pub fn set(program: &str, config: &mut Config, key: &str, value: &str) {
+    if let Err(e) = config.insert_json5(key, value) {
+        fail(program, format!("Zenoh configuration {key} = {value}: {e}"))
+    }
+}
+
+impl TlsFiles {
+    /// Mutual TLS with these files: the router listens with them and admits only
+    /// clients the CA signed; a bridge connects with them and admits only a router the
+    /// CA signed for the name it connects to.
+    pub fn configure(&self, program: &str, config: &mut Config, role: Role) {
+        let end = match role {
+            Role::Server => "listen",
+            Role::Client => "connect",
+        };
+        let mut set = |key: &str, value: &str| set(program, config, key, value);
+        set(
+            "transport/link/tls/root_ca_certificate",
+            &json_path(&self.ca),
+        );
+        set(
+            &format!("transport/link/tls/{end}_certificate"),
+            &json_path(&self.cert),
+        );
+        set(
+            &format!("transport/link/tls/{end}_private_key"),
+            &json_path(&self.key),
+        );
+        set("transport/link/tls/enable_mtls", "true");
+        if role == Role::Client {
+            set("transport/link/tls/verify_name_on_connect", "true");
+        }
     }
 }
 

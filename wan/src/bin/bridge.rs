@@ -13,9 +13,7 @@
 //!   --print-config                 print the Zenoh configuration and exit
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint).
 
-use eezybot_wan::{
-    check_endpoint, check_namespace, fail, json, json_path, topic_regex, Side, TlsFiles,
-};
+use eezybot_wan::{check_endpoint, check_namespace, fail, json, topic_regex, Role, Side, TlsFiles};
 use zenoh::config::Config;
 use zenoh::internal::plugins::PluginsManager;
 use zenoh::internal::runtime::RuntimeBuilder;
@@ -78,11 +76,9 @@ fn parse_args() -> Args {
     }
 }
 
-/// Set `key` to the JSON5 `value`; a failure is ours (a key Zenoh does not know).
+/// Set `key` to the JSON5 `value` ([`eezybot_wan::set`]).
 fn set(config: &mut Config, key: &str, value: &str) {
-    if let Err(e) = config.insert_json5(key, value) {
-        fail(PROGRAM, format!("Zenoh configuration {key} = {value}: {e}"))
-    }
+    eezybot_wan::set(PROGRAM, config, key, value)
 }
 
 fn config(args: &Args) -> Config {
@@ -136,25 +132,9 @@ fn config(args: &Args) -> Config {
         let dir = args.tls_dir.as_deref().unwrap_or_else(|| {
             fail(PROGRAM, format!("ZENOH_TLS_DIR is not set: the directory with ca.pem, {name}.pem and {name}.key (launch_scripts/wan_certs.sh)"))
         });
-        let tls = TlsFiles::load(dir, name, eezybot_wan::Role::Client)
-            .unwrap_or_else(|e| fail(PROGRAM, e));
-        set(
-            &mut c,
-            "transport/link/tls/root_ca_certificate",
-            &json_path(&tls.ca),
-        );
-        set(
-            &mut c,
-            "transport/link/tls/connect_certificate",
-            &json_path(&tls.cert),
-        );
-        set(
-            &mut c,
-            "transport/link/tls/connect_private_key",
-            &json_path(&tls.key),
-        );
-        set(&mut c, "transport/link/tls/enable_mtls", "true");
-        set(&mut c, "transport/link/tls/verify_name_on_connect", "true");
+        TlsFiles::load(dir, name, Role::Client)
+            .unwrap_or_else(|e| fail(PROGRAM, e))
+            .configure(PROGRAM, &mut c, Role::Client);
     } else {
         eprintln!(
             "{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)",

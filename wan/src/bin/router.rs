@@ -8,17 +8,16 @@
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint,
 //! an address it cannot listen on).
 
-use eezybot_wan::{check_endpoint, fail, json, json_path, TlsFiles};
+use eezybot_wan::{check_endpoint, fail, json, Role, TlsFiles};
 use zenoh::config::Config;
 
 const PROGRAM: &str = "eezybot_wan_router";
 const USAGE: &str =
     "usage: eezybot_wan_router [--listen tls/0.0.0.0:7447] [--tls-dir DIR] [--print-config]";
 
+/// Set `key` to the JSON5 `value` ([`eezybot_wan::set`]).
 fn set(config: &mut Config, key: &str, value: &str) {
-    if let Err(e) = config.insert_json5(key, value) {
-        fail(PROGRAM, format!("Zenoh configuration {key} = {value}: {e}"))
-    }
+    eezybot_wan::set(PROGRAM, config, key, value)
 }
 
 #[tokio::main]
@@ -66,24 +65,9 @@ async fn main() {
         let dir = tls_dir.unwrap_or_else(|| {
             fail(PROGRAM, "ZENOH_TLS_DIR is not set: the directory with ca.pem, router.pem and router.key (launch_scripts/wan_certs.sh)")
         });
-        let tls = TlsFiles::load(&dir, "router", eezybot_wan::Role::Server)
-            .unwrap_or_else(|e| fail(PROGRAM, e));
-        set(
-            &mut c,
-            "transport/link/tls/root_ca_certificate",
-            &json_path(&tls.ca),
-        );
-        set(
-            &mut c,
-            "transport/link/tls/listen_certificate",
-            &json_path(&tls.cert),
-        );
-        set(
-            &mut c,
-            "transport/link/tls/listen_private_key",
-            &json_path(&tls.key),
-        );
-        set(&mut c, "transport/link/tls/enable_mtls", "true");
+        TlsFiles::load(&dir, "router", Role::Server)
+            .unwrap_or_else(|e| fail(PROGRAM, e))
+            .configure(PROGRAM, &mut c, Role::Server);
     } else {
         eprintln!(
             "{PROGRAM}: WARNING: {} is plain TCP: not encrypted, not authenticated (tests only)",
