@@ -35,14 +35,15 @@ trap '[ -z "$patches_pid" ] || pkill -TERM -P "$patches_pid" cargo 2>/dev/null |
 # pi-check (Cargo.toml): the release's toolchain, OpenSSL and checks in less time than
 # profile pi; the tests under qemu share its dependencies
 EEZYBOT_PI_PROFILE=pi-check launch_scripts/cross_build.sh aarch64
-# the pure crates the Pi runs (servo mapping, motion limits, framing, the host link),
-# properties with 10 cases each under emulation (200 natively, above): the target's
-# arithmetic, not a second search of the input space. Not eezybot_msgs: its test
-# build needs the whole DDS stack again, with other features than serial_node's above
-# (about a minute of the stage), for CDR that cdr_encoding writes little-endian on
-# every target.
+# the pure crates the Pi runs (servo mapping, motion limits, framing, the host link):
+# their unit tests and properties, with 10 cases each under emulation (200 natively,
+# above): the target's arithmetic, not a second search of the input space. Not the
+# kinematics tests of what only the PC runs (IK, URDF chains, workspace envelopes:
+# envelope.rs alone took 36 s under qemu), nor eezybot_msgs: its test build needs the
+# whole DDS stack again, with other features than serial_node's above (about a minute
+# of the stage), for CDR that cdr_encoding writes little-endian on every target.
 PROPTEST_CASES=10 cargo test --profile pi-check --target aarch64-unknown-linux-gnu \
-  -p eezybot_kinematics -p servo_protocol
+  -p eezybot_kinematics -p servo_protocol --lib --test properties
 stage "patched crates: resolved from patches/, and their unit tests (tests/check_patches.sh, started above)"
 patches_code=0
 wait "$patches_pid" || patches_code=$?
