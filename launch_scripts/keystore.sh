@@ -40,17 +40,7 @@
 set -euo pipefail
 EEZYBOT_SCRIPT=keystore.sh
 . "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-# no nodes here: lib.sh's signal handling is for them
-trap 'exit 130' INT
-trap 'exit 143' TERM
-trap - EXIT
-
-usage() { sed -n '2,/^# Exit status/s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; }
-bad_usage() {
-  eezybot_say "$*"
-  eezybot_say "usage: keystore.sh DIR [--enclave PATH]... [--role pc|pi|tools] [--namespace NS] [--domain N] [--renew] (--help)"
-  exit 2
-}
+eezybot_tool "usage: keystore.sh DIR [--enclave PATH]... [--role pc|pi|tools] [--namespace NS] [--domain N] [--renew] (--help)"
 
 DIR=""
 ENCLAVES=()
@@ -58,10 +48,10 @@ ROLE=""
 NAMESPACE=/
 DOMAIN=""
 RENEW=0
-need_value() { [ $# -ge 2 ] && [ -n "$2" ] || bad_usage "$1 needs a value"; }
+need_value() { [ $# -ge 2 ] && [ -n "$2" ] || eezybot_bad_usage "$1 needs a value"; }
 while [ $# -gt 0 ]; do
   case "$1" in
-    -h|--help) usage; exit 0 ;;
+    -h|--help) eezybot_usage; exit 0 ;;
     --enclave|-e) need_value "$@"; ENCLAVES+=("$2"); shift 2 ;;
     --enclave=*) ENCLAVES+=("${1#*=}"); shift ;;
     --role) need_value "$@"; ROLE=$2; shift 2 ;;
@@ -71,26 +61,26 @@ while [ $# -gt 0 ]; do
     --domain) need_value "$@"; DOMAIN=$2; shift 2 ;;
     --domain=*) DOMAIN=${1#*=}; shift ;;
     --renew) RENEW=1; shift ;;
-    -*) bad_usage "unknown option $1" ;;
-    *) [ -z "$DIR" ] || bad_usage "one keystore directory only (got $DIR and $1)"
+    -*) eezybot_bad_usage "unknown option $1" ;;
+    *) [ -z "$DIR" ] || eezybot_bad_usage "one keystore directory only (got $DIR and $1)"
        DIR=$1; shift ;;
   esac
 done
 
-[ -n "$DIR" ] || bad_usage "the keystore directory is missing"
-[ ! -e "$DIR" ] || [ -d "$DIR" ] || bad_usage "$DIR exists and is not a directory"
+[ -n "$DIR" ] || eezybot_bad_usage "the keystore directory is missing"
+[ ! -e "$DIR" ] || [ -d "$DIR" ] || eezybot_bad_usage "$DIR exists and is not a directory"
 ROS_NAME='^(/[A-Za-z_][A-Za-z0-9_]*)+$'
 for e in "${ENCLAVES[@]}"; do
-  [[ $e =~ $ROS_NAME ]] || bad_usage "enclave '$e' is not an absolute ROS name such as /eezybot/pc2 (letters, digits, _)"
+  [[ $e =~ $ROS_NAME ]] || eezybot_bad_usage "enclave '$e' is not an absolute ROS name such as /eezybot/pc2 (letters, digits, _)"
 done
 case "$ROLE" in
   ""|pc|pi|tools) ;;
-  *) bad_usage "--role $ROLE: pc, pi or tools" ;;
+  *) eezybot_bad_usage "--role $ROLE: pc, pi or tools" ;;
 esac
-[ -z "$ROLE" ] || [ ${#ENCLAVES[@]} -gt 0 ] || bad_usage "--role applies to --enclave PATH"
-[ "$NAMESPACE" = / ] || [[ $NAMESPACE =~ $ROS_NAME ]] || bad_usage "namespace '$NAMESPACE' is not an absolute ROS namespace such as /arm2"
+[ -z "$ROLE" ] || [ ${#ENCLAVES[@]} -gt 0 ] || eezybot_bad_usage "--role applies to --enclave PATH"
+[ "$NAMESPACE" = / ] || [[ $NAMESPACE =~ $ROS_NAME ]] || eezybot_bad_usage "namespace '$NAMESPACE' is not an absolute ROS namespace such as /arm2"
 if [ -n "$DOMAIN" ]; then
-  [[ $DOMAIN =~ ^[0-9]+$ ]] && [ "$DOMAIN" -le 232 ] || bad_usage "--domain $DOMAIN: a ROS domain id 0 ... 232"
+  [[ $DOMAIN =~ ^[0-9]+$ ]] && [ "$DOMAIN" -le 232 ] || eezybot_bad_usage "--domain $DOMAIN: a ROS domain id 0 ... 232"
 fi
 [ ${#ENCLAVES[@]} -gt 0 ] || ENCLAVES=(/eezybot/pc /eezybot/pi)
 command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }

@@ -16,6 +16,24 @@ EEZYBOT_STOPPING=0
 
 eezybot_say() { echo "[${EEZYBOT_SCRIPT:-eezybot}] $*" >&2; }
 
+# For a script that starts no nodes (keystore.sh, wan_certs.sh): plain exits on Ctrl-C
+# and SIGTERM instead of the node handling below, and its usage: `eezybot_usage` prints the
+# script's header comment up to its "# Exit status" line; `eezybot_bad_usage MESSAGE` says
+# MESSAGE and the usage line, and exits 2.
+#   eezybot_tool "usage: NAME ARGS..."
+eezybot_tool() {
+  EEZYBOT_USAGE=$1
+  trap 'exit 130' INT
+  trap 'exit 143' TERM
+  trap - EXIT
+}
+eezybot_usage() { sed -n '2,/^# Exit status/s/^# \{0,1\}//p' "$0"; }
+eezybot_bad_usage() {
+  eezybot_say "$*"
+  eezybot_say "$EEZYBOT_USAGE"
+  exit 2
+}
+
 # Where the binaries come from, in this order:
 #  1. EEZYBOT_BIN_DIR, if set;
 #  2. bin/ next to launch_scripts/ (a bundle from cross_build.sh, copied to a Pi);
@@ -23,7 +41,6 @@ eezybot_say() { echo "[${EEZYBOT_SCRIPT:-eezybot}] $*" >&2; }
 #     (EEZYBOT_CARGO_SELECT: what to build, default every binary: `--bins`);
 #  4. in a source tree without cargo: target/release, if it holds the binaries.
 eezybot_find_binaries() {
-  local b missing
   if [ -n "${EEZYBOT_BIN_DIR:-}" ]; then
     EEZYBOT_BIN="$EEZYBOT_BIN_DIR"
   elif [ -x "$EEZYBOT_ROOT/bin/$1" ]; then
@@ -37,14 +54,21 @@ eezybot_find_binaries() {
   else
     EEZYBOT_BIN="$EEZYBOT_ROOT/target/release"
   fi
-  missing=()
-  for b in "$@"; do [ -x "$EEZYBOT_BIN/$b" ] || missing+=("$b"); done
-  if [ ${#missing[@]} -gt 0 ]; then
-    eezybot_say "missing in $EEZYBOT_BIN: ${missing[*]}"
-    eezybot_say "build them here (cargo build --release), or cross-build on a PC with"
-    eezybot_say "launch_scripts/cross_build.sh and copy the bundle (see README: PC + Raspberry Pi)"
-    exit 1
-  fi
+  eezybot_need_binaries "$EEZYBOT_BIN" \
+    "build them here (cargo build --release), or cross-build on a PC with
+launch_scripts/cross_build.sh and copy the bundle (see README: PC + Raspberry Pi)" "$@"
+}
+
+# eezybot_need_binaries DIR HINT BIN...: exits 1, naming the missing ones and then the
+# HINT (lines), unless DIR holds every BIN.
+eezybot_need_binaries() {
+  local dir=$1 hint=$2 b missing=() line
+  shift 2
+  for b in "$@"; do [ -x "$dir/$b" ] || missing+=("$b"); done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  eezybot_say "missing in $dir: ${missing[*]}"
+  while IFS= read -r line; do eezybot_say "$line"; done <<<"$hint"
+  exit 1
 }
 
 # The WAN mode's binaries (wan/, its own Cargo project: Zenoh and Cyclone DDS, not in the
@@ -56,7 +80,6 @@ eezybot_find_binaries() {
 #  4. else wan/target/release, if it holds them.
 #   eezybot_find_wan_binaries BIN... -> sets EEZYBOT_WAN_BIN (a directory)
 eezybot_find_wan_binaries() {
-  local b missing
   if [ -n "${EEZYBOT_WAN_BIN_DIR:-}" ]; then
     EEZYBOT_WAN_BIN="$EEZYBOT_WAN_BIN_DIR"
   elif [ -x "$EEZYBOT_ROOT/bin/$1" ]; then
@@ -70,12 +93,7 @@ eezybot_find_wan_binaries() {
   else
     EEZYBOT_WAN_BIN="$EEZYBOT_ROOT/wan/target/release"
   fi
-  missing=()
-  for b in "$@"; do [ -x "$EEZYBOT_WAN_BIN/$b" ] || missing+=("$b"); done
-  if [ ${#missing[@]} -gt 0 ]; then
-    eezybot_say "missing in $EEZYBOT_WAN_BIN: ${missing[*]} (build them: cd wan && cargo build --release)"
-    exit 1
-  fi
+  eezybot_need_binaries "$EEZYBOT_WAN_BIN" "build them: cd wan && cargo build --release" "$@"
 }
 
 # The script's own arguments are ROS arguments for every node. A leading --ros-args is

@@ -24,36 +24,26 @@
 set -euo pipefail
 EEZYBOT_SCRIPT=wan_certs.sh
 . "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-# no nodes here: lib.sh's signal handling is for them
-trap 'exit 130' INT
-trap 'exit 143' TERM
-trap - EXIT
-
-usage() { sed -n '2,/^# Exit status/s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; }
-bad_usage() {
-  eezybot_say "$*"
-  eezybot_say "usage: wan_certs.sh DIR HOST... [--client NAME]... (--help)"
-  exit 2
-}
+eezybot_tool "usage: wan_certs.sh DIR HOST... [--client NAME]... (--help)"
 
 DIR=""
 HOSTS=()
 CLIENTS=(pc pi)
 while [ $# -gt 0 ]; do
   case $1 in
-    -h|--help) usage; exit 0 ;;
+    -h|--help) eezybot_usage; exit 0 ;;
     --client)
-      [ $# -ge 2 ] || bad_usage "--client needs a NAME"
+      [ $# -ge 2 ] || eezybot_bad_usage "--client needs a NAME"
       if ! [[ $2 =~ ^[A-Za-z0-9_-]+$ ]] || [ "$2" = router ] || [ "$2" = ca ]; then
-        bad_usage "client name '$2': letters, digits, _ and -, not router or ca"
+        eezybot_bad_usage "client name '$2': letters, digits, _ and -, not router or ca"
       fi
       CLIENTS+=("$2"); shift 2 ;;
-    -*) bad_usage "unknown option $1" ;;
+    -*) eezybot_bad_usage "unknown option $1" ;;
     *) if [ -z "$DIR" ]; then DIR=$1; else HOSTS+=("$1"); fi; shift ;;
   esac
 done
-[ -n "$DIR" ] || bad_usage "no DIR"
-[ ${#HOSTS[@]} -gt 0 ] || bad_usage "no HOST: the router's address(es) as the bridges reach it (IP or DNS name)"
+[ -n "$DIR" ] || eezybot_bad_usage "no DIR"
+[ ${#HOSTS[@]} -gt 0 ] || eezybot_bad_usage "no HOST: the router's address(es) as the bridges reach it (IP or DNS name)"
 SANS=()
 for h in "${HOSTS[@]}"; do
   if [[ $h =~ ^[0-9]+\.[0-9]+\.[0-9]+\.[0-9]+$ ]] || [[ $h == *:* ]]; then
@@ -61,7 +51,7 @@ for h in "${HOSTS[@]}"; do
   elif [[ $h =~ ^[A-Za-z0-9]([A-Za-z0-9.-]*[A-Za-z0-9])?$ ]]; then
     SANS+=("DNS:$h")
   else
-    bad_usage "HOST '$h' is neither an IP address nor a DNS name"
+    eezybot_bad_usage "HOST '$h' is neither an IP address nor a DNS name"
   fi
 done
 command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }

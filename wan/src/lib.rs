@@ -270,6 +270,31 @@ pub fn set(program: &str, config: &mut Config, key: &str, value: &str) {
     }
 }
 
+/// The settings the router and the bridges share: `mode` (`"router"` or `"client"`),
+/// the one endpoint to listen on (the router) or to connect to (a bridge), nothing on
+/// the other side, no Zenoh scouting on the LAN (the router is the only peer), and
+/// timestamps (the bridges' caches of transient-local publications need them; a router
+/// with timestamping keeps them consistent).
+pub fn base_config(program: &str, mode: &str, endpoint: &Endpoint) -> Config {
+    let mut c = Config::default();
+    let (ours, other) = if mode == "router" {
+        ("listen", "connect")
+    } else {
+        ("connect", "listen")
+    };
+    let mut set = |key: &str, value: &str| set(program, &mut c, key, value);
+    set("mode", &json(mode));
+    set(
+        &format!("{ours}/endpoints"),
+        &format!("[{}]", json(&endpoint.text)),
+    );
+    set(&format!("{other}/endpoints"), "[]");
+    set("scouting/multicast/enabled", "false");
+    set("scouting/gossip/enabled", "false");
+    set("timestamping/enabled", "true");
+    c
+}
+
 impl TlsFiles {
     /// Mutual TLS with these files: the router listens with them and admits only
     /// clients the CA signed; a bridge connects with them and admits only a router the

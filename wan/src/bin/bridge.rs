@@ -13,7 +13,9 @@
 //!   --print-config                 print the Zenoh configuration and exit
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint).
 
-use eezybot_wan::{check_endpoint, check_namespace, fail, json, topic_regex, Role, Side, TlsFiles};
+use eezybot_wan::{
+    base_config, check_endpoint, check_namespace, fail, json, topic_regex, Role, Side, TlsFiles,
+};
 use zenoh::config::Config;
 use zenoh::internal::plugins::PluginsManager;
 use zenoh::internal::runtime::RuntimeBuilder;
@@ -103,13 +105,7 @@ fn config(args: &Args) -> Config {
         format!("[{}]", list.join(", "))
     };
 
-    let mut c = Config::default();
-    set(&mut c, "mode", r#""client""#);
-    set(
-        &mut c,
-        "connect/endpoints",
-        &format!("[{}]", json(&router.text)),
-    );
+    let mut c = base_config(PROGRAM, "client", &router);
     // Keep trying the router forever, at start and after a loss (an outage of the WAN).
     set(&mut c, "connect/timeout_ms", "-1");
     set(&mut c, "connect/exit_on_failure", "false");
@@ -118,13 +114,7 @@ fn config(args: &Args) -> Config {
         "connect/retry",
         "{ period_init_ms: 500, period_max_ms: 2000, period_increase_factor: 2 }",
     );
-    // Only the router: no Zenoh scouting on the LAN, no listening.
-    set(&mut c, "listen/endpoints", "[]");
-    set(&mut c, "scouting/multicast/enabled", "false");
-    set(&mut c, "scouting/gossip/enabled", "false");
-    // As zenoh-bridge-ros2dds: timestamps (the plugin's cache of transient-local
-    // publications needs them), the admin space and the plugin.
-    set(&mut c, "timestamping/enabled", "true");
+    // As zenoh-bridge-ros2dds: the admin space and the plugin (timestamps: base_config).
     set(&mut c, "adminspace/enabled", "true");
     set(&mut c, "plugins_loading/enabled", "true");
     if router.tls {

@@ -8,7 +8,7 @@
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint,
 //! an address it cannot listen on).
 
-use eezybot_wan::{check_endpoint, fail, json, Role, TlsFiles};
+use eezybot_wan::{base_config, check_endpoint, fail, Role, TlsFiles};
 use zenoh::config::Config;
 
 const PROGRAM: &str = "eezybot_wan_router";
@@ -47,20 +47,8 @@ async fn main() {
     let listen = listen.unwrap_or_else(|| "tls/0.0.0.0:7447".to_string());
     let endpoint = check_endpoint("ZENOH_LISTEN", &listen).unwrap_or_else(|e| fail(PROGRAM, e));
 
-    let mut c = Config::default();
-    set(&mut c, "mode", r#""router""#);
-    set(
-        &mut c,
-        "listen/endpoints",
-        &format!("[{}]", json(&endpoint.text)),
-    );
+    let mut c = base_config(PROGRAM, "router", &endpoint);
     set(&mut c, "listen/exit_on_failure", "true");
-    set(&mut c, "connect/endpoints", "[]");
-    set(&mut c, "scouting/multicast/enabled", "false");
-    set(&mut c, "scouting/gossip/enabled", "false");
-    // The bridges' transient-local caches need timestamps on what they publish; a
-    // router with timestamping keeps them consistent.
-    set(&mut c, "timestamping/enabled", "true");
     if endpoint.tls {
         let dir = tls_dir.unwrap_or_else(|| {
             fail(PROGRAM, "ZENOH_TLS_DIR is not set: the directory with ca.pem, router.pem and router.key (launch_scripts/wan_certs.sh)")
