@@ -41,15 +41,18 @@ CYCLONE_READER = textwrap.dedent("""
 
 
 def test_a_cyclone_dds_reader_of_our_tf_prints_no_malformed_packets(launch, observer, domain):
-    # tf is volatile and comes only when the arm moves (and for a second after
-    # state_publisher starts), so targets keep it coming until the reader, however
-    # late it matches on a busy host, has seen it.
+    # The nodes first: a Cyclone DDS reader started before them found neither of them
+    # within 15 s in a full test run (its own announcements come at its start, and are
+    # then seldom). tf is volatile and
+    # comes only when the arm moves (and for about a second after state_publisher
+    # starts), so targets keep it coming until the reader, however late it matches on a
+    # busy host, has seen it.
+    launch("compute_ik")
+    launch("state_publisher")
     reader = subprocess.Popen([sys.executable, "-c", CYCLONE_READER, str(domain), os.path.dirname(__file__)],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert reader.stdout.readline().strip() == "ready", reader.stderr.read()[-2000:]
-        launch("compute_ik")
-        pass  # MUT
         targets = observer.pub("/xyz_target", PointStamped)
         end, i = time.monotonic() + 60, 0
         while reader.poll() is None and time.monotonic() < end:
