@@ -262,6 +262,54 @@ impl TlsFiles {
     }
 }
 
+/// The command line of `program`, word by word: an option's value, `--help` and an
+/// unexpected word (usage error: exit [`CONFIG_ERROR`]) as both binaries answer them.
+pub struct CommandLine {
+    program: &'static str,
+    usage: &'static str,
+    words: std::iter::Skip<std::env::Args>,
+}
+
+impl CommandLine {
+    /// The arguments after the program's name.
+    pub fn new(program: &'static str, usage: &'static str) -> Self {
+        CommandLine {
+            program,
+            usage,
+            words: std::env::args().skip(1),
+        }
+    }
+
+    /// The value of option `name`, the next word; none: a usage error.
+    pub fn value(&mut self, name: &str) -> String {
+        let (program, usage) = (self.program, self.usage);
+        self.words
+            .next()
+            .unwrap_or_else(|| fail(program, format!("{name} needs a value\n{usage}")))
+    }
+
+    /// `--help`: the usage line on stdout, exit 0.
+    pub fn help(&self) -> ! {
+        println!("{}", self.usage);
+        std::process::exit(0)
+    }
+
+    /// A word neither binary expects there: a usage error.
+    pub fn unexpected(&self, word: &str) -> ! {
+        fail(
+            self.program,
+            format!("unexpected argument `{word}`\n{}", self.usage),
+        )
+    }
+}
+
+impl Iterator for CommandLine {
+    type Item = String;
+    fn next(&mut self) -> Option<String> {
+        self.words.next()
+    }
+}
+
 /// Set `key` of a Zenoh configuration to the JSON5 `value`; a failure is ours (a key
 /// Zenoh does not know): `program` exits with [`CONFIG_ERROR`].
 pub fn set(program: &str, config: &mut Config, key: &str, value: &str) {

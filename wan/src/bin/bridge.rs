@@ -14,7 +14,8 @@
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint).
 
 use eezybot_wan::{
-    base_config, check_endpoint, check_namespace, fail, json, topic_regex, Role, Side, TlsFiles,
+    base_config, check_endpoint, check_namespace, fail, json, topic_regex, CommandLine, Role, Side,
+    TlsFiles,
 };
 use zenoh::config::Config;
 use zenoh::internal::plugins::PluginsManager;
@@ -36,7 +37,7 @@ struct Args {
 }
 
 fn parse_args() -> Args {
-    let mut args = std::env::args().skip(1);
+    let mut args = CommandLine::new(PROGRAM, USAGE);
     let mut side = None;
     let mut router = None;
     let mut tls_dir = None;
@@ -45,25 +46,18 @@ fn parse_args() -> Args {
     let mut namespace = "/".to_string();
     let mut print_config = false;
     while let Some(arg) = args.next() {
-        let mut value = |name: &str| {
-            args.next()
-                .unwrap_or_else(|| fail(PROGRAM, format!("{name} needs a value\n{USAGE}")))
-        };
         match arg.as_str() {
-            "--router" => router = Some(value("--router")),
-            "--tls-dir" => tls_dir = Some(value("--tls-dir")),
-            "--cert" => cert = Some(value("--cert")),
-            "--domain" => domain = Some(value("--domain")),
-            "--namespace" => namespace = value("--namespace"),
+            "--router" => router = Some(args.value("--router")),
+            "--tls-dir" => tls_dir = Some(args.value("--tls-dir")),
+            "--cert" => cert = Some(args.value("--cert")),
+            "--domain" => domain = Some(args.value("--domain")),
+            "--namespace" => namespace = args.value("--namespace"),
             "--print-config" => print_config = true,
-            "-h" | "--help" => {
-                println!("{USAGE}");
-                std::process::exit(0)
-            }
+            "-h" | "--help" => args.help(),
             s if side.is_none() && !s.starts_with('-') => {
                 side = Some(s.parse::<Side>().unwrap_or_else(|e| fail(PROGRAM, e)))
             }
-            s => fail(PROGRAM, format!("unexpected argument `{s}`\n{USAGE}")),
+            s => args.unexpected(s),
         }
     }
     let env = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());

@@ -8,7 +8,7 @@
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint,
 //! an address it cannot listen on).
 
-use eezybot_wan::{base_config, check_endpoint, fail, Role, TlsFiles};
+use eezybot_wan::{base_config, check_endpoint, fail, CommandLine, Role, TlsFiles};
 use zenoh::config::Config;
 
 const PROGRAM: &str = "eezybot_wan_router";
@@ -27,21 +27,14 @@ async fn main() {
     let mut listen = env("ZENOH_LISTEN");
     let mut tls_dir = env("ZENOH_TLS_DIR");
     let mut print_config = false;
-    let mut args = std::env::args().skip(1);
+    let mut args = CommandLine::new(PROGRAM, USAGE);
     while let Some(arg) = args.next() {
-        let mut value = |name: &str| {
-            args.next()
-                .unwrap_or_else(|| fail(PROGRAM, format!("{name} needs a value\n{USAGE}")))
-        };
         match arg.as_str() {
-            "--listen" => listen = Some(value("--listen")),
-            "--tls-dir" => tls_dir = Some(value("--tls-dir")),
+            "--listen" => listen = Some(args.value("--listen")),
+            "--tls-dir" => tls_dir = Some(args.value("--tls-dir")),
             "--print-config" => print_config = true,
-            "-h" | "--help" => {
-                println!("{USAGE}");
-                return;
-            }
-            s => fail(PROGRAM, format!("unexpected argument `{s}`\n{USAGE}")),
+            "-h" | "--help" => args.help(),
+            s => args.unexpected(s),
         }
     }
     let listen = listen.unwrap_or_else(|| "tls/0.0.0.0:7447".to_string());
