@@ -310,6 +310,18 @@ impl Iterator for CommandLine {
     }
 }
 
+/// Until Ctrl-C or SIGTERM; `program` exits with [`CONFIG_ERROR`] if it cannot listen
+/// for SIGTERM.
+pub async fn stop_signal(program: &str) {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut term = signal(SignalKind::terminate())
+        .unwrap_or_else(|e| fail(program, format!("SIGTERM handler: {e}")));
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = term.recv() => {}
+    }
+}
+
 /// Set `key` of a Zenoh configuration to the JSON5 `value`; a failure is ours (a key
 /// Zenoh does not know): `program` exits with [`CONFIG_ERROR`].
 pub fn set(program: &str, config: &mut Config, key: &str, value: &str) {

@@ -210,14 +210,7 @@ async fn main() {
     std::process::exit(0)
 }
 
-/// Ctrl-C or SIGTERM.
+/// Ctrl-C or SIGTERM ([`eezybot_wan::stop_signal`]).
 async fn signal() {
-    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-        Ok(t) => t,
-        Err(e) => fail(PROGRAM, format!("SIGTERM handler: {e}")),
-    };
-    tokio::select! {
-        _ = tokio::signal::ctrl_c() => {}
-        _ = term.recv() => {}
-    }
+    eezybot_wan::stop_signal(PROGRAM).await
 }

@@ -73,14 +73,7 @@ async fn main() {
         },
         session.zid()
     );
-    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-        Ok(t) => t,
-        Err(e) => fail(PROGRAM, format!("SIGTERM handler: {e}")),
-    };
-    tokio::select! {
-        _ = tokio::signal::ctrl_c() => {}
-        _ = term.recv() => {}
-    }
+    eezybot_wan::stop_signal(PROGRAM).await;
     eprintln!("{PROGRAM}: stopping");
     let _ = session.close().await;
 }
