@@ -29,24 +29,63 @@ pub enum Side {
     Pi,
 }
 
-/// The topics that cross the WAN, each with the side whose nodes publish it: the part of
-/// the topic contract (libs/ros_plumbing/src/topics.rs) where a publisher runs on one
-/// side and a subscriber on the other. Everything else stays on its LAN: the targets,
-/// joint_states, robot_description, tf and tf_static have publishers and subscribers on
-/// the PC only. No services, actions or parameters cross.
+/// The topics that cross the WAN: each with the side whose nodes publish it and the
+/// sides whose nodes subscribe to it from across the router. That is the part of the
+/// topic contract (libs/ros_plumbing/src/topics.rs) that one site needs from another;
+/// everything else stays on its LAN (the targets, joint_states, tf and tf_static, each
+/// site's `rosout`, `parameter_events` and `ros_discovery_info`). No services, actions
+/// or parameters cross.
 ///
 /// | topic | from | to | QoS |
 /// |---|---|---|---|
 /// | `servo_angles` | PC (compute_ik) | Pi (serial_node) | reliable, volatile |
-/// | `estop` | PC (gui_bridge) | Pi (serial_node) | reliable, transient-local (latched) |
-/// | `servo_state` | Pi (serial_node) | PC (gui_bridge) | reliable, volatile |
-/// | `diagnostics` | Pi (serial_node) | PC (gui_bridge) | the PC's own stay on the PC |
-pub const CROSSING: &[(&str, Side)] = &[
-    ("servo_angles", Side::Pc),
-    ("estop", Side::Pc),
-    ("servo_state", Side::Pi),
-    ("diagnostics", Side::Pi),
+/// | `estop` | PC (gui_bridge) | Pi (serial_node), other PCs (their panels) | reliable, transient-local (latched) |
+/// | `robot_description` | PC (state_publisher) | other PCs (RViz2, their panels) | reliable, transient-local (latched) |
+/// | `servo_state` | Pi (serial_node) | PCs (gui_bridge, state_publisher, tools) | reliable, volatile |
+/// | `diagnostics` | Pi (serial_node) | PCs (gui_bridge, tools); the PC's own stay on its LAN | reliable, volatile |
+///
+/// PC to PC: a second operator PC whose bridge joins later gets the latched
+/// `robot_description` and the current `estop` from the first (the plugin's
+/// transient-local cache); its own e-stop reaches the Pi and the first PC. A bridge's
+/// DDS readers ignore its own writers, so nothing loops back.
+pub const CROSSING: &[Crossing] = &[
+    Crossing {
+        topic: "servo_angles",
+        from: Side::Pc,
+        to: &[Side::Pi],
+    },
+    Crossing {
+        topic: "estop",
+        from: Side::Pc,
+        to: &[Side::Pi, Side::Pc],
+    },
+    Crossing {
+        topic: "robot_description",
+        from: Side::Pc,
+        to: &[Side::Pc],
+    },
+    Crossing {
+        topic: "servo_state",
+        from: Side::Pi,
+        to: &[Side::Pc],
+    },
+    Crossing {
+        topic: "diagnostics",
+        from: Side::Pi,
+        to: &[Side::Pc],
+    },
 ];
+
+/// One topic of [`CROSSING`].
+#[derive(Clone, Copy, Debug)]
+pub struct Crossing {
+    /// The topic's name relative to the nodes' namespace.
+    pub topic: &'static str,
+    /// The side whose local publishers the bridge sends out.
+    pub from: Side,
+    /// The sides whose bridges write it to their local subscribers.
+    pub to: &'static [Side],
+}
 
 impl Side {
     /// The name on the command line and of the client certificate (`pc`, `pi`).
@@ -61,8 +100,8 @@ impl Side {
     pub fn outgoing(self) -> Vec<&'static str> {
         CROSSING
             .iter()
-            .filter(|(_, s)| *s == self)
-            .map(|(t, _)| *t)
+            .filter(|c| c.from == self)
+            .map(|c| c.topic)
             .collect()
     }
 
@@ -70,8 +109,8 @@ impl Side {
     pub fn incoming(self) -> Vec<&'static str> {
         CROSSING
             .iter()
-            .filter(|(_, s)| *s != self)
-            .map(|(t, _)| *t)
+            .filter(|c| c.to.contains(&self))
+            .map(|c| c.topic)
             .collect()
     }
 }
@@ -399,13 +438,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn each_crossing_topic_goes_out_on_one_side_and_in_on_the_other() {
-        for side in [Side::Pc, Side::Pi] {
-            let other = if side == Side::Pc { Side::Pi } else { Side::Pc };
-            assert_eq!(side.outgoing(), other.incoming());
-        }
-        assert_eq!(Side::Pc.outgoing(), ["servo_angles", "estop"]);
+    fn each_crossing_topic_goes_where_it_is_subscribed() {
+        assert_eq!(
+            Side::Pc.outgoing(),
+            ["servo_angles", "estop", "robot_description"]
+        );
         assert_eq!(Side::Pi.outgoing(), ["servo_state", "diagnostics"]);
+        assert_eq!(Side::Pi.incoming(), ["servo_angles", "estop"]);
+        assert_eq!(
+            Side::Pc.incoming(),
+            ["estop", "robot_description", "servo_state", "diagnostics"]
+        );
+        // what the Pi sends, only the PCs take; the Pi never takes its own kind's topics
+        for topic in Side::Pi.outgoing() {
+            assert!(!Side::Pi.incoming().contains(&topic), "{topic}");
+        }
     }
 
     #[test]
