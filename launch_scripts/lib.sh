@@ -96,6 +96,59 @@ eezybot_find_wan_binaries() {
   eezybot_need_binaries "$EEZYBOT_WAN_BIN" "build them: cd wan && cargo build --release" "$@"
 }
 
+# The WAN mode (wan/README.md): with ZENOH_ROUTER set (tls/HOST:PORT, or tcp/HOST:PORT for
+# tests), this site's bridge `eezybot_wan_bridge SIDE` runs beside the nodes, in their ROS
+# domain and namespace, and joins the router with the certificate NAME.pem of
+# ZENOH_TLS_DIR (NAME: ZENOH_CERT, default SIDE). Without ZENOH_ROUTER nothing changes.
+#   eezybot_wan SIDE      (after eezybot_ros_args and eezybot_security) -> EEZYBOT_WAN=1 when
+#                         on. Checks the bridge's configuration first, as the bridge does
+#                         (endpoint, TLS files: exit 2 with its message, before any node starts).
+#   eezybot_start_wan     starts the bridge (when on), stopped with the nodes
+EEZYBOT_WAN=0
+eezybot_wan() {
+  local side=$1 code=0
+  EEZYBOT_WAN=0
+  [ -n "${ZENOH_ROUTER:-}" ] || return 0
+  if [ "$EEZYBOT_SECURE" = 1 ]; then
+    eezybot_say "ZENOH_ROUTER and ROS_SECURITY_ENABLE=true do not go together: the WAN bridge's DDS participant has no SROS2 enclave, so secured nodes would not talk to it. The WAN leg has its own TLS (ZENOH_TLS_DIR); unset ROS_SECURITY_ENABLE on a site that uses the bridge (README: Across the internet)"
+    trap - EXIT
+    exit 2
+  fi
+  eezybot_find_wan_binaries eezybot_wan_bridge
+  EEZYBOT_WAN_ARGS=("$side" --namespace "$(eezybot_namespace)")
+  [ -z "${ZENOH_CERT:-}" ] || EEZYBOT_WAN_ARGS+=(--cert "$ZENOH_CERT")
+  "$EEZYBOT_WAN_BIN/eezybot_wan_bridge" "${EEZYBOT_WAN_ARGS[@]}" --print-config >/dev/null || code=$?
+  if [ "$code" != 0 ]; then
+    eezybot_say "the WAN bridge's configuration is unusable (above): not starting"
+    trap - EXIT
+    exit "$code"
+  fi
+  EEZYBOT_WAN=1
+}
+eezybot_start_wan() {
+  [ "$EEZYBOT_WAN" = 1 ] || return 0
+  "$EEZYBOT_WAN_BIN/eezybot_wan_bridge" "${EEZYBOT_WAN_ARGS[@]}" &
+  EEZYBOT_PIDS+=($!)
+  EEZYBOT_NAMES+=(eezybot_wan_bridge)
+}
+eezybot_wan_banner() {
+  [ "$EEZYBOT_WAN" = 1 ] || return 0
+  eezybot_say "WAN mode: bridge $EEZYBOT_WAN_BIN/eezybot_wan_bridge ${EEZYBOT_WAN_ARGS[*]} to the router $ZENOH_ROUTER, TLS files ${ZENOH_TLS_DIR:-(ZENOH_TLS_DIR not set)}"
+}
+
+# The nodes' namespace from the ROS arguments (-r __ns:=/NS or --remap __ns:=/NS; the
+# last one wins), else /.
+eezybot_namespace() {
+  local ns=/ prev= a
+  for a in "${EEZYBOT_ROS_ARGS[@]}"; do
+    case "$prev:$a" in
+      -r:__ns:=*|--remap:__ns:=*) ns=${a#__ns:=} ;;
+    esac
+    prev=$a
+  done
+  echo "$ns"
+}
+
 # The script's own arguments are ROS arguments for every node. A leading --ros-args is
 # accepted and dropped (the nodes get one --ros-args block each).
 eezybot_ros_args() {

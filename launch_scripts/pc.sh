@@ -7,6 +7,12 @@
 # SROS2: with ROS_SECURITY_ENABLE=true every node runs under the enclave /eezybot/pc of
 # ROS_SECURITY_KEYSTORE (launch_scripts/keystore.sh; README: Securing the link).
 #
+# WAN mode (README: Across the internet): with ZENOH_ROUTER=tls/HOST:PORT a bridge
+# (eezybot_wan_bridge pc) runs beside the nodes and carries the contract's topics
+# through that Zenoh router to pi.sh on the Pi, wherever it is; TLS files from
+# ZENOH_TLS_DIR (launch_scripts/wan_certs.sh; ZENOH_CERT: another client certificate
+# name). A bad endpoint or TLS file: exit 2 before anything starts.
+#
 # Arguments are ROS arguments for every node, e.g.
 #   launch_scripts/pc.sh -r __ns:=/arm2
 # Ctrl-C (or SIGTERM) stops every node; the script then exits 0.
@@ -19,13 +25,20 @@ eezybot_ros_args "$@"
 bind=${GUI_BIND:-127.0.0.1:8080}
 eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge"
 eezybot_enclave /eezybot/pc
+eezybot_wan pc
 
 eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}"
 eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
 eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
+eezybot_start_wan
 
 eezybot_banner
 eezybot_say "running here (operator PC): compute_ik, state_publisher, gui_bridge"
-eezybot_say "expected on the Pi (pi.sh, same ROS domain): serial_node"
+eezybot_wan_banner
+if [ "$EEZYBOT_WAN" = 1 ]; then
+  eezybot_say "expected on the Pi (pi.sh with ZENOH_ROUTER, through the router): serial_node"
+else
+  eezybot_say "expected on the Pi (pi.sh, same ROS domain): serial_node"
+fi
 eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
 eezybot_wait

@@ -11,6 +11,12 @@
 # ROS_SECURITY_KEYSTORE (only enclaves/eezybot/pi is needed on the Pi; README: Securing
 # the link; deploy/install.sh --keystore).
 #
+# WAN mode (README: Across the internet): with ZENOH_ROUTER=tls/HOST:PORT a bridge
+# (eezybot_wan_bridge pi) runs beside the node and carries the contract's topics
+# through that Zenoh router to pc.sh on the PC, wherever it is; TLS files from
+# ZENOH_TLS_DIR (launch_scripts/wan_certs.sh; ZENOH_CERT: another client certificate
+# name). A bad endpoint or TLS file: exit 2 before anything starts.
+#
 # Arguments are ROS arguments for serial_node, e.g.
 #   launch_scripts/pi.sh -r __ns:=/arm2
 # Ctrl-C (or SIGTERM) stops it; the script then exits 0.
@@ -23,8 +29,10 @@ eezybot_ros_args "$@"
 eezybot_serial_port
 eezybot_security /eezybot/pi serial_node
 eezybot_enclave /eezybot/pi
+eezybot_wan pi
 
 eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT"
+eezybot_start_wan
 
 eezybot_banner
 if [ "$EEZYBOT_PORT" = mock ]; then
@@ -36,5 +44,10 @@ else
   eezybot_say "(plug in the board, check the udev rule and the dialout group; SERIAL_PORT=mock for the virtual Arduino)"
   eezybot_say "running here (Pi): serial_node on $EEZYBOT_PORT (not connected yet)"
 fi
-eezybot_say "expected on the PC (pc.sh, same ROS domain): compute_ik, state_publisher, gui_bridge"
+eezybot_wan_banner
+if [ "$EEZYBOT_WAN" = 1 ]; then
+  eezybot_say "expected on the PC (pc.sh with ZENOH_ROUTER, through the router): compute_ik, state_publisher, gui_bridge"
+else
+  eezybot_say "expected on the PC (pc.sh, same ROS domain): compute_ik, state_publisher, gui_bridge"
+fi
 eezybot_wait
