@@ -60,9 +60,10 @@ class VirtualArduinoPty:
 
 
 class SplitGraph:
-    """pc.sh in hosts.pc, pi.sh in hosts.pi, an rclpy observer in hosts.pc."""
+    """pc.sh in hosts.pc, pi.sh in hosts.pi, an rclpy observer in hosts.pc (hosts: a
+    twohost.TwoHosts, or a wanhost.WanHosts with env=hosts.graph_env(...))."""
 
-    def __init__(self, hosts, domain, workdir, device="virtual", ros_args=(), target_hz=20.0):
+    def __init__(self, hosts, domain, workdir, device="virtual", ros_args=(), target_hz=20.0, env=None):
         self.hosts, self.domain = hosts, domain
         self.ros_args = list(ros_args)
         self.target_period = 1.0 / target_hz
@@ -77,7 +78,9 @@ class SplitGraph:
             port = str(self.uno.path)
         else:
             self.uno, port = None, "mock"
-        env = {"EEZYBOT_BIN_DIR": str(Path(bin_path("serial_node")).parent), "GUI_BIND": "127.0.0.1:8080"}
+        # env: more for both scripts (wanhost.WanHosts.graph_env: the WAN mode)
+        env = {"EEZYBOT_BIN_DIR": str(Path(bin_path("serial_node")).parent), "GUI_BIND": "127.0.0.1:8080",
+               **(env or {})}
         self.pc = NodeProcess(str(REPO / "launch_scripts" / "pc.sh"), self.ros_args, domain, env=env, netns=hosts.pc)
         self.pi = NodeProcess(str(REPO / "launch_scripts" / "pi.sh"), self.ros_args, domain,
                               env={**env, "SERIAL_PORT": port}, netns=hosts.pi)

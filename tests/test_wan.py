@@ -1,0 +1,271 @@
+"""The WAN mode (issue 20): the operator's PC and the Pi on different networks, joined
+only through a Zenoh router with mutual TLS. Network namespaces `pc`, `wan` and `pi`
+(wanhost.py): `pc` and `pi` each reach only the router's address in `wan`, which does
+not forward. launch_scripts/router.sh runs in `wan`; launch_scripts/pc.sh and pi.sh run
+with ZENOH_ROUTER and ZENOH_TLS_DIR, so each starts its bridge beside its nodes; real
+rclpy (Fast DDS) processes are the users at each site.
+
+One trial of each kind: the outages are in test_wan_outages.py, 20 of each length in
+tests/soak/outages.py --wan, the latency in tests/bench/wan_e2e.py (BENCHMARKS.md)."""
+import json
+import math
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, String
+
+import wanhost
+from conftest import REPO, NodeProcess, bin_path
+from robot_facts import servo_deg
+from split_graph import SplitGraph, seconds, stamp_of
+
+pytestmark = [pytest.mark.own_process,
+              pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")]
+
+PC_LAN_ONLY = {"/xyz_target", "/pose_target", "/joint_target", "/gripper_target", "/joint_states", "/tf", "/tf_static",
+               "/robot_description"}
+
+
+@pytest.fixture(scope="module")
+def certs(tmp_path_factory):
+    """Our CA with the clients pc, pi and pc2 (a second operator PC), and another CA's
+    set (a stranger's)."""
+    ours = wanhost.make_certs(tmp_path_factory.mktemp("wan-certs") / "ours", "pc2")
+    theirs = wanhost.make_certs(tmp_path_factory.mktemp("wan-certs") / "theirs")
+    return ours, theirs
+
+
+def start(sites, domain, tmp_path, certs, impaired=None, device="virtual"):
+    hosts = wanhost.WanHosts(tag="w", sites=sites, impaired=impaired)
+    try:
+        hosts.start_router(certs[0], tmp_path / "router.log")
+        g = SplitGraph(hosts, domain, tmp_path, device=device, env=hosts.graph_env(certs[0]))
+    except BaseException:
+        hosts.close()
+        raise
+    return hosts, g
+
+
+def close(hosts, g):
+    try:
+        codes = g.close()
+    finally:
+        hosts.close()
+    assert all(c == 0 for c in codes.values()), f"exit codes {codes}"
+    assert hosts.router.returncode == 0 if hosts.router else True
+
+
+def site_user(hosts, site, domain, seconds, *args):
+    """tests/site_user.py at `site` (a process of its own): started; `.result()` waits
+    for it and returns its JSON."""
+    p = hosts.popen(site, [sys.executable, str(REPO / "tests" / "site_user.py"), "--domain", str(domain),
+                           "--for", str(seconds), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def result():
+        out, err = p.communicate(timeout=seconds + 60)
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        assert p.returncode == 0 and lines, f"site_user at {site}: exit {p.returncode}\n{out[-2000:]}\n{err[-2000:]}"
+        return json.loads(lines[-1])
+
+    p.result = result
+    return p
+
+
+def bridge(hosts, site, domain, *args, env=None):
+    """eezybot_wan_bridge pc ARGS... at `site` (a second PC, a stranger), with its log."""
+    return NodeProcess(str(wanhost.wan_bin_dir() / "eezybot_wan_bridge"), ["pc", *args], domain,
+                       env=env, netns=hosts.ns[site])
+
+
+def test_a_target_crosses_the_router_and_the_estop_holds_across_it(domain, tmp_path, certs):
+    """rclpy in `pc` -> compute_ik (pc) -> bridge -> router -> bridge -> serial_node (pi)
+    -> the virtual Arduino; servo_state comes back to rclpy in `pc` with ROBOT.md's
+    servo angles. Only the contract crosses. An e-stop from `pc` holds the Pi; a Pi that
+    starts again during it sees it (latched across the router); a release moves again."""
+    hosts, g = start(("pc", "pi"), domain, tmp_path, certs)
+    try:
+        g.wait_flowing(timeout=60)
+        goal = (0.2, 0.05, 0.15)
+        m = stamp_of(time.time())
+        m.point.x, m.point.y, m.point.z = goal
+        g.xyz.publish(m)
+        want = seconds(m.header.stamp)
+        assert g.pump_until(lambda: any(seconds(s.header.stamp) == want for _, s in g.states), 15, send=False), \
+            f"no servo_state for the target\n{g.logs_tail()}"
+        expected = servo_deg(*goal)
+
+        def at(goal_deg):
+            reply = g.states[-1][1]
+            return max(abs(math.degrees(a) - e) for a, e in zip(reply.position[:3], goal_deg)) < 0.1
+
+        assert g.pump_until(lambda: at(expected), 10, send=False), (list(g.states[-1][1].position), expected)
+        assert g.states[-1][1].name[:3] == ["base_servo", "shoulder_servo", "elbow_servo"]
+
+        # what crosses: the Pi's LAN has the PC's servo_angles and estop, not its targets,
+        # joint_states, tf or robot_description; the PC's LAN has no node of the Pi's
+        pi_user = site_user(hosts, "pi", domain, 15, "--sub", "/servo_angles", "--until", "/servo_angles", "--topics")
+        g.pump_until(lambda: pi_user.poll() is not None, 30)
+        pi_topics = set(pi_user.result()["topics"])
+        assert {"/servo_angles", "/servo_state", "/estop"} <= pi_topics, pi_topics
+        assert not pi_topics & PC_LAN_ONLY, f"PC-only topics on the Pi's LAN: {sorted(pi_topics & PC_LAN_ONLY)}"
+        pc_nodes = set(g.o.node.get_node_names())
+        assert "serial_node" not in pc_nodes and "compute_ik" in pc_nodes, pc_nodes
+
+        # e-stop from the PC, through the router
+        estop = g.o.pub("/estop", Bool)  # the contract's QoS: latched
+        estop.publish(Bool(data=True))
+        assert g.pump_until(lambda: g.diag_values("serial_node")[2].get("estop") == "true", 15), \
+            f"serial_node did not report the e-stop: {g.diag_values('serial_node')}\n{g.logs_tail()}"
+        held = list(g.states[-1][1].position)
+        g.pump(2)  # targets keep coming: dropped
+        assert max(abs(a - b) for a, b in zip(g.states[-1][1].position, held)) < 1e-6, "the arm moved during the e-stop"
+
+        # a Pi that starts again (its bridge joins the router anew) sees the current e-stop
+        assert g.pi.stop() == 0
+        g.pi = NodeProcess(g.pi.argv[-1], [], domain, env={k: v for k, v in g.pi.env.items()}, netns=hosts.pi)
+        g.procs[1] = g.pi
+        g.diags.clear()
+        assert g.pump_until(lambda: g.diag_values("serial_node")[2].get("estop") == "true", 30), \
+            f"the restarted Pi does not hold the latched e-stop: {g.diag_values('serial_node')}\n{g.logs_tail()}"
+
+        estop.publish(Bool(data=False))
+        t_release = time.time()
+        assert g.pump_until(lambda: any(s >= t_release for _, s in g.replies_after(t_release)), 30), \
+            f"no motion after the release\n{g.logs_tail()}"
+    finally:
+        close(hosts, g)
+
+
+def test_a_second_operator_pc_joins_late_and_a_stranger_gets_nothing(domain, tmp_path, certs):
+    """A second operator PC (`pc2`, its own certificate from our CA) whose bridge joins
+    after the e-stop was pressed gets the latched robot_description and the current
+    e-stop, and servo_state; its release reaches the Pi and the first PC. A bridge with a
+    certificate from another CA, and a plain-TCP client, get nothing through either way."""
+    hosts, g = start(("pc", "pi", "pc2", "stranger"), domain, tmp_path, certs)
+    extra = []
+    try:
+        g.wait_flowing(timeout=60)
+        urdf = g.o.sub("/robot_description", String)
+        pc_estop = g.o.sub("/estop", Bool)
+        estop = g.o.pub("/estop", Bool)
+        estop.publish(Bool(data=True))
+        assert g.pump_until(lambda: g.diag_values("serial_node")[2].get("estop") == "true" and urdf, 15), \
+            f"{g.diag_values('serial_node')}, robot_description {len(urdf)}\n{g.logs_tail()}"
+        g.pump(1)
+
+        # the second PC: its bridge and a user (RViz2, the ros2 CLI) join now
+        extra.append(bridge(hosts, "pc2", domain, env=hosts.graph_env(certs[0], cert="pc2")))
+        late = site_user(hosts, "pc2", domain, 40, "--sub", "/robot_description", "--sub", "/estop",
+                         "--sub", "/servo_state", "--until", "/robot_description", "--until", "/estop",
+                         "--estop", "false")
+        t_join = time.time()
+        assert g.pump_until(lambda: late.poll() is not None, 50), "the second PC's user did not finish"
+        got = late.result()["got"]
+        assert all(got[t]["count"] for t in got), f"the second PC got {got}\n{extra[0].output()[-3000:]}"
+        text = urdf[-1][1].data
+        assert got["/robot_description"]["first"] == {"len": len(text), "head": text[:200]}
+        assert got["/estop"]["first"] is True, f"the second PC's first e-stop sample is not the current one: {got}"
+
+        # its release (published once its subscriptions were served) reaches the Pi and the first PC
+        assert g.pump_until(lambda: g.diag_values("serial_node")[2].get("estop") == "false"
+                            and any(s >= t_join for _, s in g.replies_after(t_join)), 30), \
+            f"the second PC's release did not reach the Pi: {g.diag_values('serial_node')}\n{g.logs_tail()}"
+        assert pc_estop and pc_estop[-1][1].data is False, f"the first PC did not hear it: {[m.data for _, m in pc_estop]}"
+
+        # strangers: a bridge with another CA's certificate, and one on plain TCP to the
+        # TLS port; their user presses the e-stop 5 times a second and listens
+        theirs = hosts.graph_env(certs[1])
+        extra.append(bridge(hosts, "stranger", domain, env=theirs))
+        extra.append(bridge(hosts, "stranger", domain, "--router", f"tcp/{wanhost.ROUTER}:{wanhost.PORT}", env=theirs))
+        stranger = site_user(hosts, "stranger", domain, 15, "--sub", "/servo_state", "--sub", "/diagnostics",
+                             "--estop", "true", "--estop-rate", "5")
+        t0 = time.time()
+        g.pump_until(lambda: stranger.poll() is not None, 40)
+        theirs_got = stranger.result()
+        assert theirs_got["estops_sent"] > 30, theirs_got
+        assert g.diag_values("serial_node")[2].get("estop") == "false", "a stranger's e-stop reached the Pi"
+        assert any(s >= t0 + 10 for _, s in g.replies_after(t0 + 10)), "the arm stopped following while strangers tried"
+        assert all(v["count"] == 0 for v in theirs_got["got"].values()), f"a stranger got {theirs_got}"
+        for p in extra[1:]:
+            assert "not connected to the router" in p.output(), p.output()[-2000:]
+        assert "connected to the router" in extra[0].output()
+    finally:
+        codes = [p.stop() for p in extra]
+        close(hosts, g)
+    assert codes == [0] * len(codes), codes
+
+
+def test_streaming_over_an_impaired_wan(domain, tmp_path, certs):
+    """40 +/- 10 ms each way and 2 % loss on the Pi's WAN link (linkem): streaming at
+    20 Hz continues through the router, the newest target wins, and the round trip is
+    reported (tests/bench/wan_e2e.py measures it)."""
+    hosts, g = start(("pc", "pi"), domain, tmp_path, certs, impaired=dict(delay_ms=40, jitter_ms=10, loss=0.02))
+    angles = g.o.sub("/servo_angles", JointState)
+    try:
+        g.wait_flowing(timeout=60)
+        t0 = time.time()
+        g.pump(20)
+        g.pump(3, send=False)
+        replies = g.replies_after(t0)
+    finally:
+        close(hosts, g)
+    sent = [s for _, s in g.sent if s >= t0]
+    replies = [(a, s) for a, s in replies if s in set(sent)]
+    answered = {s for _, s in replies}
+    rtt = sorted(a - s for a, s in replies)
+    link = {d: {k: hosts.stats[d][k] for k in ("forwarded", "dropped")} for d in ("a_to_b", "b_to_a")} if hosts.stats else {}
+    print(f"\nimpaired WAN: {len(sent)} targets, {len(answered)} answered, round trip "
+          f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
+          f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
+    run = longest_run = 0
+    for s in sent:
+        run = 0 if s in answered else run + 1
+        longest_run = max(longest_run, run)
+    assert longest_run < 40, f"streaming stalled: {longest_run} targets in a row (2 s at 20 Hz) got no answer"
+    assert len(answered) >= 0.8 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
+    final, commanded = list(g.states[-1][1].position), list(angles[-1][1].position)
+    assert max(abs(a - b) for a, b in zip(final, commanded)) < 0.2, (final, commanded)
+    stamps = [s for _, s in replies]
+    assert stamps == sorted(stamps), "an older target was applied after a newer one"
+
+
+def test_without_a_router_no_bridge_runs_and_bad_tls_files_stop_the_scripts(domain, tmp_path, certs):
+    """Without ZENOH_ROUTER pc.sh starts no bridge; with it, a missing TLS directory or
+    a key that is not the certificate's ends pc.sh / pi.sh with status 2 before any node
+    starts."""
+    bins = {"EEZYBOT_BIN_DIR": str(Path(bin_path("serial_node")).parent), "EEZYBOT_WAN_BIN_DIR": str(wanhost.wan_bin_dir())}
+    env = {**bins, "SERIAL_PORT": "mock", "ZENOH_ROUTER": ""}
+    p = NodeProcess(str(REPO / "launch_scripts" / "pi.sh"), [], domain, env=env)
+    try:
+        time.sleep(3)
+        kids = subprocess.run(["pgrep", "-a", "-P", str(p.proc.pid)], capture_output=True, text=True).stdout
+    finally:
+        assert p.stop() == 0
+    assert "serial_node" in kids and "eezybot_wan_bridge" not in kids, kids
+    assert "WAN" not in p.log_path.read_text()
+
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    for f in ("ca.pem", "pc.pem", "pi.pem"):
+        (mixed / f).write_bytes((certs[0] / f).read_bytes())
+    for f in ("pc.key", "pi.key"):  # the other CA's keys: not these certificates' keys
+        (mixed / f).write_bytes((certs[1] / f).read_bytes())
+        (mixed / f).chmod(0o600)
+    for script, tls_dir, says in (("pc.sh", tmp_path / "nonexistent", "is not a directory"),
+                                  ("pi.sh", mixed, "does not go with")):
+        env = {**bins, "SERIAL_PORT": "mock", "ZENOH_ROUTER": f"tls/{wanhost.ROUTER}:{wanhost.PORT}", "ZENOH_TLS_DIR": str(tls_dir)}
+        p = NodeProcess(str(REPO / "launch_scripts" / script), [], domain, env=env)
+        try:
+            code = p.proc.wait(30)
+        finally:
+            p.stop()
+        out = p.log_path.read_text()
+        assert code == 2, f"{script}: exit {code}\n{out}"
+        assert says in out and "not starting" in out, out
+        assert "running here" not in out, out
