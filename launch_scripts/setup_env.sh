@@ -12,8 +12,9 @@ _log() { echo "[setup] $*" >&2; }
 # OpenSSL's headers and pkg-config (the nodes' `security` build), Debian's Fast DDS 2.9
 # with its security plugins plus g++ (tests/interop/sros2_peer, the secured interop
 # peer: the PyPI Fast DDS and Cyclone wheels are built without security) and tcpdump
-# (the wire captures of tests/test_security.py).
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump}
+# (the wire captures of tests/test_security.py); for the WAN mode's bridge (wan/): cmake
+# and libclang-dev (the cyclors crate builds Cyclone DDS and binds it with bindgen).
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump cmake libclang-dev}
 . "$_here/launch_scripts/apt_missing.sh"
 # shellcheck disable=SC2086 # a list of words
 apt_missing setup $EEZYBOT_APT_PACKAGES

@@ -77,9 +77,9 @@ def site_user(hosts, site, domain, seconds, *args):
     return p
 
 
-def bridge(hosts, site, domain, *args, env=None):
-    """eezybot_wan_bridge pc ARGS... at `site` (a second PC, a stranger), with its log."""
-    return NodeProcess(str(wanhost.wan_bin_dir() / "eezybot_wan_bridge"), ["pc", *args], domain,
+def bridge(hosts, site, domain, *args, env=None, side="pc"):
+    """eezybot_wan_bridge SIDE ARGS... at `site` (a second PC, a stranger), with its log."""
+    return NodeProcess(str(wanhost.wan_bin_dir() / "eezybot_wan_bridge"), [side, *args], domain,
                        env=env, netns=hosts.ns[site])
 
 
@@ -269,3 +269,36 @@ def test_without_a_router_no_bridge_runs_and_bad_tls_files_stop_the_scripts(doma
         assert code == 2, f"{script}: exit {code}\n{out}"
         assert says in out and "not starting" in out, out
         assert "running here" not in out, out
+
+
+def test_every_sample_arrives_once_after_the_ends_restart(domain, tmp_path, certs):
+    """wan/patches/zenoh-plugin-ros2dds: with upstream's plugin, each time the subscriber
+    on the PC and the publisher on the Pi were restarted, a removed route lived on and
+    every sample then reached the PC once more (3, then 4 times). Five rounds of
+    restarting both ends of servo_state: every sample arrives once."""
+    probe = str(REPO / "wan" / "check" / "ros_probe.py")
+    hosts = wanhost.WanHosts(tag="d")
+    bridges = []
+    try:
+        hosts.start_router(certs[0], tmp_path / "router.log")
+        env = hosts.graph_env(certs[0])
+        bridges = [bridge(hosts, "pc", domain, env=env), bridge(hosts, "pi", domain, env=env, side="pi")]
+        dds = {"ROS_DOMAIN_ID": str(domain)}
+        for round_ in range(5):
+            sub = hosts.popen("pc", ["env", *(f"{k}={v}" for k, v in dds.items()), sys.executable, probe, "sub",
+                                     "/servo_state", "joint", "--count", "100000", "--timeout", "9"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            time.sleep(1)
+            pub = hosts.popen("pi", ["env", *(f"{k}={v}" for k, v in dds.items()), sys.executable, probe, "pub",
+                                     "/servo_state", "joint", "--count", "120", "--rate", "20"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            pub.wait(30)
+            out, err = sub.communicate(timeout=30)
+            seen = [line.split("position=")[1].split(" ")[0] for line in out.splitlines() if "position=" in line]
+            dups = {p: seen.count(p) for p in set(seen) if seen.count(p) > 1}
+            assert len(seen) >= 10, f"round {round_ + 1}: {len(seen)} samples\n{out[-1000:]}\n{err[-1000:]}"
+            assert not dups, f"round {round_ + 1}: samples arrived more than once: {dict(list(dups.items())[:5])}"
+    finally:
+        codes = [b.stop() for b in bridges]
+        hosts.close()
+    assert codes == [0, 0], codes
