@@ -11,15 +11,22 @@ the peers were reported lost and regained, and how many unreachable-network line
 were logged. One graph lives through every trial, as in a long teleoperation session.
 
     $EEZYBOT_PYTHON tests/soak/outages.py [--trials 20] [--lengths 3,12,25,60]
-        [--sides pc,pi] [--json FILE]
+        [--sides pc,pi] [--mode lan|wan] [--json FILE]
 
 20 trials of 3, 12, 25 and 60 s at each end take about 75 minutes.
+
+--mode wan: the WAN mode (issue 20) instead of one LAN: namespaces pc, wan and pi
+(tests/wanhost.py), launch_scripts/router.sh in `wan` with certificates of its own,
+pc.sh and pi.sh with ZENOH_ROUTER (each starts its bridge); a cut takes a site's link
+to the router down. `--mode wan --sides pi`: the Pi's WAN link, about 40 minutes.
 """
 import tempfile
 import time
+from pathlib import Path
 
 import soaklib  # first: it puts tests/ on sys.path
 import twohost
+import wanhost
 from split_graph import SplitGraph
 
 RESUME_WITHIN_S = 5.0  # issue 8: the graph resumes within 5 s of the link returning
@@ -42,15 +49,27 @@ def summarize(results):
     return rows
 
 
+def hosts_for(mode):
+    """The namespaces: pc and pi on one link (lan), or pc, wan and pi (wan)."""
+    return wanhost.WanHosts(tag="q") if mode == "wan" else twohost.TwoHosts(tag="q")
+
+
 def main():
-    args = soaklib.arguments(__doc__, trials=20, lengths="3,12,25,60", sides="pc,pi")
+    args = soaklib.arguments(__doc__, trials=20, lengths="3,12,25,60", sides="pc,pi", mode="lan")
     soaklib.need_two_hosts()
+    if args.mode not in ("lan", "wan"):
+        raise SystemExit(f"--mode {args.mode}: lan or wan")
     lengths = [float(x) for x in args.lengths.split(",")]
     sides = args.sides.split(",")
     results = []
     t_start = time.time()
-    with soaklib.domain() as domain, tempfile.TemporaryDirectory() as work, twohost.TwoHosts(tag="q") as hosts:
-        g = SplitGraph(hosts, domain, work, device="virtual")
+    with soaklib.domain() as domain, tempfile.TemporaryDirectory() as work, hosts_for(args.mode) as hosts:
+        env = None
+        if args.mode == "wan":
+            certs = wanhost.make_certs(Path(work) / "certs")
+            hosts.start_router(certs, Path(work) / "router.log")
+            env = hosts.graph_env(certs)
+        g = SplitGraph(hosts, domain, work, device="virtual", env=env)
         try:
             g.wait_flowing(60)
             for trial in range(args.trials):
@@ -72,7 +91,7 @@ def main():
               f"{row['stale_applied']:5d} {row['lost_and_regained_reported']:>9}/{row['trials']:<3} "
               f"{row['unreachable_lines_max']:8d}")
     print(f"exit codes {codes}, {time.time() - t_start:.0f} s in all")
-    soaklib.write_json(args.json, summary, trials=results, exit_codes=codes)
+    soaklib.write_json(args.json, summary, trials=results, exit_codes=codes, mode=args.mode)
 
 
 if __name__ == "__main__":
