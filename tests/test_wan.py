@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, String
 
