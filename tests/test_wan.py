@@ -5,8 +5,11 @@ not forward. launch_scripts/router.sh runs in `wan`; launch_scripts/pc.sh and pi
 with ZENOH_ROUTER and ZENOH_TLS_DIR, so each starts its bridge beside its nodes; real
 rclpy (Fast DDS) processes are the users at each site.
 
-One trial of each kind: the outages are in test_wan_outages.py, 20 of each length in
-tests/soak/outages.py --wan, the latency in tests/bench/wan_e2e.py (BENCHMARKS.md)."""
+Its checks count samples and compare values, with generous timeouts, never durations:
+it runs in the background beside the other tests (conftest: `background`), as the
+outage modules do. One trial of each kind: the outages are in test_wan_outages.py, 20
+of each length in tests/soak/outages.py --mode wan, the latency in
+tests/bench/wan_e2e.py (BENCHMARKS.md)."""
 import json
 import math
 import statistics
@@ -24,7 +27,7 @@ from conftest import REPO, NodeProcess, bin_path
 from robot_facts import servo_deg
 from split_graph import SplitGraph, seconds, stamp_of
 
-pytestmark = [pytest.mark.own_process,
+pytestmark = [pytest.mark.own_process, pytest.mark.background,
               pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")]
 
 PC_LAN_ONLY = {"/xyz_target", "/pose_target", "/joint_target", "/gripper_target", "/joint_states", "/tf", "/tf_static",

@@ -7,7 +7,7 @@ opens again by itself) and brings it back. The Pi's interface is its LAN too, as
 Pi's Wi-Fi is: serial_node and its bridge then talk over the host only.
 
 Mostly waiting, so this module runs in the background beside the other tests (conftest:
-`background`); tests/soak/outages.py --wan runs 20 trials of each length (BENCHMARKS.md)."""
+`background`); tests/soak/outages.py --mode wan runs 20 trials of each length (BENCHMARKS.md)."""
 import time
 
 import pytest
