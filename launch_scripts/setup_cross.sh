@@ -5,6 +5,7 @@
 # Debian's cross gcc + libc for both (the linkers named in .cargo/config.toml), and
 # qemu-user, so `cargo test --target ...` runs the tests of pure crates (the cargo runner
 # in .cargo/config.toml). Source it (`. launch_scripts/setup_cross.sh`) or run it.
+# EEZYBOT_CROSS_WAN=1 (cross_build.sh --wan): also what cross-building wan/'s bridge needs.
 set -euo pipefail
 
 _log() { echo "[setup_cross] $*" >&2; }
@@ -28,4 +29,13 @@ EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu l
 . "$(dirname "${BASH_SOURCE[0]}")/apt_missing.sh"
 # shellcheck disable=SC2086 # a list of words
 apt_missing setup_cross $EEZYBOT_CROSS_APT_PACKAGES
+# wan/'s bridge (cross_build.sh --wan): cyclors builds Cyclone DDS with cmake, a C and C++
+# project (`project(... LANGUAGES C CXX)`: without the cross g++ its configure stops at
+# "CMAKE_CXX_COMPILER: aarch64-linux-gnu-g++ is not a full path and was not found"), and
+# runs bindgen on its headers (libclang).
+if [ "${EEZYBOT_CROSS_WAN:-0}" = 1 ]; then
+  EEZYBOT_CROSS_WAN_APT_PACKAGES=${EEZYBOT_CROSS_WAN_APT_PACKAGES:-cmake libclang-dev g++-aarch64-linux-gnu g++-arm-linux-gnueabihf}
+  # shellcheck disable=SC2086 # a list of words
+  apt_missing setup_cross $EEZYBOT_CROSS_WAN_APT_PACKAGES
+fi
 unset _installed _missing _out
