@@ -2,7 +2,7 @@
 # Cross-builds the Raspberry Pi half of the graph (serial_node and virtual_arduino) on this
 # PC, so the Pi needs no Rust toolchain:
 #
-#   launch_scripts/cross_build.sh [aarch64|armv7|all]     (default all)
+#   launch_scripts/cross_build.sh [aarch64|armv7|all] [--wan]     (default all)
 #
 #   aarch64: aarch64-unknown-linux-gnu, 64-bit Raspberry Pi OS / Ubuntu (Pi 3, 4, 5, Zero 2 W)
 #   armv7:   armv7-unknown-linux-gnueabihf, 32-bit Raspberry Pi OS (Pi 2, 3, 4, Zero 2 W)
@@ -18,17 +18,31 @@
 # bin/, launch_scripts/{lib.sh,pi.sh}, deploy/ (systemd unit, udev rule, install.sh),
 # README.txt and raspberry_pi.md. Copy the tarball to the Pi, unpack it and follow
 # README.txt (docs/raspberry_pi.md).
+#
+# --wan (any position; opt-in): also builds the WAN bridge eezybot_wan_bridge from wan/
+# (its release profile, target dir wan/target/TRIPLE/release) and puts it in the bundle's
+# bin/, where pi.sh finds it (ZENOH_ROUTER set: wan/README.md). Needs cmake, libclang-dev
+# and the cross g++ (Cyclone DDS is built from source; setup_cross.sh installs them with
+# EEZYBOT_CROSS_WAN=1); the first build takes about 10 CPU-minutes per target.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
 
 _say() { echo "[cross_build] $*" >&2; }
 
+# --wan anywhere; the other arguments as without it.
+wan=0
+args=()
+for a in "$@"; do
+  if [ "$a" = --wan ]; then wan=1; else args+=("$a"); fi
+done
+set -- "${args[@]}"
+
 case "${1:-all}" in
   aarch64) arches=(aarch64) ;;
   armv7) arches=(armv7) ;;
   all) arches=(aarch64 armv7) ;;
-  -h|--help) sed -n '2,21s/^# \{0,1\}//p' "$0"; exit 0 ;;
+  -h|--help) sed -n '2,28s/^# \{0,1\}//p' "$0"; exit 0 ;;
   *) _say "unknown target '$1': aarch64, armv7 or all"; exit 2 ;;
 esac
 [ $# -le 1 ] || { _say "one argument at most: aarch64, armv7 or all"; exit 2; }
@@ -58,6 +72,7 @@ qemu() {
   esac
 }
 
+[ "$wan" = 0 ] || export EEZYBOT_CROSS_WAN=1  # setup_cross.sh: cmake, libclang, cross g++
 . launch_scripts/setup_cross.sh
 
 bins=(serial_node virtual_arduino)
@@ -68,7 +83,7 @@ case "$profile" in
   *) _say "EEZYBOT_PI_PROFILE=$profile: pi or pi-check"; exit 2 ;;
 esac
 version=$(git describe --always --dirty 2>/dev/null || echo unknown)
-declare -A need_glibc
+declare -A need_glibc bridge_glibc
 mkdir -p dist
 for arch in "${arches[@]}"; do
   t=$(triple "$arch")
@@ -123,8 +138,40 @@ for arch in "${arches[@]}"; do
     fi
   done
 
+  # --wan: the WAN bridge, from wan/ (its own workspace and Cargo.lock; its release
+  # profile, stripped). cyclors' build script builds Cyclone DDS with the cmake crate, which
+  # sets CMAKE_SYSTEM_NAME/PROCESSOR itself for a cross target and takes the compilers from
+  # the cc crate (CC_/CXX_<triple>: the cross gcc and g++, said explicitly as above), then
+  # runs bindgen, which passes the target to libclang: clang finds the target's headers in
+  # /usr/TOOLS itself (the bindings say __SIZEOF_PTHREAD_MUTEX_T 48, aarch64's, not the
+  # host's 40). The linker and runner: .cargo/config.toml (found from wan/ too).
+  bridge=()
+  if [ "$wan" = 1 ]; then
+    _say "building eezybot_wan_bridge for $t (wan/, release; the first build takes about 10 CPU-minutes: Zenoh, Cyclone DDS)"
+    (cd wan && env "CC_${t//-/_}=$(cc_of "$arch")" "CXX_${t//-/_}=$(tools "$arch")-g++" "AR_${t//-/_}=$(ar_of "$arch")" \
+      cargo build -q --release --target "$t" --target-dir target --bin eezybot_wan_bridge)
+    bridge=("wan/target/$t/release/eezybot_wan_bridge")
+    # It starts on the target's CPU (qemu-user cannot open its DDS sockets: the
+    # configuration only), needs no shared library but glibc's, and names no path of
+    # this build tree.
+    if ! config=$($(qemu "$arch") "${bridge[0]}" pi --router tcp/10.0.0.1:7447 --print-config 2>/dev/null) \
+      || ! grep -q '"nodename":"eezybot_wan_bridge_pi"' <<<"$config"; then
+      _say "${bridge[0]} pi --print-config under qemu: $config"; exit 1
+    fi
+    needed=$("$(tools "$arch")-objdump" -p "${bridge[0]}" | awk '$1 == "NEEDED" { print $2 }')
+    if grep -vqE '^(libc|libm|libdl|libpthread|librt|libgcc_s|ld-linux[-a-z0-9]*)\.so' <<<"$needed"; then
+      _say "${bridge[0]} needs a shared library that is not glibc's:"; echo "$needed" >&2; exit 1
+    fi
+    leaks=$(grep -aoE "$root_re/[[:print:]]*" "${bridge[0]}" | sort -u || true)
+    if [ -n "$leaks" ]; then
+      _say "${bridge[0]} names a path in $root:"; echo "$leaks" >&2; exit 1
+    fi
+    bridge_glibc[$arch]=$("$(tools "$arch")-objdump" -T "${bridge[0]}" \
+      | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -1)
+  fi
+
   # The newest glibc symbol version the binaries use: the oldest OS they run on.
-  glibc=$(for b in "${bins[@]}"; do "$(tools "$arch")-objdump" -T "$out/$b"; done \
+  glibc=$(for f in "${bins[@]/#/$out/}" "${bridge[@]}"; do "$(tools "$arch")-objdump" -T "$f"; done \
     | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -1)
   need_glibc[$arch]=$glibc
 
@@ -133,6 +180,7 @@ for arch in "${arches[@]}"; do
   rm -rf "$bundle" "$bundle.tar.gz"
   mkdir -p "$bundle/bin" "$bundle/launch_scripts"
   for b in "${bins[@]}"; do install -m 0755 "$out/$b" "$bundle/bin/$b"; done
+  [ "$wan" = 0 ] || install -m 0755 "${bridge[0]}" "$bundle/bin/eezybot_wan_bridge"
   install -m 0644 launch_scripts/lib.sh "$bundle/launch_scripts/lib.sh"
   install -m 0755 launch_scripts/pi.sh "$bundle/launch_scripts/pi.sh"
   cp -r deploy "$bundle/deploy"
@@ -167,6 +215,15 @@ The PC runs launch_scripts/pc.sh in the same ROS_DOMAIN_ID, on a network that pa
 UDP multicast. Firewall ports, Wi-Fi and troubleshooting: raspberry_pi.md (here and
 in docs/ of the source tree).
 EOF
+  [ "$wan" = 0 ] || cat >>"$bundle/README.txt" <<EOF
+
+Across the internet (the PC and the Pi on different networks): bin/eezybot_wan_bridge,
+the Pi's side of the WAN bridge (a Zenoh client of eezybot_wan_router, with
+zenoh-plugin-ros2dds and Cyclone DDS built in; needs glibc ${bridge_glibc[$arch]} or later).
+pi.sh starts it beside serial_node when ZENOH_ROUTER is set (tls/HOST:PORT of the
+router); ZENOH_TLS_DIR holds ca.pem, pi.pem and pi.key (launch_scripts/wan_certs.sh on
+the PC makes them). raspberry_pi.md, "The WAN bridge".
+EOF
   tar -C dist --owner=0 --group=0 -czf "$bundle.tar.gz" "$name"
 done
 
@@ -176,6 +233,10 @@ for arch in "${arches[@]}"; do
   for b in "${bins[@]}"; do
     printf '  %-30s %-16s %6s KiB\n' "$t" "$b" $(( $(stat -c %s "target/$t/$profile/$b") / 1024 )) >&2
   done
+  if [ "$wan" = 1 ]; then
+    printf '  %-30s %-16s %6s KiB  (needs glibc >= %s)\n' "$t" eezybot_wan_bridge \
+      $(( $(stat -c %s "wan/target/$t/release/eezybot_wan_bridge") / 1024 )) "${bridge_glibc[$arch]}" >&2
+  fi
   printf '  %-47s %6s KiB  (needs glibc >= %s)\n' "dist/eezybot-pi-$arch.tar.gz" \
     $(( $(stat -c %s "dist/eezybot-pi-$arch.tar.gz") / 1024 )) "${need_glibc[$arch]}" >&2
 done
