@@ -195,10 +195,14 @@ class GraphRun:
     device: "simavr" (the firmware's ELF in simavr) or "virtual" (virtual_arduino); both
     behind pty_tap.py. nodes: "graph" (pc.sh + pi.sh), "compute_ik" (that binary alone)
     or "seed" (seed_ik_node.py alone): the last two have no serial side.
+    hosts_factory (optional): `hosts_factory(run)` makes the namespaces instead of
+    twohost.TwoHosts (something with `pc`, `pi`, `link` and `close()`, e.g. wanhost's
+    WanHosts with its router started); env (optional): more environment for pc.sh and
+    pi.sh (e.g. WanHosts.graph_env). Without them, nothing changes.
     """
 
     def __init__(self, name, path, layout="same", device="simavr", nodes="graph", impairment=None, seed_cap="loop",
-                 serial_args=(), firmware=FIRMWARE, clock_ppm=0.0, log=print):
+                 serial_args=(), firmware=FIRMWARE, clock_ppm=0.0, log=print, hosts_factory=None, env=None):
         self.name, self.layout, self.device, self.nodes = name, layout, device, nodes
         self.clock_ppm = clock_ppm  # simavr's clock error (servo_sim --clock-ppm)
         self.impairment = impairment
@@ -216,6 +220,8 @@ class GraphRun:
         self.sent = []  # (stamp ns, path index, phase)
         self.skipped = {}  # phase -> slots skipped because this process was late
         self.serial_port = None
+        self.hosts_factory = hosts_factory
+        self.extra_env = dict(env or {})
 
     # ---- start
     def start(self):
@@ -230,7 +236,10 @@ class GraphRun:
         if twohost.available():
             raise RuntimeError(f"network namespaces are needed: {twohost.available()}")
         impaired = self.impairment if self.layout == "impaired" else None
-        self.hosts = twohost.TwoHosts(tag="e", impaired=impaired)
+        if self.hosts_factory is not None:
+            self.hosts = self.hosts_factory(self)
+        else:
+            self.hosts = twohost.TwoHosts(tag="e", impaired=impaired)
         self.lease = DomainLease()
         if self.nodes == "graph":
             self._start_device()
@@ -274,7 +283,7 @@ class GraphRun:
             raise RuntimeError(f"pty_tap did not start: {(self.workdir / 'tap.err').read_text()}")
 
     def _start_nodes(self):
-        env = {"EEZYBOT_BIN_DIR": os.environ["EEZYBOT_BIN_DIR"], "GUI_BIND": "127.0.0.1:8080"}
+        env = {"EEZYBOT_BIN_DIR": os.environ["EEZYBOT_BIN_DIR"], "GUI_BIND": "127.0.0.1:8080", **self.extra_env}
         pc, pi = self.hosts.pc, (self.hosts.pc if self.layout == "same" else self.hosts.pi)
         if self.nodes == "graph":
             self.procs = [NodeProcess(str(REPO / "launch_scripts" / "pc.sh"), [], self.lease.id, env=env, netns=pc),
