@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The patched crates of patches/ stay honest (tests/run_all.sh runs this):
 # 1. the workspace resolves rustdds and ros2-client to their copies under patches/, and
-#    wan/ zenoh-plugin-ros2dds to wan/patches/
+#    wan/ zenoh-plugin-ros2dds and zenoh-link-tls to wan/patches/
 #    (cargo only warns when a [patch.crates-io] entry goes unused, e.g. after a
 #    version bump), and so does patches/ros2-client's own lock file when its tests
 #    run against the patched rustdds;
@@ -48,10 +48,12 @@ check_resolution "workspace (Cargo.lock)" rustdds=patches/rustdds ros2-client=pa
 cargo metadata --format-version 1 --locked --manifest-path patches/ros2-client/Cargo.toml \
   "${patch_rustdds[@]}" >"$metadata"
 check_resolution "patches/ros2-client (its Cargo.lock)" rustdds=patches/rustdds <"$metadata"
-# wan/ (its own workspace): the Zenoh plugin's copy; its fix is tested through the
-# bridges (tests/test_wan.py: no duplicate after restarts)
+# wan/ (its own workspace): the copies of the Zenoh plugin and TLS link; their fixes are
+# tested through the bridges (tests/test_wan.py: no duplicate after restarts; no session
+# ends over an impaired WAN)
 cargo metadata --format-version 1 --locked --manifest-path wan/Cargo.toml >"$metadata"
-check_resolution "wan (wan/Cargo.lock)" zenoh-plugin-ros2dds=wan/patches/zenoh-plugin-ros2dds <"$metadata"
+check_resolution "wan (wan/Cargo.lock)" zenoh-plugin-ros2dds=wan/patches/zenoh-plugin-ros2dds \
+  zenoh-link-tls=wan/patches/zenoh-link-tls <"$metadata"
 
 [[ ${1:-} == --no-tests ]] && exit 0
 # debug info as the workspace has it (line tables, none for dependencies): smaller

@@ -43,11 +43,11 @@ def certs(tmp_path_factory):
     return ours, theirs
 
 
-def start(sites, domain, tmp_path, certs, impaired=None, device="virtual"):
+def start(sites, domain, tmp_path, certs, impaired=None, device="virtual", target_hz=20.0):
     hosts = wanhost.WanHosts(tag="w", sites=sites, impaired=impaired)
     try:
         hosts.start_router(certs[0], tmp_path / "router.log")
-        g = SplitGraph(hosts, domain, tmp_path, device=device, env=hosts.graph_env(certs[0]))
+        g = SplitGraph(hosts, domain, tmp_path, device=device, env=hosts.graph_env(certs[0]), target_hz=target_hz)
     except BaseException:
         hosts.close()
         raise
@@ -205,16 +205,21 @@ def test_a_second_operator_pc_joins_late_and_a_stranger_gets_nothing(domain, tmp
 
 def test_streaming_over_an_impaired_wan(domain, tmp_path, certs):
     """40 +/- 10 ms each way and 2 % loss on the Pi's WAN link (linkem): streaming at
-    20 Hz continues through the router, the newest target wins, and the round trip is
-    reported (tests/bench/wan_e2e.py measures it)."""
-    hosts, g = start(("pc", "pi"), domain, tmp_path, certs, impaired=dict(delay_ms=40, jitter_ms=10, loss=0.02))
+    50 Hz for 45 s continues through the router, the newest target wins, the round trip
+    is reported (tests/bench/wan_e2e.py measures it), and the bridges' TLS links to the
+    router hold: no Zenoh session ends (wan/patches/zenoh-link-tls: upstream's links
+    broke about once a minute here, on both sides, and the routes were made again)."""
+    hosts, g = start(("pc", "pi"), domain, tmp_path, certs, impaired=dict(delay_ms=40, jitter_ms=10, loss=0.02),
+                     target_hz=50)
     angles = g.o.sub("/servo_angles", JointState)
     try:
         g.wait_flowing(timeout=60)
         t0 = time.time()
-        g.pump(20)
+        g.pump(45)
         g.pump(3, send=False)
         replies = g.replies_after(t0)
+        churn = {p.name: [line for line in p.output().splitlines() if "Remote ROS 2 bridge left" in line]
+                 for p in g.procs}
     finally:
         close(hosts, g)
     sent = [s for _, s in g.sent if s >= t0]
@@ -225,12 +230,13 @@ def test_streaming_over_an_impaired_wan(domain, tmp_path, certs):
     print(f"\nimpaired WAN: {len(sent)} targets, {len(answered)} answered, round trip "
           f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
           f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
+    assert not any(churn.values()), f"a bridge's session to the router ended while streaming: {churn}"
     run = longest_run = 0
     for s in sent:
         run = 0 if s in answered else run + 1
         longest_run = max(longest_run, run)
-    assert longest_run < 40, f"streaming stalled: {longest_run} targets in a row (2 s at 20 Hz) got no answer"
-    assert len(answered) >= 0.8 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
+    assert longest_run < 100, f"streaming stalled: {longest_run} targets in a row (2 s at 50 Hz) got no answer"
+    assert len(answered) >= 0.7 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
     final, commanded = list(g.states[-1][1].position), list(angles[-1][1].position)
     assert max(abs(a - b) for a, b in zip(final, commanded)) < 0.2, (final, commanded)
     stamps = [s for _, s in replies]
