@@ -126,6 +126,26 @@ def velocity_violations(events, limits_us_per_s, start_us=None):
     return bad
 
 
+def held_then_moved(events, t_held_ns, t_heal_ns, min_pulses=10):
+    """A link cut judged at the pins: each pin's pulse widths between t_held_ns and
+    t_heal_ns (wall clock) must stay within 1 us (the arm holds), and after t_heal_ns at
+    least one pin must go on more than 5 us from where it held (a new target applied).
+    Returns what is wrong, [] when nothing is."""
+    problems, moved = [], []
+    for pin in range(4):
+        widths = [w for c, w in events.pulses(pin) if t_held_ns <= events.wall_ns(c) <= t_heal_ns]
+        if len(widths) < min_pulses:
+            problems.append(f"pin {pin}: {len(widths)} pulses while the link was down")
+            continue
+        if max(widths) - min(widths) > 1.0:
+            problems.append(f"pin {pin} moved while the link was down: {min(widths)}..{max(widths)}")
+        after = [w for c, w in events.pulses(pin) if events.wall_ns(c) > t_heal_ns]
+        moved.append(abs(after[-1] - widths[-1]) if after else 0.0)
+    if not problems and max(moved) <= 5:
+        problems.append("the arm did not go on to a new target after the link returned")
+    return problems
+
+
 def sent_ticks(events):
     """[(cycle, ticks)] of every SET_PULSES the AVR received."""
     return [(c, struct.unpack("<4H", p)) for t, _, p, c in events.frames() if t == SET_PULSES]

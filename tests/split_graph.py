@@ -123,6 +123,16 @@ class SplitGraph:
         self.xyz.publish(m)
         self.sent.append((t, seconds(m.header.stamp)))
 
+    def send_goal(self, goal, timeout=15):
+        """One target at `goal` (x, y, z), stamped now; spins until the servo_state that
+        answers it (its stamp) arrives, else AssertionError."""
+        m = stamp_of(time.time())
+        m.point.x, m.point.y, m.point.z = goal
+        self.xyz.publish(m)
+        want = seconds(m.header.stamp)
+        assert self.pump_until(lambda: any(seconds(s.header.stamp) == want for _, s in self.states), timeout,
+                               send=False), f"no servo_state for the target\n{self.logs_tail()}"
+
     def pump_until(self, predicate, timeout, send=True):
         end = time.monotonic() + timeout
         while time.monotonic() < end:

@@ -25,7 +25,7 @@ from std_msgs.msg import Bool, String
 import wanhost
 from conftest import REPO, NodeProcess, bin_path
 from robot_facts import servo_deg
-from split_graph import SplitGraph, seconds, stamp_of
+from split_graph import SplitGraph
 
 pytestmark = [pytest.mark.own_process, pytest.mark.background,
               pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")]
@@ -94,12 +94,7 @@ def test_a_target_crosses_the_router_and_the_estop_holds_across_it(domain, tmp_p
     try:
         g.wait_flowing(timeout=60)
         goal = (0.2, 0.05, 0.15)
-        m = stamp_of(time.time())
-        m.point.x, m.point.y, m.point.z = goal
-        g.xyz.publish(m)
-        want = seconds(m.header.stamp)
-        assert g.pump_until(lambda: any(seconds(s.header.stamp) == want for _, s in g.states), 15, send=False), \
-            f"no servo_state for the target\n{g.logs_tail()}"
+        g.send_goal(goal)
         expected = servo_deg(*goal)
 
         def at(goal_deg):

@@ -47,6 +47,15 @@ def netns(name):
         os.close(target)
 
 
+def stop_link(link):
+    """Stop linkem (linkem.ImpairedLink); its statistics, or None if it did not stop
+    cleanly (teardown goes on)."""
+    try:
+        return link.stop()
+    except Exception:  # noqa: BLE001 - teardown goes on
+        return None
+
+
 def available():
     """Why two-host tests cannot run here, or None."""
     if os.geteuid() != 0:
@@ -132,10 +141,7 @@ class TwoHosts:
 
     def close(self):
         if self.link is not None:
-            try:
-                self.stats = self.link.stop()
-            except Exception:  # noqa: BLE001 - teardown goes on
-                pass
+            self.stats = stop_link(self.link)
             self.link = None
         for ns in (self.pc, self.pi):
             _ip("netns", "del", ns, check=False)
