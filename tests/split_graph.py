@@ -11,6 +11,7 @@ how long the round trip took (one machine, one clock).
 """
 import math
 import re
+import statistics
 import subprocess
 import time
 from pathlib import Path
@@ -36,6 +37,30 @@ def stamp_of(t):
 
 def seconds(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def streaming_summary(graph, t0, replies, link_stats, what):
+    """The targets `graph` sent since wall time t0 against `replies` (servo_state after
+    t0: (arrival, stamp)) that answer them, printed with the round trip and linkem's
+    counts (`link_stats`, or None) under the heading `what`. Returns sent (stamps),
+    replies (those answering a target), answered (stamps), and longest_unanswered: the
+    longest run of consecutive targets, in the order sent, of which none was answered
+    (a stall, counted in targets rather than seconds)."""
+    sent = [s for _, s in graph.sent if s >= t0]
+    # replies to targets (servo_state from a heartbeat is stamped "now")
+    replies = [(a, s) for a, s in replies if s in set(sent)]
+    answered = {s for _, s in replies}
+    rtt = sorted(a - s for a, s in replies)
+    link = {d: {k: link_stats[d][k] for k in ("forwarded", "dropped")} for d in ("a_to_b", "b_to_a")} \
+        if link_stats else {}
+    print(f"\n{what}: {len(sent)} targets, {len(answered)} answered, round trip "
+          f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
+          f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
+    run = longest = 0
+    for s in sent:
+        run = 0 if s in answered else run + 1
+        longest = max(longest, run)
+    return {"sent": sent, "replies": replies, "answered": answered, "longest_unanswered": longest}
 
 
 class VirtualArduinoPty:

@@ -7,7 +7,6 @@ One trial of each kind here (the link outages of one graph: test_link_outages.py
 tests/soak/outages.py runs 20 of each and tests/soak/starts.py hundreds of starts
 (results in BENCHMARKS.md)."""
 import math
-import statistics
 import time
 
 import pytest
@@ -16,7 +15,7 @@ from sensor_msgs.msg import JointState
 
 import twohost
 from conftest import Observer
-from split_graph import SplitGraph, seconds, stamp_of
+from split_graph import SplitGraph, seconds, stamp_of, streaming_summary
 from startup import run_in_subprocess
 
 pytestmark = [pytest.mark.own_process,
@@ -142,28 +141,17 @@ def test_streaming_over_an_impaired_link(domain, tmp_path):
             replies = g.replies_after(t0)
         finally:
             close_graph(g)
-    sent = [s for _, s in g.sent if s >= t0]
-    # replies to targets (servo_state from a heartbeat is stamped "now")
-    replies = [(a, s) for a, s in replies if s in set(sent)]
-    answered = {s for _, s in replies}
-    rtt = sorted(a - s for a, s in replies)
-    link = {d: {k: hosts.stats[d][k] for k in ("forwarded", "dropped")} for d in ("a_to_b", "b_to_a")} if hosts.stats else {}
-    print(f"\nimpaired link: {len(sent)} targets, {len(answered)} answered, round trip "
-          f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
-          f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
+    r = streaming_summary(g, t0, replies, hosts.stats, "impaired link")
+    sent, replies, answered = r["sent"], r["replies"], r["answered"]
     # streaming goes on: servo_state keeps coming (compute_ik's steps between targets
     # answer too), and most targets' first steps reach the device (a first step that a
     # newer one overtakes on the way is superseded, not lost)
     arrivals = sorted(a for a, _ in g.replies_after(t0))
     longest_gap = max(b - a for a, b in zip(arrivals, arrivals[1:]))
-    # a stall is counted in targets, not seconds: the longest run of consecutive targets
-    # (in the order sent) of which none was answered. A loaded host coalesces a few
-    # (latest wins) and answers late; a stalled stream (a reliable writer that stops
-    # repairing, say) leaves every target after it unanswered.
-    run = longest_run = 0
-    for s in sent:
-        run = 0 if s in answered else run + 1
-        longest_run = max(longest_run, run)
+    # a stall is counted in targets, not seconds (streaming_summary). A loaded host
+    # coalesces a few (latest wins) and answers late; a stalled stream (a reliable
+    # writer that stops repairing, say) leaves every target after it unanswered.
+    longest_run = r["longest_unanswered"]
     print(f"longest gap between servo_state replies {longest_gap * 1e3:.0f} ms (not asserted: wall clock), "
           f"longest run of unanswered targets {longest_run}")
     assert longest_run < 40, f"streaming stalled: {longest_run} targets in a row (2 s at 20 Hz) got no answer"

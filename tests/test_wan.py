@@ -12,7 +12,6 @@ of each length in tests/soak/outages.py --mode wan, the latency in
 tests/bench/wan_e2e.py (BENCHMARKS.md)."""
 import json
 import math
-import statistics
 import subprocess
 import sys
 import time
@@ -25,7 +24,7 @@ from std_msgs.msg import Bool, String
 import wanhost
 from conftest import REPO, NodeProcess, bin_path
 from robot_facts import servo_deg
-from split_graph import SplitGraph
+from split_graph import SplitGraph, streaming_summary
 
 pytestmark = [pytest.mark.own_process, pytest.mark.background,
               pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")]
@@ -217,24 +216,15 @@ def test_streaming_over_an_impaired_wan(domain, tmp_path, certs):
                  for p in g.procs}
     finally:
         close(hosts, g)
-    sent = [s for _, s in g.sent if s >= t0]
-    replies = [(a, s) for a, s in replies if s in set(sent)]
-    answered = {s for _, s in replies}
-    rtt = sorted(a - s for a, s in replies)
-    link = {d: {k: hosts.stats[d][k] for k in ("forwarded", "dropped")} for d in ("a_to_b", "b_to_a")} if hosts.stats else {}
-    print(f"\nimpaired WAN: {len(sent)} targets, {len(answered)} answered, round trip "
-          f"p50 {statistics.median(rtt) * 1e3:.1f} ms, p99 {rtt[int(0.99 * (len(rtt) - 1))] * 1e3:.1f} ms, "
-          f"max {rtt[-1] * 1e3:.1f} ms; link {link}")
+    r = streaming_summary(g, t0, replies, hosts.stats, "impaired WAN")
     assert not any(churn.values()), f"a bridge's session to the router ended while streaming: {churn}"
-    run = longest_run = 0
-    for s in sent:
-        run = 0 if s in answered else run + 1
-        longest_run = max(longest_run, run)
-    assert longest_run < 100, f"streaming stalled: {longest_run} targets in a row (2 s at 50 Hz) got no answer"
-    assert len(answered) >= 0.7 * len(sent), f"only {len(answered)} of {len(sent)} targets reached the device"
+    assert r["longest_unanswered"] < 100, \
+        f"streaming stalled: {r['longest_unanswered']} targets in a row (2 s at 50 Hz) got no answer"
+    assert len(r["answered"]) >= 0.7 * len(r["sent"]), \
+        f"only {len(r['answered'])} of {len(r['sent'])} targets reached the device"
     final, commanded = list(g.states[-1][1].position), list(angles[-1][1].position)
     assert max(abs(a - b) for a, b in zip(final, commanded)) < 0.2, (final, commanded)
-    stamps = [s for _, s in replies]
+    stamps = [s for _, s in r["replies"]]
     assert stamps == sorted(stamps), "an older target was applied after a newer one"
 
 
