@@ -55,6 +55,34 @@ def test_mock_arduino_acknowledges_with_the_command_stamp(launch, observer):
     assert rig.wait_diag(lambda s, v: int(v["frames_sent"]) >= 1 and int(v["frames_acknowledged"]) >= 1 and v["last_rtt_ms"])
 
 
+def test_servo_state_is_a_steady_stream_while_idle(launch, observer):
+    """As ros2_control's joint_state_broadcaster: servo_state keeps coming while nothing
+    moves (each heartbeat's STATE reply, 20 Hz by default), stamped when the device
+    reported, so a user who subscribes after a move (`ros2 topic echo --once`) gets the
+    arm's state at once, and its positions are the ones the device holds."""
+    rig = SerialRig(launch, observer)
+    assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    rig.angles.publish(angles([80, 100, 70, 120], sec=42))
+    assert observer.spin_until(lambda: [round(math.degrees(p), 1) for p in rig.state[-1][1].position]
+                               == [80.0, 100.0, 70.0, 120.0], 10)
+    observer.spin_for(1)  # the move is over
+    idle = observer.sub("/servo_state", JointState)  # a late subscriber
+    t0 = time.monotonic()
+    assert observer.spin_until(lambda: idle, 2), "no servo_state within 2 s of subscribing, while idle"
+    first_s = time.monotonic() - t0
+    observer.spin_for(3)
+    window = [(t, m) for t, m in idle if t >= t0 + 0.5]
+    rate = (len(window) - 1) / (window[-1][0] - window[0][0])
+    print(f"\nidle servo_state: first {first_s * 1e3:.0f} ms after subscribing, {rate:.1f} Hz")
+    # the rate is the benchmark's business; here: it does not stop (50 expected in 2.5 s)
+    assert len(window) >= 15, f"{len(window)} idle servo_state in 2.5 s ({rate:.1f} Hz)"
+    assert {tuple(round(math.degrees(p), 1) for p in m.position) for _, m in window} == {(80.0, 100.0, 70.0, 120.0)}
+    now = time.time()
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in window]
+    assert all(now - 5 < s <= now + 0.1 for s in stamps), "idle servo_state is not stamped when the device reported"
+    assert stamps == sorted(stamps)
+
+
 # the firmware's hold pose (config.h): the device reports it before the first command,
 # so a first command at it needs no ramp
 HOLD_DEG = [90, 90, 90, 60]

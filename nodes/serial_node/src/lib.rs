@@ -57,7 +57,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             int("watchdog_ms", 500, 20, 60_000, "device holds/detaches after this much silence"),
             stop_action("watchdog_action", "`hold` or `detach` on watchdog"),
             stop_action("estop_action", "`hold` (the servos keep their position) or `detach` (the pulses stop, servos go limp) on e-stop"),
-            ParamSpec::new("heartbeat_period", ParameterValue::Double(0.1), "seconds of silence before a HEARTBEAT")
+            ParamSpec::new("heartbeat_period", ParameterValue::Double(0.05), "seconds of silence before a HEARTBEAT (its STATE reply is servo_state while idle)")
                 .range(ParamRange::Double { min: 0.01, max: 10.0 })
                 .read_only(),
             ParamSpec::file(
@@ -138,8 +138,6 @@ pub struct LinkStatus {
     /// when the newest servo_angles was handed to the link
     last_command: Option<Instant>,
     last_rejection: Option<String>,
-    /// ticks and state of the last servo_state published, to skip repeats
-    last_published: Option<([u16; servo_protocol::SERVOS], DeviceState)>,
     /// the settings the device was given, shown with its state: the device's
     /// watchdog (`500 ms, hold`) and what the e-stop does
     pub settings: Vec<(&'static str, String)>,
@@ -230,11 +228,11 @@ impl LinkStatus {
                         self.last_rtt = Some(rtt);
                         stamp
                     }
-                    // a heartbeat's or the watchdog's report: only worth a message if it changed
-                    None if self.last_published == Some((ticks, state)) => return None,
+                    // a heartbeat's or the watchdog's report: published too, stamped now,
+                    // so servo_state is a steady stream (every reply while moving, one a
+                    // heartbeat_period when idle), as joint_state_broadcaster's is
                     None => Time::now(),
                 };
-                self.last_published = Some((ticks, state));
                 Some(JointState {
                     header: Header {
                         stamp,
