@@ -166,6 +166,13 @@ class SplitGraph:
             self.pump(0.05, send)
         return predicate()
 
+    def answers_after(self, t_wall):
+        """The replies received after wall time t that answer a target sent at or after
+        it (a reply to a target carries the target's stamp; servo_state also comes on its
+        own, stamped when the device reported: steady while idle)."""
+        targets = {s for _, s in self.sent if s >= t_wall}
+        return [(a, s) for a, s in self.replies_after(t_wall) if s in targets]
+
     def replies_after(self, t_wall):
         """servo_state replies received after wall time t (arrival wall time, stamp)."""
         return [(a, s) for a, s in self._replies() if a >= t_wall]
@@ -178,7 +185,7 @@ class SplitGraph:
     def wait_flowing(self, timeout=30):
         """Until a target sent now comes back as servo_state."""
         t0 = time.time()
-        ok = self.pump_until(lambda: any(s >= t0 for _, s in self.replies_after(t0)), timeout)
+        ok = self.pump_until(lambda: self.answers_after(t0), timeout)
         if not ok:
             raise AssertionError(f"no servo_state for a target within {timeout} s; observer matched "
                                  f"xyz_target subscribers {self.xyz.get_subscription_count()}, servo_state publishers "
@@ -225,9 +232,9 @@ class SplitGraph:
         last_before = self.sent[-1][1]
         self.hosts.restore(side)
         t_restore = time.time()
-        resumed = self.pump_until(lambda: any(s >= t_restore for _, s in self.replies_after(t_restore)), resume_timeout)
+        resumed = self.pump_until(lambda: self.answers_after(t_restore), resume_timeout)
         t_resumed = time.time()
-        first_new = min((a for a, s in self.replies_after(t_restore) if s >= t_restore), default=None)
+        first_new = min((a for a, _ in self.answers_after(t_restore)), default=None)
         self.pump(settle)
         after = self.replies_after(t_restore)
         # replies that answer a target (servo_state from a heartbeat is stamped "now")

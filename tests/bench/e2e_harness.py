@@ -400,7 +400,10 @@ class GraphRun:
         table = self.pc_probe.servo_state if self.nodes == "graph" else self.pc_probe.servo_angles
         while time.monotonic() < end:
             self.drive(10, 0.1, "warmup")
-            if any(s >= t0 for s in table):
+            # a reply to a target carries its stamp (servo_state also comes on its own,
+            # stamped when the device reported: steady while idle)
+            sent = {t for t, _, _ in self.sent if t >= t0}
+            if any(s in sent for s in table):
                 self._wait_pi_probe()
                 return
         raise RuntimeError(f"[{self.name}] no reply to targets within {timeout:g} s; logs: "

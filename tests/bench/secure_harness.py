@@ -206,7 +206,9 @@ class LatencyRun(GraphRun):
         while time.monotonic() < end:
             self.drive(10, 0.2, "warmup")
             rows = self.peer.received_real("servo_state", mark)
-            if any(joint_state_of(p)[0] >= t0 for _, p in rows):
+            # a reply to a target carries its stamp (servo_state also comes on its own)
+            sent = {t for t, _, _ in self.sent if t >= t0}
+            if any(joint_state_of(p)[0] in sent for _, p in rows):
                 return
         raise RuntimeError(f"[{self.name}] no servo_state for a target within {timeout:g} s; matched "
                            f"{[(t, self.peer.matched(t, k)) for t, k in (('xyz_target', 'pub'), ('servo_angles', 'sub'), ('servo_state', 'sub'))]}; "
