@@ -3,9 +3,11 @@
 
 mod line;
 mod planner;
+mod trajectory;
 
 pub use line::{straight_line, LineError};
 pub use planner::{JointPath, Planner};
+pub use trajectory::{Trajectory, TrajectoryError, TrajectorySample, Waypoint};
 
 /// Why a limit, goal or path was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
