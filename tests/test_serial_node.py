@@ -57,7 +57,7 @@ def test_mock_arduino_acknowledges_with_the_command_stamp(launch, observer):
 
 def test_servo_state_is_a_steady_stream_while_idle(launch, observer):
     """As ros2_control's joint_state_broadcaster: servo_state keeps coming while nothing
-    moves (each heartbeat's STATE reply, 20 Hz by default), stamped when the device
+    moves (each heartbeat's STATE reply, 10 Hz by default), stamped when the device
     reported, so a user who subscribes after a move (`ros2 topic echo --once`) gets the
     arm's state at once, and its positions are the ones the device holds."""
     rig = SerialRig(launch, observer)
@@ -74,8 +74,8 @@ def test_servo_state_is_a_steady_stream_while_idle(launch, observer):
     window = [(t, m) for t, m in idle if t >= t0 + 0.5]
     rate = (len(window) - 1) / (window[-1][0] - window[0][0])
     print(f"\nidle servo_state: first {first_s * 1e3:.0f} ms after subscribing, {rate:.1f} Hz")
-    # the rate is the benchmark's business; here: it does not stop (50 expected in 2.5 s)
-    assert len(window) >= 15, f"{len(window)} idle servo_state in 2.5 s ({rate:.1f} Hz)"
+    # the rate is the benchmark's business; here: it does not stop (25 expected in 2.5 s)
+    assert len(window) >= 12, f"{len(window)} idle servo_state in 2.5 s ({rate:.1f} Hz)"
     assert {tuple(round(math.degrees(p), 1) for p in m.position) for _, m in window} == {(80.0, 100.0, 70.0, 120.0)}
     now = time.time()
     stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in window]

@@ -57,7 +57,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             int("watchdog_ms", 500, 20, 60_000, "device holds/detaches after this much silence"),
             stop_action("watchdog_action", "`hold` or `detach` on watchdog"),
             stop_action("estop_action", "`hold` (the servos keep their position) or `detach` (the pulses stop, servos go limp) on e-stop"),
-            ParamSpec::new("heartbeat_period", ParameterValue::Double(0.05), "seconds of silence before a HEARTBEAT (its STATE reply is servo_state while idle)")
+            ParamSpec::new("heartbeat_period", ParameterValue::Double(0.1), "seconds of silence before a HEARTBEAT (its STATE reply is servo_state while idle)")
                 .range(ParamRange::Double { min: 0.01, max: 10.0 })
                 .read_only(),
             ParamSpec::file(

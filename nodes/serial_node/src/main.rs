@@ -53,7 +53,7 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
     };
     let config = HostConfig {
         send_period: Duration::from_secs_f64(1.0 / params.f64("send_rate").unwrap_or(100.0)),
-        heartbeat_period: Duration::from_secs_f64(params.f64("heartbeat_period").unwrap_or(0.05)),
+        heartbeat_period: Duration::from_secs_f64(params.f64("heartbeat_period").unwrap_or(0.1)),
         watchdog_ms: u16::try_from(params.i64("watchdog_ms").unwrap_or(500)).unwrap_or(u16::MAX),
         watchdog_action: stop_action("watchdog_action"),
         estop_action: stop_action("estop_action"),
