@@ -12,6 +12,9 @@ from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+
 from conftest import REPO, bin_path, status_values
 from interop.servo_link import HELLO, HELLO_ACK, STATE, Decoder, SimulatedUno, frame, pulses
 from safety_rig import SerialNodeRig
@@ -153,6 +156,51 @@ def test_estop_drops_commands_until_released(launch, observer):
     assert int(rig.diag()[1]["frames_sent"]) >= 2
 
 
+def set_stalled_servos(observer, value):
+    """`ros2 param set /serial_node mock_stalled_servos VALUE` through the parameter
+    service; returns the SetParametersResult."""
+    cli = observer.node.create_client(SetParameters, "/serial_node/set_parameters")
+    try:
+        assert cli.wait_for_service(timeout_sec=15), "no /serial_node/set_parameters"
+        pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+        fut = cli.call_async(SetParameters.Request(parameters=[Parameter(name="mock_stalled_servos", value=pv)]))
+        assert observer.spin_until(fut.done, 15), "set_parameters did not answer"
+        [result] = fut.result().results
+        return result
+    finally:
+        observer.node.destroy_client(cli)
+
+
+def test_mock_stalled_servos_holds_a_servo_where_it_stopped_until_cleared(launch, observer):
+    """The virtual Arduino's simulated stall (an obstacle): the stalled servo's
+    servo_state stays where it was while the others follow the command, the link stays
+    healthy, diagnostics say so; cleared, the servo reaches its command."""
+    rig = SerialRig(launch, observer)
+    assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    deg = lambda: [round(math.degrees(p), 1) for p in rig.state[-1][1].position] if rig.state else None  # noqa: E731
+    rig.angles.publish(angles([80, 100, 70, 120]))
+    assert observer.spin_until(lambda: deg() == [80.0, 100.0, 70.0, 120.0], 10)
+    # an unknown name is refused, with the names there are; nothing changes
+    bad = set_stalled_servos(observer, "elbow")
+    assert not bad.successful and "unknown servo `elbow`" in bad.reason and "elbow_servo" in bad.reason, bad
+    assert set_stalled_servos(observer, "elbow_servo").successful
+    assert rig.wait_diag(lambda s, v: v.get("mock_stalled_servos") == "elbow_servo"
+                         and "simulated stall: elbow_servo" in s.message)
+    sent = int(rig.diag()[1]["frames_acknowledged"])
+    rig.angles.publish(angles([100, 110, 90, 140]))
+    assert observer.spin_until(lambda: deg() == [100.0, 110.0, 70.0, 140.0], 10), deg()
+    observer.spin_for(0.5)  # idle: the heartbeats' reports hold it there too
+    assert deg() == [100.0, 110.0, 70.0, 140.0]
+    # the protocol did not notice: acknowledged, nothing rejected, still connected
+    assert rig.wait_diag(lambda s, v: int(v["frames_acknowledged"]) > sent)
+    _, v = rig.diag()
+    assert (v["connection"], v["frames_rejected_by_device"], v["inputs_rejected"]) == ("connected", "0", "0"), v
+    # cleared: the elbow moves on to its latest command
+    assert set_stalled_servos(observer, "").successful
+    assert observer.spin_until(lambda: deg() == [100.0, 110.0, 90.0, 140.0], 10), deg()
+    assert rig.wait_diag(lambda s, v: "mock_stalled_servos" not in v and "stall" not in s.message)
+
+
 def start_virtual_arduino(link):
     p = subprocess.Popen([bin_path("virtual_arduino"), str(link)], stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 10
@@ -183,6 +231,25 @@ def test_missing_port_then_unplug_and_replug(launch, observer, tmp_path):
         assert observer.spin_until(lambda: len(rig.state) > n_state
                                    and [round(math.degrees(p)) for p in rig.state[-1][1].position] == [70, 95, 85, 100], 10)
         assert rig.node.proc.poll() is None
+    finally:
+        dev.send_signal(signal.SIGINT)
+        assert dev.wait(5) == 0
+
+
+def test_mock_stalled_servos_has_no_effect_on_a_real_port(launch, observer, tmp_path):
+    """On a serial port (here the virtual Arduino behind a pty) the stall cannot be
+    simulated: the value is accepted, diagnostics say it has no effect, the servo moves."""
+    link = tmp_path / "tty"
+    dev = start_virtual_arduino(link)
+    try:
+        rig = SerialRig(launch, observer, str(link))
+        assert rig.wait_diag(lambda s, v: v.get("connection") == "connected", 15)
+        assert set_stalled_servos(observer, "elbow_servo").successful
+        assert rig.wait_diag(lambda s, v: v.get("mock_stalled_servos") == "elbow_servo (no effect: not the virtual Arduino)")
+        rig.angles.publish(angles([80, 100, 70, 120]))
+        assert observer.spin_until(lambda: rig.state and [round(math.degrees(p), 1) for p in rig.state[-1][1].position]
+                                   == [80.0, 100.0, 70.0, 120.0], 10)
+        assert "stall" not in rig.diag()[0].message
     finally:
         dev.send_signal(signal.SIGINT)
         assert dev.wait(5) == 0

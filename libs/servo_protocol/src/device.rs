@@ -4,6 +4,13 @@
 //!
 //! [`Device`] is pure (time is passed in); [`VirtualArduino`] wraps it as a
 //! `Read + Write` byte stream on the real clock, like a serial port.
+//!
+//! A simulation feature the firmware does not have: a **stalled servo**
+//! ([`Device::set_stalled`]), as when the arm hits an obstacle. Its pulses go on as
+//! commanded and the protocol answers as usual, but its horn stays where it was when
+//! the stall began, and so does what STATE reports for it; un-stalled, it moves on to
+//! its latest command at servo speed. (The real firmware has no position feedback: it
+//! reports what it commands.)
 
 use crate::frame::{
     decode, encode, DeviceState, Frame, Message, StopAction, WatchdogAction, PROTOCOL_VERSION,
@@ -76,6 +83,8 @@ pub struct Device {
     output: bool,
     /// Modelled horn positions (ticks).
     horn: [f64; SERVOS],
+    /// Simulated stalls: a stalled servo's horn does not move.
+    stalled: [bool; SERVOS],
     clamped: bool,
     rx_errors: u8,
     last_seq: u8,
@@ -99,6 +108,7 @@ impl Device {
             state: DeviceState::Idle,
             applied: config.hold,
             output: false,
+            stalled: [false; SERVOS],
             clamped: false,
             rx_errors: 0,
             last_seq: 0,
@@ -130,6 +140,29 @@ impl Device {
         self.horn
     }
 
+    /// Which servos are stalled ([`Device::set_stalled`]).
+    pub fn stalled(&self) -> [bool; SERVOS] {
+        self.stalled
+    }
+
+    /// Simulate stalled (blocked) servos from `now` on: a servo that becomes stalled
+    /// stays where it is now (where STATE reports it: its horn while pulses go out,
+    /// else the pose a command would start from), whatever it is commanded; STATE
+    /// reports it there, and the protocol is not affected (commands are acknowledged,
+    /// pulses go out as commanded). A servo no longer stalled follows its latest
+    /// command again at servo speed, from where it stopped (without pulses: as any
+    /// idle servo, it is reported at the pose a command would start from).
+    pub fn set_stalled(&mut self, stalled: [bool; SERVOS], now: Duration) {
+        self.tick(now);
+        for (i, &stall) in stalled.iter().enumerate() {
+            if stall && !self.stalled[i] && !self.output && self.applied[i] != 0 {
+                // no pulses: the servo is at the pose a command would start from
+                self.horn[i] = f64::from(self.applied[i]);
+            }
+        }
+        self.stalled = stalled;
+    }
+
     /// Frames dropped so far (wrapping).
     pub fn rx_errors(&self) -> u8 {
         self.rx_errors
@@ -144,13 +177,16 @@ impl Device {
     }
 
     fn state_msg(&self) -> Message {
-        // Where the servos are: the modelled horn while pulses go out; without pulses,
-        // the pose the next command starts from (the last command, or the hold pose).
-        let ticks = if self.output {
-            self.horn.map(|h| h.round() as u16)
-        } else {
-            self.applied
-        };
+        // Where the servos are: the modelled horn while pulses go out (and always for a
+        // stalled one: it is where it stopped); without pulses, the pose the next
+        // command starts from (the last command, or the hold pose).
+        let ticks = std::array::from_fn(|i| {
+            if self.output || self.stalled[i] {
+                self.horn[i].round() as u16
+            } else {
+                self.applied[i]
+            }
+        });
         Message::State {
             ack_seq: self.last_seq,
             state: self.state,
@@ -209,7 +245,7 @@ impl Device {
                     if !self.output {
                         // pulses start where the horn is assumed to be: at the target
                         for i in 0..SERVOS {
-                            if self.applied[i] != 0 {
+                            if self.applied[i] != 0 && !self.stalled[i] {
                                 self.horn[i] = f64::from(self.applied[i]);
                             }
                         }
@@ -264,7 +300,7 @@ impl Device {
         self.last_tick = now;
         if self.output {
             for i in 0..SERVOS {
-                if self.applied[i] != 0 {
+                if self.applied[i] != 0 && !self.stalled[i] {
                     let target = f64::from(self.applied[i]);
                     let step = self.config.speed_ticks_per_s[i] * dt;
                     let d = target - self.horn[i];
@@ -339,11 +375,25 @@ impl VirtualArduino {
         let (lock, cv) = &*self.shared;
         if let Ok(mut s) = lock.lock() {
             if plugged && !s.plugged {
+                // a fresh power-up; a simulated stall is the rig's, not the device's: it stays
+                let stalled = s.device.stalled();
                 s.device = Device::new(s.device.config);
                 s.start = Instant::now();
+                s.device.set_stalled(stalled, Duration::ZERO);
                 s.to_host.clear();
             }
             s.plugged = plugged;
+        }
+        cv.notify_all();
+    }
+
+    /// Simulate stalled servos from now on ([`Device::set_stalled`]); kept over a replug.
+    pub fn set_stalled(&self, stalled: [bool; SERVOS]) {
+        let (lock, cv) = &*self.shared;
+        if let Ok(mut s) = lock.lock() {
+            let now = s.start.elapsed();
+            s.device.set_stalled(stalled, now);
+            Self::pump(&mut s);
         }
         cv.notify_all();
     }
@@ -595,5 +645,95 @@ mod tests {
         send(&mut d, 3, Message::SetPulses { ticks: [3500; 4] }, ms(20));
         assert_eq!(d.pulses(), [3500; 4]);
         assert!(d.rx_errors() >= 1);
+    }
+
+    fn reported(d: &mut Device) -> [u16; SERVOS] {
+        match states(d).last() {
+            Some(Message::State { ticks, .. }) => *ticks,
+            other => panic!("no STATE: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_stalled_servo_stays_where_it_stopped_and_the_link_does_not_notice() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::SetPulses { ticks: [2944; 4] }, ms(0));
+        states(&mut d);
+        // the elbow (channel 2) hits an obstacle at 2944 ticks
+        d.set_stalled([false, false, true, false], ms(5));
+        assert_eq!(d.stalled(), [false, false, true, false]);
+        send(&mut d, 2, Message::SetPulses { ticks: [3200; 4] }, ms(10));
+        // acknowledged as any command, pulses as commanded
+        match states(&mut d).as_slice() {
+            [Message::State {
+                ack_seq: 2,
+                state: DeviceState::Running,
+                clamped: false,
+                ..
+            }] => {}
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(d.pulses(), [3200; 4]);
+        d.tick(ms(1000));
+        send(&mut d, 3, Message::Heartbeat, ms(1000));
+        assert_eq!(reported(&mut d), [3200, 3200, 2944, 3200]);
+        assert_eq!(d.horn()[2], 2944.0);
+        // un-stalled: it moves on to its latest command at servo speed
+        d.set_stalled([false; 4], ms(1000));
+        send(&mut d, 4, Message::Heartbeat, ms(1001));
+        let elbow = reported(&mut d)[2];
+        assert!(elbow < 3200, "jumped to its target: {elbow}");
+        d.tick(ms(1500));
+        send(&mut d, 5, Message::Heartbeat, ms(1500));
+        assert_eq!(reported(&mut d), [3200; 4]);
+    }
+
+    #[test]
+    fn a_servo_stalled_mid_move_stops_there() {
+        let mut d = Device::new(DeviceConfig::default());
+        send(&mut d, 1, Message::SetPulses { ticks: [2944; 4] }, ms(0));
+        send(&mut d, 2, Message::SetPulses { ticks: [4000; 4] }, ms(10));
+        d.set_stalled([true, false, false, false], ms(60)); // 50 ms into the move
+        let stopped = d.horn()[0];
+        assert!(stopped > 2944.0 && stopped < 4000.0, "{stopped}");
+        d.tick(ms(2000));
+        assert_eq!(d.horn()[0], stopped);
+        assert_eq!(d.horn()[1], 4000.0);
+        states(&mut d);
+        send(&mut d, 3, Message::Heartbeat, ms(2000));
+        assert_eq!(reported(&mut d)[0], stopped.round() as u16);
+    }
+
+    #[test]
+    fn a_stall_holds_without_pulses_too() {
+        // before the first command the arm is assumed in the hold pose: stalled there, the
+        // first command moves the others only
+        let mut d = Device::new(DeviceConfig::default());
+        d.set_stalled([false, true, false, false], ms(0));
+        send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(1));
+        assert_eq!(reported(&mut d), [3000, HOLD_TICKS[1], 3000, 3000]);
+        // a detaching e-stop: the stalled servo is still reported where it is
+        let estop = Message::Estop {
+            engaged: Some(StopAction::Detach),
+        };
+        send(&mut d, 2, estop, ms(2));
+        assert_eq!(reported(&mut d), [3000, HOLD_TICKS[1], 3000, 3000]);
+        // un-stalled without pulses: reported, like the others, at the pose a command
+        // starts from
+        d.set_stalled([false; 4], ms(3));
+        send(&mut d, 3, Message::Heartbeat, ms(4));
+        assert_eq!(reported(&mut d), [3000; 4]);
+    }
+
+    #[test]
+    fn a_stall_outlives_a_replug() {
+        let v = VirtualArduino::new(DeviceConfig::default());
+        v.set_stalled([false, false, false, true]);
+        v.set_plugged(false);
+        v.set_plugged(true);
+        assert_eq!(
+            v.device().map(|d| d.stalled()),
+            Some([false, false, false, true])
+        );
     }
 }

@@ -171,3 +171,42 @@ pub fn ticks_to_angles(cal: &ServoCalibrations, ticks: &[u16; SERVOS]) -> [f64; 
     }
     out
 }
+
+/// The servos named in `mock_stalled_servos`: a comma-separated list of servo names
+/// (spaces around them and empty items ignored; empty: none), as a mask in channel
+/// order. An unknown name is refused, with the names there are.
+///
+/// # Examples
+/// ```
+/// use serial_node::core::parse_servo_list;
+/// assert_eq!(parse_servo_list("elbow_servo"), Ok([false, false, true, false]));
+/// assert_eq!(parse_servo_list(" base_servo, gripper_servo "), Ok([true, false, false, true]));
+/// assert_eq!(parse_servo_list(""), Ok([false; 4]));
+/// assert!(parse_servo_list("elbow").unwrap_err().contains("unknown servo `elbow`"));
+/// ```
+pub fn parse_servo_list(text: &str) -> Result<[bool; SERVOS], String> {
+    let mut mask = [false; SERVOS];
+    for name in text.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        let Some(i) = ServoId::ALL.iter().position(|s| s.name() == name) else {
+            return Err(format!(
+                "unknown servo `{}` (servos: {})",
+                shorten(name, NAME_MAX),
+                servo_list_text(&[true; SERVOS]).replace(',', ", ")
+            ));
+        };
+        mask[i] = true;
+    }
+    Ok(mask)
+}
+
+/// The servos of a mask as [`parse_servo_list`] reads them: names in channel order,
+/// comma-separated; empty for none.
+pub fn servo_list_text(mask: &[bool; SERVOS]) -> String {
+    ServoId::ALL
+        .iter()
+        .zip(mask)
+        .filter(|(_, on)| **on)
+        .map(|(s, _)| s.name())
+        .collect::<Vec<_>>()
+        .join(",")
+}

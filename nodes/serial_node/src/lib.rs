@@ -4,7 +4,7 @@
 pub mod core;
 pub mod link;
 
-use crate::core::{angles_to_ticks, ticks_to_angles};
+use crate::core::{angles_to_ticks, parse_servo_list, servo_list_text, ticks_to_angles};
 use crate::link::{Link, LinkEvent, LinkSnapshot};
 use eezybot_kinematics::{ArmConfig, ServoCalibrations, ServoId};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
@@ -17,8 +17,9 @@ use ros_plumbing::diagnostics::p50_p99;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
+use servo_protocol::device::VirtualArduino;
 use servo_protocol::host::Offered;
-use servo_protocol::DeviceState;
+use servo_protocol::{DeviceState, SERVOS};
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedReceiver;
@@ -66,10 +67,20 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "empty, or an arm_config YAML file that loads",
                 |p| load_calibration(p).map(|_| ()),
             ),
+            ParamSpec::new(
+                MOCK_STALLED_SERVOS,
+                ParameterValue::String(String::new()),
+                "simulation, port `mock` only: these servos are stalled (blocked, as by an obstacle): each stays where it was when the stall began and the virtual Arduino reports it there, while its commands are acknowledged as usual; emptied, they move on to their latest command. No effect on a real port (a warning says so)",
+            )
+            .constraints("empty, or servo names separated by commas: base_servo, shoulder_servo, elbow_servo, gripper_servo")
+            .text_check(|s| parse_servo_list(s).map(|_| ())),
             ros_plumbing::diagnostics::diagnostics_period_param(),
         ],
     }
 }
+
+/// The parameter that simulates stalled servos in the virtual Arduino.
+pub const MOCK_STALLED_SERVOS: &str = "mock_stalled_servos";
 
 /// The servo calibration from the `arm_config` file (empty: the shipped one).
 pub fn load_calibration(path: &str) -> Result<ServoCalibrations, String> {
@@ -141,6 +152,9 @@ pub struct LinkStatus {
     /// the settings the device was given, shown with its state: the device's
     /// watchdog (`500 ms, hold`) and what the e-stop does
     pub settings: Vec<(&'static str, String)>,
+    /// the servos `mock_stalled_servos` names (empty: none) and whether the virtual
+    /// Arduino simulates their stall (false: a real port, where it has no effect)
+    pub simulated_stall: (String, bool),
 }
 
 fn time_s(t: Time) -> f64 {
@@ -283,8 +297,13 @@ impl LinkStatus {
             (Some(_), s) => (
                 DiagnosticStatus::OK,
                 format!(
-                    "connected, device {}",
-                    s.map(|s| s.name()).unwrap_or("idle")
+                    "connected, device {}{}",
+                    s.map(|s| s.name()).unwrap_or("idle"),
+                    match &self.simulated_stall {
+                        (servos, true) if !servos.is_empty() =>
+                            format!(" (simulated stall: {servos})"),
+                        _ => String::new(),
+                    }
                 ),
             ),
         };
@@ -337,6 +356,14 @@ impl LinkStatus {
             ("estop", link.estop.to_string()),
         ];
         values.extend(self.settings.iter().map(|(k, v)| (*k, v.clone())));
+        match &self.simulated_stall {
+            (servos, _) if servos.is_empty() => {}
+            (servos, true) => values.push((MOCK_STALLED_SERVOS, servos.clone())),
+            (servos, false) => values.push((
+                MOCK_STALLED_SERVOS,
+                format!("{servos} (no effect: not the virtual Arduino)"),
+            )),
+        }
         if let Some((a, b)) = self.connected {
             values.push(("firmware", format!("{a}.{b}")));
         }
@@ -369,6 +396,9 @@ pub struct Io<'a, O> {
     pub port_name: String,
     /// watches the topics of [`watched_topics`]
     pub peers: PeerWatch,
+    /// the in-process virtual Arduino the link talks to (`port:=mock`), whose
+    /// simulated stalls follow `mock_stalled_servos`; `None` for a real port
+    pub mock: Option<VirtualArduino>,
 }
 
 /// What [`run`] works with: the handlers' [`Io`], and the sources of the loop.
@@ -435,6 +465,8 @@ pub struct Node<'a, O> {
     status: LinkStatus,
     cal: ServoCalibrations,
     complaints: Throttle,
+    /// the servos stalled in the virtual Arduino (`mock_stalled_servos`), as applied
+    stalled: [bool; SERVOS],
 }
 
 impl<'a, O: Outputs> Node<'a, O> {
@@ -461,12 +493,53 @@ impl<'a, O: Outputs> Node<'a, O> {
             ],
             ..LinkStatus::default()
         };
-        Node {
+        let mut node = Node {
             io,
             status,
             cal: config.servos,
             complaints: Throttle::default(),
+            stalled: [false; SERVOS],
+        };
+        node.apply_stall();
+        node
+    }
+
+    /// Hand `mock_stalled_servos` to the virtual Arduino if it changed (a real port
+    /// cannot simulate a stall: a warning says it has no effect).
+    fn apply_stall(&mut self) {
+        let text = self
+            .io
+            .params
+            .string(MOCK_STALLED_SERVOS)
+            .unwrap_or_default();
+        // checked by the parameter's spec; a value that does not parse changes nothing
+        let Ok(stalled) = parse_servo_list(&text) else {
+            return;
+        };
+        if stalled == self.stalled {
+            return;
         }
+        self.stalled = stalled;
+        let names = servo_list_text(&stalled);
+        self.status.simulated_stall = (names.clone(), self.io.mock.is_some());
+        match &self.io.mock {
+            Some(device) => {
+                device.set_stalled(stalled);
+                if names.is_empty() {
+                    log::info!("virtual Arduino: no servo stalled any more");
+                } else {
+                    log::warn!(
+                        "virtual Arduino: simulating a stall of {names}: they stay where they are, whatever they are commanded"
+                    );
+                }
+            }
+            None if names.is_empty() => {}
+            None => log::warn!(
+                "{MOCK_STALLED_SERVOS} ({names}) has no effect: port `{}` is not the virtual Arduino (`mock`)",
+                self.io.port_name
+            ),
+        }
+        self.report();
     }
 
     /// Publish the diagnostics entry now.
@@ -493,8 +566,9 @@ impl<'a, O: Outputs> Node<'a, O> {
     }
 
     /// The parameters changed: load `arm_config` again (keeping the previous one if it
-    /// does not load).
+    /// does not load), and apply `mock_stalled_servos`.
     pub fn on_params(&mut self) {
+        self.apply_stall();
         match ArmConfig::load_or_shipped(&self.io.params.string("arm_config").unwrap_or_default()) {
             Ok(c) => {
                 self.cal = c.servos;

@@ -59,10 +59,10 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         estop_action: stop_action("estop_action"),
         ..HostConfig::default()
     };
-    let opener = if port == "mock" {
-        link::mock_opener(link::virtual_arduino())
-    } else {
-        link::serial_opener(port.clone(), u32::try_from(baud).unwrap_or(115_200))
+    let mock = (port == "mock").then(link::virtual_arduino);
+    let opener = match &mock {
+        Some(device) => link::mock_opener(device.clone()),
+        None => link::serial_opener(port.clone(), u32::try_from(baud).unwrap_or(115_200)),
     };
     let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
     let link = Link::start(opener, config, tx)?;
@@ -113,6 +113,7 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         diag_name,
         port_name: port,
         peers,
+        mock,
     };
     serial_node::run(serial_node::Handles {
         io,

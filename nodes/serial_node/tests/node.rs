@@ -10,7 +10,7 @@ use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use futures::channel::mpsc;
 use ros_plumbing::peers::PeerWatch;
-use ros_plumbing::Params;
+use ros_plumbing::{ParameterValue, Params};
 use serial_node::core::{angles_to_ticks, ticks_to_angles};
 use serial_node::link::{self, Link};
 use serial_node::{Handles, Input, Io, Outputs};
@@ -95,6 +95,7 @@ async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnosti
             "/servo_angles",
             "/servo_state",
         )),
+        mock: None,
     };
     let handles = Handles {
         io,
@@ -164,6 +165,99 @@ async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnosti
             "only the first command went out"
         );
         assert_eq!(fake.value("inputs_rejected").as_deref(), Some("1"));
+        stop.send(()).unwrap();
+    };
+    let ((), ()) = futures::join!(serial_node::run(handles), script);
+    link.shutdown();
+}
+
+/// The newest servo_state's pulse widths.
+fn last_ticks(fake: &Fake) -> Option<[u16; 4]> {
+    let cal = serial_node::load_calibration("").unwrap();
+    let msgs = fake.servo_state.lock().unwrap();
+    angles_to_ticks(&cal, msgs.last()?).ok()
+}
+
+#[tokio::test]
+async fn mock_stalled_servos_holds_a_servo_in_the_virtual_arduino_until_cleared() {
+    let (tx, events) = tokio::sync::mpsc::unbounded_channel();
+    let device = link::virtual_arduino();
+    let link = Link::start(link::mock_opener(device.clone()), HostConfig::default(), tx).unwrap();
+    let fake = Fake::default();
+    let (inputs, samples) = mpsc::unbounded::<Input>();
+    let (stop, stopped) = futures::channel::oneshot::channel::<()>();
+    let params = Params::new(BTreeMap::from([(
+        serial_node::MOCK_STALLED_SERVOS.to_string(),
+        ParameterValue::String(String::new()),
+    )]));
+    let io = Io {
+        link: &link,
+        outputs: &fake,
+        params: params.clone(),
+        diag_name: "serial_node: servo link".into(),
+        port_name: "mock".into(),
+        peers: PeerWatch::new(&serial_node::watched_topics(
+            "/servo_angles",
+            "/servo_state",
+        )),
+        mock: Some(device.clone()),
+    };
+    let handles = Handles {
+        io,
+        inputs: samples,
+        events,
+        shutdown: async move {
+            let _ = stopped.await;
+        },
+    };
+    let send = |ticks| {
+        inputs
+            .unbounded_send(Input::ServoAngles(
+                angles(ticks, Time::now()),
+                Instant::now(),
+            ))
+            .unwrap()
+    };
+    let script = async {
+        until("connected", || {
+            fake.value("connection").as_deref() == Some("connected")
+        })
+        .await;
+        let start = [3000, 3000, 3000, 2400];
+        send(start);
+        until("the first pose", || last_ticks(&fake) == Some(start)).await;
+        params.set(
+            serial_node::MOCK_STALLED_SERVOS,
+            ParameterValue::String("elbow_servo".into()),
+        );
+        until("the stall in diagnostics", || {
+            fake.value("mock_stalled_servos").as_deref() == Some("elbow_servo")
+        })
+        .await;
+        assert_eq!(
+            device.device().unwrap().stalled(),
+            [false, false, true, false]
+        );
+        let target = [3200, 3100, 3200, 2500];
+        send(target);
+        until("the others at the target, the elbow held", || {
+            last_ticks(&fake) == Some([3200, 3100, 3000, 2500])
+        })
+        .await;
+        // the link is healthy: the device acknowledged, nothing rejected
+        assert_eq!(
+            fake.value("frames_rejected_by_device").as_deref(),
+            Some("0")
+        );
+        params.set(
+            serial_node::MOCK_STALLED_SERVOS,
+            ParameterValue::String(String::new()),
+        );
+        until("the elbow at its command", || {
+            last_ticks(&fake) == Some(target)
+        })
+        .await;
+        assert_eq!(fake.value("mock_stalled_servos"), None);
         stop.send(()).unwrap();
     };
     let ((), ()) = futures::join!(serial_node::run(handles), script);
