@@ -55,7 +55,7 @@ impl Message for GoalStatusArray {}
 //   goals accepted at or before the timestamp.
 #[derive(Clone, Serialize, Deserialize, Debug)]
 pub struct CancelGoalRequest {
-  pub(crate) goal_info: GoalInfo,
+  pub goal_info: GoalInfo,
 }
 impl Message for CancelGoalRequest {}
 

@@ -71,6 +71,24 @@ where
     &mut self.my_status_publisher
   }
 
+  /// The goal service's server, shared: with [`Self::cancel_server_ref`] and
+  /// [`Self::result_server_ref`], one task can await the three requests together
+  /// (`async_receive_request` takes `&self`), which the `&mut` accessors above do
+  /// not allow.
+  pub fn goal_server_ref(&self) -> &Server<SendGoalRequest<G>, SendGoalResponse> {
+    &self.my_goal_server
+  }
+  /// The cancel service's server, shared (see [`Self::goal_server_ref`]).
+  pub fn cancel_server_ref(
+    &self,
+  ) -> &Server<action_msgs::CancelGoalRequest, action_msgs::CancelGoalResponse> {
+    &self.my_cancel_server
+  }
+  /// The result service's server, shared (see [`Self::goal_server_ref`]).
+  pub fn result_server_ref(&self) -> &Server<GetResultRequest, GetResultResponse<R>> {
+    &self.my_result_server
+  }
+
   /// Receive a new goal, if available.
   pub fn receive_goal(&self) -> ReadResult<Option<(RmwRequestId, SendGoalRequest<G>)>>
   where
