@@ -25,6 +25,13 @@ pub trait RosMessage: Serialize + DeserializeOwned + Clone + Send + Sync + 'stat
     }
 }
 
+/// A part of an action (goal, result, feedback): no topic of its own.
+macro_rules! ros2_client_message {
+    ($ty:ty) => {
+        impl ros2_client::Message for $ty {}
+    };
+}
+
 macro_rules! ros_message {
     ($ty:ty, $pkg:literal, $name:literal) => {
         impl $crate::RosMessage for $ty {
@@ -33,6 +40,54 @@ macro_rules! ros_message {
         }
         impl ros2_client::Message for $ty {}
     };
+}
+
+/// `builtin_interfaces`' Duration (Time is ros2-client's): <https://github.com/ros2/rcl_interfaces/tree/rolling/builtin_interfaces/msg>
+pub mod builtin_interfaces {
+    use serde::{Deserialize, Serialize};
+
+    /// [builtin_interfaces/msg/Duration](https://github.com/ros2/rcl_interfaces/blob/rolling/builtin_interfaces/msg/Duration.msg):
+    /// a signed time span, `sec + nanosec·10⁻⁹` (`nanosec` < 10⁹).
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+    pub struct Duration {
+        /// Whole seconds (may be negative).
+        pub sec: i32,
+        /// Nanoseconds added to `sec`, 0 … 999 999 999.
+        pub nanosec: u32,
+    }
+
+    impl Duration {
+        /// The span in seconds.
+        pub fn as_secs_f64(self) -> f64 {
+            f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
+        }
+
+        /// The span of `s` seconds, rounded to the nanosecond (saturating at the `i32`
+        /// range of `sec`; NaN gives zero).
+        pub fn from_secs_f64(s: f64) -> Duration {
+            let nanos = (s * 1e9).round();
+            let nanos = if nanos.is_nan() {
+                0
+            } else {
+                nanos.clamp(i64::MIN as f64, i64::MAX as f64) as i64
+            };
+            let sec = nanos.div_euclid(1_000_000_000);
+            let nanosec = nanos.rem_euclid(1_000_000_000) as u32;
+            match i32::try_from(sec) {
+                Ok(sec) => Duration { sec, nanosec },
+                Err(_) if sec < 0 => Duration {
+                    sec: i32::MIN,
+                    nanosec: 0,
+                },
+                Err(_) => Duration {
+                    sec: i32::MAX,
+                    nanosec: 999_999_999,
+                },
+            }
+        }
+    }
+
+    ros_message!(Duration, "builtin_interfaces", "Duration");
 }
 
 /// `std_msgs`: <https://github.com/ros2/common_interfaces/tree/rolling/std_msgs/msg>
@@ -184,6 +239,16 @@ pub mod geometry_msgs {
         pub pose: Pose,
     }
 
+    /// [geometry_msgs/msg/Twist](https://github.com/ros2/common_interfaces/blob/rolling/geometry_msgs/msg/Twist.msg)
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct Twist {
+        /// Linear velocity (m/s).
+        pub linear: Vector3,
+        /// Angular velocity (rad/s).
+        pub angular: Vector3,
+    }
+
+    ros_message!(Twist, "geometry_msgs", "Twist");
     ros_message!(Point, "geometry_msgs", "Point");
     ros_message!(Pose, "geometry_msgs", "Pose");
     ros_message!(PoseStamped, "geometry_msgs", "PoseStamped");
@@ -284,4 +349,309 @@ pub mod diagnostic_msgs {
     ros_message!(KeyValue, "diagnostic_msgs", "KeyValue");
     ros_message!(DiagnosticStatus, "diagnostic_msgs", "DiagnosticStatus");
     ros_message!(DiagnosticArray, "diagnostic_msgs", "DiagnosticArray");
+}
+
+/// `trajectory_msgs`: <https://github.com/ros2/common_interfaces/tree/rolling/trajectory_msgs/msg>
+pub mod trajectory_msgs {
+    use super::builtin_interfaces::Duration;
+    use super::geometry_msgs::{Transform, Twist};
+    use super::std_msgs::Header;
+    use serde::{Deserialize, Serialize};
+
+    /// [trajectory_msgs/msg/JointTrajectoryPoint](https://github.com/ros2/common_interfaces/blob/rolling/trajectory_msgs/msg/JointTrajectoryPoint.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct JointTrajectoryPoint {
+        /// Positions (rad or m), parallel to the trajectory's `joint_names`.
+        pub positions: Vec<f64>,
+        /// Velocities; empty, or one per joint.
+        pub velocities: Vec<f64>,
+        /// Accelerations; empty, or one per joint.
+        pub accelerations: Vec<f64>,
+        /// Efforts; empty, or one per joint.
+        pub effort: Vec<f64>,
+        /// When the point is to be reached, from the trajectory's `header.stamp`.
+        pub time_from_start: Duration,
+    }
+
+    /// [trajectory_msgs/msg/JointTrajectory](https://github.com/ros2/common_interfaces/blob/rolling/trajectory_msgs/msg/JointTrajectory.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct JointTrajectory {
+        /// `stamp`: when the trajectory starts (zero: now).
+        pub header: Header,
+        /// The joints the points give.
+        pub joint_names: Vec<String>,
+        /// The points, in time order.
+        pub points: Vec<JointTrajectoryPoint>,
+    }
+
+    /// [trajectory_msgs/msg/MultiDOFJointTrajectoryPoint](https://github.com/ros2/common_interfaces/blob/rolling/trajectory_msgs/msg/MultiDOFJointTrajectoryPoint.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct MultiDOFJointTrajectoryPoint {
+        /// One transform per joint.
+        pub transforms: Vec<Transform>,
+        /// Velocities; empty, or one per joint.
+        pub velocities: Vec<Twist>,
+        /// Accelerations; empty, or one per joint.
+        pub accelerations: Vec<Twist>,
+        /// When the point is to be reached.
+        pub time_from_start: Duration,
+    }
+
+    /// [trajectory_msgs/msg/MultiDOFJointTrajectory](https://github.com/ros2/common_interfaces/blob/rolling/trajectory_msgs/msg/MultiDOFJointTrajectory.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct MultiDOFJointTrajectory {
+        /// Start time and frame.
+        pub header: Header,
+        /// The joints.
+        pub joint_names: Vec<String>,
+        /// The points.
+        pub points: Vec<MultiDOFJointTrajectoryPoint>,
+    }
+
+    ros_message!(
+        JointTrajectoryPoint,
+        "trajectory_msgs",
+        "JointTrajectoryPoint"
+    );
+    ros_message!(JointTrajectory, "trajectory_msgs", "JointTrajectory");
+    ros_message!(
+        MultiDOFJointTrajectoryPoint,
+        "trajectory_msgs",
+        "MultiDOFJointTrajectoryPoint"
+    );
+    ros_message!(
+        MultiDOFJointTrajectory,
+        "trajectory_msgs",
+        "MultiDOFJointTrajectory"
+    );
+}
+
+/// `control_msgs` (ros-controls/control_msgs 6.x, the Kilted release; where Jazzy's 5.x
+/// differs, said at the type): <https://github.com/ros-controls/control_msgs>
+pub mod control_msgs {
+    use super::builtin_interfaces::Duration;
+    use super::std_msgs::Header;
+    use super::trajectory_msgs::{
+        JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectory,
+        MultiDOFJointTrajectoryPoint,
+    };
+    use serde::{Deserialize, Serialize};
+
+    /// [control_msgs/msg/JointTolerance](https://github.com/ros-controls/control_msgs/blob/master/control_msgs/msg/JointTolerance.msg):
+    /// 0 = the controller's default, negative = no limit.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct JointTolerance {
+        /// The joint.
+        pub name: String,
+        /// rad or m
+        pub position: f64,
+        /// rad/s or m/s
+        pub velocity: f64,
+        /// rad/s² or m/s²
+        pub acceleration: f64,
+    }
+
+    /// [control_msgs/msg/JointComponentTolerance](https://github.com/ros-controls/control_msgs/blob/master/control_msgs/msg/JointComponentTolerance.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct JointComponentTolerance {
+        /// The joint.
+        pub joint_name: String,
+        /// X_AXIS = 1 … ROTATION = 5.
+        pub component: u16,
+        /// position
+        pub position: f64,
+        /// velocity
+        pub velocity: f64,
+        /// acceleration
+        pub acceleration: f64,
+    }
+
+    /// [control_msgs/msg/JointTrajectoryControllerState](https://github.com/ros-controls/control_msgs/blob/master/control_msgs/msg/JointTrajectoryControllerState.msg)
+    /// (the same in Jazzy's 5.x)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct JointTrajectoryControllerState {
+        /// Stamp of the state.
+        pub header: Header,
+        /// The controller's joints.
+        pub joint_names: Vec<String>,
+        /// Where the trajectory (or the hold) wants the joints now.
+        pub reference: JointTrajectoryPoint,
+        /// What the joints report.
+        pub feedback: JointTrajectoryPoint,
+        /// reference − feedback
+        pub error: JointTrajectoryPoint,
+        /// What the controller commands.
+        pub output: JointTrajectoryPoint,
+        /// Multi-DOF joints (none here).
+        pub multi_dof_joint_names: Vec<String>,
+        /// unused
+        pub multi_dof_reference: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_feedback: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_error: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_output: MultiDOFJointTrajectoryPoint,
+        /// The speed scaling applied (1 = as planned).
+        pub speed_scaling_factor: f64,
+    }
+
+    /// [control_msgs/action/FollowJointTrajectory](https://github.com/ros-controls/control_msgs/blob/master/control_msgs/action/FollowJointTrajectory.action): the goal.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct FollowJointTrajectoryGoal {
+        /// The trajectory.
+        pub trajectory: JointTrajectory,
+        /// Planar or floating joints (none here).
+        pub multi_dof_trajectory: MultiDOFJointTrajectory,
+        /// How far each joint may be off while moving.
+        pub path_tolerance: Vec<JointTolerance>,
+        /// Per component, multi-DOF joints.
+        pub component_path_tolerance: Vec<JointComponentTolerance>,
+        /// How far each joint may be off at the end.
+        pub goal_tolerance: Vec<JointTolerance>,
+        /// Per component, multi-DOF joints.
+        pub component_goal_tolerance: Vec<JointComponentTolerance>,
+        /// How long after the last point's time the goal tolerance may still be met.
+        pub goal_time_tolerance: Duration,
+    }
+
+    /// FollowJointTrajectory's result.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct FollowJointTrajectoryResult {
+        /// One of the constants on [`FollowJointTrajectoryResult`].
+        pub error_code: i32,
+        /// Why, in words.
+        pub error_string: String,
+    }
+
+    impl FollowJointTrajectoryResult {
+        /// Done.
+        pub const SUCCESSFUL: i32 = 0;
+        /// The goal cannot be executed (limits, times, points).
+        pub const INVALID_GOAL: i32 = -1;
+        /// The goal's joints are not the controller's.
+        pub const INVALID_JOINTS: i32 = -2;
+        /// The trajectory ends before now.
+        pub const OLD_HEADER_TIMESTAMP: i32 = -3;
+        /// A joint left its path tolerance.
+        pub const PATH_TOLERANCE_VIOLATED: i32 = -4;
+        /// A joint missed its goal tolerance in time.
+        pub const GOAL_TOLERANCE_VIOLATED: i32 = -5;
+    }
+
+    /// FollowJointTrajectory's feedback as control_msgs 6.3 and later have it (Kilted):
+    /// with `index` and `multi_dof_index`. Jazzy's 5.x has neither
+    /// ([`FollowJointTrajectoryFeedbackJazzy`]).
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct FollowJointTrajectoryFeedback {
+        /// Stamp.
+        pub header: Header,
+        /// The controller's joints.
+        pub joint_names: Vec<String>,
+        /// Where the trajectory wants the joints now.
+        pub desired: JointTrajectoryPoint,
+        /// What the joints report.
+        pub actual: JointTrajectoryPoint,
+        /// desired − actual
+        pub error: JointTrajectoryPoint,
+        /// The index of the point being moved to.
+        pub index: i32,
+        /// Multi-DOF joints (none here).
+        pub multi_dof_joint_names: Vec<String>,
+        /// unused
+        pub multi_dof_desired: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_actual: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_error: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_index: i32,
+    }
+
+    /// FollowJointTrajectory's feedback as Jazzy's control_msgs 5.x has it.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct FollowJointTrajectoryFeedbackJazzy {
+        /// Stamp.
+        pub header: Header,
+        /// The controller's joints.
+        pub joint_names: Vec<String>,
+        /// Where the trajectory wants the joints now.
+        pub desired: JointTrajectoryPoint,
+        /// What the joints report.
+        pub actual: JointTrajectoryPoint,
+        /// desired − actual
+        pub error: JointTrajectoryPoint,
+        /// Multi-DOF joints (none here).
+        pub multi_dof_joint_names: Vec<String>,
+        /// unused
+        pub multi_dof_desired: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_actual: MultiDOFJointTrajectoryPoint,
+        /// unused
+        pub multi_dof_error: MultiDOFJointTrajectoryPoint,
+    }
+
+    impl From<FollowJointTrajectoryFeedback> for FollowJointTrajectoryFeedbackJazzy {
+        fn from(f: FollowJointTrajectoryFeedback) -> Self {
+            FollowJointTrajectoryFeedbackJazzy {
+                header: f.header,
+                joint_names: f.joint_names,
+                desired: f.desired,
+                actual: f.actual,
+                error: f.error,
+                multi_dof_joint_names: f.multi_dof_joint_names,
+                multi_dof_desired: f.multi_dof_desired,
+                multi_dof_actual: f.multi_dof_actual,
+                multi_dof_error: f.multi_dof_error,
+            }
+        }
+    }
+
+    /// [control_msgs/msg/GripperCommand](https://github.com/ros-controls/control_msgs/blob/master/control_msgs/msg/GripperCommand.msg)
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct GripperCommand {
+        /// The gripper joint's position (rad here, as gripper_action_controller).
+        pub position: f64,
+        /// Most effort; ≤ 0 = no limit (our hobby servo has no effort control).
+        pub max_effort: f64,
+    }
+
+    /// [control_msgs/action/GripperCommand](https://github.com/ros-controls/control_msgs/blob/master/control_msgs/action/GripperCommand.action): the goal.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct GripperCommandGoal {
+        /// Where the gripper goes.
+        pub command: GripperCommand,
+    }
+
+    /// GripperCommand's result, and (the same fields) its feedback.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct GripperCommandResult {
+        /// The gripper joint's position (rad).
+        pub position: f64,
+        /// The effort (unknown here: 0).
+        pub effort: f64,
+        /// It stopped short of the goal.
+        pub stalled: bool,
+        /// It reached the goal.
+        pub reached_goal: bool,
+    }
+
+    ros_message!(JointTolerance, "control_msgs", "JointTolerance");
+    ros_message!(
+        JointComponentTolerance,
+        "control_msgs",
+        "JointComponentTolerance"
+    );
+    ros_message!(
+        JointTrajectoryControllerState,
+        "control_msgs",
+        "JointTrajectoryControllerState"
+    );
+    ros_message!(GripperCommand, "control_msgs", "GripperCommand");
+    ros2_client_message!(FollowJointTrajectoryGoal);
+    ros2_client_message!(FollowJointTrajectoryResult);
+    ros2_client_message!(FollowJointTrajectoryFeedback);
+    ros2_client_message!(FollowJointTrajectoryFeedbackJazzy);
+    ros2_client_message!(GripperCommandGoal);
+    ros2_client_message!(GripperCommandResult);
 }
