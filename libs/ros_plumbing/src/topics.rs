@@ -18,11 +18,13 @@
 //! ```
 
 use crate::qos;
+use eezybot_msgs::control_msgs::JointTrajectoryControllerState;
 use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
 use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64, String as StringMsg};
 use eezybot_msgs::tf2_msgs::TFMessage;
+use eezybot_msgs::trajectory_msgs::JointTrajectory;
 use eezybot_msgs::RosMessage;
 use ros2_client::qos::{Durability, History, Reliability};
 use ros2_client::QosProfile;
@@ -172,7 +174,7 @@ pub const SERVO_ANGLES: Topic<JointState> =
     Topic::new("servo_angles", qos::COMMANDS, &[IK], &[SERIAL, FOXGLOVE]);
 /// What the Arduino reports it applied, rad.
 pub const SERVO_STATE: Topic<JointState> =
-    Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI, RECORD]);
+    Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI, IK, RECORD]);
 /// The URDF text, latched.
 pub const ROBOT_DESCRIPTION: Topic<StringMsg> = Topic::new(
     "robot_description",
@@ -192,6 +194,20 @@ pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
     &[GUI, IK, SERIAL, STATE],
     &[GUI],
 );
+
+/// arm_controller's trajectory topic (ros2_controllers' joint_trajectory_controller
+/// name): a trajectory to execute now, replacing any running one. Not in [`visit_all`]:
+/// the controller's topics are not recorded nor bridged to Foxglove.
+pub const JOINT_TRAJECTORY: Topic<JointTrajectory> =
+    Topic::new("arm_controller/joint_trajectory", qos::COMMANDS, &[], &[IK]);
+/// arm_controller's state: reference, feedback (servo_state), error and output. Not in
+/// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
+pub const CONTROLLER_STATE: Topic<JointTrajectoryControllerState> =
+    Topic::new("arm_controller/controller_state", qos::COMMANDS, &[IK], &[]);
+/// arm_controller's FollowJointTrajectory action (control_msgs/action/FollowJointTrajectory).
+pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
+/// gripper_controller's GripperCommand action (control_msgs/action/GripperCommand).
+pub const GRIPPER_CMD: &str = "gripper_controller/gripper_cmd";
 
 /// Something done with each typed topic of the contract ([`visit_all`]): for code that
 /// needs the message type, e.g. to subscribe a topic chosen by name.
