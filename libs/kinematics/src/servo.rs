@@ -182,6 +182,37 @@ impl ServoCalibrations {
         Ok(ServoAngles { rad })
     }
 
+    /// The arm state that servo angles (rad, `servo_angles` order) put the arm in: the
+    /// inverse of [`Self::servo_angles`], unchecked (a reported angle is what it is).
+    ///
+    /// # Examples
+    /// ```
+    /// use eezybot_kinematics::{ArmState, ServoCalibrations};
+    /// let c = ServoCalibrations::default();
+    /// let mut s = ArmState::default();
+    /// s.joints.base_rad = 0.3;
+    /// s.gripper_opening = 0.5;
+    /// let back = c.state_of_angles(c.servo_angles(&s).unwrap().rad);
+    /// assert!((back.joints.base_rad - 0.3).abs() < 1e-12);
+    /// assert!((back.joints.elbow_rad - s.joints.elbow_rad).abs() < 1e-12);
+    /// assert!((back.gripper_opening - 0.5).abs() < 1e-12);
+    /// ```
+    pub fn state_of_angles(&self, rad: [f64; 4]) -> ArmState {
+        let input = |servo: ServoId, r: f64| {
+            let c = self.get(servo);
+            (r.to_degrees() - c.offset_deg) / c.gain
+        };
+        let base = input(ServoId::Base, rad[0]).to_radians();
+        let shoulder = input(ServoId::Shoulder, rad[1]).to_radians();
+        let forearm = input(ServoId::Elbow, rad[2]).to_radians();
+        let mut state = ArmState::default();
+        state.joints.base_rad = base;
+        state.joints.shoulder_rad = shoulder;
+        state.joints.elbow_rad = forearm - shoulder;
+        state.gripper_opening = input(ServoId::Gripper, rad[3]);
+        state
+    }
+
     /// Servo angles (rad) for an arm state, each clamped into its servo's range (for
     /// a state that may lie a hair outside them; [`Self::servo_angles`] refuses).
     pub fn clamped_servo_angles(&self, state: &ArmState) -> [f64; 4] {

@@ -5,10 +5,21 @@
 //! once, and the pose sent to a new `joint_states` subscriber. Events in, [`Effect`]s
 //! out; [`crate::run`] does the I/O.
 
-use crate::pipeline::{ArmModel, Input, Pipeline, Step};
+use crate::controller::{self, Actual, ControllerMap, ControllerSettings, Execution, Outcome};
+use crate::pipeline::{ArmModel, GoalRequest, Input, Pipeline, Step};
 use command_gate::{CommandGate, Stamp, Verdict};
+use eezybot_motion::{track, AxisState};
+use eezybot_msgs::control_msgs::{
+    FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal, FollowJointTrajectoryResult as Fjt,
+    GripperCommandGoal, GripperCommandResult, JointTrajectoryControllerState,
+};
 use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::trajectory_msgs::{JointTrajectory, JointTrajectoryPoint};
 use eezybot_msgs::Time;
+use ros2_client::action::GoalId;
+use ros2_client::service::request_id::RmwRequestId;
+use ros_plumbing::action::GoalEnd;
 use ros_plumbing::burst;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::Params;
@@ -30,6 +41,62 @@ pub enum Effect {
     JointStates(JointState),
     /// Publish a `diagnostics` report.
     Report,
+    /// Answer a goal request (of arm_controller, or of gripper_controller if
+    /// `gripper`).
+    AnswerGoal {
+        /// the request
+        request: RmwRequestId,
+        /// the goal
+        id: GoalId,
+        /// accepted (else rejected)
+        accepted: bool,
+        /// gripper_controller's
+        gripper: bool,
+    },
+    /// FollowJointTrajectory feedback on a running goal.
+    TrajectoryFeedback(GoalId, Box<FollowJointTrajectoryFeedback>),
+    /// A FollowJointTrajectory goal ended.
+    TrajectoryResult(GoalId, GoalEnd, Fjt),
+    /// GripperCommand feedback on a running goal.
+    GripperFeedback(GoalId, GripperCommandResult),
+    /// A GripperCommand goal ended.
+    GripperResult(GoalId, GoalEnd, GripperCommandResult),
+    /// Publish on `arm_controller/controller_state`.
+    ControllerState(Box<JointTrajectoryControllerState>),
+}
+
+/// Who sent the running trajectory.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Owner {
+    /// a FollowJointTrajectory goal
+    Action(GoalId),
+    /// `arm_controller/joint_trajectory`
+    Topic,
+}
+
+#[derive(Debug)]
+struct ArmRun {
+    exec: Execution,
+    owner: Owner,
+    last: Option<controller::Tick>,
+}
+
+/// How close (rad) the claw's reported angle must come to a GripperCommand's position.
+pub const GRIPPER_TOLERANCE_RAD: f64 = 0.02;
+
+/// How long (s) the claw may stay short of a GripperCommand's position after its
+/// command got there before the goal ends as stalled.
+pub const GRIPPER_STALL_S: f64 = 1.0;
+
+#[derive(Debug)]
+struct GripperRun {
+    id: GoalId,
+    /// the opening asked for (axis units)
+    target: f64,
+    /// the claw's axis, moved here while a trajectory runs the arm
+    motion: AxisState,
+    /// when the command reached the target (s)
+    commanded_at: Option<f64>,
 }
 
 /// The loop's state around the pipeline.
@@ -46,6 +113,14 @@ pub struct Driver<M: ArmModel> {
     last_immediate: Option<Instant>,
     subscribers: usize,
     greet_polls: u8,
+    map: Option<ControllerMap>,
+    settings: ControllerSettings,
+    arm: Option<ArmRun>,
+    gripper: Option<GripperRun>,
+    /// the latest servo_state: controller joints, and the claw's axis
+    actual: Option<(Actual, Option<f64>)>,
+    /// the last trajectory refused or ended, for `diagnostics`
+    last_trajectory: Option<String>,
 }
 
 impl<M: ArmModel> Driver<M> {
@@ -59,7 +134,44 @@ impl<M: ArmModel> Driver<M> {
             last_immediate: None,
             subscribers: 0,
             greet_polls: 0,
+            map: None,
+            settings: ControllerSettings::default(),
+            arm: None,
+            gripper: None,
+            actual: None,
+            last_trajectory: None,
         }
+        .with_map()
+    }
+
+    fn with_map(mut self) -> Self {
+        self.map = self.core.model().controller_map();
+        self
+    }
+
+    /// The tolerances a goal's zeros stand for.
+    pub fn set_controller_settings(&mut self, settings: ControllerSettings) {
+        self.settings = settings;
+    }
+
+    /// What `diagnostics` says of the controllers.
+    pub fn controller_values(&self) -> Vec<(String, String)> {
+        let running = match &self.arm {
+            None => "idle".to_string(),
+            Some(r) => format!(
+                "executing a trajectory of {:.3} s from {}",
+                r.exec.plan().trajectory.duration(),
+                match r.owner {
+                    Owner::Action(_) => "follow_joint_trajectory",
+                    Owner::Topic => "joint_trajectory",
+                }
+            ),
+        };
+        let mut v = vec![("arm_controller".to_string(), running)];
+        if let Some(t) = &self.last_trajectory {
+            v.push(("last_trajectory".into(), t.clone()));
+        }
+        v
     }
 
     /// The pipeline.
@@ -84,10 +196,13 @@ impl<M: ArmModel> Driver<M> {
     pub fn on_time(&mut self, now: Instant, wall: Time) -> Vec<Effect> {
         let mut effects = vec![];
         if let Some(t) = self.next_step.filter(|t| *t <= now) {
-            if let Some(step) = self.core.step(wall) {
+            if self.arm.is_some() {
+                self.tick_arm(wall, &mut effects);
+            } else if let Some(step) = self.core.step(wall) {
                 effects.push(Effect::Publish(step));
             }
-            self.next_step = Some(t + self.step_period()).filter(|_| self.core.is_moving());
+            self.gripper_progress(wall, true, &mut effects);
+            self.next_step = Some(t + self.step_period()).filter(|_| self.busy());
             if self.next_step.is_none() {
                 effects.push(Effect::Report);
             }
@@ -174,10 +289,47 @@ impl<M: ArmModel> Driver<M> {
                         log::info!("emergency stop released")
                     }
                     self.core.set_estop(engaged);
+                    if engaged {
+                        self.end_arm(
+                            GoalEnd::Aborted,
+                            Fjt::INVALID_GOAL,
+                            "emergency stop engaged".into(),
+                            effects,
+                        );
+                        self.end_gripper(
+                            GoalEnd::Aborted,
+                            false,
+                            "emergency stop engaged",
+                            effects,
+                        );
+                    }
                     self.next_step = None;
                     effects.push(Effect::Report);
                 }
                 continue;
+            }
+            match input {
+                Input::Trajectory(msg) => {
+                    self.on_trajectory(msg, wall, now, effects);
+                    continue;
+                }
+                Input::TrajectoryGoal(goal) => {
+                    self.on_trajectory_goal(goal, wall, now, effects);
+                    continue;
+                }
+                Input::GripperGoal(goal) => {
+                    self.on_gripper_goal(goal, wall, now, effects);
+                    continue;
+                }
+                Input::Cancel(ids) => {
+                    self.on_cancel(&ids, wall, effects);
+                    continue;
+                }
+                Input::ServoState(msg) => {
+                    self.on_servo_state(&msg, wall, effects);
+                    continue;
+                }
+                _ => {}
             }
             let Some(result) = self.core.handle(&input, wall) else {
                 continue;
@@ -189,6 +341,24 @@ impl<M: ArmModel> Driver<M> {
             }
             match result {
                 Ok(step) => {
+                    // another command takes the arm (or the claw) from a running goal
+                    let topic = input_topic(&input);
+                    if !matches!(input, Input::GripperTarget(..)) {
+                        self.end_arm(
+                            GoalEnd::Aborted,
+                            Fjt::INVALID_GOAL,
+                            format!("preempted by {topic}"),
+                            effects,
+                        );
+                    }
+                    if matches!(input, Input::GripperTarget(..) | Input::JointTarget(_)) {
+                        self.end_gripper(
+                            GoalEnd::Aborted,
+                            false,
+                            &format!("preempted by {topic}"),
+                            effects,
+                        );
+                    }
                     effects.push(Effect::Publish(step));
                     // The next step one and a half periods after this first one: a
                     // target stream at the motion rate (a 50 Hz teleop) steps the
@@ -222,6 +392,551 @@ impl<M: ArmModel> Driver<M> {
     }
 }
 
+/// The topic an input came on, for messages.
+fn input_topic(input: &Input) -> &'static str {
+    match input {
+        Input::XyzTarget(_) => "xyz_target",
+        Input::PoseTarget(_) => "pose_target",
+        Input::GripperTarget(..) => "gripper_target",
+        Input::JointTarget(_) => "joint_target",
+        _ => "another command",
+    }
+}
+
+/// A point of controller joint positions only.
+fn positions_point(positions: Vec<f64>) -> JointTrajectoryPoint {
+    JointTrajectoryPoint {
+        positions,
+        ..Default::default()
+    }
+}
+
+/// a − b, element by element.
+fn difference(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(x, y)| x - y).collect()
+}
+
+impl<M: ArmModel> Driver<M> {
+    fn busy(&self) -> bool {
+        self.core.is_moving() || self.arm.is_some() || self.gripper.is_some()
+    }
+
+    fn refuse(&mut self, what: &str, code: i32, text: &str, effects: &mut Vec<Effect>) {
+        let line = format!("{what} refused ({}): {text}", code_name(code));
+        log::warn!("{line}");
+        self.last_trajectory = Some(line);
+        effects.push(Effect::Report);
+    }
+
+    /// Check a trajectory against the arm as it is now.
+    fn plan(
+        &self,
+        msg: &JointTrajectory,
+        goal: Option<&FollowJointTrajectoryGoal>,
+        wall: Time,
+    ) -> Result<controller::Plan, controller::Refusal> {
+        let Some(map) = &self.map else {
+            return Err(controller::Refusal {
+                code: Fjt::INVALID_JOINTS,
+                text: "this arm has no trajectory controller (the EezyBot only)".into(),
+            });
+        };
+        if self.core.estop() {
+            return Err(controller::Refusal {
+                code: Fjt::INVALID_GOAL,
+                text: "the emergency stop is engaged".into(),
+            });
+        }
+        if let Some(g) = goal {
+            if !g.multi_dof_trajectory.points.is_empty()
+                || !g.multi_dof_trajectory.joint_names.is_empty()
+            {
+                return Err(controller::Refusal {
+                    code: Fjt::INVALID_JOINTS,
+                    text: "multi_dof_trajectory: this arm has no multi-DOF joints".into(),
+                });
+            }
+        }
+        let axes = self.core.axes();
+        let limits = self.core.axis_limits();
+        let start: Vec<f64> = map.axes.iter().map(|&a| axes[a]).collect();
+        let arm_limits: Vec<_> = map.axes.iter().map(|&a| limits[a]).collect();
+        let (path, goal_tol, goal_time) = match goal {
+            Some(g) => (
+                &g.path_tolerance[..],
+                &g.goal_tolerance[..],
+                g.goal_time_tolerance,
+            ),
+            None => (&[][..], &[][..], Default::default()),
+        };
+        controller::plan(
+            map,
+            &arm_limits,
+            &start,
+            msg,
+            path,
+            goal_tol,
+            goal_time,
+            &self.settings,
+            seconds(wall),
+            |q| {
+                self.core
+                    .check_joints(&map.joints, q)
+                    .map_err(|r| r.to_string())
+            },
+        )
+    }
+
+    fn start_arm(
+        &mut self,
+        plan: controller::Plan,
+        owner: Owner,
+        wall: Time,
+        now: Instant,
+        effects: &mut Vec<Effect>,
+    ) {
+        let Some(map) = self.map.clone() else { return };
+        if plan.late_s > 0.0 {
+            log::info!(
+                "trajectory: header.stamp {:.3} s in the past, started now in full",
+                plan.late_s
+            );
+        }
+        self.end_arm(
+            GoalEnd::Canceled,
+            Fjt::INVALID_GOAL,
+            "preempted by a newer trajectory".into(),
+            effects,
+        );
+        self.core.stop_motion();
+        self.last_trajectory = Some(format!(
+            "executing: {} points over {:.3} s",
+            plan.trajectory.point_times().len(),
+            plan.trajectory.duration()
+        ));
+        self.arm = Some(ArmRun {
+            exec: Execution::new(plan, map),
+            owner,
+            last: None,
+        });
+        // the first step at once, then one per period
+        self.tick_arm(wall, effects);
+        self.next_step = Some(now + self.step_period());
+    }
+
+    fn on_trajectory(
+        &mut self,
+        msg: JointTrajectory,
+        wall: Time,
+        now: Instant,
+        effects: &mut Vec<Effect>,
+    ) {
+        if msg.points.is_empty() {
+            // ros2_controllers: an empty trajectory stops the arm where it is
+            if self.arm.is_some() {
+                self.end_arm(
+                    GoalEnd::Aborted,
+                    Fjt::INVALID_GOAL,
+                    "stopped by an empty trajectory on arm_controller/joint_trajectory".into(),
+                    effects,
+                );
+                self.core.stop_motion();
+            }
+            return;
+        }
+        match self.plan(&msg, None, wall) {
+            Ok(plan) => self.start_arm(plan, Owner::Topic, wall, now, effects),
+            Err(r) => self.refuse("arm_controller/joint_trajectory", r.code, &r.text, effects),
+        }
+    }
+
+    fn on_trajectory_goal(
+        &mut self,
+        g: GoalRequest<FollowJointTrajectoryGoal>,
+        wall: Time,
+        now: Instant,
+        effects: &mut Vec<Effect>,
+    ) {
+        match self.plan(&g.goal.trajectory, Some(&g.goal), wall) {
+            Ok(plan) => {
+                effects.push(Effect::AnswerGoal {
+                    request: g.request,
+                    id: g.id,
+                    accepted: true,
+                    gripper: false,
+                });
+                self.start_arm(plan, Owner::Action(g.id), wall, now, effects);
+            }
+            Err(r) => {
+                effects.push(Effect::AnswerGoal {
+                    request: g.request,
+                    id: g.id,
+                    accepted: false,
+                    gripper: false,
+                });
+                self.refuse("follow_joint_trajectory goal", r.code, &r.text, effects);
+            }
+        }
+    }
+
+    /// End the running trajectory, if any: its result to its client.
+    fn end_arm(&mut self, end: GoalEnd, code: i32, text: String, effects: &mut Vec<Effect>) {
+        let Some(run) = self.arm.take() else { return };
+        self.core.stop_motion();
+        let note = match end {
+            GoalEnd::Succeeded => "succeeded".to_string(),
+            _ => format!(
+                "{} ({}): {text}",
+                if end == GoalEnd::Canceled {
+                    "canceled"
+                } else {
+                    "aborted"
+                },
+                code_name(code)
+            ),
+        };
+        if end != GoalEnd::Succeeded {
+            log::warn!("trajectory {note}");
+        } else {
+            log::info!("trajectory succeeded");
+        }
+        self.last_trajectory = Some(note);
+        effects.push(Effect::Report);
+        if let Owner::Action(id) = run.owner {
+            effects.push(Effect::TrajectoryResult(
+                id,
+                end,
+                Fjt {
+                    error_code: code,
+                    error_string: text,
+                },
+            ));
+        }
+    }
+
+    fn tick_arm(&mut self, wall: Time, effects: &mut Vec<Effect>) {
+        let (Some(run), Some(map)) = (&mut self.arm, &self.map) else {
+            return;
+        };
+        let actual = self.actual.as_ref().map(|(a, _)| a);
+        let tick = run.exec.tick(seconds(wall), actual);
+        let mut axes = self.core.axes();
+        for (k, &a) in map.axes.iter().enumerate() {
+            axes[a] = tick.axes[k];
+        }
+        if let (Some(g), Some(gm)) = (&mut self.gripper, &map.gripper) {
+            let limits = self.core.axis_limits()[gm.axis];
+            g.motion = track(g.motion, g.target, limits, self.core.motion().period_s);
+            axes[gm.axis] = g.motion.position;
+        }
+        let owner = run.owner;
+        let outcome = tick.outcome.clone();
+        let step = self.core.command_axes(&axes, wall);
+        effects.push(Effect::Publish(step));
+        if let Owner::Action(id) = owner {
+            effects.push(Effect::TrajectoryFeedback(
+                id,
+                Box::new(self.feedback(&tick, wall)),
+            ));
+        }
+        if let Some(run) = &mut self.arm {
+            run.last = Some(tick);
+        }
+        if let Some(Outcome {
+            succeeded,
+            code,
+            text,
+        }) = outcome
+        {
+            let end = if succeeded {
+                GoalEnd::Succeeded
+            } else {
+                GoalEnd::Aborted
+            };
+            self.end_arm(end, code, text, effects);
+        }
+    }
+
+    fn feedback(&self, tick: &controller::Tick, wall: Time) -> FollowJointTrajectoryFeedback {
+        let map = self.map.as_ref();
+        let actual = self
+            .actual
+            .as_ref()
+            .map(|(a, _)| a.positions.clone())
+            .unwrap_or_default();
+        let error = if actual.is_empty() {
+            JointTrajectoryPoint::default()
+        } else {
+            positions_point(difference(&tick.desired.positions, &actual))
+        };
+        FollowJointTrajectoryFeedback {
+            header: Header {
+                stamp: wall,
+                frame_id: String::new(),
+            },
+            joint_names: map.map(|m| m.joints.clone()).unwrap_or_default(),
+            desired: tick.desired.clone(),
+            actual: positions_point(actual),
+            error,
+            index: tick.index,
+            ..Default::default()
+        }
+    }
+
+    /// `arm_controller/controller_state` now: the reference (the running trajectory's
+    /// desired point, else the command), the feedback (servo_state), the error, the
+    /// output (the command).
+    fn controller_state(&self, wall: Time) -> Option<JointTrajectoryControllerState> {
+        let map = self.map.as_ref()?;
+        let axes = self.core.axes();
+        let command: Vec<f64> =
+            map.joints_of(&map.axes.iter().map(|&a| axes[a]).collect::<Vec<_>>());
+        let reference = match self.arm.as_ref().and_then(|r| r.last.as_ref()) {
+            Some(t) => t.desired.clone(),
+            None => positions_point(command.clone()),
+        };
+        let actual = self.actual.as_ref().map(|(a, _)| a.positions.clone());
+        let error = actual
+            .as_ref()
+            .map(|a| positions_point(difference(&reference.positions, a)))
+            .unwrap_or_default();
+        Some(JointTrajectoryControllerState {
+            header: Header {
+                stamp: wall,
+                frame_id: String::new(),
+            },
+            joint_names: map.joints.clone(),
+            reference,
+            feedback: positions_point(actual.unwrap_or_default()),
+            error,
+            output: positions_point(command),
+            speed_scaling_factor: 1.0,
+            ..Default::default()
+        })
+    }
+
+    fn on_servo_state(&mut self, msg: &JointState, wall: Time, effects: &mut Vec<Effect>) {
+        let Some(map) = &self.map else { return };
+        let Some(axes) = self.core.model().reported_axes(msg) else {
+            log::debug!("servo_state without every servo: not used as the actual state");
+            return;
+        };
+        let positions = map.joints_of(&map.axes.iter().map(|&a| axes[a]).collect::<Vec<_>>());
+        let claw = map.gripper.as_ref().map(|g| axes[g.axis] * g.rad_per_unit);
+        let stamp = if msg.header.stamp == Time::ZERO {
+            wall
+        } else {
+            msg.header.stamp
+        };
+        self.actual = Some((
+            Actual {
+                positions,
+                stamp_s: seconds(stamp),
+            },
+            claw,
+        ));
+        if let Some(state) = self.controller_state(wall) {
+            effects.push(Effect::ControllerState(Box::new(state)));
+        }
+        self.gripper_progress(wall, false, effects);
+    }
+
+    fn on_gripper_goal(
+        &mut self,
+        g: GoalRequest<GripperCommandGoal>,
+        wall: Time,
+        now: Instant,
+        effects: &mut Vec<Effect>,
+    ) {
+        let Some(gm) = self.map.as_ref().and_then(|m| m.gripper.clone()) else {
+            effects.push(Effect::AnswerGoal {
+                request: g.request,
+                id: g.id,
+                accepted: false,
+                gripper: true,
+            });
+            self.refuse(
+                "gripper_cmd goal",
+                Fjt::INVALID_JOINTS,
+                "this arm has no gripper controller",
+                effects,
+            );
+            return;
+        };
+        let position = g.goal.command.position;
+        let opening = position / gm.rad_per_unit;
+        let refusal = if self.core.estop() {
+            Some("the emergency stop is engaged".to_string())
+        } else if !(position.is_finite() && (-1e-9..=1.0 + 1e-9).contains(&opening)) {
+            Some(format!(
+                "position {position} rad is outside {}'s range 0 … {:.4} rad (closed … open)",
+                gm.joint, gm.rad_per_unit
+            ))
+        } else {
+            None
+        };
+        if let Some(why) = refusal {
+            effects.push(Effect::AnswerGoal {
+                request: g.request,
+                id: g.id,
+                accepted: false,
+                gripper: true,
+            });
+            self.refuse("gripper_cmd goal", Fjt::INVALID_GOAL, &why, effects);
+            return;
+        }
+        let opening = opening.clamp(0.0, 1.0);
+        effects.push(Effect::AnswerGoal {
+            request: g.request,
+            id: g.id,
+            accepted: true,
+            gripper: true,
+        });
+        self.end_gripper(
+            GoalEnd::Canceled,
+            false,
+            "preempted by a newer goal",
+            effects,
+        );
+        let axes = self.core.axes();
+        self.gripper = Some(GripperRun {
+            id: g.id,
+            target: opening,
+            motion: AxisState {
+                position: axes[gm.axis],
+                velocity: 0.0,
+            },
+            commanded_at: None,
+        });
+        if self.arm.is_none() {
+            match self.core.handle_gripper_target(opening, wall) {
+                Ok(step) => effects.push(Effect::Publish(step)),
+                Err(r) => {
+                    self.end_gripper(GoalEnd::Aborted, false, &r.to_string(), effects);
+                    return;
+                }
+            }
+        }
+        if self.next_step.is_none() {
+            self.next_step = Some(now + self.step_period());
+        }
+    }
+
+    /// Judge the running gripper goal (on a step, with feedback; or on a report).
+    fn gripper_progress(&mut self, wall: Time, step: bool, effects: &mut Vec<Effect>) {
+        let (Some(g), Some(gm)) = (
+            &mut self.gripper,
+            self.map.as_ref().and_then(|m| m.gripper.as_ref()),
+        ) else {
+            return;
+        };
+        let now_s = seconds(wall);
+        let commanded = self.core.axes()[gm.axis];
+        if (commanded - g.target).abs() < 1e-9 && g.commanded_at.is_none() {
+            g.commanded_at = Some(now_s);
+        }
+        let actual = self.actual.as_ref().and_then(|(_, c)| *c);
+        let target_rad = g.target * gm.rad_per_unit;
+        let reached = commanded_at_target(g.commanded_at)
+            && actual.is_some_and(|a| (a - target_rad).abs() <= GRIPPER_TOLERANCE_RAD);
+        let state = GripperCommandResult {
+            position: actual.unwrap_or(commanded * gm.rad_per_unit),
+            effort: 0.0,
+            stalled: false,
+            reached_goal: reached,
+        };
+        let (id, commanded_at) = (g.id, g.commanded_at);
+        if reached {
+            self.gripper = None;
+            effects.push(Effect::GripperResult(id, GoalEnd::Succeeded, state));
+            return;
+        }
+        if commanded_at.is_some_and(|t| now_s - t > GRIPPER_STALL_S) {
+            let why = match actual {
+                Some(a) => format!(
+                    "{} stopped at {a:.3} rad, short of {target_rad:.3} rad",
+                    gm.joint
+                ),
+                None => "no servo_state came: is serial_node running?".into(),
+            };
+            log::warn!("gripper_cmd goal aborted: stalled: {why}");
+            self.last_trajectory = Some(format!("gripper_cmd aborted: stalled: {why}"));
+            self.gripper = None;
+            effects.push(Effect::GripperResult(
+                id,
+                GoalEnd::Aborted,
+                GripperCommandResult {
+                    stalled: true,
+                    ..state
+                },
+            ));
+            return;
+        }
+        if step {
+            effects.push(Effect::GripperFeedback(id, state));
+        }
+    }
+
+    fn end_gripper(&mut self, end: GoalEnd, reached: bool, why: &str, effects: &mut Vec<Effect>) {
+        let Some(g) = self.gripper.take() else { return };
+        log::info!("gripper_cmd goal ended: {why}");
+        let gm = self.map.as_ref().and_then(|m| m.gripper.as_ref());
+        let position = self
+            .actual
+            .as_ref()
+            .and_then(|(_, c)| *c)
+            .or_else(|| gm.map(|gm| self.core.axes()[gm.axis] * gm.rad_per_unit))
+            .unwrap_or_default();
+        if end != GoalEnd::Succeeded && self.arm.is_none() {
+            self.core.stop_motion();
+        }
+        effects.push(Effect::GripperResult(
+            g.id,
+            end,
+            GripperCommandResult {
+                position,
+                effort: 0.0,
+                stalled: false,
+                reached_goal: reached,
+            },
+        ));
+    }
+
+    fn on_cancel(&mut self, ids: &[GoalId], _wall: Time, effects: &mut Vec<Effect>) {
+        for id in ids {
+            if matches!(self.arm.as_ref().map(|r| r.owner), Some(Owner::Action(a)) if a == *id) {
+                self.end_arm(
+                    GoalEnd::Canceled,
+                    Fjt::SUCCESSFUL,
+                    "canceled by the client".into(),
+                    effects,
+                );
+            }
+            if self.gripper.as_ref().is_some_and(|g| g.id == *id) {
+                self.end_gripper(GoalEnd::Canceled, false, "canceled by the client", effects);
+            }
+        }
+    }
+}
+
+/// Whether the claw's command got to the goal (then the report is judged).
+fn commanded_at_target(at: Option<f64>) -> bool {
+    at.is_some()
+}
+
+/// The name of a FollowJointTrajectory error code.
+pub fn code_name(code: i32) -> &'static str {
+    match code {
+        Fjt::SUCCESSFUL => "SUCCESSFUL",
+        Fjt::INVALID_GOAL => "INVALID_GOAL",
+        Fjt::INVALID_JOINTS => "INVALID_JOINTS",
+        Fjt::OLD_HEADER_TIMESTAMP => "OLD_HEADER_TIMESTAMP",
+        Fjt::PATH_TOLERANCE_VIOLATED => "PATH_TOLERANCE_VIOLATED",
+        Fjt::GOAL_TOLERANCE_VIOLATED => "GOAL_TOLERANCE_VIOLATED",
+        _ => "unknown",
+    }
+}
+
 /// Of the inputs that arrived together, the ones to act on, in order: an
 /// `xyz_target` followed by a newer one is superseded, and so are a `pose_target` and a
 /// `gripper_target` (latest wins); `joint_target`s (which may name only some joints),
@@ -232,6 +947,8 @@ pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
         Input::XyzTarget(_) => Some(0),
         Input::GripperTarget(..) => Some(1),
         Input::PoseTarget(_) => Some(2),
+        Input::ServoState(_) => Some(3),
+        Input::Trajectory(_) => Some(4),
         _ => None,
     })
 }

@@ -2,6 +2,7 @@
 //! its URDF chain), its joint and servo limits, and the servo mapping that makes
 //! `servo_angles`. [`IkCore`] is the target pipeline driving it.
 
+use crate::controller::{ControllerMap, GripperMap};
 use crate::core::Reason;
 use crate::numeric::{describe_pose, NumericIk, Solver};
 use crate::pipeline::{joint_state, ArmModel, Cartesian, Pipeline, Solved};
@@ -464,6 +465,41 @@ impl ArmModel for EezyBot {
 
     fn chain_variables(&self, s: &ArmState) -> Vec<f64> {
         s.joints.to_chain().to_vec()
+    }
+
+    /// base, shoulder and elbow on the base, shoulder and forearm-elevation axes (the
+    /// elbow servo sets shoulder + elbow); the claw's joint on the opening.
+    fn controller_map(&self) -> Option<ControllerMap> {
+        Some(ControllerMap {
+            joints: ["base_joint", "shoulder_joint", "elbow_joint"]
+                .map(String::from)
+                .to_vec(),
+            axes: vec![0, 1, 2],
+            axis_names: vec![
+                "the base servo (base_joint, through the 2:1 gear)".into(),
+                "the shoulder servo (shoulder_joint)".into(),
+                "the elbow servo (the forearm's elevation, shoulder_joint + elbow_joint)".into(),
+            ],
+            to_axes: nalgebra::DMatrix::from_row_slice(
+                3,
+                3,
+                &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0],
+            ),
+            gripper: Some(GripperMap {
+                joint: "gripper_joint".into(),
+                axis: 3,
+                rad_per_unit: self.gripper_open_rad,
+            }),
+        })
+    }
+
+    fn reported_axes(&self, servo_state: &JointState) -> Option<Vec<f64>> {
+        let mut rad = [0.0; 4];
+        for (i, id) in ServoId::ALL.iter().enumerate() {
+            let k = servo_state.name.iter().position(|n| n == id.name())?;
+            rad[i] = *servo_state.position.get(k).filter(|v| v.is_finite())?;
+        }
+        Some(actuators(&self.calibration.state_of_angles(rad)).to_vec())
     }
 }
 

@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
+pub mod controller;
 pub mod core;
 pub mod driver;
 pub mod eezybot;
@@ -8,6 +9,7 @@ pub mod numeric;
 pub mod pipeline;
 pub mod urdf_arm;
 
+use crate::controller::ControllerSettings;
 use crate::core::{MotionMode, DEFAULT_MAX_TARGET_AGE_S};
 use crate::driver::{Driver, Effect};
 use crate::eezybot::IkCore;
@@ -104,6 +106,32 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .range(ParamRange::Double { min: 1e-6, max: 1.0 }),
             ParamSpec::new(
+                "goal_tolerance",
+                ParameterValue::Double(ControllerSettings::default().goal_tolerance),
+                "arm_controller: how far (rad) each joint's servo_state may be from a trajectory's last point for the goal to succeed, where the goal gives 0; 0 = not checked",
+            )
+            .range(ParamRange::Double { min: 0.0, max: 3.2 }),
+            ParamSpec::new(
+                "path_tolerance",
+                ParameterValue::Double(ControllerSettings::default().path_tolerance),
+                "arm_controller: how far (rad) each joint's servo_state may be from what was commanded for the same instant while a trajectory runs, where the goal gives 0; 0 = not checked",
+            )
+            .range(ParamRange::Double { min: 0.0, max: 3.2 }),
+            ParamSpec::new(
+                "goal_time_tolerance",
+                ParameterValue::Double(ControllerSettings::default().goal_time),
+                "arm_controller: how long (s) after a trajectory's last point the goal tolerance may still be met, where the goal gives 0",
+            )
+            .range(ParamRange::Double { min: 0.0, max: 60.0 }),
+            ParamSpec::new(
+                "feedback_layout",
+                ParameterValue::String("any".into()),
+                "FollowJointTrajectory feedback as control_msgs lays it out: `any` (Kilted's, with index left 0, which Jazzy's clients read too), `kilted` (control_msgs 6.3 and later, index filled in) or `jazzy` (control_msgs 5)",
+            )
+            .constraints("one of: any, kilted, jazzy")
+            .text_check(|s| FeedbackLayout::parse(s).map(|_| ()).ok_or_else(|| "must be `any`, `kilted` or `jazzy`".into()))
+            .read_only(),
+            ParamSpec::new(
                 "gripper_up_angle",
                 ParameterValue::Double(GRIPPER_UP_DEFAULT_DEG),
                 "URDF arms: the configuration is reported undesirable (gripper_up) when the tip's z axis is closer than this (deg) to straight up; 0 = no check",
@@ -167,6 +195,41 @@ impl Core {
     }
 }
 
+/// The trajectory controller's defaults, from the parameters.
+pub fn controller_settings(params: &Params) -> ControllerSettings {
+    let d = ControllerSettings::default();
+    ControllerSettings {
+        path_tolerance: params.f64("path_tolerance").unwrap_or(d.path_tolerance),
+        goal_tolerance: params.f64("goal_tolerance").unwrap_or(d.goal_tolerance),
+        goal_time: params.f64("goal_time_tolerance").unwrap_or(d.goal_time),
+    }
+}
+
+/// How FollowJointTrajectory feedback is laid out on the wire: control_msgs changed it
+/// in 6.3 (Kilted's release) by adding `index` and `multi_dof_index`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FeedbackLayout {
+    /// Kilted's layout with both indices 0: Jazzy's clients read it too (the zeros
+    /// read as empty sequences), Kilted's read every field.
+    Any,
+    /// Kilted's layout (control_msgs 6.3 and later), `index` filled in.
+    Kilted,
+    /// Jazzy's layout (control_msgs 5).
+    Jazzy,
+}
+
+impl FeedbackLayout {
+    /// `any`, `kilted` or `jazzy`.
+    pub fn parse(s: &str) -> Option<FeedbackLayout> {
+        match s {
+            "any" => Some(FeedbackLayout::Any),
+            "kilted" => Some(FeedbackLayout::Kilted),
+            "jazzy" => Some(FeedbackLayout::Jazzy),
+            _ => None,
+        }
+    }
+}
+
 /// Where the loop's results go.
 pub trait Outputs {
     /// Publish on `joint_states`.
@@ -175,6 +238,11 @@ pub trait Outputs {
     fn servo_angles(&self, msg: JointState);
     /// Publish a `diagnostics` report with this status.
     fn diagnostics(&self, status: DiagnosticStatus);
+    /// The controllers' answers, feedback, results and state ([`Effect::AnswerGoal`],
+    /// [`Effect::TrajectoryFeedback`], [`Effect::TrajectoryResult`],
+    /// [`Effect::GripperFeedback`], [`Effect::GripperResult`],
+    /// [`Effect::ControllerState`]).
+    fn controllers(&self, effect: Effect);
     /// The peer counts of the watched topics, in [`watched_topics`]' order:
     /// `servo_angles` subscribers, `joint_states` subscribers, `xyz_target` publishers.
     fn peer_counts(&self) -> [usize; 3];
@@ -234,6 +302,7 @@ where
     );
     core.apply_params(&h.params);
     let mut driver = Driver::new(core);
+    driver.set_controller_settings(controller_settings(&h.params));
     let (inputs, shutdown) = (h.inputs, h.shutdown);
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
@@ -255,6 +324,7 @@ where
             }
             Ok(()) = param_changes.changed() => {
                 ticker = tokio::time::interval(period(&h.params));
+                driver.set_controller_settings(controller_settings(&h.params));
                 driver.on_params(&h.params)
             }
             input = inputs.next() => {
@@ -273,8 +343,18 @@ where
                     h.outputs.joint_states(step.joint_states);
                 }
                 Effect::JointStates(msg) => h.outputs.joint_states(msg),
+                e @ (Effect::AnswerGoal { .. }
+                | Effect::TrajectoryFeedback(..)
+                | Effect::TrajectoryResult(..)
+                | Effect::GripperFeedback(..)
+                | Effect::GripperResult(..)
+                | Effect::ControllerState(_)) => h.outputs.controllers(e),
                 Effect::Report => {
                     let mut s = driver.core().diagnostic_status(&h.diag_name);
+                    s.values
+                        .extend(driver.controller_values().into_iter().map(|(key, value)| {
+                            eezybot_msgs::diagnostic_msgs::KeyValue { key, value }
+                        }));
                     h.peers.annotate(&mut s, std::time::Instant::now());
                     h.params.annotate(&mut s);
                     h.outputs.diagnostics(s);

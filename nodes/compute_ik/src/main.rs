@@ -1,16 +1,47 @@
 //! `compute_ik` binary: sets up ROS and runs [`compute_ik::run`].
 
 use compute_ik::core::Source;
-use compute_ik::{ArmModel, Core, Handles, Input, Outputs, Pipeline};
+use compute_ik::driver::Effect;
+use compute_ik::pipeline::GoalRequest;
+use compute_ik::{ArmModel, Core, FeedbackLayout, Handles, Input, Outputs, Pipeline};
+use eezybot_msgs::control_msgs::{
+    FollowJointTrajectoryFeedback, FollowJointTrajectoryFeedbackJazzy, FollowJointTrajectoryGoal,
+    FollowJointTrajectoryResult, GripperCommandGoal, GripperCommandResult,
+    JointTrajectoryControllerState,
+};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
+use futures::StreamExt;
+use ros_plumbing::action::{ActionRequest, ActionServer};
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Subscription;
 use ros_plumbing::{samples, topics, RosNode, Shutdown, TopicPublisher};
 use std::process::ExitCode;
+
+/// FollowJointTrajectory feedback in the layout `feedback_layout` asks for (serialized
+/// as the variant it holds).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+enum FeedbackWire {
+    Kilted(FollowJointTrajectoryFeedback),
+    Jazzy(FollowJointTrajectoryFeedbackJazzy),
+}
+impl ros2_client::Message for FeedbackWire {}
+
+type TrajectoryServer =
+    ActionServer<FollowJointTrajectoryGoal, FollowJointTrajectoryResult, FeedbackWire>;
+type GripperServer = ActionServer<GripperCommandGoal, GripperCommandResult, GripperCommandResult>;
+
+/// arm_controller's and gripper_controller's endpoints (the EezyBot's).
+struct Controllers {
+    trajectory: TrajectoryServer,
+    gripper: GripperServer,
+    state: TopicPublisher<JointTrajectoryControllerState>,
+    layout: FeedbackLayout,
+}
 
 struct RosOutputs<'a> {
     node: &'a ros_plumbing::Node,
@@ -19,6 +50,7 @@ struct RosOutputs<'a> {
     /// the EezyBot's servos; an arm without a servo mapping has none
     servo_angles: Option<TopicPublisher<JointState>>,
     diagnostics: DiagnosticsPublisher,
+    controllers: Option<&'a Controllers>,
 }
 
 impl Outputs for RosOutputs<'_> {
@@ -32,6 +64,39 @@ impl Outputs for RosOutputs<'_> {
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
+    }
+    fn controllers(&self, effect: Effect) {
+        let Some(c) = self.controllers else { return };
+        match effect {
+            Effect::AnswerGoal {
+                request,
+                id,
+                accepted,
+                gripper,
+            } => match (gripper, accepted) {
+                (false, true) => c.trajectory.accept(request, id),
+                (false, false) => c.trajectory.reject(request),
+                (true, true) => c.gripper.accept(request, id),
+                (true, false) => c.gripper.reject(request),
+            },
+            Effect::TrajectoryFeedback(id, f) => {
+                let wire = match c.layout {
+                    FeedbackLayout::Kilted => FeedbackWire::Kilted(*f),
+                    FeedbackLayout::Any => FeedbackWire::Kilted(FollowJointTrajectoryFeedback {
+                        index: 0,
+                        multi_dof_index: 0,
+                        ..*f
+                    }),
+                    FeedbackLayout::Jazzy => FeedbackWire::Jazzy((*f).into()),
+                };
+                c.trajectory.feedback(id, wire);
+            }
+            Effect::TrajectoryResult(id, end, r) => c.trajectory.finish(id, end, r),
+            Effect::GripperFeedback(id, f) => c.gripper.feedback(id, f),
+            Effect::GripperResult(id, end, r) => c.gripper.finish(id, end, r),
+            Effect::ControllerState(m) => c.state.publish(*m),
+            _ => {}
+        }
     }
     fn peer_counts(&self) -> [usize; 3] {
         [
@@ -78,6 +143,43 @@ async fn serve<M: ArmModel>(
         None
     };
     let diagnostics = node.diagnostics()?;
+    let controllers = match arm.controller_map() {
+        None => None,
+        Some(_) => {
+            let resolver = node.resolver().clone();
+            let layout =
+                FeedbackLayout::parse(&params.string("feedback_layout").unwrap_or_default())
+                    .unwrap_or(FeedbackLayout::Any);
+            let trajectory = ActionServer::new(
+                node.node_mut(),
+                &resolver,
+                topics::FOLLOW_JOINT_TRAJECTORY,
+                "control_msgs",
+                "FollowJointTrajectory",
+            )?;
+            let gripper = ActionServer::new(
+                node.node_mut(),
+                &resolver,
+                topics::GRIPPER_CMD,
+                "control_msgs",
+                "GripperCommand",
+            )?;
+            Some(Controllers {
+                trajectory,
+                gripper,
+                state: node.publish_on(&topics::CONTROLLER_STATE)?,
+                layout,
+            })
+        }
+    };
+    let trajectory_topic = match &controllers {
+        Some(_) => Some(node.subscribe_to(&topics::JOINT_TRAJECTORY)?),
+        None => None,
+    };
+    let servo_state = match &controllers {
+        Some(_) => Some(node.subscribe_to(&topics::SERVO_STATE)?),
+        None => None,
+    };
     let peers = PeerWatch::new(&compute_ik::watched_topics(
         &node.resolve(&topics::SERVO_ANGLES)?,
         &node.resolve(&topics::JOINT_STATES)?,
@@ -89,6 +191,7 @@ async fn serve<M: ArmModel>(
         joint_states,
         servo_angles,
         diagnostics,
+        controllers: controllers.as_ref(),
     };
 
     let inputs = futures::stream::select_all([
@@ -108,6 +211,22 @@ async fn serve<M: ArmModel>(
         }),
         samples::readable_inputs(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
     ]);
+    let mut controller_inputs = Vec::new();
+    if let Some(t) = &trajectory_topic {
+        controller_inputs.push(
+            samples::readable_inputs(t, &topics::JOINT_TRAJECTORY, Input::Trajectory).boxed_local(),
+        );
+    }
+    if let Some(s) = &servo_state {
+        controller_inputs.push(
+            samples::readable_inputs(s, &topics::SERVO_STATE, Input::ServoState).boxed_local(),
+        );
+    }
+    if let Some(c) = &controllers {
+        controller_inputs.push(action_inputs(&c.trajectory, Input::TrajectoryGoal));
+        controller_inputs.push(action_inputs(&c.gripper, Input::GripperGoal));
+    }
+    let inputs = futures::stream::select(inputs, futures::stream::select_all(controller_inputs));
 
     let diag_name = format!("{}: inverse kinematics", node.resolver().node_name());
     log::info!(
@@ -133,4 +252,39 @@ async fn serve<M: ArmModel>(
     };
     compute_ik::run(core, handles).await;
     Ok(())
+}
+
+/// An action server's goals and accepted cancels as inputs; a request that cannot be
+/// read is logged and left out.
+fn action_inputs<'a, G, R, F>(
+    server: &'a ActionServer<G, R, F>,
+    goal: fn(GoalRequest<G>) -> Input,
+) -> futures::stream::LocalBoxStream<'a, Input>
+where
+    G: ros2_client::Message + Clone + 'static,
+    R: ros2_client::Message + Clone + Default + 'static,
+    F: ros2_client::Message + 'static,
+{
+    futures::stream::unfold(server, move |server| async move {
+        loop {
+            let input = match server.next().await {
+                ActionRequest::Goal {
+                    request,
+                    id,
+                    goal: g,
+                } => goal(GoalRequest {
+                    request,
+                    id,
+                    goal: Box::new(g),
+                }),
+                ActionRequest::Cancel(ids) => Input::Cancel(ids),
+                ActionRequest::Unreadable(e) => {
+                    log::warn!("{}: unreadable request ignored: {e}", server.name());
+                    continue;
+                }
+            };
+            return Some((input, server));
+        }
+    })
+    .boxed_local()
 }

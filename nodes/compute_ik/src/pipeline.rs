@@ -4,6 +4,7 @@
 //! reported in `diagnostics`; a refused one is recorded and changes nothing. Free of ROS
 //! I/O: time comes in as arguments.
 
+use crate::controller::ControllerMap;
 use crate::core::{
     check_age, check_finite, check_frame, pose_parts, Counters, MotionMode, MotionSettings, Notice,
     Reason, Rejection, Source,
@@ -11,12 +12,16 @@ use crate::core::{
 use crate::numeric::{NumericIk, Solver};
 use eezybot_kinematics::ik::Target;
 use eezybot_motion::{straight_line, AxisLimits, JointPath, LineError, Planner};
+use eezybot_msgs::control_msgs::{FollowJointTrajectoryGoal, GripperCommandGoal};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::trajectory_msgs::JointTrajectory;
 use eezybot_msgs::Time;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use ros2_client::action::GoalId;
+use ros2_client::service::request_id::RmwRequestId;
 use ros_plumbing::feedback::{self, Refusal};
 use ros_plumbing::Params;
 
@@ -43,6 +48,27 @@ pub enum Input {
     Estop(bool),
     /// A sample that could not be read (malformed): where, and the error.
     Unreadable(Source, String),
+    /// An `arm_controller/joint_trajectory` sample.
+    Trajectory(JointTrajectory),
+    /// A new `arm_controller/follow_joint_trajectory` goal.
+    TrajectoryGoal(GoalRequest<FollowJointTrajectoryGoal>),
+    /// A new `gripper_controller/gripper_cmd` goal.
+    GripperGoal(GoalRequest<GripperCommandGoal>),
+    /// Cancels accepted for these goals (of either action).
+    Cancel(Vec<GoalId>),
+    /// A `servo_state` sample: what the Arduino applied.
+    ServoState(JointState),
+}
+
+/// A goal request of an action: the request to answer, the goal's id, the goal.
+#[derive(Clone, Debug)]
+pub struct GoalRequest<G> {
+    /// The request (answered with accept or reject).
+    pub request: RmwRequestId,
+    /// The goal's id.
+    pub id: GoalId,
+    /// The goal.
+    pub goal: Box<G>,
 }
 
 /// What an accepted target or a motion step publishes.
@@ -170,6 +196,17 @@ pub trait ArmModel {
     fn numeric_mut(&mut self) -> Option<&mut NumericIk>;
     /// The chain's variables of a state (for the numerical assessments).
     fn chain_variables(&self, s: &Self::State) -> Vec<f64>;
+
+    /// How arm_controller's and gripper_controller's joints drive the planner's axes;
+    /// `None`: this arm has no trajectory controller.
+    fn controller_map(&self) -> Option<ControllerMap> {
+        None
+    }
+    /// The planner's axes a `servo_state` report puts the arm at; `None` when it does
+    /// not give every servo.
+    fn reported_axes(&self, _servo_state: &JointState) -> Option<Vec<f64>> {
+        None
+    }
 }
 
 /// The node's state for an arm: what it commands, where the motion goes, and what it
@@ -359,7 +396,12 @@ impl<M: ArmModel> Pipeline<M> {
             Input::GripperTarget(v, stamp) => self.handle_gripper_target(*v, *stamp),
             Input::JointTarget(m) => self.handle_joint_target(m, now),
             Input::Unreadable(source, e) => Err(self.reject_unreadable(*source, e.clone())),
-            Input::Estop(_) => return None,
+            Input::Estop(_)
+            | Input::Trajectory(_)
+            | Input::TrajectoryGoal(_)
+            | Input::GripperGoal(_)
+            | Input::Cancel(_)
+            | Input::ServoState(_) => return None,
         })
     }
 
@@ -656,6 +698,44 @@ impl<M: ArmModel> Pipeline<M> {
             joint_states: self.joint_states(stamp),
             servo_angles: self.model.servo_angles(&self.state, stamp),
         }
+    }
+
+    /// The planner's axes of the commanded state.
+    pub fn axes(&self) -> Vec<f64> {
+        self.model.axes(&self.state)
+    }
+
+    /// The planner's velocity and acceleration limits, one per axis.
+    pub fn axis_limits(&self) -> Vec<eezybot_motion::AxisLimits> {
+        self.planner.limits().to_vec()
+    }
+
+    /// Whether joint values (of `names`, from the current goal) are a goal the arm can
+    /// take: its joint limits and servo ranges.
+    pub fn check_joints(&self, names: &[String], positions: &[f64]) -> Result<(), Reason> {
+        let goal = self.model.joint_goal(names, positions, &self.state)?;
+        self.model.check_goal(&goal)
+    }
+
+    /// Command the arm to the axes `axes` (a trajectory's step), stamped `now`: the
+    /// planner is left at rest there, the goal is there.
+    pub fn command_axes(&mut self, axes: &[f64], now: Time) -> Step {
+        self.state = self.model.planned(axes);
+        self.goal = self.state.clone();
+        if let Err(e) = self.planner.reset(&self.model.axes(&self.state)) {
+            log::warn!("trajectory step: {e}");
+        }
+        self.counters.steps += 1;
+        self.output(now)
+    }
+
+    /// Stop the planned motion where it is (a trajectory takes over, or ends).
+    pub fn stop_motion(&mut self) {
+        self.planner.stop();
+        let axes = self.planner.position();
+        self.state = self.model.planned(&axes);
+        self.goal = self.state.clone();
+        let _ = self.planner.reset(&axes);
     }
 
     /// `joint_states` of the commanded state (every non-fixed URDF joint), with this
