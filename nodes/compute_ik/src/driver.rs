@@ -117,6 +117,9 @@ pub struct Driver<M: ArmModel> {
     settings: ControllerSettings,
     arm: Option<ArmRun>,
     gripper: Option<GripperRun>,
+    /// a `gripper_target` that came while a trajectory runs the arm: the opening, and
+    /// the claw's axis moving there
+    claw: Option<(f64, AxisState)>,
     /// the latest servo_state: controller joints, and the claw's axis
     actual: Option<(Actual, Option<f64>)>,
     /// the last trajectory refused or ended, for `diagnostics`
@@ -138,6 +141,7 @@ impl<M: ArmModel> Driver<M> {
             settings: ControllerSettings::default(),
             arm: None,
             gripper: None,
+            claw: None,
             actual: None,
             last_trajectory: None,
         }
@@ -300,6 +304,7 @@ impl<M: ArmModel> Driver<M> {
                             GoalEnd::Aborted,
                             false,
                             "emergency stop engaged",
+                            true,
                             effects,
                         );
                     }
@@ -344,18 +349,36 @@ impl<M: ArmModel> Driver<M> {
                     // another command takes the arm (or the claw) from a running goal
                     let topic = input_topic(&input);
                     if !matches!(input, Input::GripperTarget(..)) {
-                        self.end_arm(
+                        self.end_arm_then(
                             GoalEnd::Aborted,
                             Fjt::INVALID_GOAL,
                             format!("preempted by {topic}"),
+                            false,
                             effects,
                         );
+                    }
+                    if let (Input::GripperTarget(..), Some(_), Some(gm)) = (
+                        &input,
+                        &self.arm,
+                        self.map.as_ref().and_then(|m| m.gripper.as_ref()),
+                    ) {
+                        // the trajectory keeps the arm; the claw moves on its own
+                        let here = self.core.axes()[gm.axis];
+                        let target = self.core.model().axes(self.core.goal())[gm.axis];
+                        self.claw = Some((
+                            target,
+                            AxisState {
+                                position: here,
+                                velocity: 0.0,
+                            },
+                        ));
                     }
                     if matches!(input, Input::GripperTarget(..) | Input::JointTarget(_)) {
                         self.end_gripper(
                             GoalEnd::Aborted,
                             false,
                             &format!("preempted by {topic}"),
+                            false,
                             effects,
                         );
                     }
@@ -581,8 +604,38 @@ impl<M: ArmModel> Driver<M> {
 
     /// End the running trajectory, if any: its result to its client.
     fn end_arm(&mut self, end: GoalEnd, code: i32, text: String, effects: &mut Vec<Effect>) {
+        self.end_arm_then(end, code, text, true, effects);
+    }
+
+    /// [`Self::end_arm`]; `stop`: the arm stops where it is (and a claw on its way goes
+    /// on), else a target that took the arm has planned its motion already.
+    fn end_arm_then(
+        &mut self,
+        end: GoalEnd,
+        code: i32,
+        text: String,
+        stop: bool,
+        effects: &mut Vec<Effect>,
+    ) {
         let Some(run) = self.arm.take() else { return };
-        self.core.stop_motion();
+        let claw = self.claw.take();
+        if stop {
+            self.core.stop_motion();
+            // a claw on its way goes on, at its own limits
+            let target = self
+                .gripper
+                .as_ref()
+                .map(|g| g.target)
+                .or(claw.map(|(t, _)| t));
+            let gripper = self.map.as_ref().and_then(|m| m.gripper.as_ref());
+            if let (Some(t), Some(gm)) = (target, gripper) {
+                let mut axes = self.core.axes();
+                if axes[gm.axis] != t {
+                    axes[gm.axis] = t;
+                    self.core.move_to_axes(&axes);
+                }
+            }
+        }
         let note = match end {
             GoalEnd::Succeeded => "succeeded".to_string(),
             _ => format!(
@@ -624,10 +677,18 @@ impl<M: ArmModel> Driver<M> {
         for (k, &a) in map.axes.iter().enumerate() {
             axes[a] = tick.axes[k];
         }
-        if let (Some(g), Some(gm)) = (&mut self.gripper, &map.gripper) {
+        if let Some(gm) = &map.gripper {
             let limits = self.core.axis_limits()[gm.axis];
-            g.motion = track(g.motion, g.target, limits, self.core.motion().period_s);
-            axes[gm.axis] = g.motion.position;
+            let dt = self.core.motion().period_s;
+            let claw = match (&mut self.gripper, &mut self.claw) {
+                (Some(g), _) => Some((g.target, &mut g.motion)),
+                (None, Some((target, motion))) => Some((*target, motion)),
+                (None, None) => None,
+            };
+            if let Some((target, motion)) = claw {
+                *motion = track(*motion, target, limits, dt);
+                axes[gm.axis] = motion.position;
+            }
         }
         let owner = run.owner;
         let outcome = tick.outcome.clone();
@@ -796,6 +857,7 @@ impl<M: ArmModel> Driver<M> {
             GoalEnd::Canceled,
             false,
             "preempted by a newer goal",
+            true,
             effects,
         );
         let axes = self.core.axes();
@@ -812,7 +874,7 @@ impl<M: ArmModel> Driver<M> {
             match self.core.handle_gripper_target(opening, wall) {
                 Ok(step) => effects.push(Effect::Publish(step)),
                 Err(r) => {
-                    self.end_gripper(GoalEnd::Aborted, false, &r.to_string(), effects);
+                    self.end_gripper(GoalEnd::Aborted, false, &r.to_string(), true, effects);
                     return;
                 }
             }
@@ -877,7 +939,16 @@ impl<M: ArmModel> Driver<M> {
         }
     }
 
-    fn end_gripper(&mut self, end: GoalEnd, reached: bool, why: &str, effects: &mut Vec<Effect>) {
+    /// End the running gripper goal, if any; `stop`: the claw stops where it is (else a
+    /// target that took it has planned its motion already).
+    fn end_gripper(
+        &mut self,
+        end: GoalEnd,
+        reached: bool,
+        why: &str,
+        stop: bool,
+        effects: &mut Vec<Effect>,
+    ) {
         let Some(g) = self.gripper.take() else { return };
         log::info!("gripper_cmd goal ended: {why}");
         let gm = self.map.as_ref().and_then(|m| m.gripper.as_ref());
@@ -887,7 +958,7 @@ impl<M: ArmModel> Driver<M> {
             .and_then(|(_, c)| *c)
             .or_else(|| gm.map(|gm| self.core.axes()[gm.axis] * gm.rad_per_unit))
             .unwrap_or_default();
-        if end != GoalEnd::Succeeded && self.arm.is_none() {
+        if stop && end != GoalEnd::Succeeded && self.arm.is_none() {
             self.core.stop_motion();
         }
         effects.push(Effect::GripperResult(
@@ -913,7 +984,13 @@ impl<M: ArmModel> Driver<M> {
                 );
             }
             if self.gripper.as_ref().is_some_and(|g| g.id == *id) {
-                self.end_gripper(GoalEnd::Canceled, false, "canceled by the client", effects);
+                self.end_gripper(
+                    GoalEnd::Canceled,
+                    false,
+                    "canceled by the client",
+                    true,
+                    effects,
+                );
             }
         }
     }

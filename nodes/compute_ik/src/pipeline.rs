@@ -729,6 +729,14 @@ impl<M: ArmModel> Pipeline<M> {
         self.output(now)
     }
 
+    /// Plan a motion to the axes `axes` from where the arm is (within the limits).
+    pub fn move_to_axes(&mut self, axes: &[f64]) {
+        match self.planner.move_to(axes) {
+            Ok(()) => self.goal = self.model.planned(axes),
+            Err(e) => log::warn!("cannot move on: {e}"),
+        }
+    }
+
     /// Stop the planned motion where it is (a trajectory takes over, or ends).
     pub fn stop_motion(&mut self) {
         self.planner.stop();

@@ -269,3 +269,169 @@ fn a_urdf_arm_runs_the_same_pipeline_and_publishes_no_servo_angles() {
         other => panic!("{other:?}"),
     }
 }
+
+// ---- arm_controller (trajectories) ----
+
+use eezybot_msgs::builtin_interfaces::Duration as RosDuration;
+use eezybot_msgs::trajectory_msgs::{JointTrajectory, JointTrajectoryPoint};
+
+const ARM: [&str; 3] = ["base_joint", "shoulder_joint", "elbow_joint"];
+
+fn position(js: &JointState, name: &str) -> f64 {
+    js.position[js.name.iter().position(|n| n == name).unwrap()]
+}
+
+fn arm_joints(js: &JointState) -> [f64; 3] {
+    ARM.map(|n| position(js, n))
+}
+
+fn trajectory(points: &[([f64; 3], f64)]) -> Input {
+    Input::Trajectory(JointTrajectory {
+        joint_names: ARM.map(String::from).to_vec(),
+        points: points
+            .iter()
+            .map(|(p, t)| JointTrajectoryPoint {
+                positions: p.to_vec(),
+                time_from_start: RosDuration::from_secs_f64(*t),
+                ..Default::default()
+            })
+            .collect(),
+        ..Default::default()
+    })
+}
+
+/// The home pose's arm joints.
+fn home(d: &Driver<EezyBot>) -> [f64; 3] {
+    arm_joints(&d.core().joint_states(Time::ZERO))
+}
+
+fn last_published(effects: &[(Duration, Effect)]) -> &JointState {
+    effects
+        .iter()
+        .rev()
+        .find_map(|(_, e)| match e {
+            Effect::Publish(s) => Some(&s.joint_states),
+            _ => None,
+        })
+        .expect("something published")
+}
+
+#[test]
+fn a_trajectory_on_the_topic_runs_in_time_and_ends_exactly_at_its_last_point() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let end = [h[0] + 0.3, h[1] + 0.1, h[2] - 0.1];
+    let (t0, w0) = clock.at(ms(0));
+    let first = d.on_inputs(vec![trajectory(&[(end, 1.0)])], t0, w0);
+    // the first step at once (still at the start: t = 0)
+    let step = published(&first);
+    assert_eq!(step.len(), 1);
+    let out = run_until_idle(&mut d, &clock);
+    let steps: Vec<(Duration, [f64; 3])> = out
+        .iter()
+        .filter_map(|(t, e)| match e {
+            Effect::Publish(s) => Some((*t, arm_joints(&s.joint_states))),
+            _ => None,
+        })
+        .collect();
+    // linear between the start and the point: halfway at 0.5 s
+    let (_, half) = steps.iter().find(|(t, _)| *t >= ms(500)).unwrap();
+    assert!((half[0] - (h[0] + 0.15)).abs() < 0.01, "{half:?}");
+    assert_eq!(
+        arm_joints(last_published(&out)).map(|v| (v * 1e9).round()),
+        end.map(|v| (v * 1e9).round())
+    );
+    let done = steps
+        .iter()
+        .position(|(_, q)| (q[0] - end[0]).abs() < 1e-12)
+        .unwrap();
+    assert!(
+        steps[done].0 >= ms(1000) && steps[done].0 <= ms(1020),
+        "{:?}",
+        steps[done].0
+    );
+}
+
+#[test]
+fn a_refused_trajectory_moves_nothing_and_says_why() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let (t0, w0) = clock.at(ms(0));
+    let too_fast = trajectory(&[([h[0] + 0.5, h[1], h[2]], 0.05)]);
+    let effects = d.on_inputs(vec![too_fast], t0, w0);
+    assert!(published(&effects).is_empty());
+    assert_eq!(reports(&effects), 1);
+    assert!(d.deadline().is_none());
+    let why = d
+        .controller_values()
+        .into_iter()
+        .find(|(k, _)| k == "last_trajectory")
+        .unwrap()
+        .1;
+    assert!(
+        why.contains("INVALID_GOAL")
+            && why.contains("base servo")
+            && why.contains("velocity limit"),
+        "{why}"
+    );
+}
+
+#[test]
+fn a_target_during_a_trajectory_takes_the_arm_and_is_reached() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let (t0, w0) = clock.at(ms(0));
+    d.on_inputs(vec![trajectory(&[([h[0] + 0.4, h[1], h[2]], 2.0)])], t0, w0);
+    // 300 ms into the trajectory
+    while let Some(t) = d.deadline().filter(|t| *t <= clock.t0 + ms(300)) {
+        d.on_time(t, clock.wall(t - clock.t0));
+    }
+    let (t1, w1) = clock.at(ms(300));
+    let effects = d.on_inputs(vec![xyz(0.15, -0.05, 0.12, w1)], t1, w1);
+    assert_eq!(published(&effects).len(), 1, "the target's first step");
+    let out = run_until_idle(&mut d, &clock);
+    // the same target alone, from rest at home, ends at the same joints
+    let mut alone = driver();
+    alone.on_inputs(vec![xyz(0.15, -0.05, 0.12, w0)], t0, w0);
+    let alone_out = run_until_idle(&mut alone, &clock);
+    let (a, b) = (
+        arm_joints(last_published(&out)),
+        arm_joints(last_published(&alone_out)),
+    );
+    assert!(
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9),
+        "{a:?} vs {b:?}"
+    );
+    assert!(d.controller_values()[0].1 == "idle");
+}
+
+#[test]
+fn a_gripper_target_during_a_trajectory_moves_the_claw_and_the_trajectory_goes_on() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let end = [h[0] - 0.2, h[1], h[2]];
+    let (t0, w0) = clock.at(ms(0));
+    d.on_inputs(vec![trajectory(&[(end, 1.0)])], t0, w0);
+    let (t1, w1) = clock.at(ms(200));
+    while let Some(t) = d.deadline().filter(|t| *t <= t1) {
+        d.on_time(t, clock.wall(t - clock.t0));
+    }
+    d.on_inputs(vec![Input::GripperTarget(1.0, w1)], t1, w1);
+    let out = run_until_idle(&mut d, &clock);
+    let last = last_published(&out);
+    assert!(
+        arm_joints(last)
+            .iter()
+            .zip(end)
+            .all(|(a, b)| (a - b).abs() < 1e-9),
+        "{last:?}"
+    );
+    assert!(
+        (position(last, "gripper_joint") - ArmConfig::default().geometry.gripper_open_rad).abs()
+            < 1e-9
+    );
+}
