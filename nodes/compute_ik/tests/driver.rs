@@ -1,6 +1,6 @@
 //! The node's loop policy ([`Driver`]) on a fixed clock: every event is handed its
 //! time, as `servo_protocol::host`'s tests do, so nothing here waits or reads a clock.
-#![allow(clippy::unwrap_used)]
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 use compute_ik::core::Source;
 use compute_ik::driver::{Driver, Effect, MIN_IMMEDIATE_DIAG_GAP};
 use compute_ik::eezybot::{EezyBot, IkCore};
