@@ -7,14 +7,24 @@
 //!
 //! The values are written again, independently, in `tests/interop/cases.py`.
 
+use eezybot_msgs::builtin_interfaces::Duration;
 use eezybot_msgs::cdr::{hex, unhex};
+use eezybot_msgs::control_msgs::{
+    FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal, FollowJointTrajectoryResult,
+    GripperCommand, GripperCommandGoal, GripperCommandResult, JointComponentTolerance,
+    JointTolerance, JointTrajectoryControllerState,
+};
 use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+use eezybot_msgs::geometry_msgs::Twist;
 use eezybot_msgs::geometry_msgs::{
     Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3,
 };
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::{Bool, Float64, Header, String as StringMsg};
 use eezybot_msgs::tf2_msgs::TFMessage;
+use eezybot_msgs::trajectory_msgs::{
+    JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint,
+};
 use eezybot_msgs::{cdr, RosMessage, Time};
 use std::io::BufRead;
 
@@ -28,12 +38,20 @@ struct Case {
 }
 
 fn case<M: RosMessage + std::fmt::Debug>(name: &'static str, value: M) -> Case {
+    case_of(name, M::ros_type_string(), value)
+}
+
+/// A case of a type that is no topic's (an action's goal, result or feedback).
+fn case_of<M>(name: &'static str, ros_type: String, value: M) -> Case
+where
+    M: serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug + 'static,
+{
     let bytes = cdr::encode(&value).unwrap_or_else(|e| panic!("{name}: {e}"));
     let want = format!("{value:?}");
     let ours = bytes.clone();
     Case {
         name,
-        ros_type: M::ros_type_string(),
+        ros_type,
         bytes,
         check: Box::new(move |theirs| {
             let got: M = cdr::decode(theirs).map_err(|e| e.to_string())?;
@@ -286,6 +304,63 @@ fn cases() -> Vec<Case> {
                 values: vec![],
             },
         ),
+        case(
+            "duration",
+            Duration {
+                sec: -3,
+                nanosec: 999_999_999,
+            },
+        ),
+        case("joint_trajectory_empty", JointTrajectory::default()),
+        case("joint_trajectory", joint_trajectory()),
+        case("controller_state", controller_state()),
+        case_of(
+            "follow_joint_trajectory_goal",
+            "control_msgs/action/FollowJointTrajectory_Goal".into(),
+            fjt_goal(),
+        ),
+        case_of(
+            "follow_joint_trajectory_result",
+            "control_msgs/action/FollowJointTrajectory_Result".into(),
+            FollowJointTrajectoryResult {
+                error_code: FollowJointTrajectoryResult::PATH_TOLERANCE_VIOLATED,
+                error_string: UNICODE.into(),
+            },
+        ),
+        case_of(
+            "follow_joint_trajectory_feedback",
+            "control_msgs/action/FollowJointTrajectory_Feedback".into(),
+            FollowJointTrajectoryFeedback {
+                header: header(7, 8, ""),
+                joint_names: vec!["base_joint".into()],
+                desired: tpoint(&[0.5], &[-0.25], &[1.0], &[], 1, 2),
+                actual: tpoint(&[0.25], &[], &[], &[], 0, 0),
+                error: tpoint(&[0.25], &[], &[], &[], 0, 0),
+                index: 2,
+                multi_dof_index: -1,
+                ..Default::default()
+            },
+        ),
+        case_of(
+            "gripper_command_goal",
+            "control_msgs/action/GripperCommand_Goal".into(),
+            GripperCommandGoal {
+                command: GripperCommand {
+                    position: 0.5,
+                    max_effort: -0.0,
+                },
+            },
+        ),
+        case_of(
+            "gripper_command_result",
+            "control_msgs/action/GripperCommand_Result".into(),
+            GripperCommandResult {
+                position: f64::NAN,
+                effort: 0.0,
+                stalled: true,
+                reached_goal: false,
+            },
+        ),
         case("diagnostic_array_empty", DiagnosticArray::default()),
         case(
             "diagnostic_array",
@@ -316,6 +391,105 @@ fn cases() -> Vec<Case> {
             },
         ),
     ]
+}
+
+fn tpoint(
+    p: &[f64],
+    v: &[f64],
+    a: &[f64],
+    e: &[f64],
+    sec: i32,
+    nanosec: u32,
+) -> JointTrajectoryPoint {
+    JointTrajectoryPoint {
+        positions: p.to_vec(),
+        velocities: v.to_vec(),
+        accelerations: a.to_vec(),
+        effort: e.to_vec(),
+        time_from_start: Duration { sec, nanosec },
+    }
+}
+
+fn joint_trajectory() -> JointTrajectory {
+    JointTrajectory {
+        header: header(1_700_000_000, 5, "base_link"),
+        joint_names: vec!["base_joint".into(), UNICODE.into(), String::new()],
+        points: vec![
+            tpoint(&[0.0, 1.5, -1.5], &[], &[], &[], 0, 0),
+            tpoint(
+                &[0.1, f64::NAN, -0.0],
+                &[0.2, 0.0, f64::INFINITY],
+                &[1.0, 2.0, 3.0],
+                &[f64::MAX],
+                1,
+                500_000_000,
+            ),
+        ],
+    }
+}
+
+fn controller_state() -> JointTrajectoryControllerState {
+    JointTrajectoryControllerState {
+        header: header(2, 3, ""),
+        joint_names: vec!["base_joint".into(), "elbow_joint".into()],
+        reference: tpoint(&[0.5, -1.0], &[0.1, 0.2], &[], &[], 1, 0),
+        feedback: tpoint(&[0.49, -1.01], &[], &[], &[], 0, 0),
+        error: tpoint(&[0.01, 0.01], &[], &[], &[], 0, 0),
+        output: tpoint(&[0.5, -1.0], &[], &[], &[], 0, 0),
+        multi_dof_joint_names: vec!["planar".into()],
+        multi_dof_reference: MultiDOFJointTrajectoryPoint {
+            transforms: vec![Transform::default()],
+            velocities: vec![Twist {
+                linear: Vector3 {
+                    x: 1.0,
+                    y: 2.0,
+                    z: 3.0,
+                },
+                angular: Vector3 {
+                    x: -1.0,
+                    y: -0.0,
+                    z: f64::NAN,
+                },
+            }],
+            accelerations: vec![],
+            time_from_start: Duration { sec: 4, nanosec: 1 },
+        },
+        speed_scaling_factor: 0.5,
+        ..Default::default()
+    }
+}
+
+fn fjt_goal() -> FollowJointTrajectoryGoal {
+    FollowJointTrajectoryGoal {
+        trajectory: joint_trajectory(),
+        multi_dof_trajectory: MultiDOFJointTrajectory {
+            header: header(1, 2, "odom"),
+            joint_names: vec!["planar".into()],
+            points: vec![MultiDOFJointTrajectoryPoint {
+                transforms: vec![Transform::default(), Transform::default()],
+                ..Default::default()
+            }],
+        },
+        path_tolerance: vec![JointTolerance {
+            name: "elbow_joint".into(),
+            position: 0.05,
+            velocity: -1.0,
+            acceleration: 0.0,
+        }],
+        component_path_tolerance: vec![JointComponentTolerance {
+            joint_name: "planar".into(),
+            component: 5,
+            position: 0.1,
+            velocity: 0.2,
+            acceleration: 0.3,
+        }],
+        goal_tolerance: vec![JointTolerance::default()],
+        component_goal_tolerance: vec![],
+        goal_time_tolerance: Duration {
+            sec: 0,
+            nanosec: 500_000_000,
+        },
+    }
 }
 
 fn main() {

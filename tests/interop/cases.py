@@ -5,11 +5,17 @@ or, for tf2_msgs/TFMessage which has no wheel, with the Cyclone DDS IDL types.
 """
 import math
 
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from control_msgs.msg import GripperCommand as GripperCommandMsg
+from control_msgs.msg import JointComponentTolerance, JointTolerance, JointTrajectoryControllerState
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3
 from sensor_msgs.msg import JointState
+from geometry_msgs.msg import Twist
 from std_msgs.msg import Bool, Float64, Header, String
+from trajectory_msgs.msg import (JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectory,
+                                 MultiDOFJointTrajectoryPoint)
 
 from interop import idl
 
@@ -45,8 +51,54 @@ def idl_ts(sec, nanosec, frame, child, tr, rot):
     )
 
 
+def tpoint(p, v=(), a=(), e=(), sec=0, nanosec=0):
+    return JointTrajectoryPoint(positions=list(p), velocities=list(v), accelerations=list(a), effort=list(e),
+                                time_from_start=Duration(sec=sec, nanosec=nanosec))
+
+
+def joint_trajectory():
+    return JointTrajectory(header=header(1_700_000_000, 5, "base_link"), joint_names=["base_joint", UNICODE, ""],
+                           points=[tpoint([0.0, 1.5, -1.5]),
+                                   tpoint([0.1, NAN, -0.0], [0.2, 0.0, INF], [1.0, 2.0, 3.0], [F64_MAX], 1, 500_000_000)])
+
+
+def controller_state():
+    return JointTrajectoryControllerState(
+        header=header(2, 3, ""), joint_names=["base_joint", "elbow_joint"],
+        reference=tpoint([0.5, -1.0], [0.1, 0.2], sec=1), feedback=tpoint([0.49, -1.01]), error=tpoint([0.01, 0.01]),
+        output=tpoint([0.5, -1.0]), multi_dof_joint_names=["planar"],
+        multi_dof_reference=MultiDOFJointTrajectoryPoint(
+            transforms=[Transform()], velocities=[Twist(linear=vec(1, 2, 3), angular=vec(-1, -0.0, NAN))],
+            accelerations=[], time_from_start=Duration(sec=4, nanosec=1)),
+        speed_scaling_factor=0.5)
+
+
+def fjt_goal():
+    return FollowJointTrajectory.Goal(
+        trajectory=joint_trajectory(),
+        multi_dof_trajectory=MultiDOFJointTrajectory(header=header(1, 2, "odom"), joint_names=["planar"],
+                                                     points=[MultiDOFJointTrajectoryPoint(transforms=[Transform(), Transform()])]),
+        path_tolerance=[JointTolerance(name="elbow_joint", position=0.05, velocity=-1.0, acceleration=0.0)],
+        component_path_tolerance=[JointComponentTolerance(joint_name="planar", component=5, position=0.1, velocity=0.2,
+                                                          acceleration=0.3)],
+        goal_tolerance=[JointTolerance()], component_goal_tolerance=[],
+        goal_time_tolerance=Duration(sec=0, nanosec=500_000_000))
+
+
 def cases():
     return [
+        ("duration", Duration(sec=-3, nanosec=999_999_999)),
+        ("joint_trajectory_empty", JointTrajectory()),
+        ("joint_trajectory", joint_trajectory()),
+        ("controller_state", controller_state()),
+        ("follow_joint_trajectory_goal", fjt_goal()),
+        ("follow_joint_trajectory_result", FollowJointTrajectory.Result(
+            error_code=FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED, error_string=UNICODE)),
+        ("follow_joint_trajectory_feedback", FollowJointTrajectory.Feedback(
+            header=header(7, 8, ""), joint_names=["base_joint"], desired=tpoint([0.5], [-0.25], [1.0], sec=1, nanosec=2),
+            actual=tpoint([0.25]), error=tpoint([0.25]), index=2, multi_dof_index=-1)),
+        ("gripper_command_goal", GripperCommand.Goal(command=GripperCommandMsg(position=0.5, max_effort=-0.0))),
+        ("gripper_command_result", GripperCommand.Result(position=NAN, effort=0.0, stalled=True, reached_goal=False)),
         ("header_empty", header(0, 0, "")),
         ("header_max", header(I32_MAX, 999_999_999, UNICODE)),
         ("header_min", header(I32_MIN, 0, "base_link")),
