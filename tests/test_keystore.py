@@ -256,10 +256,19 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
         contract = {f"rt/{n}" for n in TOPICS}
         services = {t for t in g["publish"] | g["subscribe"] if t.startswith(("rq/", "rr/"))}
         graph = {"ros_discovery_info", "rt/parameter_events", "rt/rosout", "rt/clock"}
-        assert g["publish"] | g["subscribe"] <= contract | services | graph, e
+        # compute_ik's controllers (not in the topic table): arm_controller's topics and
+        # both actions' feedback and status, on the PC only
+        controllers = {"rt/arm_controller/joint_trajectory", "rt/arm_controller/controller_state"} | {
+            f"rt/{a}/_action/{t}" for a in ("arm_controller/follow_joint_trajectory", "gripper_controller/gripper_cmd")
+            for t in ("feedback", "status")}
+        expected = controllers if e == "/eezybot/pc" else set()
+        assert (g["publish"] | g["subscribe"]) & controllers == expected, e
+        assert g["publish"] | g["subscribe"] <= contract | services | graph | controllers, e
     pc = grants["/eezybot/pc"]
     assert "rq/compute_ik/set_parametersRequest" in pc["publish"]
     assert "rr/compute_ik/set_parametersReply" in pc["subscribe"]
+    assert "rq/arm_controller/follow_joint_trajectory/_action/send_goalRequest" in pc["subscribe"]
+    assert "rr/gripper_controller/gripper_cmd/_action/get_resultReply" in pc["publish"]
 
 
 def test_a_rerun_keeps_the_ca_the_governance_and_the_enclaves(fresh):

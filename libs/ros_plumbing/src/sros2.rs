@@ -173,6 +173,11 @@ impl Role {
                 r.publish.insert(dds.clone());
                 r.subscribe.insert(dds);
             }
+            // a trajectory client's side of the controllers (MoveIt)
+            let (mut publish, mut subscribe) = (BTreeSet::new(), BTreeSet::new());
+            controller_rules(namespace, &mut subscribe, &mut publish);
+            r.publish.extend(publish);
+            r.subscribe.extend(subscribe);
             for pattern in ["rq/*", "rr/*"] {
                 r.publish.insert(pattern.to_string());
                 r.subscribe.insert(pattern.to_string());
@@ -494,11 +499,40 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
             }
         }
     }
+    if nodes.contains("compute_ik") {
+        controller_rules(namespace, &mut r.publish, &mut r.subscribe);
+    }
     r.publish
         .extend(GRAPH_PUBLISH.iter().map(|s| s.to_string()));
     r.subscribe
         .extend(GRAPH_SUBSCRIBE.iter().map(|s| s.to_string()));
     Ok(r)
+}
+
+/// The services of a ROS 2 action (`<action>/_action/<service>`).
+const ACTION_SERVICES: [&str; 3] = ["send_goal", "cancel_goal", "get_result"];
+
+/// compute_ik's controllers (arm_controller, gripper_controller: not in the topic
+/// table): what their server side publishes (`publish`) and subscribes (`subscribe`); a
+/// client (a tools enclave: MoveIt) is the other way round.
+fn controller_rules(
+    namespace: &str,
+    publish: &mut BTreeSet<String>,
+    subscribe: &mut BTreeSet<String>,
+) {
+    let ns = |name: &str| in_namespace(namespace, name);
+    subscribe.insert(format!("rt/{}", ns(topics::JOINT_TRAJECTORY.name)));
+    publish.insert(format!("rt/{}", ns(topics::CONTROLLER_STATE.name)));
+    for action in [topics::FOLLOW_JOINT_TRAJECTORY, topics::GRIPPER_CMD] {
+        let a = ns(action);
+        for srv in ACTION_SERVICES {
+            subscribe.insert(format!("rq/{a}/_action/{srv}Request"));
+            publish.insert(format!("rr/{a}/_action/{srv}Reply"));
+        }
+        for t in ["feedback", "status"] {
+            publish.insert(format!("rt/{a}/_action/{t}"));
+        }
+    }
 }
 
 /// One enclave's grant: who (`enclave`, the certificate's `CN`), for what in which
@@ -933,5 +967,31 @@ mod tests {
         assert_eq!(v.not_after(), "1970-01-02T00:00:00");
         assert!(Domains::id(233).is_err());
         assert_eq!(Domains::id(232).unwrap(), Domains::Id(232));
+    }
+
+    #[test]
+    fn compute_ik_serves_the_controllers_and_a_tools_enclave_may_use_them() {
+        let pc = Role::Pc.rules("/arm2").unwrap();
+        let send_goal = "arm2/arm_controller/follow_joint_trajectory/_action/send_goal";
+        assert!(pc.subscribe.contains(&format!("rq/{send_goal}Request")));
+        assert!(pc.publish.contains(&format!("rr/{send_goal}Reply")));
+        assert!(pc
+            .publish
+            .contains("rt/arm2/gripper_controller/gripper_cmd/_action/status"));
+        assert!(pc
+            .subscribe
+            .contains("rt/arm2/arm_controller/joint_trajectory"));
+        assert!(pc
+            .publish
+            .contains("rt/arm2/arm_controller/controller_state"));
+        let pi = Role::Pi.rules("/arm2").unwrap();
+        assert!(!pi.subscribe.iter().any(|t| t.contains("arm_controller")));
+        let tools = Role::Tools.rules("/arm2").unwrap();
+        assert!(tools
+            .publish
+            .contains("rt/arm2/arm_controller/joint_trajectory"));
+        assert!(tools
+            .subscribe
+            .contains("rt/arm2/arm_controller/follow_joint_trajectory/_action/feedback"));
     }
 }
