@@ -81,6 +81,9 @@ struct ArmRun {
     last: Option<controller::Tick>,
 }
 
+/// Without a `servo_state` for this long (s), controller_state comes at the peer polls.
+pub const CONTROLLER_STATE_QUIET_S: f64 = 0.5;
+
 /// How close (rad) the claw's reported angle must come to a GripperCommand's position.
 pub const GRIPPER_TOLERANCE_RAD: f64 = 0.02;
 
@@ -124,6 +127,8 @@ pub struct Driver<M: ArmModel> {
     actual: Option<(Actual, Option<f64>)>,
     /// the last trajectory refused or ended, for `diagnostics`
     last_trajectory: Option<String>,
+    /// when the last servo_state came (s, wall clock)
+    servo_state_at: Option<f64>,
 }
 
 impl<M: ArmModel> Driver<M> {
@@ -144,6 +149,7 @@ impl<M: ArmModel> Driver<M> {
             claw: None,
             actual: None,
             last_trajectory: None,
+            servo_state_at: None,
         }
         .with_map()
     }
@@ -261,15 +267,27 @@ impl<M: ArmModel> Driver<M> {
     /// The peers were looked at: `subscribers` read `joint_states`. A new one is sent
     /// the pose, stamped `wall`, over the next polls.
     pub fn on_poll(&mut self, subscribers: usize, wall: Time) -> Vec<Effect> {
+        let mut effects = vec![];
+        // controller_state comes with every servo_state; without one lately (no
+        // serial_node), it comes at the polls, with no feedback
+        let quiet = self
+            .servo_state_at
+            .is_none_or(|t| seconds(wall) - t > CONTROLLER_STATE_QUIET_S);
+        if quiet {
+            if let Some(state) = self.controller_state(wall) {
+                effects.push(Effect::ControllerState(Box::new(state)));
+            }
+        }
         if subscribers > self.subscribers {
             self.greet_polls = GREET_POLLS;
         }
         self.subscribers = subscribers;
         if self.greet_polls == 0 {
-            return vec![];
+            return effects;
         }
         self.greet_polls -= 1;
-        vec![Effect::JointStates(self.core.joint_states(wall))]
+        effects.push(Effect::JointStates(self.core.joint_states(wall)));
+        effects
     }
 
     /// The parameters changed: applied (a new solver logged and reported).
@@ -789,6 +807,7 @@ impl<M: ArmModel> Driver<M> {
         } else {
             msg.header.stamp
         };
+        self.servo_state_at = Some(seconds(wall));
         self.actual = Some((
             Actual {
                 positions,
