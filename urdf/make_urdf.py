@@ -3,7 +3,13 @@
 
 The closed linkages of the EezyBotArm Mk2 are modelled as open chains (docs/robot.md's
 chains 1-4): passive joints whose angles compute_ik publishes on
-joint_states (see eezybot_kinematics::PassiveJoints). Inertias are those of the
+joint_states (see eezybot_kinematics::PassiveJoints). The three that follow one
+actuated joint linearly carry a <mimic> tag (drive_link_joint = -elbow,
+level_link_joint = shoulder, triangle_joint = -shoulder, offset 0: their zero is the
+kinematics' zero), so that a tool that reads only the URDF (MoveIt, RViz) poses them
+from the actuated joints; wrist_joint, crank_joint and upper_link_joint follow
+shoulder + elbow, which <mimic> cannot say. The fixed frame wrist_pivot is there for
+MoveIt's IK (moveit_config/README.md). Inertias are those of the
 boxes/cylinders drawn, with plausible masses of the printed parts and servos.
 Run it after changing a dimension; `cargo test -p eezybot_kinematics` checks
 that the URDF and the kinematics library agree.
@@ -92,6 +98,15 @@ parts.append(link("main_arm", "orange", 0.05, [("box", (L2 + 0.02, 0.012, 0.02),
 parts.append(joint("elbow_joint", "revolute", "main_arm", "forearm", (L2, 0, 0), PITCH, (*elbow, MG995),
                    comment="phi - alpha: forearm relative to the main arm (the forearm servo sets phi through chain 2)"))
 parts.append(link("forearm", "orange", 0.06, [("box", (L3 + CRANK, 0.012, 0.016), ((L3 - CRANK) / 2, 0, 0))], ((L3 - CRANK) / 2, 0, 0)))
+# A frame for MoveIt's IK of the 3-DOF arm (moveit_config: group `arm` is the chain
+# base_link -> wrist_pivot). tool0 hangs below the passive wrist_joint (= -phi), which a
+# URDF <mimic> cannot express (it follows two joints), so no solver that only knows the
+# actuated joints can place tool0; this point is on the forearm itself, at the wrist
+# pivot (wrist_joint's origin). tool0 = wrist_pivot + (TOOL_DX, 0, 0) in the turntable's
+# (level) frame: the plate stays level. No geometry, so no collision pairs change.
+parts.append(joint("wrist_pivot_joint", "fixed", "forearm", "wrist_pivot", (L3, 0, 0),
+                   comment="wrist pivot on the forearm, for MoveIt's IK: tool0 = this point + tool_dx, level"))
+parts.append('  <link name="wrist_pivot"/>\n')
 parts.append(joint("wrist_joint", "revolute", "forearm", "front_plate", (L3, 0, 0), PITCH, (-phi[1], -phi[0], MG995),
                    comment="passive, = -phi: the parallelograms keep the front plate level"))
 parts.append(link("front_plate", "white", 0.03, [("box", (0.01, 0.05, 0.045), (0.005, 0, 0.005)),
@@ -109,16 +124,19 @@ parts.append(joint("crank_joint", "revolute", "turntable", "crank", (0, SIDE, H 
                    comment="passive chain 2, = phi: crank on the shoulder axis, driven by the forearm servo"))
 parts.append(link("crank", "blue", 0.008, [("box", (CRANK, 0.005, 0.012), (-CRANK / 2, 0, 0))], (-CRANK / 2, 0, 0)))
 parts.append(joint("drive_link_joint", "revolute", "crank", "drive_link", (-CRANK, 0, 0), PITCH, (-elbow[1], -elbow[0], MG995),
-                   comment="passive, = alpha - phi: 135 mm link parallel to the main arm, pinned to the forearm's rear lever"))
+                   mimic=("elbow_joint", -1),
+                   comment="passive, = alpha - phi = -elbow (a URDF mimic): 135 mm link parallel to the main arm, pinned to the forearm's rear lever"))
 parts.append(link("drive_link", "blue", 0.01, [("box", (L2, 0.005, 0.008), (L2 / 2, 0, 0))], (L2 / 2, 0, 0)))
 # chains 3 and 4: levelling
 parts.append(joint("level_link_joint", "revolute", "turntable", "level_link", (PIVOT[0], -SIDE, H - BASE_TOP + PIVOT[1]), PITCH, (*alpha, MG995),
-                   comment="passive chain 3, = alpha: 135 mm link from the fixed pivot, parallel to the main arm"))
+                   mimic=("shoulder_joint", 1),
+                   comment="passive chain 3, = alpha (a URDF mimic): 135 mm link from the fixed pivot, parallel to the main arm"))
 parts.append(link("level_link", "blue", 0.01, [("box", (L2, 0.005, 0.008), (L2 / 2, 0, 0))], (L2 / 2, 0, 0)))
 tri_elbow = (-PIVOT[0], SIDE, -PIVOT[1])
 tri_upper = (-PIVOT[0] + UPPER_PIN[0], 0, -PIVOT[1] + UPPER_PIN[1])
 parts.append(joint("triangle_joint", "revolute", "level_link", "triangle_link", (L2, 0, 0), PITCH, (-alpha[1], -alpha[0], MG995),
-                   comment="passive, = -alpha: the triangle link pivots on the elbow axle and stays level"))
+                   mimic=("shoulder_joint", -1),
+                   comment="passive, = -alpha (a URDF mimic): the triangle link pivots on the elbow axle and stays level"))
 parts.append(link("triangle_link", "blue", 0.01, [("box", (0.045, 0.005, 0.04), (0.02, 0, 0))], (0.02, 0, 0)))
 parts.append(joint("upper_link_joint", "revolute", "triangle_link", "upper_link", tri_upper, PITCH, (*phi, MG995),
                    comment="passive chain 4, = phi: 147 mm link parallel to the forearm, pinned to the front plate"))
