@@ -245,9 +245,14 @@ def test_namespace_moves_every_topic(launch, observer):
     assert root_angles == []
     names = observer.node.get_publisher_names_and_types_by_node("compute_ik", "/arm2")
     topics = {t for t, _ in names} - {"/rosout", "/parameter_events"}
-    assert topics == {"/arm2/joint_states", "/arm2/servo_angles", "/arm2/diagnostics"}, topics
+    # the trajectory controllers' state and the actions' feedback and status move too
+    actions = {f"/arm2/{a}/_action/{t}" for a in ("arm_controller/follow_joint_trajectory", "gripper_controller/gripper_cmd")
+               for t in ("feedback", "status")}
+    assert topics == {"/arm2/joint_states", "/arm2/servo_angles", "/arm2/diagnostics",
+                      "/arm2/arm_controller/controller_state"} | actions, topics
     subs = {t for t, _ in observer.node.get_subscriber_names_and_types_by_node("compute_ik", "/arm2")}
-    assert {"/arm2/xyz_target", "/arm2/gripper_target", "/arm2/joint_target", "/arm2/estop"} <= subs
+    assert {"/arm2/xyz_target", "/arm2/gripper_target", "/arm2/joint_target", "/arm2/estop",
+            "/arm2/servo_state", "/arm2/arm_controller/joint_trajectory"} <= subs
 
 
 def test_remap_and_params_file(launch, observer, tmp_path):
