@@ -81,6 +81,9 @@ struct ArmRun {
     last: Option<controller::Tick>,
 }
 
+/// How far ahead of its time (in motion periods) each trajectory step is sampled.
+pub const TRAJECTORY_LEAD_PERIODS: f64 = 0.5;
+
 /// Without a `servo_state` for this long (s), controller_state comes at the peer polls.
 pub const CONTROLLER_STATE_QUIET_S: f64 = 0.5;
 
@@ -530,13 +533,18 @@ impl<M: ArmModel> Driver<M> {
 
     fn start_arm(
         &mut self,
-        plan: controller::Plan,
+        mut plan: controller::Plan,
         owner: Owner,
         wall: Time,
         now: Instant,
         effects: &mut Vec<Effect>,
     ) {
         let Some(map) = self.map.clone() else { return };
+        // Steps come once a period: each is sampled half a period ahead of its time, so
+        // the steps straddle every instant of the trajectory (within half a period's
+        // motion of it, early or late, rather than up to a whole period late), and the
+        // first step, at once, already moves.
+        plan.start_s -= TRAJECTORY_LEAD_PERIODS * self.step_period().as_secs_f64();
         if plan.late_s > 0.0 {
             log::info!(
                 "trajectory: header.stamp {:.3} s in the past, started now in full",
