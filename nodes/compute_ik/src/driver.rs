@@ -1045,14 +1045,19 @@ pub fn code_name(code: i32) -> &'static str {
 /// `xyz_target` followed by a newer one is superseded, and so are a `pose_target` and a
 /// `gripper_target` (latest wins); `joint_target`s (which may name only some joints),
 /// e-stops and unreadable samples are all kept. Returns them and how many were
-/// superseded.
+/// superseded. Of `servo_state` reports and `arm_controller/joint_trajectory` samples,
+/// too, only the newest is kept, uncounted: the count is of targets (`diagnostics`'
+/// `superseded`, beside `received`).
 pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
+    let (batch, _) = burst::latest_wins(batch, |i| match i {
+        Input::ServoState(_) => Some(0),
+        Input::Trajectory(_) => Some(1),
+        _ => None,
+    });
     burst::latest_wins(batch, |i| match i {
         Input::XyzTarget(_) => Some(0),
         Input::GripperTarget(..) => Some(1),
         Input::PoseTarget(_) => Some(2),
-        Input::ServoState(_) => Some(3),
-        Input::Trajectory(_) => Some(4),
         _ => None,
     })
 }

@@ -436,3 +436,34 @@ fn a_gripper_target_during_a_trajectory_moves_the_claw_and_the_trajectory_goes_o
             < 1e-9
     );
 }
+
+#[test]
+fn servo_state_reports_in_a_burst_are_not_counted_as_superseded_targets() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let (t0, w0) = clock.at(ms(0));
+    let report = |deg: f64| {
+        Input::ServoState(JointState {
+            name: [
+                "base_servo",
+                "shoulder_servo",
+                "elbow_servo",
+                "gripper_servo",
+            ]
+            .map(String::from)
+            .to_vec(),
+            position: vec![deg.to_radians(), 1.5, 1.5, 1.0],
+            ..Default::default()
+        })
+    };
+    let burst = vec![
+        report(90.0),
+        xyz(0.2, 0.0, 0.15, w0),
+        report(91.0),
+        xyz(0.2, 0.01, 0.15, w0),
+        report(92.0),
+    ];
+    d.on_inputs(burst, t0, w0);
+    let c = d.core().counters();
+    assert_eq!((c.received, c.superseded), (1, 1), "{c:?}");
+}
