@@ -256,9 +256,10 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
         contract = {f"rt/{n}" for n in TOPICS}
         services = {t for t in g["publish"] | g["subscribe"] if t.startswith(("rq/", "rr/"))}
         graph = {"ros_discovery_info", "rt/parameter_events", "rt/rosout", "rt/clock"}
-        # compute_ik's controllers (not in the topic table): arm_controller's topics and
-        # both actions' feedback and status, on the PC only
-        controllers = {"rt/arm_controller/joint_trajectory", "rt/arm_controller/controller_state"} | {
+        # compute_ik's controllers (not in the topic table): arm_controller's topics, both
+        # actions' feedback and status, and the leader arm's topics it follows, on the PC only
+        controllers = {"rt/arm_controller/joint_trajectory", "rt/arm_controller/controller_state",
+                       "rt/leader/joint_states", "rt/leader/deadman"} | {
             f"rt/{a}/_action/{t}" for a in ("arm_controller/follow_joint_trajectory", "gripper_controller/gripper_cmd")
             for t in ("feedback", "status")}
         expected = controllers if e == "/eezybot/pc" else set()

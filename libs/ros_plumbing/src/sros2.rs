@@ -522,6 +522,8 @@ fn controller_rules(
 ) {
     let ns = |name: &str| in_namespace(namespace, name);
     subscribe.insert(format!("rt/{}", ns(topics::JOINT_TRAJECTORY.name)));
+    subscribe.insert(format!("rt/{}", ns(topics::LEADER_JOINT_STATES.name)));
+    subscribe.insert(format!("rt/{}", ns(topics::LEADER_DEADMAN.name)));
     publish.insert(format!("rt/{}", ns(topics::CONTROLLER_STATE.name)));
     for action in [topics::FOLLOW_JOINT_TRAJECTORY, topics::GRIPPER_CMD] {
         let a = ns(action);

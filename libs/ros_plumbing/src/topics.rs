@@ -204,6 +204,13 @@ pub const JOINT_TRAJECTORY: Topic<JointTrajectory> =
 /// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
 pub const CONTROLLER_STATE: Topic<JointTrajectoryControllerState> =
     Topic::new("arm_controller/controller_state", qos::COMMANDS, &[IK], &[]);
+/// A leader arm's joints (serial_node in the leader role), in the follower's joint
+/// convention; compute_ik follows them while [`LEADER_DEADMAN`] is held. Not in
+/// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
+pub const LEADER_JOINT_STATES: Topic<JointState> =
+    Topic::new("leader/joint_states", qos::COMMANDS, &[], &[IK]);
+/// The leader arm's deadman button: `true` while held, with every leader sample.
+pub const LEADER_DEADMAN: Topic<Bool> = Topic::new("leader/deadman", qos::COMMANDS, &[], &[IK]);
 /// arm_controller's FollowJointTrajectory action (control_msgs/action/FollowJointTrajectory).
 pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
 /// gripper_controller's GripperCommand action (control_msgs/action/GripperCommand).

@@ -81,6 +81,9 @@ struct ArmRun {
     last: Option<controller::Tick>,
 }
 
+/// Without a leader sample for this long, the follower holds (5 samples at 100 Hz).
+pub const DEFAULT_LEADER_TIMEOUT: Duration = Duration::from_millis(50);
+
 /// How far ahead of its time (in motion periods) each trajectory step is sampled.
 pub const TRAJECTORY_LEAD_PERIODS: f64 = 0.5;
 
@@ -132,6 +135,22 @@ pub struct Driver<M: ArmModel> {
     last_trajectory: Option<String>,
     /// when the last servo_state came (s, wall clock)
     servo_state_at: Option<f64>,
+    leader: Leader,
+}
+
+/// Following a leader arm (`leader/joint_states`, `leader/deadman`).
+#[derive(Debug, Default)]
+struct Leader {
+    /// the deadman is held (its latest sample)
+    deadman: bool,
+    /// the follower follows (deadman held, samples fresh)
+    following: bool,
+    /// when the follower holds if no further sample comes
+    deadline: Option<Instant>,
+    /// how long without a sample before holding
+    timeout: Duration,
+    /// why the follower holds, for `diagnostics`
+    state: String,
 }
 
 impl<M: ArmModel> Driver<M> {
@@ -153,6 +172,11 @@ impl<M: ArmModel> Driver<M> {
             actual: None,
             last_trajectory: None,
             servo_state_at: None,
+            leader: Leader {
+                timeout: DEFAULT_LEADER_TIMEOUT,
+                state: "no leader".into(),
+                ..Leader::default()
+            },
         }
         .with_map()
     }
@@ -180,7 +204,10 @@ impl<M: ArmModel> Driver<M> {
                 }
             ),
         };
-        let mut v = vec![("arm_controller".to_string(), running)];
+        let mut v = vec![
+            ("arm_controller".to_string(), running),
+            ("leader".to_string(), self.leader.state.clone()),
+        ];
         if let Some(t) = &self.last_trajectory {
             v.push(("last_trajectory".into(), t.clone()));
         }
@@ -194,10 +221,15 @@ impl<M: ArmModel> Driver<M> {
 
     /// When [`Driver::on_time`] is next due: the next motion step or the held target.
     pub fn deadline(&self) -> Option<Instant> {
-        match (self.next_step, self.gate.deadline()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        [self.next_step, self.gate.deadline(), self.leader.deadline]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    /// How long without a leader sample before the follower holds.
+    pub fn set_leader_timeout(&mut self, timeout: Duration) {
+        self.leader.timeout = timeout;
     }
 
     fn step_period(&self) -> Duration {
@@ -208,6 +240,16 @@ impl<M: ArmModel> Driver<M> {
     /// step, and the held late target when its time has come.
     pub fn on_time(&mut self, now: Instant, wall: Time) -> Vec<Effect> {
         let mut effects = vec![];
+        if self.leader.deadline.is_some_and(|t| t <= now) {
+            self.leader.deadline = None;
+            let ms = self.leader.timeout.as_millis();
+            self.hold_leader(
+                format!(
+                    "no leader sample for {ms} ms (cable pulled, or the leader's node stopped)"
+                ),
+                &mut effects,
+            );
+        }
         if let Some(t) = self.next_step.filter(|t| *t <= now) {
             if self.arm.is_some() {
                 self.tick_arm(wall, &mut effects);
@@ -353,6 +395,19 @@ impl<M: ArmModel> Driver<M> {
                 }
                 Input::ServoState(msg) => {
                     self.on_servo_state(&msg, wall, effects);
+                    continue;
+                }
+                Input::LeaderDeadman(held) => {
+                    self.leader.deadman = held;
+                    if !held {
+                        self.hold_leader("deadman released".into(), effects);
+                    } else if !self.leader.following {
+                        self.leader.state = "deadman held, waiting for a leader sample".into();
+                    }
+                    continue;
+                }
+                Input::LeaderJoints(msg) => {
+                    self.on_leader_joints(msg, now, wall, effects);
                     continue;
                 }
                 _ => {}
@@ -1028,6 +1083,85 @@ fn commanded_at_target(at: Option<f64>) -> bool {
     at.is_some()
 }
 
+impl<M: ArmModel> Driver<M> {
+    /// Stop following: the arm holds where it is.
+    fn hold_leader(&mut self, why: String, effects: &mut Vec<Effect>) {
+        self.leader.deadline = None;
+        if self.leader.following {
+            self.leader.following = false;
+            self.core.stop_motion();
+            log::info!("leader: {why}: the follower holds");
+            effects.push(Effect::Report);
+        }
+        self.leader.state = format!("holding: {why}");
+    }
+
+    /// A leader sample: followed (a joint target for its joints, within the motion
+    /// limits) while the deadman is held.
+    fn on_leader_joints(
+        &mut self,
+        msg: JointState,
+        now: Instant,
+        wall: Time,
+        effects: &mut Vec<Effect>,
+    ) {
+        if !self.leader.deadman {
+            if self.leader.state == "no leader" {
+                self.leader.state = "holding: deadman released".into();
+            }
+            return;
+        }
+        if self.core.estop() {
+            self.hold_leader("emergency stop engaged".into(), effects);
+            return;
+        }
+        if !self.leader.following {
+            self.leader.following = true;
+            self.end_arm_then(
+                GoalEnd::Aborted,
+                Fjt::INVALID_GOAL,
+                "preempted by the leader arm".into(),
+                true,
+                effects,
+            );
+            log::info!("leader: deadman held: the follower follows");
+            effects.push(Effect::Report);
+        }
+        self.leader.deadline = Some(now + self.leader.timeout);
+        let target = JointState {
+            header: Header {
+                stamp: Time::ZERO,
+                frame_id: String::new(),
+            },
+            ..msg
+        };
+        match self.core.retarget_joints(&target, wall) {
+            Ok(()) => {
+                self.leader.state = "following".into();
+                // stepped at the motion rate, whatever the leader's rate; the first
+                // step of a new motion at once
+                if self.next_step.is_none() {
+                    if let Some(step) = self.core.step(wall) {
+                        effects.push(Effect::Publish(step));
+                    }
+                    self.next_step = Some(now + self.step_period());
+                }
+            }
+            Err(reason) => {
+                // outside the follower's limits (or malformed): not followed, the
+                // follower goes on to the last pose it could take
+                self.leader.state = format!("following, this pose refused: {reason}");
+                if let Some(quiet) = self.complaints.allow("leader/refused", now) {
+                    log::warn!(
+                        "leader sample not followed: {reason}{}",
+                        Throttle::suffix(quiet)
+                    );
+                }
+            }
+        }
+    }
+}
+
 /// The name of a FollowJointTrajectory error code.
 pub fn code_name(code: i32) -> &'static str {
     match code {
@@ -1052,6 +1186,7 @@ pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
     let (batch, _) = burst::latest_wins(batch, |i| match i {
         Input::ServoState(_) => Some(0),
         Input::Trajectory(_) => Some(1),
+        Input::LeaderJoints(_) => Some(2),
         _ => None,
     });
     burst::latest_wins(batch, |i| match i {

@@ -124,6 +124,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .range(ParamRange::Double { min: 0.0, max: 60.0 }),
             ParamSpec::new(
+                "leader_timeout",
+                ParameterValue::Double(driver::DEFAULT_LEADER_TIMEOUT.as_secs_f64()),
+                "following a leader arm (leader/joint_states while leader/deadman is true): without a leader sample for this long (s) the follower holds",
+            )
+            .range(ParamRange::Double { min: 0.01, max: 5.0 }),
+            ParamSpec::new(
                 "feedback_layout",
                 ParameterValue::String("any".into()),
                 "FollowJointTrajectory feedback as control_msgs lays it out: `any` (Kilted's, with index left 0, which Jazzy's clients read too), `kilted` (control_msgs 6.3 and later, index filled in) or `jazzy` (control_msgs 5)",
@@ -203,6 +209,14 @@ pub fn controller_settings(params: &Params) -> ControllerSettings {
         goal_tolerance: params.f64("goal_tolerance").unwrap_or(d.goal_tolerance),
         goal_time: params.f64("goal_time_tolerance").unwrap_or(d.goal_time),
     }
+}
+
+/// How long without a leader sample before the follower holds.
+pub fn leader_timeout(params: &Params) -> Duration {
+    let s = params
+        .f64("leader_timeout")
+        .unwrap_or(driver::DEFAULT_LEADER_TIMEOUT.as_secs_f64());
+    Duration::from_secs_f64(s.clamp(0.01, 5.0))
 }
 
 /// How FollowJointTrajectory feedback is laid out on the wire: control_msgs changed it
@@ -303,6 +317,7 @@ where
     core.apply_params(&h.params);
     let mut driver = Driver::new(core);
     driver.set_controller_settings(controller_settings(&h.params));
+    driver.set_leader_timeout(leader_timeout(&h.params));
     let (inputs, shutdown) = (h.inputs, h.shutdown);
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
@@ -310,30 +325,32 @@ where
         let deadline = driver.deadline().map(tokio::time::Instant::from_std);
         let now = std::time::Instant::now;
         let effects = tokio::select! {
-            _ = &mut shutdown => break,
-            _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
-                driver.on_time(now(), Time::now())
-            }
-            _ = ticker.tick() => vec![Effect::Report],
-            _ = subscriber_poll.tick() => {
-                let counts = h.outputs.peer_counts();
-                let changes = h.peers.update(&counts, std::time::Instant::now());
-                changes.iter().for_each(|c| c.log());
-                let report = (!changes.is_empty()).then_some(Effect::Report);
-                report.into_iter().chain(driver.on_poll(counts[1], Time::now())).collect()
-            }
-            Ok(()) = param_changes.changed() => {
-                ticker = tokio::time::interval(period(&h.params));
-                driver.set_controller_settings(controller_settings(&h.params));
-                driver.on_params(&h.params)
-            }
-            input = inputs.next() => {
-                let Some(first) = input else { break };
-                // a burst (DDS repairing what a network outage held back) is applied
-                // as its newest target; a lone target goes at once
-                driver.on_inputs(burst::take_burst(first, &mut inputs), now(), Time::now())
-            }
-        };
+                _ = &mut shutdown => break,
+                _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
+                    driver.on_time(now(), Time::now())
+                }
+                _ = ticker.tick() => vec![Effect::Report],
+                _ = subscriber_poll.tick() => {
+                    let counts = h.outputs.peer_counts();
+                    let changes = h.peers.update(&counts, std::time::Instant::now());
+                    changes.iter().for_each(|c| c.log());
+                    let report = (!changes.is_empty()).then_some(Effect::Report);
+                    report.into_iter().chain(driver.on_poll(counts[1], Time::now())).collect()
+                }
+                Ok(()) = param_changes.changed() => {
+                    ticker = tokio::time::interval(period(&h.params));
+                    driver.set_controller_settings(controller_settings(&h.params));
+                    driver.set_leader_timeout(leader_timeout(&h.params));
+        driver.set_leader_timeout(leader_timeout(&h.params));
+                    driver.on_params(&h.params)
+                }
+                input = inputs.next() => {
+                    let Some(first) = input else { break };
+                    // a burst (DDS repairing what a network outage held back) is applied
+                    // as its newest target; a lone target goes at once
+                    driver.on_inputs(burst::take_burst(first, &mut inputs), now(), Time::now())
+                }
+            };
         for effect in effects {
             match effect {
                 Effect::Publish(step) => {

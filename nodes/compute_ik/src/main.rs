@@ -176,6 +176,13 @@ async fn serve<M: ArmModel>(
         Some(_) => Some(node.subscribe_to(&topics::JOINT_TRAJECTORY)?),
         None => None,
     };
+    let leader = match &controllers {
+        Some(_) => Some((
+            node.subscribe_to(&topics::LEADER_JOINT_STATES)?,
+            node.subscribe_to(&topics::LEADER_DEADMAN)?,
+        )),
+        None => None,
+    };
     let servo_state = match &controllers {
         Some(_) => Some(node.subscribe_to(&topics::SERVO_STATE)?),
         None => None,
@@ -220,6 +227,18 @@ async fn serve<M: ArmModel>(
     if let Some(s) = &servo_state {
         controller_inputs.push(
             samples::readable_inputs(s, &topics::SERVO_STATE, Input::ServoState).boxed_local(),
+        );
+    }
+    if let Some((joints, deadman)) = &leader {
+        controller_inputs.push(
+            samples::readable_inputs(joints, &topics::LEADER_JOINT_STATES, Input::LeaderJoints)
+                .boxed_local(),
+        );
+        controller_inputs.push(
+            samples::readable_inputs(deadman, &topics::LEADER_DEADMAN, |m| {
+                Input::LeaderDeadman(m.data)
+            })
+            .boxed_local(),
         );
     }
     if let Some(c) = &controllers {

@@ -58,6 +58,10 @@ pub enum Input {
     Cancel(Vec<GoalId>),
     /// A `servo_state` sample: what the Arduino applied.
     ServoState(JointState),
+    /// A `leader/joint_states` sample: the leader arm's joints.
+    LeaderJoints(JointState),
+    /// A `leader/deadman` sample: the leader's deadman button is held.
+    LeaderDeadman(bool),
 }
 
 /// A goal request of an action: the request to answer, the goal's id, the goal.
@@ -401,7 +405,9 @@ impl<M: ArmModel> Pipeline<M> {
             | Input::TrajectoryGoal(_)
             | Input::GripperGoal(_)
             | Input::Cancel(_)
-            | Input::ServoState(_) => return None,
+            | Input::ServoState(_)
+            | Input::LeaderJoints(_)
+            | Input::LeaderDeadman(_) => return None,
         })
     }
 
@@ -460,27 +466,42 @@ impl<M: ArmModel> Pipeline<M> {
     /// Handle a `joint_target` arriving at `now`: positions for some or all of the
     /// arm's joints; the others keep the values of the current goal.
     pub fn handle_joint_target(&mut self, msg: &JointState, now: Time) -> Result<Step, Rejection> {
-        let stamp = msg.header.stamp;
-        let result = (|| {
-            self.check_estop()?;
-            check_age(stamp, now, self.motion.max_target_age_s)?;
-            if msg.name.len() != msg.position.len() {
-                return Err(Reason::LengthMismatch {
-                    names: msg.name.len(),
-                    positions: msg.position.len(),
-                });
+        let result = self.joint_candidate(msg, now);
+        self.finish(Source::JointTarget, msg.header.stamp, now, result)
+    }
+
+    fn joint_candidate(&self, msg: &JointState, now: Time) -> Result<M::State, Reason> {
+        self.check_estop()?;
+        check_age(msg.header.stamp, now, self.motion.max_target_age_s)?;
+        if msg.name.len() != msg.position.len() {
+            return Err(Reason::LengthMismatch {
+                names: msg.name.len(),
+                positions: msg.position.len(),
+            });
+        }
+        if msg.name.is_empty() {
+            return Err(Reason::NoJoints);
+        }
+        for (i, name) in msg.name.iter().enumerate() {
+            if msg.name[..i].contains(name) {
+                return Err(Reason::DuplicateJoint { name: name.clone() });
             }
-            if msg.name.is_empty() {
-                return Err(Reason::NoJoints);
-            }
-            for (i, name) in msg.name.iter().enumerate() {
-                if msg.name[..i].contains(name) {
-                    return Err(Reason::DuplicateJoint { name: name.clone() });
-                }
-            }
-            self.model.joint_goal(&msg.name, &msg.position, &self.goal)
-        })();
-        self.finish(Source::JointTarget, stamp, now, result)
+        }
+        self.model.joint_goal(&msg.name, &msg.position, &self.goal)
+    }
+
+    /// Move the goal to joint positions (as a `joint_target` would) without stepping:
+    /// the motion toward it is stepped at the motion rate by the caller's timer, so a
+    /// stream faster than the motion rate (a leader arm's 100 Hz) cannot step the
+    /// planner faster. Not counted as a target; a refusal changes nothing.
+    pub fn retarget_joints(&mut self, msg: &JointState, now: Time) -> Result<(), Reason> {
+        let goal = self.joint_candidate(msg, now)?;
+        self.model.check_goal(&goal)?;
+        self.planner
+            .move_to(&self.model.axes(&goal))
+            .map_err(|e| Reason::Line { why: e.to_string() })?;
+        self.goal = goal;
+        Ok(())
     }
 
     /// Record a sample on `source` that could not be read at all.

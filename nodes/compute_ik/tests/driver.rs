@@ -467,3 +467,105 @@ fn servo_state_reports_in_a_burst_are_not_counted_as_superseded_targets() {
     let c = d.core().counters();
     assert_eq!((c.received, c.superseded), (1, 1), "{c:?}");
 }
+
+// ---- following a leader arm ----
+
+fn leader(q: [f64; 3]) -> Input {
+    Input::LeaderJoints(JointState {
+        name: ARM.map(String::from).to_vec(),
+        position: q.to_vec(),
+        ..Default::default()
+    })
+}
+
+fn leader_value(d: &Driver<EezyBot>) -> String {
+    d.controller_values()
+        .into_iter()
+        .find(|(k, _)| k == "leader")
+        .unwrap()
+        .1
+}
+
+/// Steps published until `until` (run by the driver's own deadlines).
+fn steps_until(
+    d: &mut Driver<EezyBot>,
+    clock: &Clock,
+    until: Duration,
+) -> Vec<(Duration, [f64; 3])> {
+    let mut out = vec![];
+    while let Some(t) = d.deadline().filter(|t| *t <= clock.t0 + until) {
+        let since = t - clock.t0;
+        for e in d.on_time(t, clock.wall(since)) {
+            if let Effect::Publish(s) = e {
+                out.push((since, arm_joints(&s.joint_states)));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_follower_follows_the_leader_only_while_the_deadman_is_held() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let far = [h[0] + 0.4, h[1], h[2]];
+    let (t0, w0) = clock.at(ms(0));
+    // deadman released: samples are not followed
+    assert!(published(&d.on_inputs(vec![leader(far)], t0, w0)).is_empty());
+    assert!(
+        leader_value(&d).starts_with("holding"),
+        "{}",
+        leader_value(&d)
+    );
+    let (t1, w1) = clock.at(ms(10));
+    let e = d.on_inputs(vec![Input::LeaderDeadman(true), leader(far)], t1, w1);
+    assert_eq!(published(&e).len(), 1, "held: followed at once");
+    assert_eq!(leader_value(&d), "following");
+    // samples every 10 ms, as the leader firmware sends them, for 200 ms
+    for k in 2..22 {
+        let (t, w) = clock.at(ms(10 * k));
+        steps_until(&mut d, &clock, ms(10 * k));
+        d.on_inputs(vec![Input::LeaderDeadman(true), leader(far)], t, w);
+    }
+    let moving = arm_joints(&d.core().joint_states(Time::ZERO));
+    assert!(
+        moving[0] > h[0] + 0.05 && moving[0] < far[0],
+        "{moving:?}: on its way, within the motion limits"
+    );
+    // released: the arm holds where it is at once, no further step
+    let (t, w) = clock.at(ms(215));
+    let e = d.on_inputs(vec![Input::LeaderDeadman(false)], t, w);
+    assert!(published(&e).is_empty());
+    let held = arm_joints(&d.core().joint_states(Time::ZERO));
+    assert!(
+        steps_until(&mut d, &clock, ms(2000)).is_empty(),
+        "a step after the release"
+    );
+    assert_eq!(arm_joints(&d.core().joint_states(Time::ZERO)), held);
+    assert!(leader_value(&d).contains("deadman released"));
+}
+
+#[test]
+fn without_leader_samples_the_follower_holds_after_the_timeout() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let far = [h[0] - 0.4, h[1], h[2]];
+    let (t0, w0) = clock.at(ms(0));
+    d.on_inputs(vec![Input::LeaderDeadman(true), leader(far)], t0, w0);
+    // the cable is pulled after the first sample: steps go on until the timeout, not after
+    let steps = steps_until(&mut d, &clock, ms(2000));
+    let last = steps.last().unwrap().0;
+    assert!(
+        last < ms(50) + ms(1),
+        "a step at {last:?}, after the 50 ms timeout"
+    );
+    assert!(
+        leader_value(&d).contains("no leader sample for 50 ms"),
+        "{}",
+        leader_value(&d)
+    );
+    let q = arm_joints(&d.core().joint_states(Time::ZERO));
+    assert!(q[0] > far[0] && q[0] < h[0], "{q:?}: held on its way");
+}
