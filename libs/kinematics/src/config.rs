@@ -1,6 +1,6 @@
 //! The arm configuration file (`config/arm.yaml`): geometry, limits, servo calibration.
 
-use crate::{Arm, JointLimits, MotionLimits, ServoCalibrations};
+use crate::{Arm, JointLimits, MotionLimits, ServoCalibrations, ServoId};
 use serde::{Deserialize, Serialize};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -153,6 +153,10 @@ pub struct ArmConfig {
     pub servos: ServoCalibrations,
     /// Servo speed and acceleration limits.
     pub motion: MotionLimits,
+    /// The leader arm's potentiometer calibration (optional section `leader:`, written by
+    /// the calibration wizard; files without it load unchanged).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub leader: Option<LeaderCalibration>,
 }
 
 impl ArmConfig {
@@ -275,6 +279,9 @@ impl ArmConfig {
         }
         self.servos.validate(origin)?;
         self.motion.validate(origin)?;
+        if let Some(leader) = &self.leader {
+            leader.validate(origin)?;
+        }
         Ok(())
     }
 
@@ -284,6 +291,149 @@ impl ArmConfig {
             geometry: self.geometry,
             limits: self.limits_deg.to_radians(),
         }
+    }
+}
+
+// ------------------------------------------------ leader arm (calibration wizard)
+
+/// The default full-scale reading of a leader arm's ADC: the Arduino's 10 bits.
+pub const DEFAULT_ADC_MAX: u16 = 1023;
+
+/// One leader-arm potentiometer: the two readings the wizard took at two references. The
+/// map is the line through them: `input = input_a + (counts − counts_a) · (input_b −
+/// input_a) / (counts_b − counts_a)`, the input in the servo's terms (base_joint,
+/// shoulder_joint, forearm elevation φ, claw opening 0 … 1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LeaderChannel {
+    /// ADC reading at reference A (counts; an average may be fractional).
+    pub counts_a: f64,
+    /// The input at reference A.
+    pub input_a: f64,
+    /// ADC reading at reference B.
+    pub counts_b: f64,
+    /// The input at reference B.
+    pub input_b: f64,
+}
+
+impl LeaderChannel {
+    /// Input units per count.
+    pub fn slope(&self) -> f64 {
+        (self.input_b - self.input_a) / (self.counts_b - self.counts_a)
+    }
+
+    /// The input for a reading.
+    pub fn input(&self, counts: f64) -> f64 {
+        self.input_a + (counts - self.counts_a) * self.slope()
+    }
+
+    /// The reading at an input.
+    pub fn counts(&self, input: f64) -> f64 {
+        self.counts_a + (input - self.input_a) / self.slope()
+    }
+}
+
+fn default_adc_max() -> u16 {
+    DEFAULT_ADC_MAX
+}
+
+/// The leader arm's potentiometers: the optional `leader:` section of the arm
+/// configuration. A channel that is absent is not calibrated.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LeaderCalibration {
+    /// The ADC's full-scale reading (1023 for the Arduino's 10 bits).
+    #[serde(default = "default_adc_max")]
+    pub adc_max: u16,
+    /// Base potentiometer (input: base_joint, deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base: Option<LeaderChannel>,
+    /// Main-arm potentiometer (input: shoulder_joint, deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shoulder: Option<LeaderChannel>,
+    /// Forearm potentiometer (input: forearm elevation φ, deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub elbow: Option<LeaderChannel>,
+    /// Claw potentiometer or trigger (input: opening 0 … 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gripper: Option<LeaderChannel>,
+}
+
+impl Default for LeaderCalibration {
+    fn default() -> Self {
+        LeaderCalibration {
+            adc_max: DEFAULT_ADC_MAX,
+            base: None,
+            shoulder: None,
+            elbow: None,
+            gripper: None,
+        }
+    }
+}
+
+impl LeaderCalibration {
+    /// One channel.
+    pub fn get(&self, servo: ServoId) -> Option<&LeaderChannel> {
+        servo
+            .of([&self.base, &self.shoulder, &self.elbow, &self.gripper])
+            .as_ref()
+    }
+
+    /// Set one channel.
+    pub fn set(&mut self, servo: ServoId, channel: LeaderChannel) {
+        *servo.of([
+            &mut self.base,
+            &mut self.shoulder,
+            &mut self.elbow,
+            &mut self.gripper,
+        ]) = Some(channel);
+    }
+
+    /// The loader's check (the plausibility is `calibration::derive_leader`'s): a positive full
+    /// scale, finite values, readings within it, distinct readings and inputs.
+    pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
+        let invalid =
+            |field: &'static str, value: String, why: &'static str| ConfigError::Invalid {
+                origin: origin.to_string(),
+                field,
+                value,
+                why,
+            };
+        if self.adc_max == 0 {
+            return Err(invalid("leader.adc_max", "0".into(), "must be positive"));
+        }
+        for servo in ServoId::ALL {
+            let Some(c) = self.get(servo) else { continue };
+            let field = servo.of([
+                "leader.base",
+                "leader.shoulder",
+                "leader.elbow",
+                "leader.gripper",
+            ]);
+            let value = format!("{c:?}");
+            let full = f64::from(self.adc_max);
+            if ![c.counts_a, c.input_a, c.counts_b, c.input_b]
+                .iter()
+                .all(|v| v.is_finite())
+            {
+                return Err(invalid(field, value, "every value must be finite"));
+            }
+            if !(0.0..=full).contains(&c.counts_a) || !(0.0..=full).contains(&c.counts_b) {
+                return Err(invalid(
+                    field,
+                    value,
+                    "readings must lie within 0 … adc_max",
+                ));
+            }
+            if c.counts_a == c.counts_b || c.input_a == c.input_b {
+                return Err(invalid(
+                    field,
+                    value,
+                    "the two readings and the two inputs must differ",
+                ));
+            }
+        }
+        Ok(())
     }
 }
 

@@ -2,6 +2,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod assess;
+pub mod calibration;
 pub mod chain;
 mod config;
 pub mod envelope;
@@ -13,8 +14,8 @@ mod servo;
 pub mod urdf;
 
 pub use config::{
-    ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LimitDeg, MAX_CONFIG_BYTES,
-    MAX_FLOW_COLLECTIONS,
+    ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LeaderCalibration, LeaderChannel,
+    LimitDeg, DEFAULT_ADC_MAX, MAX_CONFIG_BYTES, MAX_FLOW_COLLECTIONS,
 };
 pub use error::{Joint, KinematicsError};
 pub use motion::{MotionLimits, ServoMotionLimits};
