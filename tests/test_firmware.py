@@ -56,8 +56,8 @@ def test_handshake_reports_versions(uno):
     uno.send(frame(HELLO, 1, bytes([1])))
     f, _ = uno.wait_for(lambda f: f[0] == HELLO_ACK)
     version, major, minor, servos, watchdog_ms = struct.unpack("<BBBBH", f[2])
-    assert (version, servos, watchdog_ms) == (2, 4, 500)
-    assert (major, minor) == (1, 0)
+    assert (version, servos, watchdog_ms) == (3, 4, 500)
+    assert (major, minor) == (1, 1)  # 1.1: the leader role (tests/test_leader_firmware.py)
 
 
 # config.h's hold pose: ROBOT.md's home pose, claw closed (PROTOCOL.md, STATE)

@@ -3,7 +3,7 @@
 #include <stdint.h>
 
 #define FIRMWARE_MAJOR 1
-#define FIRMWARE_MINOR 0
+#define FIRMWARE_MINOR 1  // 1.1: the leader role (protocol version 3)
 // PROTOCOL_VERSION and the frame constants: protocol.h (written from libs/servo_protocol)
 
 #define SERVO_COUNT 4
@@ -40,3 +40,7 @@ static const uint16_t HOLD_TICKS[SERVO_COUNT] = {2944, 2944, 2944, 2325};
 // A partial frame older than this is dropped (a 12-byte frame takes ~1 ms at 115200),
 // so bytes lost mid-frame never hold up the next frame.
 #define FRAME_GAP_MS 5
+
+// The leader role (PROTOCOL.md version 3; wiring in docs/protocol.md): potentiometer
+// wipers on A0..A3, deadman button from D2 to GND. Its sampling (LEADER_PERIOD_US,
+// LEADER_OVERSAMPLING) is a protocol constant, in protocol.h; leader_adc.cpp does it.

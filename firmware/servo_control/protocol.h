@@ -6,7 +6,7 @@
 // generated: frame constants
 // Written from libs/servo_protocol/src/frame.rs, the one source of these values; after
 // a change there: EEZYBOT_BLESS=1 cargo test -p servo_protocol --test firmware_header
-#define PROTOCOL_VERSION 2
+#define PROTOCOL_VERSION 3
 #define PROTO_SYNC 0xA5
 #define PROTO_MAX_PAYLOAD 15
 #define PROTO_OVERHEAD 4
@@ -19,6 +19,8 @@ enum MsgType {
   MSG_STATE = 0x5,
   MSG_ESTOP = 0x6,
   MSG_CONFIG = 0x7,
+  MSG_ROLE = 0x8,
+  MSG_LEADER_STATE = 0x9,
 };
 
 // The state byte of a STATE payload.
@@ -28,7 +30,20 @@ enum DeviceState {
   STATE_WATCHDOG_HOLD = 2,
   STATE_WATCHDOG_DETACHED = 3,
   STATE_ESTOP = 4,
+  STATE_LEADER = 5,
 };
+
+// The role byte of a ROLE payload.
+enum DeviceRole {
+  ROLE_FOLLOWER = 0,
+  ROLE_LEADER = 1,
+};
+
+// The leader role's sampling: a LEADER_STATE every LEADER_PERIOD_US, each channel
+// the sum of LEADER_OVERSAMPLING samples.
+#define LEADER_CHANNELS 4
+#define LEADER_OVERSAMPLING 16
+#define LEADER_PERIOD_US 9600
 
 // Payload length each type must have, or -1 for an unknown type.
 static inline int8_t proto_payload_len(uint8_t type) {
@@ -40,6 +55,8 @@ static inline int8_t proto_payload_len(uint8_t type) {
     case MSG_STATE: return 12;
     case MSG_ESTOP: return 1;
     case MSG_CONFIG: return 3;
+    case MSG_ROLE: return 1;
+    case MSG_LEADER_STATE: return 11;
     default: return -1;
   }
 }

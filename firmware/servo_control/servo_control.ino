@@ -10,6 +10,12 @@
 // commands until released. No pulses go out before the first command; until
 // then it reports its hold pose (config.h), where the host's first command starts.
 //
+// The same sketch is a leader (PROTOCOL.md version 3: the host selects the role with
+// ROLE, so the same image goes on both Unos of leader-follower teleoperation): no
+// pulses; four potentiometers on A0..A3 and a deadman button on D2 sampled by Timer2
+// (leader_adc.cpp: 16 samples a channel in 9.6 ms windows) and streamed as
+// LEADER_STATE, one a window. A HELLO (a new session) makes it a follower again.
+//
 // Builds in the Arduino IDE (board: Arduino Uno) and with `make` (avr-gcc + Debian's
 // arduino-core-avr).
 
@@ -17,9 +23,11 @@
 #include "config.h"
 #include "protocol.h"
 #include "servo_pwm.h"
+#include "leader_adc.h"
 
 static Decoder decoder;
 static uint8_t state = STATE_IDLE;
+static uint8_t role = ROLE_FOLLOWER;
 // clamped command, ticks (0 = no pulses on that channel); the hold pose before the first
 static uint16_t applied[SERVO_COUNT];
 static bool output = false;  // pulses going out
@@ -65,18 +73,44 @@ static void output_pulses(bool on) {
   servo_pwm_sync();  // a new width starts the next frame early (servo_pwm.h)
 }
 
+static void send_leader_state(const LeaderWindow *w) {
+  uint8_t p[11];
+  for (uint8_t i = 0; i < LEADER_CHANNELS; i++) put_u16(p + 2 * i, w->sum[i]);
+  p[8] = w->deadman;
+  p[9] = w->window;
+  p[10] = w->overruns;
+  send(MSG_LEADER_STATE, p, sizeof(p));
+}
+
+// Leader: the pulses stop (whatever the state, the e-stop too: a leader has none),
+// the sampling starts. Follower again: idle, the next command starts from `applied`.
+// Taking the role the device has changes nothing.
+static void set_role(uint8_t r) {
+  if (r == role) return;
+  role = r;
+  if (r == ROLE_LEADER) {
+    output_pulses(false);
+    state = STATE_LEADER;
+    leader_adc_begin();
+  } else {
+    leader_adc_end();
+    state = STATE_IDLE;
+  }
+}
+
 static void handle(const Frame *f) {
   last_seq = f->seq;
   last_rx_ms = millis();
   switch (f->type) {
     case MSG_HELLO: {
+      set_role(ROLE_FOLLOWER);  // a new session starts as a follower
       uint8_t p[6] = {PROTOCOL_VERSION, FIRMWARE_MAJOR, FIRMWARE_MINOR, SERVO_COUNT, 0, 0};
       put_u16(p + 4, watchdog_ms);
       send(MSG_HELLO_ACK, p, sizeof(p));
       return;
     }
     case MSG_SET_PULSES:
-      if (state != STATE_ESTOP) {
+      if (state != STATE_ESTOP && role == ROLE_FOLLOWER) {  // a leader drives nothing
         clamped = 0;
         for (uint8_t i = 0; i < SERVO_COUNT; i++) {
           uint16_t t = get_u16(f->payload + 2 * i);
@@ -93,6 +127,7 @@ static void handle(const Frame *f) {
     case MSG_HEARTBEAT:
       break;
     case MSG_ESTOP:
+      if (role == ROLE_LEADER) break;  // no pulses to hold or stop
       if (f->payload[0] == 1 || f->payload[0] == 2) {
         state = STATE_ESTOP;  // ignore commands; 1: hold the pulses, 2: stop them
         if (f->payload[0] == 2) output_pulses(false);
@@ -107,6 +142,9 @@ static void handle(const Frame *f) {
       watchdog_detach = f->payload[2] == 1;
       break;
     }
+    case MSG_ROLE:
+      if (f->payload[0] <= ROLE_LEADER) set_role(f->payload[0]);
+      break;
     default:  // device-to-host types sent to the device
       decoder.errors++;
       return;
@@ -142,5 +180,9 @@ void loop() {
       state = STATE_WATCHDOG_HOLD;
     }
     send_state();
+  }
+  if (role == ROLE_LEADER) {
+    LeaderWindow w;
+    if (leader_adc_take(&w)) send_leader_state(&w);
   }
 }

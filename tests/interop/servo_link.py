@@ -1,5 +1,7 @@
-"""The servo link protocol (firmware/servo_control/PROTOCOL.md), written again from the
-document for the tests: frames, a decoder, and helpers to run the firmware in simavr."""
+"""The servo link protocol (firmware/servo_control/PROTOCOL.md, version 3), written again
+from the document for the tests: frames, a decoder, the leader role's LEADER_STATE, and
+helpers to run the firmware in simavr (with recorded potentiometer and deadman inputs
+for the leader role)."""
 import os
 import signal
 import struct
@@ -10,10 +12,20 @@ import tty
 from pathlib import Path
 
 SYNC = 0xA5
-HELLO, HELLO_ACK, SET_PULSES, HEARTBEAT, STATE, ESTOP, CONFIG = 1, 2, 3, 4, 5, 6, 7
-PAYLOAD_LEN = {HELLO: 1, HELLO_ACK: 6, SET_PULSES: 8, HEARTBEAT: 0, STATE: 12, ESTOP: 1, CONFIG: 3}
-STATES = {0: "idle", 1: "running", 2: "watchdog hold", 3: "watchdog detached", 4: "estop"}
+PROTOCOL_VERSION = 3
+HELLO, HELLO_ACK, SET_PULSES, HEARTBEAT, STATE, ESTOP, CONFIG, ROLE, LEADER_STATE = 1, 2, 3, 4, 5, 6, 7, 8, 9
+PAYLOAD_LEN = {HELLO: 1, HELLO_ACK: 6, SET_PULSES: 8, HEARTBEAT: 0, STATE: 12, ESTOP: 1, CONFIG: 3, ROLE: 1,
+               LEADER_STATE: 11}
+STATES = {0: "idle", 1: "running", 2: "watchdog hold", 3: "watchdog detached", 4: "estop", 5: "leader"}
+FOLLOWER, LEADER = 0, 1
 CYCLES_PER_US = 16
+# The leader role: LEADER_STATE every window of 64 conversions 150 us apart (16 a channel,
+# A0 A1 A2 A3 A0 ...); a channel is the sum of its 16 10-bit samples, and 16 x 1024 stands
+# for the ADC reference, AVcc (5 V)
+LEADER_PERIOD_US = 9600
+LEADER_OVERSAMPLING = 16
+LEADER_FULL_SCALE = LEADER_OVERSAMPLING * 1024
+AVCC_MV = 5000
 
 
 def crc8(data):
@@ -36,6 +48,11 @@ def set_pulses(seq, ticks):
 
 def config(seq, watchdog_ms, detach):
     return frame(CONFIG, seq, struct.pack("<HB", watchdog_ms, 1 if detach else 0))
+
+
+def role(seq, which):
+    """ROLE: FOLLOWER (0) or LEADER (1)."""
+    return frame(ROLE, seq, bytes([which]))
 
 
 class Decoder:
@@ -71,13 +88,37 @@ def parse_state(payload):
             "ticks": list(struct.unpack("<4H", payload[4:12]))}
 
 
+def parse_leader_state(payload):
+    """A LEADER_STATE: `adc` the four sums (0..16368), `millivolts` what they stand for at
+    AVcc = 5 V (sum / 16384 x 5000), `deadman` held throughout the window, `window` its
+    number (wraps), `overruns` the device's late samples (wraps)."""
+    *adc, buttons, window, overruns = struct.unpack("<4HBBB", payload)
+    if buttons > 1:
+        raise ValueError(f"buttons byte {buttons:#x}: only bit 0 is defined")
+    return {"adc": adc, "millivolts": [a * AVCC_MV / LEADER_FULL_SCALE for a in adc], "deadman": bool(buttons),
+            "window": window, "overruns": overruns}
+
+
+def leader_state(seq, adc, deadman, window, overruns=0):
+    """A LEADER_STATE frame (as the device sends it)."""
+    return frame(LEADER_STATE, seq, struct.pack("<4HBBB", *adc, 1 if deadman else 0, window & 0xFF, overruns & 0xFF))
+
+
+def write_adc_file(path, points):
+    """servo_sim --adc-file: `points` of (t_ms, [mv0, mv1, mv2, mv3], deadman held)."""
+    lines = ["# t_ms mv0 mv1 mv2 mv3 deadman"]
+    lines += [f"{t:g} {' '.join(f'{mv:g}' for mv in mvs)} {1 if held else 0}" for t, mvs, held in points]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
 class SimulatedUno:
     """The servo_control ELF in simavr (firmware/servo_control/build/servo_sim)."""
 
-    def __init__(self, workdir, firmware_dir, boot=0, clock_ppm=0.0):
+    def __init__(self, workdir, firmware_dir, boot=0, clock_ppm=0.0, adc_file=None):
         """`boot` > 0: the same board reset (a new simavr process on the same pty link),
         with its own events file. `clock_ppm`: the board's clock error against wall time
-        (servo_sim --clock-ppm)."""
+        (servo_sim --clock-ppm). `adc_file`: the leader's recorded inputs (A0..A3 and the
+        deadman button, servo_sim --adc-file; write_adc_file)."""
         self.workdir = Path(workdir)
         self.tty_path = self.workdir / "tty"
         tag = f"-{boot}" if boot else ""
@@ -88,6 +129,8 @@ class SimulatedUno:
         args = [str(sim), str(elf), "--pty-link", str(self.tty_path), "--events", str(self.events_path)]
         if clock_ppm:
             args += ["--clock-ppm", repr(float(clock_ppm))]
+        if adc_file:
+            args += ["--adc-file", str(adc_file)]
         self.proc = subprocess.Popen(args, stdout=self.log, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + 10
         while not self.tty_path.exists():

@@ -4,11 +4,14 @@
 //
 // The fuzzer's input is a script of operations on the device:
 //   00kkkkkk  the next k+1 input bytes arrive on the UART, then loop() runs
-//   01-ttttt  a valid frame of type t (0..15, unknown types too) with the next bytes
+//   010-tttt  a valid frame of type t (0..15, unknown types too) with the next bytes
 //             as sequence number and payload (its type's length; else the low nibble of
 //             the next byte), correct CRC, then loop()
 //   10dddddd  the clock advances (d < 32: d ms; else (d - 31) * 25 ms, up to 800 ms),
 //             then loop()
+//   011-----  a leader sampling window ends (if the sketch samples: leader role) with the
+//             next 10 bytes as its four sums, deadman bit (bit 0) and overruns, then
+//             loop()
 //   11------  a pause longer than FRAME_GAP_MS, then a HEARTBEAT with the next byte as
 //             sequence number: the device must answer it
 // and every run ends with that pause and HEARTBEAT.
@@ -19,8 +22,11 @@
 //    e-stop (to its values clamped into the table) or when the watchdog detaches;
 //  - every reply is the model's: HELLO_ACK for HELLO, a STATE (acknowledged sequence
 //    number, state, clamped flag, widths) for every other host frame, an unsolicited
-//    STATE when the watchdog fires, nothing for device-to-host types; transmit sequence
-//    numbers count up by one;
+//    STATE when the watchdog fires, nothing for device-to-host types, a LEADER_STATE
+//    (the window's sums, deadman bit, number and overruns) for each sampling window in
+//    the leader role; transmit sequence numbers count up by one;
+//  - the sampler (leader_adc.h) runs exactly while the model is in the leader role;
+//    begin and end alternate; no pulses in the leader role;
 //  - a valid frame after garbage and a pause longer than FRAME_GAP_MS is handled, and a
 //    frame is handled in the loop() that reads the byte making it decodable (its last
 //    byte, or the one that makes a false start before it fail: then several are handled
@@ -47,6 +53,10 @@ static std::vector<uint8_t> rx;  // bytes the host sent, not yet read
 static size_t rx_next;
 static std::vector<uint8_t> tx;  // bytes the sketch wrote
 static uint16_t width[SERVO_COUNT];
+// the sampler of leader_adc.h: running, and a window ended but not taken
+static bool sampling, window_ready;
+static LeaderWindow window_data;
+static uint8_t windows;
 
 HostSerial Serial;
 void HostSerial::begin(unsigned long) {}
@@ -69,6 +79,25 @@ void servo_pwm_set(uint8_t i, uint16_t ticks) {
 void servo_pwm_sync() {}  // frame timing only: no width changes
 uint16_t servo_pwm_get(uint8_t i) { return i < SERVO_COUNT ? width[i] : 0; }
 
+void leader_adc_begin() {
+  SPEC_CHECK(!sampling, "leader_adc_begin() while sampling");
+  sampling = true;
+  window_ready = false;
+  windows = 0;
+}
+void leader_adc_end() {
+  SPEC_CHECK(sampling, "leader_adc_end() while not sampling");
+  sampling = false;
+  window_ready = false;
+}
+uint8_t leader_adc_take(LeaderWindow *out) {
+  SPEC_CHECK(sampling, "leader_adc_take() while not sampling");
+  if (!window_ready) return 0;
+  *out = window_data;
+  window_ready = false;
+  return 1;
+}
+
 extern "C" int LLVMFuzzerInitialize(int *, char ***) {
   power_up_bss.resize(__stop_sketch_bss - __start_sketch_bss);
   power_up_data.resize(__stop_sketch_data - __start_sketch_data);
@@ -83,6 +112,7 @@ static void boot() {
   rx.clear();
   rx_next = 0;
   tx.clear();
+  sampling = window_ready = false;
   copy_raw(__start_sketch_bss, power_up_bss.data(), power_up_bss.size());
   copy_raw(__start_sketch_data, power_up_data.data(), power_up_data.size());
   setup();
@@ -96,11 +126,15 @@ struct Reply {
 
 // Version 1 of the page and version 2 (ESTOP 2 stops the pulses; STATE reports the
 // commanded widths, or the hold pose of config.h before the first command) are both
-// modelled: the one the sketch's PROTOCOL_VERSION names is checked.
+// modelled: the one the sketch's PROTOCOL_VERSION names is checked. Version 3's leader
+// role (ROLE, LEADER_STATE) is modelled as the page says it.
 struct Model {
   spec::Decoder dec;
   unsigned long last_byte = 0, last_rx = 0;
   uint8_t st = spec::IDLE, clamped = 0, last_seq = 0;
+  uint8_t role = spec::FOLLOWER_ROLE;
+  bool window_due = false;  // a sampling window ended: a LEADER_STATE is due
+  uint8_t window_payload[11] = {0};
   uint16_t applied[SERVO_COUNT] = {0}, out[SERVO_COUNT] = {0};
   bool output = false;  // pulses going out
   uint16_t watchdog_ms = WATCHDOG_MS_DEFAULT;
@@ -122,6 +156,20 @@ struct Model {
     memset(out, 0, sizeof(out));
   }
 
+  // "Taking the role the device has changes nothing." Leader: the pulses stop, whatever
+  // the state (the e-stop too); follower again: idle.
+  void set_role(uint8_t r) {
+    if (r == role) return;
+    role = r;
+    if (r == spec::LEADER_ROLE) {
+      stop_pulses();
+      st = spec::LEADER;
+    } else {
+      st = spec::IDLE;
+      window_due = false;
+    }
+  }
+
   void state_reply() {
     Reply r;
     r.type = spec::STATE;
@@ -141,6 +189,7 @@ struct Model {
     const uint8_t *p = f.payload.data();
     switch (f.type) {
       case spec::HELLO: {
+        set_role(spec::FOLLOWER_ROLE);  // "every HELLO puts it back in the follower role"
         uint8_t a[6] = {PROTOCOL_VERSION, FIRMWARE_MAJOR, FIRMWARE_MINOR, SERVO_COUNT,
                         (uint8_t)watchdog_ms, (uint8_t)(watchdog_ms >> 8)};
         Reply r;
@@ -150,7 +199,8 @@ struct Model {
         return;
       }
       case spec::SET_PULSES:
-        if (st != spec::E_STOP) {  // "ignores SET_PULSES until ESTOP(0)"
+        // "ignores SET_PULSES until ESTOP(0)"; a leader ignores them
+        if (st != spec::E_STOP && role == spec::FOLLOWER_ROLE) {
           clamped = 0;
           for (int i = 0; i < SERVO_COUNT; i++) {
             uint16_t t = (uint16_t)(p[2 * i] | (p[2 * i + 1] << 8));
@@ -165,6 +215,7 @@ struct Model {
       case spec::HEARTBEAT:
         break;
       case spec::ESTOP:
+        if (role == spec::LEADER_ROLE) break;  // "ESTOP changes nothing" for a leader
         if (p[0] == 1 || (PROTOCOL_VERSION >= 2 && p[0] == 2)) {
           st = spec::E_STOP;
           if (p[0] == 2) stop_pulses();
@@ -184,7 +235,10 @@ struct Model {
         detach = p[2] == 1;
         break;
       }
-      default:  // HELLO_ACK, STATE: device-to-host types, no answer
+      case spec::ROLE:
+        if (p[0] <= spec::LEADER_ROLE) set_role(p[0]);  // other bytes: no change, STATE
+        break;
+      default:  // HELLO_ACK, STATE, LEADER_STATE: device-to-host types, no answer
         return;
     }
     state_reply();
@@ -207,6 +261,13 @@ struct Model {
         st = spec::WATCHDOG_HOLD;
       }
       state_reply();
+    }
+    if (role == spec::LEADER_ROLE && window_due) {  // "a LEADER_STATE every window"
+      Reply r;
+      r.type = spec::LEADER_STATE;
+      r.payload.assign(window_payload, window_payload + 11);
+      replies.push_back(r);
+      window_due = false;
     }
   }
 };
@@ -264,6 +325,26 @@ static void run_loop(const uint8_t *bytes, size_t n) {
   for (int i = 0; i < SERVO_COUNT; i++)
     SPEC_CHECK(width[i] == model.out[i], "step %zu at %lu ms: pin %d outputs %u ticks, PROTOCOL.md says %u",
                step, now_ms, 8 + i, width[i], model.out[i]);
+  SPEC_CHECK(sampling == (model.role == spec::LEADER_ROLE), "step %zu: the sampler %s in the %s role", step,
+             sampling ? "runs" : "stopped", model.role == spec::LEADER_ROLE ? "leader" : "follower");
+  SPEC_CHECK(!window_ready, "step %zu: a sampling window was not taken", step);
+}
+
+// A sampling window ends with the sums, deadman bit and overruns in `b` (10 bytes).
+static void window_ends(const uint8_t *b) {
+  if (sampling) {
+    for (int c = 0; c < LEADER_CHANNELS; c++) window_data.sum[c] = (uint16_t)(b[2 * c] | (b[2 * c + 1] << 8));
+    window_data.deadman = b[8] & 1;
+    window_data.window = windows++;
+    window_data.overruns = b[9];
+    window_ready = true;
+    memcpy(model.window_payload, b, 8);
+    model.window_payload[8] = window_data.deadman;
+    model.window_payload[9] = window_data.window;
+    model.window_payload[10] = window_data.overruns;
+    model.window_due = true;
+  }
+  run_loop(NULL, 0);
 }
 
 static void advance(unsigned long ms) {
@@ -301,6 +382,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
         break;
       }
       case 1: {
+        if (op & 0x20) {
+          uint8_t b[10];
+          for (int j = 0; j < 10; j++) b[j] = next(0);
+          window_ends(b);
+          break;
+        }
         uint8_t type = op & 0x0F;
         uint8_t seq = next(0);
         int len = spec::payload_len(type);

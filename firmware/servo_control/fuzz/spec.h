@@ -21,8 +21,10 @@ namespace spec {
   } while (0)
 
 const uint8_t SYNC = 0xA5;
-enum { HELLO = 1, HELLO_ACK = 2, SET_PULSES = 3, HEARTBEAT = 4, STATE = 5, ESTOP = 6, CONFIG = 7 };
-enum { IDLE = 0, RUNNING = 1, WATCHDOG_HOLD = 2, WATCHDOG_DETACHED = 3, E_STOP = 4 };
+enum { HELLO = 1, HELLO_ACK = 2, SET_PULSES = 3, HEARTBEAT = 4, STATE = 5, ESTOP = 6, CONFIG = 7,
+       ROLE = 8, LEADER_STATE = 9 };
+enum { IDLE = 0, RUNNING = 1, WATCHDOG_HOLD = 2, WATCHDOG_DETACHED = 3, E_STOP = 4, LEADER = 5 };
+enum { FOLLOWER_ROLE = 0, LEADER_ROLE = 1 };
 
 // CRC-8/SMBUS: polynomial 0x07, init 0, no reflection, no final xor.
 inline uint8_t crc8(const uint8_t *p, size_t n) {
@@ -44,6 +46,8 @@ inline int payload_len(int type) {
     case STATE: return 12;
     case ESTOP: return 1;
     case CONFIG: return 3;
+    case ROLE: return 1;
+    case LEADER_STATE: return 11;
     default: return -1;
   }
 }

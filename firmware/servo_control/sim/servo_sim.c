@@ -4,6 +4,7 @@
 // event file with the simulated cycle count, and simulated time paced to wall time.
 //
 //   servo_sim FIRMWARE.elf --pty-link /tmp/x/tty --events /tmp/x/events.txt [--clock-ppm PPM]
+//             [--adc-file FILE]
 //
 // --clock-ppm: the board's clock runs PPM parts per million fast (negative: slow) of
 // 16 MHz against wall time. An Uno's ceramic resonator is within +-0.5 % (5000 ppm),
@@ -11,12 +12,26 @@
 // sweeps the whole frame every few seconds; paced exactly (the default, 0), the phase
 // stays where the run happened to start it.
 //
+// --adc-file: the leader role's inputs, a recorded hand motion: lines
+//   T_MS MV0 MV1 MV2 MV3 DEADMAN
+// (simulated milliseconds since power-up, non-decreasing; millivolts on A0..A3, 0..5000;
+// DEADMAN 1: the button held, D2 pulled to GND, 0: released, D2 high), '#' comments.
+// Voltages are interpolated linearly between two lines (two lines at the same time: a
+// step), held before the first and after the last; the deadman follows the last line
+// at or before the time (steps). Each channel's voltage is set when the AVR starts a
+// conversion (simavr's ADC trigger), as a real ADC samples at the conversion's start;
+// D2 changes at its line's cycle. AVcc = AREF = VCC = 5000 mV. Without the option the
+// inputs stay at 0 mV and D2 is not driven.
+//
 // Event lines:  e CYCLE PIN LEVEL   (pin 0..3 = PB0..PB3)
 //               r CYCLE BYTE        (byte delivered to the AVR's UART, host -> AVR)
 //               t CYCLE BYTE        (byte sent by the AVR)
 //               w CYCLE NS          (bytes were read from the pty at CLOCK_REALTIME NS;
 //                                    their r lines follow: ties simulated to wall time)
 //               u CYCLE 0|1         (the USB cable pulled / plugged back, SIGUSR1)
+//               a CYCLE CH MV       (--adc-file: a conversion of channel CH started with
+//                                    MV millivolts on it)
+//               d CYCLE LEVEL       (--adc-file: D2 driven to LEVEL, 0 = deadman held)
 // SIGUSR1 pulls the USB cable (the pty is closed and its link removed; the AVR runs on,
 // holding its pulses as a board on its own supply does) or plugs it back (a new pty at
 // the same link). Stops on SIGINT/SIGTERM with exit code 0.
@@ -32,6 +47,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <avr_adc.h>
 #include <avr_ioport.h>
 #include <avr_uart.h>
 #include <sim_avr.h>
@@ -45,6 +61,133 @@ static avr_t *avr;
 static int master = -1;
 static int xoff;
 static uint32_t pin_level[4] = {2, 2, 2, 2};
+
+// --adc-file: the recorded inputs
+#define AVCC_MV 5000
+struct adc_point {
+  double t_ms;
+  double mv[4];
+  int deadman;
+};
+static struct adc_point *adc_points;
+static size_t adc_count;
+static avr_irq_t *d2_irq;
+
+static int load_adc_file(const char *path) {
+  FILE *f = fopen(path, "r");
+  if (!f) {
+    perror("servo_sim: --adc-file");
+    return -1;
+  }
+  char line[512];
+  size_t cap = 0, lineno = 0;
+  while (fgets(line, sizeof(line), f)) {
+    lineno++;
+    char *hash = strchr(line, '#');
+    if (hash) *hash = 0;
+    struct adc_point p;
+    char extra;
+    int n = sscanf(line, "%lf %lf %lf %lf %lf %d %c", &p.t_ms, &p.mv[0], &p.mv[1], &p.mv[2], &p.mv[3], &p.deadman, &extra);
+    if (n <= 0) continue;  // blank
+    if (n != 6 || p.t_ms < 0 || (adc_count && p.t_ms < adc_points[adc_count - 1].t_ms) || (p.deadman & ~1)) {
+      fprintf(stderr, "servo_sim: %s:%zu: want `T_MS MV0 MV1 MV2 MV3 DEADMAN`, times non-decreasing\n", path, lineno);
+      fclose(f);
+      return -1;
+    }
+    for (int c = 0; c < 4; c++) p.mv[c] = p.mv[c] < 0 ? 0 : p.mv[c] > AVCC_MV ? AVCC_MV : p.mv[c];
+    if (adc_count == cap) {
+      cap = cap ? 2 * cap : 64;
+      adc_points = realloc(adc_points, cap * sizeof(*adc_points));
+      if (!adc_points) abort();
+    }
+    adc_points[adc_count++] = p;
+  }
+  fclose(f);
+  if (!adc_count) {
+    fprintf(stderr, "servo_sim: %s: no lines\n", path);
+    return -1;
+  }
+  return 0;
+}
+
+static double cycle_ms(avr_cycle_count_t cycle) {
+  return (double)cycle * 1e3 / (double)avr->frequency;
+}
+
+// The last point at or before `t_ms` (the first if none).
+static size_t adc_at(double t_ms) {
+  size_t i = 0;
+  while (i + 1 < adc_count && adc_points[i + 1].t_ms <= t_ms) i++;
+  return i;
+}
+
+static double adc_mv(double t_ms, int ch) {
+  size_t i = adc_at(t_ms);
+  const struct adc_point *a = &adc_points[i];
+  if (t_ms <= a->t_ms || i + 1 == adc_count) return a->mv[ch];
+  const struct adc_point *b = &adc_points[i + 1];
+  return a->mv[ch] + (b->mv[ch] - a->mv[ch]) * (t_ms - a->t_ms) / (b->t_ms - a->t_ms);
+}
+
+// A conversion starts: the voltages now on every channel (simavr reads them when the
+// firmware reads the result, from what was raised last).
+static void adc_trigger(struct avr_irq_t *irq, uint32_t value, void *param) {
+  (void)irq, (void)param;
+  union {
+    avr_adc_mux_t mux;
+    uint32_t v;
+  } e = {.v = value};
+  double t = cycle_ms(avr->cycle);
+  for (int c = 0; c < 4; c++) {
+    uint32_t mv = (uint32_t)(adc_mv(t, c) + 0.5);
+    avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + c), mv);
+    if (e.mux.kind == ADC_MUX_SINGLE && e.mux.src == (unsigned)c)
+      fprintf(events, "a %llu %d %u\n", (unsigned long long)avr->cycle, c, mv);
+  }
+}
+
+// D2 as the file says at this cycle: the button pulls it to GND, the pull-up (and the
+// "external" level simavr gives an input pin when the firmware writes PORTD) to 5 V.
+static void drive_d2(int held) {
+  avr_ioport_external_t ext = {.name = 'D', .mask = 1 << 2, .value = held ? 0 : 1 << 2};
+  avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('D'), &ext);
+  avr_raise_irq(d2_irq, held ? 0 : 1);
+}
+
+static int d2_level = -1;  // the file's deadman now: 1 held (D2 low), -1 not driven yet
+
+// Something else raised D2 (simavr applies the internal pull-up when the firmware writes
+// PORTD, in versions without "external" levels): the button wins, from the next cycle.
+static avr_cycle_count_t d2_redrive(struct avr_t *a, avr_cycle_count_t when, void *param) {
+  (void)a, (void)when, (void)param;
+  if (d2_level >= 0) avr_raise_irq(d2_irq, d2_level ? 0 : 1);
+  return 0;
+}
+
+static void d2_raised(struct avr_irq_t *irq, uint32_t value, void *param) {
+  (void)irq, (void)param;
+  if (d2_level >= 0 && (value ? 1 : 0) != (d2_level ? 0 : 1)) avr_cycle_timer_register(avr, 1, d2_redrive, NULL);
+}
+
+static avr_cycle_count_t d2_timer(struct avr_t *a, avr_cycle_count_t when, void *param) {
+  (void)a, (void)when, (void)param;
+  double t = cycle_ms(avr->cycle);
+  size_t i = adc_at(t);
+  int held = t >= adc_points[i].t_ms ? adc_points[i].deadman : adc_points[0].deadman;
+  if (held != d2_level) {
+    d2_level = held;
+    drive_d2(held);
+    fprintf(events, "d %llu %d\n", (unsigned long long)avr->cycle, held ? 0 : 1);
+  }
+  // again at the next line that changes it
+  for (size_t j = i + 1; j < adc_count; j++) {
+    if (adc_points[j].deadman != held) {
+      avr_cycle_count_t at = (avr_cycle_count_t)(adc_points[j].t_ms * 1e-3 * (double)avr->frequency + 0.5);
+      return at > avr->cycle ? at : avr->cycle + 1;
+    }
+  }
+  return 0;
+}
 
 static void on_signal(int sig) {
   (void)sig;
@@ -134,18 +277,20 @@ static void unplug(const char *link_path) {
 }
 
 static void usage(void) {
-  fprintf(stderr, "usage: servo_sim FIRMWARE.elf --pty-link PATH --events PATH [--no-realtime] [--clock-ppm PPM]\n");
+  fprintf(stderr, "usage: servo_sim FIRMWARE.elf --pty-link PATH --events PATH [--no-realtime] [--clock-ppm PPM]"
+                  " [--adc-file FILE]\n");
   exit(2);
 }
 
 int main(int argc, char **argv) {
-  const char *elf = NULL, *link_path = NULL, *events_path = NULL;
+  const char *elf = NULL, *link_path = NULL, *events_path = NULL, *adc_path = NULL;
   int realtime = 1;
   double clock_ppm = 0.0;
   for (int i = 1; i < argc; i++) {
     if (!strcmp(argv[i], "--pty-link") && i + 1 < argc) link_path = argv[++i];
     else if (!strcmp(argv[i], "--events") && i + 1 < argc) events_path = argv[++i];
     else if (!strcmp(argv[i], "--no-realtime")) realtime = 0;
+    else if (!strcmp(argv[i], "--adc-file") && i + 1 < argc) adc_path = argv[++i];
     else if (!strcmp(argv[i], "--clock-ppm") && i + 1 < argc) {
       char *end;
       clock_ppm = strtod(argv[++i], &end);
@@ -155,6 +300,7 @@ int main(int argc, char **argv) {
     else usage();
   }
   if (!elf || !link_path || !events_path) usage();
+  if (adc_path && load_adc_file(adc_path)) return 2;
 
   elf_firmware_t fw;
   memset(&fw, 0, sizeof(fw));
@@ -169,6 +315,7 @@ int main(int argc, char **argv) {
   }
   avr_init(avr);
   avr->frequency = 16000000;
+  avr->vcc = avr->avcc = avr->aref = AVCC_MV;  // a Uno on USB: the ADC's reference is AVcc
   avr->log = 1;
   avr_load_firmware(avr, &fw);
 
@@ -187,6 +334,12 @@ int main(int argc, char **argv) {
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_out, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), uart_xon, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), uart_xoff, NULL);
+  if (adc_path) {
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER), adc_trigger, NULL);
+    d2_irq = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2);
+    avr_irq_register_notify(d2_irq, d2_raised, NULL);
+    avr_cycle_timer_register(avr, 1, d2_timer, NULL);
+  }
 
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);

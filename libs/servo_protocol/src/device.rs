@@ -11,11 +11,20 @@
 //! the stall began, and so does what STATE reports for it; un-stalled, it moves on to
 //! its latest command at servo speed. (The real firmware has no position feedback: it
 //! reports what it commands.)
+//!
+//! **The leader role** (protocol version 3) is simulated too: after a ROLE leader the
+//! device stops its pulses and streams LEADER_STATE every sampling window
+//! ([`LEADER_PERIOD_US`]), with the potentiometers' voltages and the deadman button set
+//! from code ([`Device::set_leader_input`], [`VirtualArduino::set_leader_input`]), so a
+//! leader host runs without hardware. Each channel is 16 samples of the datasheet's code
+//! for the input at the window's end (the firmware averages over the window); the
+//! deadman bit is set when the button was held throughout the window, as the firmware's.
 
 use crate::frame::{
-    decode, encode, DeviceState, Frame, Message, StopAction, WatchdogAction, PROTOCOL_VERSION,
-    SERVOS,
+    decode, encode, DeviceState, Frame, Message, Role, StopAction, WatchdogAction,
+    LEADER_OVERSAMPLING, LEADER_PERIOD_US, PROTOCOL_VERSION, SERVOS,
 };
+use crate::leader::LeaderInput;
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::sync::{Arc, Condvar, Mutex};
@@ -25,7 +34,10 @@ use std::time::{Duration, Instant};
 pub const FRAME_GAP: Duration = Duration::from_millis(5);
 
 /// Firmware version the virtual device reports (the firmware's own constants).
-pub const FIRMWARE_VERSION: (u8, u8) = (1, 0);
+pub const FIRMWARE_VERSION: (u8, u8) = (1, 1);
+
+/// The leader role's sampling window: a LEADER_STATE every 9.6 ms.
+pub const LEADER_PERIOD: Duration = Duration::from_micros(LEADER_PERIOD_US as u64);
 
 /// Servo speed in ticks per second: `deg_per_s` × ticks per degree (0.5 µs ticks, 544–2400 µs over 180°).
 const fn ticks_per_s(deg_per_s: f64) -> f64 {
@@ -94,6 +106,14 @@ pub struct Device {
     last_byte: Duration,
     rx: Vec<u8>,
     out: Vec<u8>,
+    role: Role,
+    /// the simulated potentiometers and deadman button
+    leader_input: LeaderInput,
+    /// leader role: the end of the current sampling window, its number, and whether
+    /// the deadman button was released at some moment of it
+    window_end: Duration,
+    window: u8,
+    released_in_window: bool,
 }
 
 impl Device {
@@ -118,7 +138,34 @@ impl Device {
             last_byte: Duration::ZERO,
             rx: Vec::new(),
             out: Vec::new(),
+            role: Role::Follower,
+            leader_input: LeaderInput::default(),
+            window_end: Duration::ZERO,
+            window: 0,
+            released_in_window: true,
         }
+    }
+
+    /// The device's role ([`Message::Role`]; a HELLO makes it a follower).
+    pub fn role(&self) -> Role {
+        self.role
+    }
+
+    /// The simulated leader inputs ([`Device::set_leader_input`]).
+    pub fn leader_input(&self) -> LeaderInput {
+        self.leader_input
+    }
+
+    /// Set the simulated potentiometers (A0–A3, millivolts) and deadman button from
+    /// `now` on; in the leader role, the windows that ended before `now` are sent with
+    /// the inputs before. A release of the deadman button at any moment of a window
+    /// clears its deadman bit.
+    pub fn set_leader_input(&mut self, input: LeaderInput, now: Duration) {
+        self.tick(now);
+        if !input.deadman {
+            self.released_in_window = true;
+        }
+        self.leader_input = input;
     }
 
     /// Current state.
@@ -219,6 +266,11 @@ impl Device {
         match frame.msg {
             Message::Hello { .. } => {
                 self.last_rx = now;
+                // a new session: a leader becomes a follower again, without pulses
+                if self.role == Role::Leader {
+                    self.role = Role::Follower;
+                    self.state = DeviceState::Idle;
+                }
                 let (firmware_major, firmware_minor) = FIRMWARE_VERSION;
                 self.reply(Message::HelloAck {
                     version: PROTOCOL_VERSION,
@@ -231,7 +283,8 @@ impl Device {
             }
             Message::SetPulses { ticks } => {
                 self.last_rx = now;
-                if self.state != DeviceState::Estop {
+                // a leader drives nothing: ignored, and the STATE says why
+                if self.state != DeviceState::Estop && self.role == Role::Follower {
                     let mut clamped = false;
                     for (i, t) in ticks.iter().enumerate() {
                         let (lo, hi) = self.config.limits[i];
@@ -256,6 +309,8 @@ impl Device {
                 }
             }
             Message::Heartbeat => self.last_rx = now,
+            // a leader has no pulses to hold or stop
+            Message::Estop { .. } if self.role == Role::Leader => self.last_rx = now,
             Message::Estop { engaged } => {
                 self.last_rx = now;
                 match engaged {
@@ -284,8 +339,25 @@ impl Device {
                 self.watchdog_ms = watchdog_ms.max(20);
                 self.watchdog_action = action;
             }
+            Message::Role { role } => {
+                self.last_rx = now;
+                if role != self.role {
+                    self.role = role;
+                    match role {
+                        Role::Leader => {
+                            // the pulses stop; the windows start now
+                            self.output = false;
+                            self.state = DeviceState::Leader;
+                            self.window_end = now + LEADER_PERIOD;
+                            self.window = 0;
+                            self.released_in_window = !self.leader_input.deadman;
+                        }
+                        Role::Follower => self.state = DeviceState::Idle,
+                    }
+                }
+            }
             // device-to-host messages are not for a device
-            Message::HelloAck { .. } | Message::State { .. } => {
+            Message::HelloAck { .. } | Message::State { .. } | Message::LeaderState { .. } => {
                 self.rx_errors = self.rx_errors.wrapping_add(1);
                 return;
             }
@@ -324,6 +396,19 @@ impl Device {
             };
             let msg = self.state_msg();
             self.reply(msg);
+        }
+        while self.role == Role::Leader && self.window_end <= now {
+            let input = self.leader_input;
+            let msg = Message::LeaderState {
+                adc: std::array::from_fn(|i| input.code(i) * LEADER_OVERSAMPLING),
+                deadman: input.deadman && !self.released_in_window,
+                window: self.window,
+                overruns: 0,
+            };
+            self.reply(msg);
+            self.window = self.window.wrapping_add(1);
+            self.window_end += LEADER_PERIOD;
+            self.released_in_window = !input.deadman;
         }
     }
 
@@ -375,11 +460,14 @@ impl VirtualArduino {
         let (lock, cv) = &*self.shared;
         if let Ok(mut s) = lock.lock() {
             if plugged && !s.plugged {
-                // a fresh power-up; a simulated stall is the rig's, not the device's: it stays
+                // a fresh power-up; a simulated stall is the rig's, not the device's, and
+                // the knobs stay where they are: both stay
                 let stalled = s.device.stalled();
+                let input = s.device.leader_input();
                 s.device = Device::new(s.device.config);
                 s.start = Instant::now();
                 s.device.set_stalled(stalled, Duration::ZERO);
+                s.device.set_leader_input(input, Duration::ZERO);
                 s.to_host.clear();
             }
             s.plugged = plugged;
@@ -393,6 +481,19 @@ impl VirtualArduino {
         if let Ok(mut s) = lock.lock() {
             let now = s.start.elapsed();
             s.device.set_stalled(stalled, now);
+            Self::pump(&mut s);
+        }
+        cv.notify_all();
+    }
+
+    /// Set the simulated leader inputs from now on ([`Device::set_leader_input`]): the
+    /// potentiometers' voltages on A0–A3 and the deadman button; they stay over a
+    /// replug (they are the knobs, not the board).
+    pub fn set_leader_input(&self, input: LeaderInput) {
+        let (lock, cv) = &*self.shared;
+        if let Ok(mut s) = lock.lock() {
+            let now = s.start.elapsed();
+            s.device.set_leader_input(input, now);
             Self::pump(&mut s);
         }
         cv.notify_all();
@@ -723,6 +824,194 @@ mod tests {
         d.set_stalled([false; 4], ms(3));
         send(&mut d, 3, Message::Heartbeat, ms(4));
         assert_eq!(reported(&mut d), [3000; 4]);
+    }
+
+    fn leader_states(msgs: &[Message]) -> Vec<([u16; 4], bool, u8)> {
+        msgs.iter()
+            .filter_map(|m| match m {
+                Message::LeaderState {
+                    adc,
+                    deadman,
+                    window,
+                    overruns: 0,
+                } => Some((*adc, *deadman, *window)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// A device that followed a command, then took the leader role at 100 ms.
+    fn leading() -> Device {
+        let mut d = Device::new(DeviceConfig::default());
+        d.set_leader_input(
+            LeaderInput {
+                millivolts: [0.0, 1000.0, 2500.0, 5000.0],
+                deadman: true,
+            },
+            ms(0),
+        );
+        send(&mut d, 1, Message::SetPulses { ticks: [3000; 4] }, ms(0));
+        states(&mut d);
+        send(&mut d, 2, Message::Role { role: Role::Leader }, ms(100));
+        d
+    }
+
+    #[test]
+    fn the_leader_role_stops_the_pulses_and_streams_a_window_every_9_6_ms() {
+        let mut d = leading();
+        assert_eq!(d.role(), Role::Leader);
+        assert_eq!((d.state(), d.pulses()), (DeviceState::Leader, [0; 4]));
+        assert!(matches!(
+            states(&mut d).as_slice(),
+            [Message::State {
+                ack_seq: 2,
+                state: DeviceState::Leader,
+                ticks: [3000, 3000, 3000, 3000],
+                ..
+            }]
+        ));
+        // one second: 104 windows, numbered from 0, the datasheet's codes × 16
+        d.tick(ms(1100));
+        let got = leader_states(&states(&mut d));
+        assert_eq!(got.len(), 104);
+        assert!(got
+            .iter()
+            .enumerate()
+            .all(
+                |(i, (adc, deadman, window))| *adc == [0, 204 * 16, 512 * 16, 1023 * 16]
+                    && *deadman
+                    && usize::from(*window) == i % 256
+            ));
+        // the watchdog has nothing to do with a leader
+        assert_eq!(d.state(), DeviceState::Leader);
+    }
+
+    #[test]
+    fn a_leader_ignores_commands_and_the_estop_and_a_hello_ends_the_role() {
+        let mut d = leading();
+        states(&mut d);
+        send(&mut d, 3, Message::SetPulses { ticks: [4000; 4] }, ms(101));
+        send(
+            &mut d,
+            4,
+            Message::Estop {
+                engaged: Some(StopAction::Hold),
+            },
+            ms(102),
+        );
+        // taking the role it has changes nothing: the windows go on
+        send(&mut d, 5, Message::Role { role: Role::Leader }, ms(103));
+        let replies = states(&mut d);
+        assert_eq!(replies.len(), 3);
+        assert!(replies.iter().all(|m| matches!(
+            m,
+            Message::State {
+                state: DeviceState::Leader,
+                ticks: [3000, 3000, 3000, 3000],
+                ..
+            }
+        )));
+        assert_eq!(d.pulses(), [0; 4]);
+        d.tick(ms(120));
+        assert_eq!(
+            leader_states(&states(&mut d))
+                .iter()
+                .map(|s| s.2)
+                .collect::<Vec<_>>(),
+            vec![0, 1]
+        );
+        send(&mut d, 6, Message::Hello { version: 3 }, ms(121));
+        assert_eq!((d.role(), d.state()), (Role::Follower, DeviceState::Idle));
+        d.tick(ms(500));
+        assert!(leader_states(&states(&mut d)).is_empty());
+        // a follower again: the next command ramps from where it was
+        send(&mut d, 7, Message::SetPulses { ticks: [3100; 4] }, ms(501));
+        assert_eq!(d.pulses(), [3100; 4]);
+    }
+
+    #[test]
+    fn role_follower_ends_the_stream_and_waits_for_a_command() {
+        let mut d = leading();
+        d.tick(ms(130));
+        send(
+            &mut d,
+            3,
+            Message::Role {
+                role: Role::Follower,
+            },
+            ms(130),
+        );
+        let msgs = states(&mut d);
+        assert_eq!(leader_states(&msgs).len(), 3);
+        assert!(matches!(
+            msgs.last(),
+            Some(Message::State {
+                ack_seq: 3,
+                state: DeviceState::Idle,
+                ..
+            })
+        ));
+        d.tick(ms(300));
+        assert!(states(&mut d).is_empty());
+        assert_eq!(d.pulses(), [0; 4]);
+    }
+
+    #[test]
+    fn the_deadman_bit_needs_the_button_held_throughout_the_window() {
+        let mut d = leading();
+        states(&mut d);
+        let held = |deadman| LeaderInput {
+            millivolts: [0.0; 4],
+            deadman,
+        };
+        // windows end at 109.6, 119.2, 128.8, 138.4 ms: a release of 1 ms inside the
+        // second clears its bit only
+        d.set_leader_input(held(false), ms(112));
+        d.set_leader_input(held(true), ms(113));
+        d.tick(ms(139));
+        let bits: Vec<bool> = leader_states(&states(&mut d)).iter().map(|s| s.1).collect();
+        assert_eq!(bits, vec![true, false, true, true]);
+        // pressed within a window: the next whole one is the first held
+        d.set_leader_input(held(false), ms(140));
+        d.set_leader_input(held(true), ms(150));
+        d.tick(ms(168));
+        let bits: Vec<bool> = leader_states(&states(&mut d)).iter().map(|s| s.1).collect();
+        assert_eq!(bits, vec![false, false, true]);
+    }
+
+    #[test]
+    fn a_virtual_leader_streams_what_the_code_sets() {
+        let mut v = VirtualArduino::new(DeviceConfig::default());
+        v.set_read_timeout(ms(20));
+        v.set_leader_input(LeaderInput::from_fractions([0.25, 0.5, 0.75, 0.0], true));
+        v.write_all(&encode(&Frame {
+            seq: 1,
+            msg: Message::Role { role: Role::Leader },
+        }))
+        .unwrap();
+        let mut buf = Vec::new();
+        let mut chunk = [0u8; 256];
+        let mut leader = vec![];
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while leader.len() < 3 && Instant::now() < deadline {
+            if let Ok(n) = v.read(&mut chunk) {
+                buf.extend_from_slice(&chunk[..n]);
+            }
+            while let Ok(Some(f)) = decode(&mut buf) {
+                if let Some(s) = crate::leader::LeaderState::from_frame(&f) {
+                    leader.push(s);
+                }
+            }
+        }
+        assert!(leader.len() >= 3);
+        assert_eq!(leader[0].fractions(), [0.25, 0.5, 0.75, 0.0]);
+        assert!(leader[0].deadman);
+        // the knobs stay over a replug; the board comes back a follower
+        v.set_plugged(false);
+        v.set_plugged(true);
+        let d = v.device().unwrap();
+        assert_eq!(d.role(), Role::Follower);
+        assert_eq!(d.leader_input().millivolts[1], 2500.0);
     }
 
     #[test]

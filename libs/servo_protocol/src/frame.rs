@@ -6,8 +6,9 @@
 
 /// Start marker of every frame.
 pub const SYNC: u8 = 0xA5;
-/// Protocol version this code speaks.
-pub const PROTOCOL_VERSION: u8 = 2;
+/// Protocol version this code speaks (3: the leader role, [`MsgType::Role`] and
+/// [`MsgType::LeaderState`]; a follower's frames are those of version 2).
+pub const PROTOCOL_VERSION: u8 = 3;
 /// Number of servo channels.
 pub const SERVOS: usize = 4;
 /// Pulse widths are counted in Timer1 ticks of 0.5 µs (16 MHz / 8).
@@ -35,11 +36,16 @@ pub enum MsgType {
     Estop = 0x6,
     /// host → device: watchdog timeout and action
     Config = 0x7,
+    /// host → device: follower (drive the servos) or leader (stream the potentiometers)
+    Role = 0x8,
+    /// device → host, leader role only: the potentiometers and the deadman button of one
+    /// sampling window
+    LeaderState = 0x9,
 }
 
 impl MsgType {
     /// Every message type, in the order of their numbers.
-    pub const ALL: [MsgType; 7] = [
+    pub const ALL: [MsgType; 9] = [
         MsgType::Hello,
         MsgType::HelloAck,
         MsgType::SetPulses,
@@ -47,6 +53,8 @@ impl MsgType {
         MsgType::State,
         MsgType::Estop,
         MsgType::Config,
+        MsgType::Role,
+        MsgType::LeaderState,
     ];
 
     fn from_nibble(n: u8) -> Option<MsgType> {
@@ -63,9 +71,52 @@ impl MsgType {
             MsgType::State => 12,
             MsgType::Estop => 1,
             MsgType::Config => 3,
+            MsgType::Role => 1,
+            MsgType::LeaderState => 11,
         }
     }
 }
+
+/// What the device is for: set by [`Message::Role`], reported in every STATE (the
+/// leader's state byte is [`DeviceState::Leader`]). A device powers up, and every HELLO
+/// puts it back, in the follower role.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Role {
+    /// Drives the servos on pins 8–11 (version 2's device).
+    #[default]
+    Follower = 0,
+    /// A leader arm (or a box of potentiometers) on a second Uno: no pulses; streams
+    /// [`Message::LeaderState`] with A0–A3 and the deadman button on D2.
+    Leader = 1,
+}
+
+impl Role {
+    /// Every role, in the order of their bytes.
+    pub const ALL: [Role; 2] = [Role::Follower, Role::Leader];
+
+    /// The role's byte in a ROLE payload.
+    pub fn to_byte(self) -> u8 {
+        self as u8
+    }
+    fn from_byte(b: u8) -> Option<Role> {
+        Role::ALL.into_iter().find(|r| r.to_byte() == b)
+    }
+}
+
+/// Leader role: potentiometer channels, A0–A3.
+pub const LEADER_CHANNELS: usize = 4;
+/// Leader role: ADC samples summed into each channel's value of a LEADER_STATE.
+pub const LEADER_OVERSAMPLING: u16 = 16;
+/// Leader role: a channel's value that stands for the ADC reference (AVcc, the 5 V that
+/// also feeds the potentiometers): 16 samples × 1024 codes. A value `s` means the input
+/// was `s / 16384` of AVcc (the datasheet's `ADC = Vin × 1024 / Vref`, summed).
+pub const LEADER_FULL_SCALE: u16 = LEADER_OVERSAMPLING * 1024;
+/// Leader role: the largest value a channel can report (16 samples of 1023).
+pub const LEADER_ADC_MAX: u16 = LEADER_OVERSAMPLING * 1023;
+/// Leader role: one sampling window, and so the period of LEADER_STATE: 64 conversions
+/// (16 per channel, interleaved A0 A1 A2 A3 A0 …) 150 µs apart, 9.6 ms (104.2 Hz).
+pub const LEADER_PERIOD_US: u32 = 9600;
 
 /// What the device does when it stops following commands (watchdog, e-stop).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,16 +146,20 @@ pub enum DeviceState {
     /// Emergency stop: holding (or, engaged with [`StopAction::Detach`], no
     /// pulses); commands ignored.
     Estop = 4,
+    /// The leader role ([`Role::Leader`]): no pulses, LEADER_STATE streamed; SET_PULSES
+    /// and ESTOP change nothing.
+    Leader = 5,
 }
 
 impl DeviceState {
     /// Every state, in the order of their bytes.
-    pub const ALL: [DeviceState; 5] = [
+    pub const ALL: [DeviceState; 6] = [
         DeviceState::Idle,
         DeviceState::Running,
         DeviceState::WatchdogHold,
         DeviceState::WatchdogDetached,
         DeviceState::Estop,
+        DeviceState::Leader,
     ];
 
     /// The state's byte in a STATE payload.
@@ -122,6 +177,7 @@ impl DeviceState {
             DeviceState::WatchdogHold => "watchdog hold",
             DeviceState::WatchdogDetached => "watchdog detached",
             DeviceState::Estop => "e-stop",
+            DeviceState::Leader => "leader",
         }
     }
 }
@@ -182,6 +238,27 @@ pub enum Message {
         /// what it does then
         action: WatchdogAction,
     },
+    /// host → device (version 3): take this role. Answered by STATE; taking the role
+    /// the device has changes nothing.
+    Role {
+        /// the role
+        role: Role,
+    },
+    /// device → host (version 3), leader role: one sampling window of the
+    /// potentiometers and the deadman button, every [`LEADER_PERIOD_US`].
+    LeaderState {
+        /// A0–A3: each the sum of [`LEADER_OVERSAMPLING`] 10-bit samples, 0 ..=
+        /// [`LEADER_ADC_MAX`]; [`LEADER_FULL_SCALE`] stands for AVcc
+        adc: [u16; LEADER_CHANNELS],
+        /// the deadman button (D2 to GND) was held at every sample of the window
+        deadman: bool,
+        /// the window's number (wraps; 0 the first after the ROLE): a gap says
+        /// windows were lost (on the wire, or not sent)
+        window: u8,
+        /// samples taken late so far (the conversion before was not done: the sample
+        /// waited for it), wrapping; 0 in normal operation
+        overruns: u8,
+    },
 }
 
 impl Message {
@@ -195,6 +272,8 @@ impl Message {
             Message::State { .. } => MsgType::State,
             Message::Estop { .. } => MsgType::Estop,
             Message::Config { .. } => MsgType::Config,
+            Message::Role { .. } => MsgType::Role,
+            Message::LeaderState { .. } => MsgType::LeaderState,
         }
     }
 }
@@ -282,6 +361,16 @@ pub fn encode(frame: &Frame) -> Vec<u8> {
                 WatchdogAction::Hold => 0,
                 WatchdogAction::Detach => 1,
             });
+        }
+        Message::Role { role } => payload.push(role.to_byte()),
+        Message::LeaderState {
+            adc,
+            deadman,
+            window,
+            overruns,
+        } => {
+            adc.iter().for_each(|v| put_u16(&mut payload, *v));
+            payload.extend_from_slice(&[u8::from(deadman), window, overruns]);
         }
     }
     debug_assert_eq!(payload.len(), frame.msg.msg_type().payload_len());
@@ -462,7 +551,110 @@ pub fn decode(buf: &mut Vec<u8>) -> Result<Option<Frame>, DecodeError> {
                 action,
             }
         }
+        MsgType::Role => match Role::from_byte(p[0]) {
+            Some(role) => Message::Role { role },
+            None => return reject(buf, DecodeError::BadValue("role")),
+        },
+        MsgType::LeaderState => {
+            if p[8] > 1 {
+                return reject(buf, DecodeError::BadValue("buttons"));
+            }
+            Message::LeaderState {
+                adc: ticks_at(p, 0),
+                deadman: p[8] == 1,
+                window: p[9],
+                overruns: p[10],
+            }
+        }
     };
     buf.drain(..total);
     Ok(Some(Frame { seq, msg }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one(bytes: &[u8]) -> Result<Option<Frame>, DecodeError> {
+        decode(&mut bytes.to_vec())
+    }
+
+    #[test]
+    fn role_frames_byte_for_byte() {
+        let leader = encode(&Frame {
+            seq: 3,
+            msg: Message::Role { role: Role::Leader },
+        });
+        let body = [0x81, 0x03, 0x01];
+        assert_eq!(leader[..4], [0xA5, 0x81, 0x03, 0x01]);
+        assert_eq!(leader[4], crc8(&body));
+        assert_eq!(leader.len(), 5);
+        assert_eq!(
+            one(&leader),
+            Ok(Some(Frame {
+                seq: 3,
+                msg: Message::Role { role: Role::Leader }
+            }))
+        );
+        let follower = encode(&Frame {
+            seq: 4,
+            msg: Message::Role {
+                role: Role::Follower,
+            },
+        });
+        assert_eq!(follower[3], 0);
+        // a role the protocol does not define
+        let mut bad = vec![0xA5, 0x81, 0x05, 0x02];
+        bad.push(crc8(&bad[1..]));
+        assert_eq!(one(&bad), Err(DecodeError::BadValue("role")));
+    }
+
+    #[test]
+    fn leader_state_frames_byte_for_byte() {
+        let msg = Message::LeaderState {
+            adc: [0, 8192, LEADER_ADC_MAX, 0x1234],
+            deadman: true,
+            window: 200,
+            overruns: 1,
+        };
+        let bytes = encode(&Frame { seq: 9, msg });
+        // 15 bytes: 1.30 ms at 115200 baud, 13.5 % of the wire at 104.2 Hz
+        assert_eq!(bytes.len(), 15);
+        assert_eq!(
+            bytes[..14],
+            [0xA5, 0x9B, 0x09, 0x00, 0x00, 0x00, 0x20, 0xF0, 0x3F, 0x34, 0x12, 0x01, 200, 0x01]
+        );
+        assert_eq!(one(&bytes), Ok(Some(Frame { seq: 9, msg })));
+        // the buttons byte: bit 0 only
+        let mut bad = bytes[..14].to_vec();
+        bad[11] = 0x02;
+        bad.push(crc8(&bad[1..]));
+        assert_eq!(one(&bad), Err(DecodeError::BadValue("buttons")));
+        // a LEADER_STATE with another length is not one
+        let mut short = vec![0xA5, 0x9A, 0x01];
+        short.extend_from_slice(&[0; 10]);
+        short.push(crc8(&short[1..]));
+        assert!(matches!(
+            one(&short),
+            Err(DecodeError::BadLength {
+                msg_type: MsgType::LeaderState,
+                expected: 11,
+                got: 10
+            })
+        ));
+    }
+
+    #[test]
+    fn the_leader_scale() {
+        assert_eq!(LEADER_FULL_SCALE, 16384);
+        assert_eq!(LEADER_ADC_MAX, 16368);
+        assert_eq!(
+            LEADER_PERIOD_US,
+            64 * 150,
+            "16 samples × 4 channels, 150 µs apart"
+        );
+        assert_eq!(DeviceState::Leader.to_byte(), 5);
+        assert_eq!(DeviceState::from_byte(5), Some(DeviceState::Leader));
+        assert_eq!(DeviceState::from_byte(6), None);
+    }
 }

@@ -27,6 +27,16 @@
 //! most [`command_gate::HOLD_MAX`]). The wait is part of [`Next::Wait`], so the shell needs no
 //! timer of its own.
 //!
+//! **The leader role** (protocol version 3): with [`HostConfig::role`] (or
+//! [`HostLink::set_role`]) [`Role::Leader`], the link asks the device for the leader
+//! role right after CONFIG and sends nothing else but HEARTBEATs: no pulses, no e-stop
+//! (a leader drives no servos). Each LEADER_STATE the device streams (104.2 Hz) is
+//! decoded into a [`LeaderState`], queued for [`HostLink::take_leader_states`] and
+//! counted in [`HostLink::leader_stats`] (windows lost, the device's late samples). A
+//! device whose STATE says it lost the role (or, for a follower link, took it) is told
+//! again. A follower link drives a version-2 device as well (version 3 changed nothing
+//! of a follower's frames); the leader role needs version 3.
+//!
 //! # Examples
 //! ```
 //! use servo_protocol::host::{HostConfig, HostLink, LinkEvent, Next};
@@ -62,7 +72,10 @@
 //! assert_eq!(answered.map(|a| a.0), Some(7));
 //! ```
 
-use crate::frame::{DeviceState, Frame, Message, StopAction, WatchdogAction, PROTOCOL_VERSION};
+use crate::frame::{
+    DeviceState, Frame, Message, Role, StopAction, WatchdogAction, PROTOCOL_VERSION,
+};
+use crate::leader::LeaderState;
 use crate::SERVOS;
 use command_gate::{CommandGate, GateCounters, Stamp, Verdict};
 use std::collections::VecDeque;
@@ -75,6 +88,17 @@ pub const SEND_BURST: f64 = 2.0;
 /// A servo's refresh period: it sees one pulse every 20 ms, so this is the time step of
 /// the velocity guard.
 pub const SERVO_FRAME: Duration = Duration::from_millis(20);
+
+/// The oldest protocol version a follower link drives: version 3 added the leader role
+/// and left a follower's frames as version 2 had them.
+pub const OLDEST_FOLLOWER_VERSION: u8 = 2;
+
+/// The protocol version the leader role needs.
+pub const LEADER_VERSION: u8 = 3;
+
+/// The most LEADER_STATEs [`HostLink::take_leader_states`] keeps (2.5 s at 104.2 Hz); a
+/// shell that does not take them loses the oldest.
+pub const LEADER_QUEUE: usize = 256;
 
 /// Link settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -101,6 +125,11 @@ pub struct HostConfig {
     pub retry_min: Duration,
     /// Longest wait between two attempts.
     pub retry_max: Duration,
+    /// The device's role: [`Role::Follower`] drives the servos (commands, e-stop);
+    /// [`Role::Leader`] asks the device for the leader role after CONFIG and takes its
+    /// LEADER_STATEs ([`HostLink::take_leader_states`]); commands and the e-stop are not
+    /// sent to a leader.
+    pub role: Role,
 }
 
 impl Default for HostConfig {
@@ -116,6 +145,7 @@ impl Default for HostConfig {
             max_ticks_per_s: [f64::INFINITY; SERVOS],
             retry_min: Duration::from_millis(100),
             retry_max: Duration::from_millis(500),
+            role: Role::Follower,
         }
     }
 }
@@ -202,6 +232,20 @@ pub enum Offered {
     DroppedInEstop,
 }
 
+/// What came of the leader role's stream ([`HostLink::leader_stats`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LeaderStats {
+    /// LEADER_STATEs received (every session).
+    pub frames: u64,
+    /// Windows missing between two LEADER_STATEs of a session (gaps in their window
+    /// counter: frames lost on the wire, or not sent).
+    pub windows_lost: u64,
+    /// The device's count of late samples, as of its last LEADER_STATE (wraps).
+    pub overruns: u8,
+    /// The last LEADER_STATE of this session, and when it came.
+    pub last: Option<(LeaderState, Instant)>,
+}
+
 /// Counters of the sending side, for diagnostics.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SendStats {
@@ -264,6 +308,22 @@ pub struct HostLink<T> {
     stats: SendStats,
     /// the late-hold gate: a late command with its tag and reception
     gate: CommandGate<([u16; SERVOS], T, Instant)>,
+    /// the device's protocol version, this session
+    device_version: Option<u8>,
+    /// the device's role as far as we know this session (a HELLO makes it a follower),
+    /// and the sequence number of the last ROLE sent until a STATE answers it or a later
+    /// frame: STATEs that answer older frames say nothing of the role
+    device_role: Option<Role>,
+    role_seq: Option<u8>,
+    /// the device's last word this session (a STATE answering our last ROLE or later, a
+    /// LEADER_STATE) said it leads
+    device_leads: bool,
+    /// the window of the last LEADER_STATE, to count gaps from (none after a ROLE: the
+    /// device's counter may start again)
+    gap_base: Option<u8>,
+    /// LEADER_STATEs not taken yet
+    leader: VecDeque<LeaderState>,
+    leader_stats: LeaderStats,
 }
 
 impl<T: Clone> HostLink<T> {
@@ -290,6 +350,13 @@ impl<T: Clone> HostLink<T> {
             events: Vec::new(),
             stats: SendStats::default(),
             gate: CommandGate::new(),
+            device_version: None,
+            device_role: None,
+            role_seq: None,
+            device_leads: false,
+            gap_base: None,
+            leader: VecDeque::new(),
+            leader_stats: LeaderStats::default(),
         }
     }
 
@@ -326,6 +393,45 @@ impl<T: Clone> HostLink<T> {
     /// What the late-hold gate did ([`HostLink::offer`]).
     pub fn gate(&self) -> &GateCounters {
         self.gate.counters()
+    }
+
+    /// The role this link wants the device in.
+    pub fn role(&self) -> Role {
+        self.config.role
+    }
+
+    /// Ask for another role from now on (on the open session, once connected: a ROLE
+    /// frame goes out at the next [`HostLink::next`]); returns whether that changed it.
+    /// A device that speaks protocol version 2 cannot lead: asking one for the leader
+    /// role reports [`LinkEvent::VersionMismatch`] and closes the port.
+    pub fn set_role(&mut self, role: Role, now: Instant) -> bool {
+        if self.config.role == role {
+            return false;
+        }
+        self.config.role = role;
+        if let Some(version) = self.device_version {
+            if role == Role::Leader && version < LEADER_VERSION {
+                self.refuse_version(version, now);
+            }
+        }
+        true
+    }
+
+    /// Whether the device is in the leader role: connected, and its last word (a STATE
+    /// answering the ROLE or later, or a LEADER_STATE) said so.
+    pub fn leader_active(&self) -> bool {
+        self.is_connected() && self.config.role == Role::Leader && self.device_leads
+    }
+
+    /// The LEADER_STATEs received since the last call, oldest first (at most
+    /// [`LEADER_QUEUE`]).
+    pub fn take_leader_states(&mut self) -> Vec<LeaderState> {
+        self.leader.drain(..).collect()
+    }
+
+    /// What came of the leader role's stream.
+    pub fn leader_stats(&self) -> &LeaderStats {
+        &self.leader_stats
     }
 
     /// The events since the last call.
@@ -401,6 +507,12 @@ impl<T: Clone> HostLink<T> {
         self.last_pulses_sent = None;
         self.device_estop = None;
         self.in_flight.clear();
+        self.device_version = None;
+        self.device_role = None;
+        self.role_seq = None;
+        self.device_leads = false;
+        self.gap_base = None;
+        self.leader_stats.last = None;
     }
 
     /// The port could not be opened: try again later.
@@ -427,6 +539,29 @@ impl<T: Clone> HostLink<T> {
         };
         self.at = None;
         self.in_flight.clear();
+        self.device_version = None;
+        self.device_leads = false;
+    }
+
+    /// The device speaks `version`, which cannot do what we want: a firmware upgrade
+    /// is needed, no point in trying every 100 ms.
+    fn refuse_version(&mut self, version: u8, now: Instant) {
+        self.events
+            .push(LinkEvent::VersionMismatch { device: version });
+        let reason = if self.config.role == Role::Leader && version < LEADER_VERSION {
+            format!("device speaks protocol {version}; the leader role needs {LEADER_VERSION}")
+        } else {
+            format!("device speaks protocol {version}, this node {PROTOCOL_VERSION}")
+        };
+        self.close(reason, now, self.config.retry_max);
+    }
+
+    /// Whether a device speaking `version` can take our role.
+    fn version_fits(&self, version: u8) -> bool {
+        match self.config.role {
+            Role::Follower => (OLDEST_FOLLOWER_VERSION..=PROTOCOL_VERSION).contains(&version),
+            Role::Leader => version == PROTOCOL_VERSION,
+        }
     }
 
     /// Bytes from the device that were not a frame.
@@ -449,16 +584,15 @@ impl<T: Clone> HostLink<T> {
                 if !matches!(self.phase, Phase::Handshake { .. }) {
                     return false; // a late answer to a repeated HELLO
                 }
-                if version != PROTOCOL_VERSION {
-                    self.events
-                        .push(LinkEvent::VersionMismatch { device: version });
-                    let reason =
-                        format!("device speaks protocol {version}, this node {PROTOCOL_VERSION}");
-                    // a firmware upgrade is needed: no point in trying every 100 ms
-                    self.close(reason, now, self.config.retry_max);
+                if !self.version_fits(version) {
+                    self.refuse_version(version, now);
                     return true;
                 }
                 self.phase = Phase::Connected { config_sent: false };
+                self.device_version = Some(version);
+                // a HELLO puts a device in the follower role (version 2: the only one)
+                self.device_role = Some(Role::Follower);
+                self.role_seq = None;
                 if self.connected_once && !self.estop {
                     // the newest command goes out again, ramping from where the device is
                     if let Some((ticks, tag)) = self.newest.clone() {
@@ -487,6 +621,23 @@ impl<T: Clone> HostLink<T> {
                     return false;
                 }
                 let mut replan = false;
+                // the device's role, from a STATE that answers our last ROLE or a later
+                // frame (one answering an older frame may predate it)
+                let reported = if state == DeviceState::Leader {
+                    Role::Leader
+                } else {
+                    Role::Follower
+                };
+                let current = self.role_seq.is_none_or(|r| ack_seq.wrapping_sub(r) < 128);
+                if current {
+                    // the answers come in order: every later STATE is as new
+                    self.role_seq = None;
+                    self.device_leads = reported == Role::Leader;
+                    if self.device_role != Some(reported) {
+                        replan |= reported != self.config.role;
+                        self.device_role = Some(reported);
+                    }
+                }
                 // the pose the device reports is where the next pulses start, until we
                 // have sent pulses of our own this session
                 if self.last_pulses_sent.is_none() {
@@ -515,6 +666,35 @@ impl<T: Clone> HostLink<T> {
                     answered,
                 });
                 replan
+            }
+            Message::LeaderState { .. } => {
+                if !self.is_connected() {
+                    return false;
+                }
+                let Some(state) = LeaderState::from_frame(&frame) else {
+                    return false;
+                };
+                if self.config.role != Role::Leader {
+                    // a follower link's device leads: the STATEs say so (every answer
+                    // does), and it is told (ROLE follower); frames still in flight
+                    // after that are no news
+                    return false;
+                }
+                self.device_leads = true;
+                let stats = &mut self.leader_stats;
+                stats.frames += 1;
+                if let Some(base) = self.gap_base {
+                    stats.windows_lost +=
+                        u64::from(state.window.wrapping_sub(base).wrapping_sub(1));
+                }
+                self.gap_base = Some(state.window);
+                stats.overruns = state.overruns;
+                stats.last = Some((state, now));
+                if self.leader.len() == LEADER_QUEUE {
+                    self.leader.pop_front();
+                }
+                self.leader.push_back(state);
+                false
             }
             other => {
                 self.events.push(LinkEvent::Garbage {
@@ -592,6 +772,24 @@ impl<T: Clone> HostLink<T> {
                         },
                         now,
                     );
+                }
+                // the device's role differs from ours (after the HELLO a leader link's
+                // does; a follower's only if the device took the leader role): tell it
+                let role = self.config.role;
+                if self.device_role != Some(role) {
+                    self.device_role = Some(role);
+                    let next = self.frame(Message::Role { role }, now);
+                    self.role_seq = Some(self.seq);
+                    self.gap_base = None;
+                    return next;
+                }
+                if role == Role::Leader {
+                    // a leader drives nothing: heartbeats only
+                    let heartbeat_due = self.last_sent + self.config.heartbeat_period;
+                    if now >= heartbeat_due {
+                        return self.frame(Message::Heartbeat, now);
+                    }
+                    return Next::Wait(heartbeat_due);
                 }
                 // a device starts released: tell it only when it matters
                 let told = self.device_estop.unwrap_or(false);
@@ -722,8 +920,9 @@ impl<T: Clone> HostLink<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::device::{Device, DeviceConfig, HOLD_TICKS};
-    use crate::{decode, encode};
+    use crate::device::{Device, DeviceConfig, FIRMWARE_VERSION, HOLD_TICKS};
+    use crate::leader::LeaderInput;
+    use crate::{decode, encode, MsgType};
 
     fn ms(n: u64) -> Duration {
         Duration::from_millis(n)
@@ -841,10 +1040,14 @@ mod tests {
         use crate::MsgType::*;
         assert_eq!(&kinds[..3], &[Hello, Config, SetPulses], "{kinds:?}");
         assert_eq!(r.device.pulses(), [3000; 4]);
+        assert!(r.events.iter().any(
+            |(_, e)| matches!(e, LinkEvent::Connected { firmware } if *firmware == FIRMWARE_VERSION)
+        ));
+        // a follower link never asks for a role
         assert!(r
-            .events
+            .sent
             .iter()
-            .any(|(_, e)| matches!(e, LinkEvent::Connected { firmware: (1, 0) })));
+            .all(|(_, m)| m.msg_type() != crate::MsgType::Role));
         assert!(r.events.iter().any(|(_, e)| matches!(
             e,
             LinkEvent::State {
@@ -1312,5 +1515,261 @@ mod tests {
         let ev = r.link.take_events();
         assert_eq!(ev[0], LinkEvent::VersionMismatch { device: 1 });
         assert!(matches!(r.link.next(r.now), Next::Wait(_)));
+    }
+
+    fn hello_ack(version: u8) -> Frame {
+        Frame {
+            seq: 1,
+            msg: Message::HelloAck {
+                version,
+                firmware_major: 1,
+                firmware_minor: 0,
+                servos: 4,
+                watchdog_ms: 500,
+            },
+        }
+    }
+
+    /// A link of `role` past its HELLO, answered by a device speaking `version`.
+    fn answered(role: Role, version: u8) -> (HostLink<u32>, Instant) {
+        let t0 = Instant::now();
+        let mut link = HostLink::new(
+            HostConfig {
+                role,
+                ..HostConfig::default()
+            },
+            t0,
+        );
+        assert_eq!(link.next(t0), Next::Open);
+        link.opened(t0);
+        assert!(matches!(
+            link.next(t0),
+            Next::Send(Frame {
+                msg: Message::Hello {
+                    version: PROTOCOL_VERSION
+                },
+                ..
+            })
+        ));
+        link.received(hello_ack(version), t0);
+        (link, t0)
+    }
+
+    #[test]
+    fn a_follower_link_drives_a_version_2_device_a_leader_link_does_not() {
+        let (mut link, t0) = answered(Role::Follower, 2);
+        assert!(link.is_connected());
+        assert!(matches!(
+            link.next(t0),
+            Next::Send(Frame {
+                msg: Message::Config { .. },
+                ..
+            })
+        ));
+        // and asking it to lead is refused: version 2 has no leader role
+        assert!(link.set_role(Role::Leader, t0));
+        assert!(!link.is_connected());
+        assert!(link
+            .take_events()
+            .contains(&LinkEvent::VersionMismatch { device: 2 }));
+        let (mut link, _) = answered(Role::Leader, 2);
+        assert!(!link.is_connected());
+        let events = link.take_events();
+        assert_eq!(events[0], LinkEvent::VersionMismatch { device: 2 });
+        assert!(
+            matches!(&events[1], LinkEvent::Disconnected { reason, .. } if reason.contains("leader role needs 3"))
+        );
+        // nor does either link drive a version it does not know
+        for role in [Role::Follower, Role::Leader] {
+            for version in [1, 4] {
+                let (link, _) = answered(role, version);
+                assert!(!link.is_connected(), "{role:?} {version}");
+            }
+        }
+    }
+
+    /// A leader link against the device model, the knobs at a quarter, half, three
+    /// quarters and the top, the deadman held.
+    fn leader_rig() -> Rig {
+        let mut r = Rig::new(HostConfig {
+            role: Role::Leader,
+            ..HostConfig::default()
+        });
+        r.device.set_leader_input(
+            LeaderInput::from_fractions([0.25, 0.5, 0.75, 1.0], true),
+            Duration::ZERO,
+        );
+        r
+    }
+
+    #[test]
+    fn a_leader_link_asks_for_the_role_then_only_heartbeats_and_takes_the_stream() {
+        let mut r = leader_rig();
+        // commands and the e-stop are for followers: never sent to a leader
+        r.link.command([3000; 4], 1, r.now);
+        r.link.set_estop(true);
+        r.run_until(1000);
+        let kinds: Vec<_> = r.sent.iter().map(|(_, m)| m.msg_type()).collect();
+        assert_eq!(
+            &kinds[..3],
+            &[MsgType::Hello, MsgType::Config, MsgType::Role],
+            "{kinds:?}"
+        );
+        assert!(
+            kinds[3..].iter().all(|k| *k == MsgType::Heartbeat),
+            "{kinds:?}"
+        );
+        assert!((9..=11).contains(&(kinds.len() - 3)), "{kinds:?}");
+        assert_eq!(r.sent[2].1, Message::Role { role: Role::Leader });
+        assert_eq!(r.device.role(), Role::Leader);
+        assert_eq!(r.device.pulses(), [0; 4]);
+        assert!(r.link.leader_active());
+        // a window every 9.6 ms from the ROLE on: about 104 in the second
+        let states = r.link.take_leader_states();
+        assert!((100..=104).contains(&states.len()), "{}", states.len());
+        for (i, s) in states.iter().enumerate() {
+            assert_eq!(usize::from(s.window), i);
+            assert_eq!(s.fractions(), [0.25, 0.5, 0.75, 1023.0 / 1024.0]);
+            assert!(s.deadman);
+        }
+        assert!(r.link.take_leader_states().is_empty(), "taken");
+        let stats = r.link.leader_stats().clone();
+        assert_eq!(stats.frames, states.len() as u64);
+        assert_eq!((stats.windows_lost, stats.overruns), (0, 0));
+        assert_eq!(stats.last.map(|l| l.0), states.last().copied());
+        // the STATEs say "leader" (the device's state byte 5)
+        assert!(r.events.iter().any(|(_, e)| matches!(
+            e,
+            LinkEvent::State {
+                state: DeviceState::Leader,
+                ..
+            }
+        )));
+        assert_eq!(r.device.state(), DeviceState::Leader);
+    }
+
+    #[test]
+    fn a_leader_that_lost_its_role_is_told_again() {
+        // soon, and after more frames than half the sequence numbers (20 s of heartbeats)
+        for lost_at in [300, 20_000] {
+            leader_loses_its_role_at(lost_at);
+        }
+    }
+
+    fn leader_loses_its_role_at(lost_at: u64) {
+        let mut r = leader_rig();
+        r.run_until(lost_at);
+        // the board reset behind the port's back: a follower, silent
+        r.device = Device::new(DeviceConfig::default());
+        r.device
+            .set_leader_input(LeaderInput::from_fractions([0.1; 4], false), Duration::ZERO);
+        let before = r.link.take_leader_states().len();
+        assert!(before > 20);
+        r.run_until(lost_at + 400);
+        assert_eq!(r.device.role(), Role::Leader, "told again");
+        let roles = r
+            .sent
+            .iter()
+            .filter(|(_, m)| matches!(m, Message::Role { .. }))
+            .count();
+        assert_eq!(roles, 2);
+        let after = r.link.take_leader_states();
+        assert!(after.len() > 20, "{}", after.len());
+        // the new stream counts from 0 again: windows lost are counted, not hidden
+        assert_eq!(after[0].window, 0);
+        assert!(after.iter().all(|s| !s.deadman && s.adc == [102 * 16; 4]));
+        assert!(r.link.leader_active());
+        assert_eq!(
+            r.link.leader_stats().windows_lost,
+            0,
+            "a new stream is no gap"
+        );
+    }
+
+    #[test]
+    fn windows_lost_on_the_wire_are_counted() {
+        let mut r = leader_rig();
+        r.run_until(100);
+        r.link.take_leader_states();
+        let base = r.link.leader_stats().last.unwrap().0.window;
+        let w = |n: u8, seq: u8| Frame {
+            seq,
+            msg: Message::LeaderState {
+                adc: [0; 4],
+                deadman: false,
+                window: base.wrapping_add(n),
+                overruns: n,
+            },
+        };
+        let lost0 = r.link.leader_stats().windows_lost;
+        assert!(
+            !r.link.received(w(1, 200), r.now),
+            "no replan for the stream"
+        );
+        r.link.received(w(4, 201), r.now);
+        r.link.received(w(5, 202), r.now);
+        let stats = r.link.leader_stats();
+        assert_eq!(stats.windows_lost - lost0, 2);
+        assert_eq!(stats.overruns, 5);
+        assert_eq!(
+            r.link
+                .take_leader_states()
+                .iter()
+                .map(|s| (s.seq, s.window.wrapping_sub(base)))
+                .collect::<Vec<_>>(),
+            vec![(200, 1), (201, 4), (202, 5)]
+        );
+    }
+
+    #[test]
+    fn a_follower_links_device_that_leads_is_told_to_follow() {
+        let mut r = Rig::new(HostConfig::default());
+        r.link.command([3000; 4], 1, r.now);
+        r.run_until(100);
+        assert_eq!(r.device.pulses(), [3000; 4]);
+        // something made the device a leader (line noise that passed the CRC)
+        r.device.receive(
+            &encode(&Frame {
+                seq: 99,
+                msg: Message::Role { role: Role::Leader },
+            }),
+            r.t(),
+        );
+        r.device.take_output();
+        r.run_until(400);
+        assert_eq!(r.device.role(), Role::Follower);
+        assert!(r.sent.iter().any(|(_, m)| *m
+            == Message::Role {
+                role: Role::Follower
+            }));
+        // its LEADER_STATEs are not queued for a follower
+        assert!(r.link.take_leader_states().is_empty());
+        assert!(!r.link.leader_active());
+        // idle after the role: the next command ramps from where it was
+        r.link.command([3100; 4], 2, r.now);
+        r.run_until(500);
+        assert_eq!(r.device.pulses(), [3100; 4]);
+    }
+
+    #[test]
+    fn the_role_can_change_on_an_open_link() {
+        let mut r = Rig::new(HostConfig::default());
+        r.run_until(100);
+        assert!(!r.link.leader_active());
+        r.device
+            .set_leader_input(LeaderInput::from_fractions([0.5; 4], true), r.t());
+        assert!(r.link.set_role(Role::Leader, r.now));
+        assert!(!r.link.set_role(Role::Leader, r.now), "no change");
+        r.run_until(300);
+        assert!(r.link.leader_active());
+        assert_eq!(r.device.state(), DeviceState::Leader);
+        assert!(r.link.take_leader_states().len() > 15);
+        assert!(r.link.set_role(Role::Follower, r.now));
+        r.run_until(400);
+        assert_eq!(r.device.state(), DeviceState::Idle);
+        assert!(!r.link.leader_active());
+        r.link.command([3000; 4], 1, r.now);
+        r.run_until(500);
+        assert_eq!(r.device.pulses(), [3000; 4]);
     }
 }

@@ -4,11 +4,14 @@
 pub mod device;
 mod frame;
 pub mod host;
+pub mod leader;
 
 pub use frame::{
-    crc8, decode, encode, DecodeError, DeviceState, Frame, Message, MsgType, StopAction,
-    WatchdogAction, MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SERVOS, SYNC, TICKS_PER_US,
+    crc8, decode, encode, DecodeError, DeviceState, Frame, Message, MsgType, Role, StopAction,
+    WatchdogAction, LEADER_ADC_MAX, LEADER_CHANNELS, LEADER_FULL_SCALE, LEADER_OVERSAMPLING,
+    LEADER_PERIOD_US, MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SERVOS, SYNC, TICKS_PER_US,
 };
+pub use leader::{LeaderInput, LeaderState};
 
 use std::io::{self, Read};
 use std::time::Duration;
@@ -78,7 +81,8 @@ impl<R: Read> FrameReader<R> {
     /// it whole; never longer than [`MAX_FRAME_WAIT`]. With only the start byte in, the
     /// length is not known yet: a STATE's rest is waited for (every frame a device sends
     /// is one, but for the HELLO_ACK that answers the handshake, which is read a
-    /// little later). `None` when no partial frame is held.
+    /// little later, and a leader's LEADER_STATE, a byte shorter, read a byte time
+    /// later than it could be). `None` when no partial frame is held.
     pub fn rest_wait(&self, byte_time: Duration) -> Option<Duration> {
         let missing = match self.missing() {
             0 => return None,

@@ -1,13 +1,17 @@
 //! The firmware's protocol constants are this crate's: the section of
 //! `firmware/servo_control/protocol.h` between `// generated: frame constants` and
 //! `// end generated: frame constants` (the version, the frame's sizes, the message
-//! types with their payload lengths, the state byte) is rendered here from `frame.rs`,
+//! types with their payload lengths, the state byte, the role byte, the leader role's
+//! sampling) is rendered here from `frame.rs`,
 //! and this test fails when the header holds anything else. After changing a constant,
 //! `EEZYBOT_BLESS=1 cargo test -p servo_protocol --test firmware_header` rewrites the
 //! section; then rebuild the firmware (`make -C firmware/servo_control`).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
-use servo_protocol::{DeviceState, MsgType, MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SYNC};
+use servo_protocol::{
+    DeviceState, MsgType, Role, LEADER_CHANNELS, LEADER_OVERSAMPLING, LEADER_PERIOD_US,
+    MAX_PAYLOAD, OVERHEAD, PROTOCOL_VERSION, SYNC,
+};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -46,8 +50,21 @@ fn render() -> String {
     for state in DeviceState::ALL {
         let _ = writeln!(s, "  STATE_{} = {},", c_name(state), state.to_byte());
     }
+    s.push_str("};\n\n// The role byte of a ROLE payload.\nenum DeviceRole {\n");
+    for role in Role::ALL {
+        let _ = writeln!(s, "  ROLE_{} = {},", c_name(role), role.to_byte());
+    }
+    let _ = write!(
+        s,
+        "}};\n\n\
+         // The leader role's sampling: a LEADER_STATE every LEADER_PERIOD_US, each channel\n\
+         // the sum of LEADER_OVERSAMPLING samples.\n\
+         #define LEADER_CHANNELS {LEADER_CHANNELS}\n\
+         #define LEADER_OVERSAMPLING {LEADER_OVERSAMPLING}\n\
+         #define LEADER_PERIOD_US {LEADER_PERIOD_US}\n"
+    );
     s.push_str(
-        "};\n\n\
+        "\n\
          // Payload length each type must have, or -1 for an unknown type.\n\
          static inline int8_t proto_payload_len(uint8_t type) {\n  switch (type) {\n",
     );
@@ -90,4 +107,6 @@ fn c_names_are_the_firmware_s() {
     assert_eq!(c_name(MsgType::HelloAck), "HELLO_ACK");
     assert_eq!(c_name(DeviceState::WatchdogDetached), "WATCHDOG_DETACHED");
     assert_eq!(c_name(MsgType::Estop), "ESTOP");
+    assert_eq!(c_name(MsgType::LeaderState), "LEADER_STATE");
+    assert_eq!(c_name(Role::Follower), "FOLLOWER");
 }

@@ -4,7 +4,9 @@
 #![allow(clippy::unwrap_used)]
 
 use proptest::prelude::*;
-use servo_protocol::{decode, encode, DeviceState, Frame, Message, StopAction, WatchdogAction};
+use servo_protocol::{
+    decode, encode, DeviceState, Frame, Message, Role, StopAction, WatchdogAction,
+};
 
 fn message() -> impl Strategy<Value = Message> {
     let ticks = prop::array::uniform4(any::<u16>());
@@ -13,7 +15,8 @@ fn message() -> impl Strategy<Value = Message> {
         Just(DeviceState::Running),
         Just(DeviceState::WatchdogHold),
         Just(DeviceState::WatchdogDetached),
-        Just(DeviceState::Estop)
+        Just(DeviceState::Estop),
+        Just(DeviceState::Leader)
     ];
     prop_oneof![
         any::<u8>().prop_map(|version| Message::Hello { version }),
@@ -60,6 +63,20 @@ fn message() -> impl Strategy<Value = Message> {
                 WatchdogAction::Hold
             }
         }),
+        prop_oneof![Just(Role::Follower), Just(Role::Leader)]
+            .prop_map(|role| Message::Role { role }),
+        (
+            prop::array::uniform4(any::<u16>()),
+            any::<bool>(),
+            any::<u8>(),
+            any::<u8>()
+        )
+            .prop_map(|(adc, deadman, window, overruns)| Message::LeaderState {
+                adc,
+                deadman,
+                window,
+                overruns
+            }),
     ]
 }
 
@@ -171,4 +188,43 @@ fn protocol_md_example_frame() {
         "PROTOCOL.md example is not {}",
         hex.join(" ")
     );
+}
+
+#[test]
+fn protocol_md_leader_examples() {
+    let doc = include_str!("../../../firmware/servo_control/PROTOCOL.md");
+    let hex = |f: &Frame| -> String {
+        encode(f)
+            .iter()
+            .map(|b| format!("{b:02X}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let role = Frame {
+        seq: 2,
+        msg: Message::Role { role: Role::Leader },
+    };
+    let leader = Frame {
+        seq: 0x31,
+        msg: Message::LeaderState {
+            adc: [4096, 8192, 12288, 16368],
+            deadman: true,
+            window: 8,
+            overruns: 0,
+        },
+    };
+    for f in [role, leader] {
+        assert!(
+            doc.contains(&hex(&f)),
+            "PROTOCOL.md has no example {}",
+            hex(&f)
+        );
+    }
+    // and what the example says the sums stand for: 1250, 2500, 3750 mV and the top
+    let s = servo_protocol::LeaderState::from_frame(&leader).unwrap();
+    assert_eq!(
+        [0, 1, 2].map(|i| s.millivolts(i, 5000.0)),
+        [1250.0, 2500.0, 3750.0]
+    );
+    assert_eq!(s.adc[3], servo_protocol::LEADER_ADC_MAX);
 }
