@@ -262,8 +262,10 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
                        "rt/leader/joint_states", "rt/leader/deadman"} | {
             f"rt/{a}/_action/{t}" for a in ("arm_controller/follow_joint_trajectory", "gripper_controller/gripper_cmd")
             for t in ("feedback", "status")}
-        expected = controllers if e == "/eezybot/pc" else set()
+        leader = {"rt/leader/joint_states", "rt/leader/deadman"}  # a leader's serial_node on either
+        expected = controllers if e == "/eezybot/pc" else leader
         assert (g["publish"] | g["subscribe"]) & controllers == expected, e
+        assert leader <= g["publish"], e
         assert g["publish"] | g["subscribe"] <= contract | services | graph | controllers, e
     pc = grants["/eezybot/pc"]
     assert "rq/compute_ik/set_parametersRequest" in pc["publish"]

@@ -502,6 +502,16 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
     if nodes.contains("compute_ik") {
         controller_rules(namespace, &mut r.publish, &mut r.subscribe);
     }
+    if nodes.contains("serial_node") || nodes.contains("compute_ik") {
+        // serial_node in the leader role reads a leader arm next to the PC or the Pi
+        for t in [
+            topics::LEADER_JOINT_STATES.name,
+            topics::LEADER_DEADMAN.name,
+        ] {
+            r.publish
+                .insert(format!("rt/{}", in_namespace(namespace, t)));
+        }
+    }
     r.publish
         .extend(GRAPH_PUBLISH.iter().map(|s| s.to_string()));
     r.subscribe

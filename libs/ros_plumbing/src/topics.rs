@@ -208,9 +208,10 @@ pub const CONTROLLER_STATE: Topic<JointTrajectoryControllerState> =
 /// convention; compute_ik follows them while [`LEADER_DEADMAN`] is held. Not in
 /// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
 pub const LEADER_JOINT_STATES: Topic<JointState> =
-    Topic::new("leader/joint_states", qos::COMMANDS, &[], &[IK]);
+    Topic::new("leader/joint_states", qos::COMMANDS, &[SERIAL], &[IK]);
 /// The leader arm's deadman button: `true` while held, with every leader sample.
-pub const LEADER_DEADMAN: Topic<Bool> = Topic::new("leader/deadman", qos::COMMANDS, &[], &[IK]);
+pub const LEADER_DEADMAN: Topic<Bool> =
+    Topic::new("leader/deadman", qos::COMMANDS, &[SERIAL], &[IK]);
 /// arm_controller's FollowJointTrajectory action (control_msgs/action/FollowJointTrajectory).
 pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
 /// gripper_controller's GripperCommand action (control_msgs/action/GripperCommand).

@@ -210,3 +210,38 @@ pub fn servo_list_text(mask: &[bool; SERVOS]) -> String {
         .collect::<Vec<_>>()
         .join(",")
 }
+
+/// A leader arm's joints from its potentiometers' readings (each a fraction of the ADC's
+/// full scale, `servo_protocol::leader::LeaderState::fractions`), by the leader's
+/// calibration (`leader:` of the arm config: ADC counts → the servo's input) and the
+/// geometry's claw opening: `(joint name, rad)` in the follower's convention, for the
+/// calibrated channels (`elbow_joint` needs the shoulder's too: the forearm's
+/// potentiometer gives its elevation, shoulder + elbow).
+pub fn leader_joints(
+    cal: &eezybot_kinematics::LeaderCalibration,
+    gripper_open_rad: f64,
+    fractions: [f64; 4],
+) -> Vec<(&'static str, f64)> {
+    let counts = |f: f64| f * (f64::from(cal.adc_max) + 1.0);
+    let input = |ch: &Option<eezybot_kinematics::LeaderChannel>, i: usize| {
+        ch.as_ref().map(|c| c.input(counts(fractions[i])))
+    };
+    let base = input(&cal.base, 0);
+    let shoulder = input(&cal.shoulder, 1);
+    let forearm = input(&cal.elbow, 2);
+    let opening = input(&cal.gripper, 3);
+    let mut out = Vec::with_capacity(4);
+    if let Some(b) = base {
+        out.push(("base_joint", b.to_radians()));
+    }
+    if let Some(s) = shoulder {
+        out.push(("shoulder_joint", s.to_radians()));
+    }
+    if let (Some(s), Some(f)) = (shoulder, forearm) {
+        out.push(("elbow_joint", (f - s).to_radians()));
+    }
+    if let Some(o) = opening {
+        out.push(("gripper_joint", o.clamp(0.0, 1.0) * gripper_open_rad));
+    }
+    out
+}

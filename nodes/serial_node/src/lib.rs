@@ -6,7 +6,7 @@ pub mod link;
 
 use crate::core::{angles_to_ticks, parse_servo_list, servo_list_text, ticks_to_angles};
 use crate::link::{Link, LinkEvent, LinkSnapshot};
-use eezybot_kinematics::{ArmConfig, ServoCalibrations, ServoId};
+use eezybot_kinematics::{ArmConfig, LeaderCalibration, ServoCalibrations, ServoId};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
@@ -19,7 +19,7 @@ use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use servo_protocol::device::VirtualArduino;
 use servo_protocol::host::Offered;
-use servo_protocol::{DeviceState, SERVOS};
+use servo_protocol::{DeviceState, LeaderState, SERVOS};
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedReceiver;
@@ -68,6 +68,17 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 |p| load_calibration(p).map(|_| ()),
             ),
             ParamSpec::new(
+                "role",
+                ParameterValue::String("follower".into()),
+                "`follower`: drives the servos (servo_angles -> the Arduino, servo_state back); `leader`: reads a leader arm's potentiometers and deadman button (firmware 1.1, protocol 3) and publishes leader/joint_states (the follower's joints, by arm_config's leader: calibration) and leader/deadman, with every sample (104 Hz)",
+            )
+            .constraints("one of: follower, leader")
+            .text_check(|s| match s {
+                "follower" | "leader" => Ok(()),
+                _ => Err("must be `follower` or `leader`".into()),
+            })
+            .read_only(),
+            ParamSpec::new(
                 MOCK_STALLED_SERVOS,
                 ParameterValue::String(String::new()),
                 "simulation, port `mock` only: these servos are stalled (blocked, as by an obstacle): each stays where it was when the stall began and the virtual Arduino reports it there, while its commands are acknowledged as usual; emptied, they move on to their latest command. No effect on a real port (a warning says so)",
@@ -106,6 +117,9 @@ pub trait Outputs {
     fn servo_state(&self, msg: JointState);
     /// Publish a `diagnostics` report.
     fn diagnostics(&self, status: DiagnosticStatus);
+    /// Publish a leader sample: `leader/joint_states` (`None` when none of its channels
+    /// is calibrated) and `leader/deadman`.
+    fn leader(&self, joints: Option<JointState>, deadman: bool);
     /// The peer counts of the watched topics ([`watched_topics`]): `servo_angles`
     /// publishers, `servo_state` subscribers.
     fn peer_counts(&self) -> Vec<usize>;
@@ -155,6 +169,9 @@ pub struct LinkStatus {
     /// the servos `mock_stalled_servos` names (empty: none) and whether the virtual
     /// Arduino simulates their stall (false: a real port, where it has no effect)
     pub simulated_stall: (String, bool),
+    /// the leader role's latest sample: deadman held, joints calibrated, overruns, and
+    /// its readings in 10-bit ADC counts (what the `leader:` calibration is written in)
+    pub leader: Option<(bool, bool, u8, [f64; 4])>,
 }
 
 fn time_s(t: Time) -> f64 {
@@ -367,6 +384,29 @@ impl LinkStatus {
         if let Some((a, b)) = self.connected {
             values.push(("firmware", format!("{a}.{b}")));
         }
+        if let Some((deadman, calibrated, overruns, counts)) = self.leader {
+            values.push((
+                "leader_counts",
+                counts
+                    .iter()
+                    .map(|c| format!("{c:.1}"))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            ));
+            values.push((
+                "leader_deadman",
+                if deadman { "held" } else { "released" }.into(),
+            ));
+            values.push((
+                "leader_joints",
+                if calibrated {
+                    "published".into()
+                } else {
+                    "not calibrated (arm_config has no leader: section)".into()
+                },
+            ));
+            values.push(("leader_overruns", overruns.to_string()));
+        }
         if let Some(d) = &self.last_disconnect {
             values.push(("last_disconnect", d.clone()));
         }
@@ -409,6 +449,8 @@ pub struct Handles<'a, I, O, S> {
     pub inputs: I,
     /// the link's events
     pub events: UnboundedReceiver<LinkEvent>,
+    /// a leader's samples (the leader role; `None`: a follower)
+    pub leader: Option<UnboundedReceiver<LeaderState>>,
     /// resolves when the node is to stop
     pub shutdown: S,
 }
@@ -422,8 +464,13 @@ pub async fn run<O: Outputs>(
         io,
         inputs,
         mut events,
+        leader,
         shutdown,
     } = h;
+    let (has_leader, mut leader) = match leader {
+        Some(rx) => (true, rx),
+        None => (false, tokio::sync::mpsc::unbounded_channel().1),
+    };
     let period = ros_plumbing::diagnostics::diagnostics_period;
     let params = io.params.clone();
     let mut ticker = tokio::time::interval(period(&params));
@@ -443,6 +490,7 @@ pub async fn run<O: Outputs>(
                 ticker = tokio::time::interval(period(&params));
             }
             Some(event) = events.recv() => node.on_event(event),
+            Some(sample) = leader.recv(), if has_leader => node.on_leader_state(&sample),
             input = inputs.next() => {
                 let Some(first) = input else { break };
                 // a burst (DDS repairing what a network outage held back) moves the
@@ -464,6 +512,9 @@ pub struct Node<'a, O> {
     io: Io<'a, O>,
     status: LinkStatus,
     cal: ServoCalibrations,
+    /// the leader role's potentiometer calibration (`leader:` of arm_config) and the
+    /// claw's opening (rad)
+    leader: (Option<LeaderCalibration>, f64),
     complaints: Throttle,
     /// the servos stalled in the virtual Arduino (`mock_stalled_servos`), as applied
     stalled: [bool; SERVOS],
@@ -497,6 +548,7 @@ impl<'a, O: Outputs> Node<'a, O> {
             io,
             status,
             cal: config.servos,
+            leader: (config.leader, config.geometry.gripper_open_rad),
             complaints: Throttle::default(),
             stalled: [false; SERVOS],
         };
@@ -583,8 +635,44 @@ impl<'a, O: Outputs> Node<'a, O> {
     /// An event of the link: publish the `servo_state` it brings, if any.
     pub fn on_event(&mut self, event: LinkEvent) {
         if let Some(msg) = self.status.on_event(event, &self.cal) {
-            self.io.outputs.servo_state(msg);
+            // a leader drives no servos: its reports are not servo_state
+            if self.io.params.string("role").as_deref() != Some("leader") {
+                self.io.outputs.servo_state(msg);
+            }
         }
+    }
+
+    /// A leader's sample: its joints (by the leader calibration) and its deadman.
+    pub fn on_leader_state(&mut self, sample: &LeaderState) {
+        let (cal, open_rad) = &self.leader;
+        let joints = cal
+            .as_ref()
+            .map(|c| crate::core::leader_joints(c, *open_rad, sample.fractions()));
+        let msg = joints.filter(|j| !j.is_empty()).map(|j| JointState {
+            header: Header {
+                stamp: Time::now(),
+                frame_id: String::new(),
+            },
+            name: j.iter().map(|(n, _)| n.to_string()).collect(),
+            position: j.iter().map(|(_, v)| *v).collect(),
+            velocity: vec![],
+            effort: vec![],
+        });
+        if msg.is_none() {
+            if let Some(quiet) = self.complaints.allow("leader/uncalibrated", Instant::now()) {
+                log::warn!(
+                    "leader: no leader: calibration in arm_config: only leader/deadman is published (calibrate the leader arm with the wizard){}",
+                    Throttle::suffix(quiet)
+                );
+            }
+        }
+        let scale = f64::from(
+            cal.as_ref()
+                .map_or(eezybot_kinematics::DEFAULT_ADC_MAX, |c| c.adc_max),
+        ) + 1.0;
+        let counts = sample.fractions().map(|f| f * scale);
+        self.status.leader = Some((sample.deadman, msg.is_some(), sample.overruns, counts));
+        self.io.outputs.leader(msg, sample.deadman);
     }
 
     /// Of inputs that arrived together, the ones to handle, in order: a

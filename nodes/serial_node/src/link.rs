@@ -10,7 +10,7 @@ use command_gate::{GateCounters, Stamp};
 use eezybot_msgs::Time;
 use servo_protocol::device::{DeviceConfig, VirtualArduino};
 use servo_protocol::host::{HostConfig, HostLink, Next, Offered};
-use servo_protocol::{encode, FrameReader, SERVOS};
+use servo_protocol::{encode, FrameReader, LeaderState, SERVOS};
 use std::io::{self, Read, Write};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -100,6 +100,8 @@ pub fn virtual_arduino() -> VirtualArduino {
 struct Shared {
     machine: HostLink<Time>,
     events: UnboundedSender<LinkEvent>,
+    /// a leader's samples (the leader role), each as it came
+    leader: Option<UnboundedSender<LeaderState>>,
     /// counts the ports opened: a reader of an older port stops
     session: u64,
     shutdown: bool,
@@ -110,6 +112,12 @@ impl Shared {
     fn forward(&mut self) {
         for e in self.machine.take_events() {
             let _ = self.events.send(e);
+        }
+        let samples = self.machine.take_leader_states();
+        if let Some(leader) = &self.leader {
+            for s in samples {
+                let _ = leader.send(s);
+            }
         }
     }
 }
@@ -127,16 +135,19 @@ pub struct Link {
 }
 
 impl Link {
-    /// Start the link thread; events go to `events`.
+    /// Start the link thread; events go to `events`, a leader's samples (the leader
+    /// role, `config.role`) to `leader`.
     pub fn start(
         opener: PortOpener,
         config: HostConfig,
         events: UnboundedSender<LinkEvent>,
+        leader: Option<UnboundedSender<LeaderState>>,
     ) -> io::Result<Link> {
         let shared = Arc::new((
             Mutex::new(Shared {
                 machine: HostLink::new(config, Instant::now()),
                 events,
+                leader,
                 session: 0,
                 shutdown: false,
             }),

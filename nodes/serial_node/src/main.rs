@@ -2,6 +2,7 @@
 
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Bool;
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
 use ros_plumbing::Subscription;
@@ -9,7 +10,7 @@ use ros_plumbing::{samples, topics, RosNode, Shutdown, TopicPublisher};
 use serial_node::link::{self, Link};
 use serial_node::{Input, Outputs};
 use servo_protocol::host::HostConfig;
-use servo_protocol::StopAction;
+use servo_protocol::{Role, StopAction};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -18,6 +19,8 @@ struct RosOutputs<'a> {
     angles: &'a Subscription<JointState>,
     servo_state: TopicPublisher<JointState>,
     diagnostics: DiagnosticsPublisher,
+    /// the leader role's `leader/joint_states` and `leader/deadman`
+    leader: Option<(TopicPublisher<JointState>, TopicPublisher<Bool>)>,
 }
 
 impl Outputs for RosOutputs<'_> {
@@ -26,6 +29,14 @@ impl Outputs for RosOutputs<'_> {
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.publish(vec![status]);
+    }
+    fn leader(&self, joints: Option<JointState>, deadman: bool) {
+        if let Some((joint_states, button)) = &self.leader {
+            if let Some(j) = joints {
+                joint_states.publish(j);
+            }
+            button.publish(Bool { data: deadman });
+        }
     }
     fn peer_counts(&self) -> Vec<usize> {
         vec![
@@ -44,6 +55,7 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
     let params = node.params().clone();
     let port = params.string("port").unwrap_or_default();
     let baud = params.i64("baud").unwrap_or(115_200);
+    let leader_role = params.string("role").as_deref() == Some("leader");
     let stop_action = |name: &str| {
         if params.string(name).as_deref() == Some("detach") {
             StopAction::Detach
@@ -57,6 +69,11 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         watchdog_ms: u16::try_from(params.i64("watchdog_ms").unwrap_or(500)).unwrap_or(u16::MAX),
         watchdog_action: stop_action("watchdog_action"),
         estop_action: stop_action("estop_action"),
+        role: if leader_role {
+            Role::Leader
+        } else {
+            Role::Follower
+        },
         ..HostConfig::default()
     };
     let mock = (port == "mock").then(link::virtual_arduino);
@@ -65,7 +82,13 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         None => link::serial_opener(port.clone(), u32::try_from(baud).unwrap_or(115_200)),
     };
     let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
-    let link = Link::start(opener, config, tx)?;
+    let (leader_tx, leader_rx) = if leader_role {
+        let (t, r) = tokio::sync::mpsc::unbounded_channel();
+        (Some(t), Some(r))
+    } else {
+        (None, None)
+    };
+    let link = Link::start(opener, config, tx, leader_tx)?;
 
     let angles = node.subscribe_to(&topics::SERVO_ANGLES)?;
     let estop = node.subscribe_to(&topics::ESTOP)?;
@@ -75,11 +98,20 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         &node.resolve(&topics::SERVO_ANGLES)?,
         &node.resolve(&topics::SERVO_STATE)?,
     ));
+    let leader = if leader_role {
+        Some((
+            node.publish_on(&topics::LEADER_JOINT_STATES)?,
+            node.publish_on(&topics::LEADER_DEADMAN)?,
+        ))
+    } else {
+        None
+    };
     let outputs = RosOutputs {
         node: node.node(),
         angles: &angles,
         servo_state,
         diagnostics,
+        leader,
     };
     let inputs = futures::stream::select(
         samples::inputs(
@@ -89,6 +121,19 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         ),
         samples::readable_inputs(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
     );
+    if leader_role {
+        log::info!(
+            "{} is a leader arm's reader: {} -> {}, {}",
+            node.resolver().node_fqn(),
+            if port == "mock" {
+                "the virtual Arduino".to_string()
+            } else {
+                port.clone()
+            },
+            node.resolve(&topics::LEADER_JOINT_STATES)?,
+            node.resolve(&topics::LEADER_DEADMAN)?,
+        );
+    }
     log::info!(
         "{} ready in ROS domain {}: {} -> {} ({}), replies on {}",
         node.resolver().node_fqn(),
@@ -119,6 +164,7 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
         io,
         inputs,
         events: rx,
+        leader: leader_rx,
         shutdown,
     })
     .await;

@@ -27,7 +27,7 @@ impl Rig {
     fn new(config: HostConfig) -> Rig {
         let device = VirtualArduino::new(DeviceConfig::default());
         let (tx, events) = unbounded_channel();
-        let link = Link::start(link::mock_opener(device.clone()), config, tx).unwrap();
+        let link = Link::start(link::mock_opener(device.clone()), config, tx, None).unwrap();
         let mut rig = Rig {
             device,
             link: Some(link),

@@ -23,6 +23,7 @@ use std::time::{Duration, Instant};
 struct Fake {
     servo_state: Mutex<Vec<JointState>>,
     diagnostics: Mutex<Vec<DiagnosticStatus>>,
+    leader: Mutex<Vec<(Option<JointState>, bool)>>,
 }
 
 impl Outputs for Fake {
@@ -31,6 +32,9 @@ impl Outputs for Fake {
     }
     fn diagnostics(&self, status: DiagnosticStatus) {
         self.diagnostics.lock().unwrap().push(status);
+    }
+    fn leader(&self, joints: Option<JointState>, deadman: bool) {
+        self.leader.lock().unwrap().push((joints, deadman));
     }
     fn peer_counts(&self) -> Vec<usize> {
         vec![1, 1]
@@ -80,6 +84,7 @@ async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnosti
         link::mock_opener(link::virtual_arduino()),
         HostConfig::default(),
         tx,
+        None,
     )
     .unwrap();
     let fake = Fake::default();
@@ -101,6 +106,7 @@ async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnosti
         io,
         inputs: samples,
         events,
+        leader: None,
         shutdown: async move {
             let _ = stopped.await;
         },
@@ -182,7 +188,13 @@ fn last_ticks(fake: &Fake) -> Option<[u16; 4]> {
 async fn mock_stalled_servos_holds_a_servo_in_the_virtual_arduino_until_cleared() {
     let (tx, events) = tokio::sync::mpsc::unbounded_channel();
     let device = link::virtual_arduino();
-    let link = Link::start(link::mock_opener(device.clone()), HostConfig::default(), tx).unwrap();
+    let link = Link::start(
+        link::mock_opener(device.clone()),
+        HostConfig::default(),
+        tx,
+        None,
+    )
+    .unwrap();
     let fake = Fake::default();
     let (inputs, samples) = mpsc::unbounded::<Input>();
     let (stop, stopped) = futures::channel::oneshot::channel::<()>();
@@ -206,6 +218,7 @@ async fn mock_stalled_servos_holds_a_servo_in_the_virtual_arduino_until_cleared(
         io,
         inputs: samples,
         events,
+        leader: None,
         shutdown: async move {
             let _ = stopped.await;
         },
@@ -262,4 +275,107 @@ async fn mock_stalled_servos_holds_a_servo_in_the_virtual_arduino_until_cleared(
     };
     let ((), ()) = futures::join!(serial_node::run(handles), script);
     link.shutdown();
+}
+
+/// The shipped arm config with a leader section: each potentiometer at half scale is
+/// the home pose, at three quarters 45° further (the claw: 100 … 900 counts).
+fn leader_config(dir: &std::path::Path) -> String {
+    let shipped = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/arm.yaml"
+    ))
+    .unwrap();
+    let path = dir.join("arm.yaml");
+    std::fs::write(
+        &path,
+        format!(
+            "{shipped}\nleader:\n  adc_max: 1023\n  \
+             base: {{ counts_a: 512.0, input_a: 0.0, counts_b: 768.0, input_b: 45.0 }}\n  \
+             shoulder: {{ counts_a: 512.0, input_a: 90.0, counts_b: 768.0, input_b: 45.0 }}\n  \
+             elbow: {{ counts_a: 512.0, input_a: 0.0, counts_b: 768.0, input_b: -45.0 }}\n  \
+             gripper: {{ counts_a: 100.0, input_a: 0.0, counts_b: 900.0, input_b: 1.0 }}\n"
+        ),
+    )
+    .unwrap();
+    path.display().to_string()
+}
+
+#[tokio::test]
+async fn the_leader_role_publishes_the_leaders_joints_and_deadman_and_no_servo_state() {
+    use servo_protocol::{LeaderInput, Role};
+    let dir = std::env::temp_dir().join(format!("leader-node-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (tx, events) = tokio::sync::mpsc::unbounded_channel();
+    let (leader_tx, leader_rx) = tokio::sync::mpsc::unbounded_channel();
+    let device = link::virtual_arduino();
+    device.set_leader_input(LeaderInput::from_fractions([0.75, 0.5, 0.5, 0.5], true));
+    let config = HostConfig {
+        role: Role::Leader,
+        ..HostConfig::default()
+    };
+    let link = Link::start(
+        link::mock_opener(device.clone()),
+        config,
+        tx,
+        Some(leader_tx),
+    )
+    .unwrap();
+    let fake = Fake::default();
+    let (_inputs, samples) = mpsc::unbounded::<Input>();
+    let (stop, stopped) = futures::channel::oneshot::channel::<()>();
+    let params = Params::new(BTreeMap::from([
+        (
+            "arm_config".to_string(),
+            ParameterValue::String(leader_config(&dir)),
+        ),
+        ("role".to_string(), ParameterValue::String("leader".into())),
+    ]));
+    let io = Io {
+        link: &link,
+        outputs: &fake,
+        params,
+        diag_name: "leader: servo link".into(),
+        port_name: "mock".into(),
+        peers: PeerWatch::new(&serial_node::watched_topics(
+            "/servo_angles",
+            "/servo_state",
+        )),
+        mock: Some(device.clone()),
+    };
+    let handles = Handles {
+        io,
+        inputs: samples,
+        events,
+        leader: Some(leader_rx),
+        shutdown: async move {
+            let _ = stopped.await;
+        },
+    };
+    let last = || fake.leader.lock().unwrap().last().cloned();
+    let script = async {
+        until("a leader sample", || {
+            last().is_some_and(|(j, d)| j.is_some() && d)
+        })
+        .await;
+        let (joints, _) = last().unwrap();
+        let joints = joints.unwrap();
+        let get = |n: &str| joints.position[joints.name.iter().position(|x| x == n).unwrap()];
+        // 0.75 of the scale on the base: 45° (within the ADC's one-code truncation)
+        assert!(
+            (get("base_joint").to_degrees() - 45.0).abs() < 0.1,
+            "{joints:?}"
+        );
+        assert!((get("shoulder_joint").to_degrees() - 90.0).abs() < 0.1);
+        assert!((get("elbow_joint").to_degrees() + 90.0).abs() < 0.2);
+        device.set_leader_input(LeaderInput::from_fractions([0.75, 0.5, 0.5, 0.5], false));
+        until("the deadman released", || last().is_some_and(|(_, d)| !d)).await;
+        assert!(
+            fake.servo_state.lock().unwrap().is_empty(),
+            "a leader published servo_state"
+        );
+        let _ = stop.send(());
+    };
+    tokio::join!(serial_node::run(handles), script);
+    link.shutdown();
+    let _ = std::fs::remove_dir_all(&dir);
 }
