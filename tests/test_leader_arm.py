@@ -41,7 +41,8 @@ def pots(base_fraction):
 # the base swept to 22.5° and held; the deadman released and the leader swept on to 45°
 # (not followed); held again (followed to 45°); swept back toward home, and the cable
 # pulled on the way (the test stops the leader's simavr at CABLE_PULLED_S).
-MOTION = [
+SHIFT_MS = 6000  # home held this much longer: the graph starts up meanwhile, on a busy host too
+MOTION = [(t + (SHIFT_MS if t else 0), p, held) for t, p, held in [
     (0, pots(0.5), True),
     (7000, pots(0.5), True),
     (9000, pots(0.625), True),
@@ -52,8 +53,8 @@ MOTION = [
     (16000, pots(0.75), True),
     (18000, pots(0.75), True),
     (22000, pots(0.5), True),
-]
-CABLE_PULLED_S = 19.0
+]]
+CABLE_PULLED_S = 25.0
 # a held pulse in simavr, measured edge to edge, varies by about 1 us (interrupt latency;
 # more on a busy host): 5 us still tells a hold from following, which moves it by 460 us
 JITTER_US = 5.0
@@ -92,6 +93,10 @@ def test_the_follower_tracks_the_leader_holds_on_release_and_when_the_cable_is_p
         leader_diag = lambda: status_values(latest_status(follower.diags, "leader_arm"))  # noqa: E731
         assert observer.spin_until(lambda: leader_diag().get("connection") == "connected", 15), leader_diag()
         assert observer.spin_until(lambda: leader_diag().get("leader_joints") == "published", 5), leader_diag()
+        # compute_ik follows (the leader at home) before the motion starts
+        following = lambda: status_values(latest_status(follower.diags, "compute_ik")).get("leader") == "following"  # noqa: E731
+        left = 12.5 - (time.time_ns() - t0_ns) / 1e9
+        assert observer.spin_until(following, max(0.0, left)), "compute_ik did not follow within 12.5 s of start"
 
         def until(s):
             observer.spin_for(max(0.0, s - (time.time_ns() - t0_ns) / 1e9))
@@ -119,17 +124,17 @@ def test_the_follower_tracks_the_leader_holds_on_release_and_when_the_cable_is_p
 
     # tracks: home (the leader's half scale, within the ADC's truncation), the sweep
     # followed (monotone), then 22.5° where the leader holds it
-    settled(2.0, 6.8, 0.0)
-    sweep = [w for _, w in base_pulses(events, t0_ns, 7.2, 8.8)]
+    settled(8.0, 12.8, 0.0)
+    sweep = [w for _, w in base_pulses(events, t0_ns, 13.2, 14.8)]
     assert sweep[0] > sweep[-1] + 50 and all(b <= a + JITTER_US for a, b in zip(sweep, sweep[1:])), sweep[::10]
-    settled(10.0, 11.9, 22.5)
-    # released at 12 s: the leader goes on to 45°, the follower holds within a frame
+    settled(16.0, 17.9, 22.5)
+    # released at 18 s: the leader goes on to 45°, the follower holds within a frame
     # (every pulse the same command: within simavr's interrupt jitter of a held pulse,
     # about 1 us, where following the leader would have moved it by 460 us)
-    held = base_pulses(events, t0_ns, 12.1, 15.9)
+    held = base_pulses(events, t0_ns, 18.1, 21.9)
     assert held and max(w for _, w in held) - min(w for _, w in held) <= JITTER_US, held[::10]
-    # held again at 16 s: followed to 45°
-    settled(17.0, 17.9, 45.0)
+    # held again at 22 s: followed to 45°
+    settled(23.0, 23.9, 45.0)
     # the cable pulled on the way back: the follower holds where it was
     after = base_pulses(events, t0_ns, CABLE_PULLED_S + 0.1, CABLE_PULLED_S + 2.4)
     assert after and max(w for _, w in after) - min(w for _, w in after) <= JITTER_US, after[::10]
