@@ -270,6 +270,9 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
     pc = grants["/eezybot/pc"]
     assert "rq/compute_ik/set_parametersRequest" in pc["publish"]
     assert "rr/compute_ik/set_parametersReply" in pc["subscribe"]
+    # the calibration wizard applies a saved calibration: serial_node's arm_config
+    assert "rq/serial_node/set_parametersRequest" in pc["publish"]
+    assert "rq/serial_node/set_parametersRequest" in grants["/eezybot/pi"]["subscribe"]
     assert "rq/arm_controller/follow_joint_trajectory/_action/send_goalRequest" in pc["subscribe"]
     assert "rr/gripper_controller/gripper_cmd/_action/get_resultReply" in pc["publish"]
 

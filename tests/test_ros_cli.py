@@ -187,8 +187,10 @@ def test_the_running_graph_has_the_topics_of_the_contract(launch, observer):
     def complete():
         for t in TOPICS.values():
             pubs, subs = endpoints(t["name"])
+            # `gui_bridge (calibration)` and the like: a mode of a node, not running now
+            want_pubs = {n for n in t["publishers"] if " " not in n}
             want_subs = {n for n in t["subscribers"] if " " not in n}
-            if not ours(t["publishers"]) <= {e.node_name for e in pubs} or not want_subs <= {e.node_name for e in subs}:
+            if not want_pubs <= {e.node_name for e in pubs} or not want_subs <= {e.node_name for e in subs}:
                 return False
         return True
 

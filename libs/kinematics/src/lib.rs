@@ -15,7 +15,7 @@ pub mod urdf;
 
 pub use config::{
     ArmConfig, ArmGeometry, ConfigError, JointLimitsDeg, LeaderCalibration, LeaderChannel,
-    LimitDeg, DEFAULT_ADC_MAX, MAX_CONFIG_BYTES, MAX_FLOW_COLLECTIONS,
+    LimitDeg, DEFAULT_ADC_MAX, MAX_CONFIG_BYTES, MAX_FLOW_COLLECTIONS, SHIPPED_ARM_YAML,
 };
 pub use error::{Joint, KinematicsError};
 pub use motion::{MotionLimits, ServoMotionLimits};

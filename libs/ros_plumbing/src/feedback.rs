@@ -55,6 +55,9 @@ pub enum ReasonCode {
     NotFinite,
     /// The emergency stop is engaged.
     Estop,
+    /// The arm is being calibrated (compute_ik's `calibrating`): the wizard drives the
+    /// servos, no target is taken.
+    Calibrating,
     /// A straight-line move would leave the workspace (or jump at a singularity).
     LineBlocked,
     /// A `joint_target` naming an unknown joint, one twice, none, or with a different
@@ -74,13 +77,14 @@ pub enum ReasonCode {
 
 impl ReasonCode {
     /// Every code, in a fixed order.
-    pub const ALL: [ReasonCode; 13] = [
+    pub const ALL: [ReasonCode; 14] = [
         ReasonCode::Unreachable,
         ReasonCode::OutOfLimits,
         ReasonCode::Stale,
         ReasonCode::WrongFrame,
         ReasonCode::NotFinite,
         ReasonCode::Estop,
+        ReasonCode::Calibrating,
         ReasonCode::LineBlocked,
         ReasonCode::BadJoints,
         ReasonCode::BadOrientation,
@@ -99,6 +103,7 @@ impl ReasonCode {
             ReasonCode::WrongFrame => "wrong_frame",
             ReasonCode::NotFinite => "not_finite",
             ReasonCode::Estop => "estop",
+            ReasonCode::Calibrating => "calibrating",
             ReasonCode::LineBlocked => "line_blocked",
             ReasonCode::BadJoints => "bad_joints",
             ReasonCode::BadOrientation => "bad_orientation",

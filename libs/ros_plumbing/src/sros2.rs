@@ -116,12 +116,21 @@ pub const PARAMETER_SERVICES: &[&str] = &[
 
 /// Which node calls which other node's parameter services
 /// ([`crate::remote_params::RemoteParameters`]): gui_bridge switches compute_ik's
-/// `motion` for `play --line` and reads and sets its parameters from the web panel.
-pub const REMOTE_PARAMETER_CALLS: &[(&str, &str, &[&str])] = &[(
-    "gui_bridge",
-    "compute_ik",
-    &["get_parameters", "set_parameters"],
-)];
+/// `motion` for `play --line` and reads and sets its parameters from the web panel; its
+/// calibration wizard sets compute_ik's `calibrating` and, on saving, `arm_config` on
+/// compute_ik and serial_node.
+pub const REMOTE_PARAMETER_CALLS: &[(&str, &str, &[&str])] = &[
+    (
+        "gui_bridge",
+        "compute_ik",
+        &["get_parameters", "set_parameters"],
+    ),
+    (
+        "gui_bridge",
+        "serial_node",
+        &["get_parameters", "set_parameters"],
+    ),
+];
 
 /// The topics every ros2-client node uses besides its own (DDS names): the ROS graph
 /// (`ros_discovery_info`, published and subscribed), `/parameter_events` (published and

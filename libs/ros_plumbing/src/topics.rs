@@ -155,6 +155,9 @@ const RECORD: &str = "gui_bridge (record)";
 /// a Foxglove client watches it, to forward it to Foxglove (`robot_description` and
 /// `tf_static` as long as it runs).
 const FOXGLOVE: &str = "gui_bridge (Foxglove)";
+/// gui_bridge's calibration wizard (it drives the servos while compute_ik's
+/// `calibrating` is true, and shows a leader arm beside the follower).
+const CALIBRATION: &str = "gui_bridge (calibration)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.
 pub const XYZ_TARGET: Topic<PointStamped> = Topic::new_target("xyz_target", &[GUI]);
@@ -170,8 +173,12 @@ pub const ESTOP: Topic<Bool> = Topic::new("estop", qos::ESTOP, &[GUI], &[IK, SER
 pub const JOINT_STATES: Topic<JointState> =
     Topic::new("joint_states", qos::COMMANDS, &[IK], &[STATE, GUI, RECORD]);
 /// Servo horn angles after calibration, rad.
-pub const SERVO_ANGLES: Topic<JointState> =
-    Topic::new("servo_angles", qos::COMMANDS, &[IK], &[SERIAL, FOXGLOVE]);
+pub const SERVO_ANGLES: Topic<JointState> = Topic::new(
+    "servo_angles",
+    qos::COMMANDS,
+    &[IK, CALIBRATION],
+    &[SERIAL, FOXGLOVE],
+);
 /// What the Arduino reports it applied, rad.
 pub const SERVO_STATE: Topic<JointState> =
     Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI, IK, RECORD]);
@@ -208,10 +215,10 @@ pub const CONTROLLER_STATE: Topic<JointTrajectoryControllerState> =
 /// convention; compute_ik follows them while [`LEADER_DEADMAN`] is held. Not in
 /// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
 pub const LEADER_JOINT_STATES: Topic<JointState> =
-    Topic::new("leader/joint_states", qos::COMMANDS, &[SERIAL], &[IK]);
+    Topic::new("leader/joint_states", qos::COMMANDS, &[SERIAL], &[IK, GUI]);
 /// The leader arm's deadman button: `true` while held, with every leader sample.
 pub const LEADER_DEADMAN: Topic<Bool> =
-    Topic::new("leader/deadman", qos::COMMANDS, &[SERIAL], &[IK]);
+    Topic::new("leader/deadman", qos::COMMANDS, &[SERIAL], &[IK, GUI]);
 /// arm_controller's FollowJointTrajectory action (control_msgs/action/FollowJointTrajectory).
 pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
 /// gripper_controller's GripperCommand action (control_msgs/action/GripperCommand).

@@ -80,6 +80,8 @@ pub enum Reason {
     NoJoints,
     /// The emergency stop is engaged.
     EmergencyStop,
+    /// compute_ik's `calibrating` is true: the calibration wizard drives the servos.
+    Calibrating,
     /// The target's stamp is older than `max_target_age`.
     TooOld {
         /// how old (s)
@@ -140,6 +142,7 @@ impl Reason {
             Reason::LengthMismatch { .. } => "length_mismatch".into(),
             Reason::NoJoints => "no_joints".into(),
             Reason::EmergencyStop => "estop".into(),
+            Reason::Calibrating => "calibrating".into(),
             Reason::TooOld { .. } => "too_old".into(),
             Reason::Line { .. } => "line_leaves_workspace".into(),
             Reason::Unreadable { .. } => "unreadable".into(),
@@ -163,6 +166,7 @@ impl Reason {
             | Reason::LengthMismatch { .. }
             | Reason::NoJoints => ReasonCode::BadJoints,
             Reason::EmergencyStop => ReasonCode::Estop,
+            Reason::Calibrating => ReasonCode::Calibrating,
             Reason::TooOld { .. } => ReasonCode::Stale,
             Reason::Line { .. } => ReasonCode::LineBlocked,
             Reason::Unreadable { .. } => ReasonCode::Unreadable,
@@ -223,6 +227,10 @@ impl fmt::Display for Reason {
             Reason::EmergencyStop => write!(
                 f,
                 "emergency stop engaged: no motion until `estop` is false"
+            ),
+            Reason::Calibrating => write!(
+                f,
+                "the arm is being calibrated: no target is taken until `calibrating` is false"
             ),
             Reason::TooOld { age_s, max_s } => write!(
                 f,

@@ -6,6 +6,7 @@
 //! out; [`crate::run`] does the I/O.
 
 use crate::controller::{self, Actual, ControllerMap, ControllerSettings, Execution, Outcome};
+use crate::core::Reason;
 use crate::pipeline::{ArmModel, GoalRequest, Input, Pipeline, Step};
 use command_gate::{CommandGate, Stamp, Verdict};
 use eezybot_motion::{track, AxisState};
@@ -135,6 +136,9 @@ pub struct Driver<M: ArmModel> {
     last_trajectory: Option<String>,
     /// when the last servo_state came (s, wall clock)
     servo_state_at: Option<f64>,
+    /// the last servo_state with every servo, to take the arm where it is after
+    /// calibrating (read through the calibration of that moment)
+    last_servo_state: Option<JointState>,
     leader: Leader,
 }
 
@@ -172,6 +176,7 @@ impl<M: ArmModel> Driver<M> {
             actual: None,
             last_trajectory: None,
             servo_state_at: None,
+            last_servo_state: None,
             leader: Leader {
                 timeout: DEFAULT_LEADER_TIMEOUT,
                 state: "no leader".into(),
@@ -335,15 +340,51 @@ impl<M: ArmModel> Driver<M> {
         effects
     }
 
-    /// The parameters changed: applied (a new solver logged and reported).
-    pub fn on_params(&mut self, params: &Params) -> Vec<Effect> {
+    /// The parameters changed at `wall`: applied (a new solver logged and reported;
+    /// `calibrating` started or ended, after `arm_config`, so that the arm is taken where
+    /// the new calibration says it is).
+    pub fn on_params(&mut self, params: &Params, wall: Time) -> Vec<Effect> {
         let solver = self.core.solver();
         self.core.apply_params(params);
-        if self.core.solver() == solver {
-            return vec![];
+        let mut effects = vec![];
+        if self.core.solver() != solver {
+            log::info!("solver: {}", params.string("solver").unwrap_or_default());
+            effects.push(Effect::Report);
         }
-        log::info!("solver: {}", params.string("solver").unwrap_or_default());
-        vec![Effect::Report]
+        let calibrating = params.bool("calibrating").unwrap_or(false);
+        if calibrating != self.core.calibrating() {
+            self.set_calibrating(calibrating, wall, &mut effects);
+        }
+        effects
+    }
+
+    /// Start calibrating: stop, end the running goals, hold the leader, publish nothing
+    /// until the end. End it: take the arm where `servo_state` says it is.
+    fn set_calibrating(&mut self, on: bool, wall: Time, effects: &mut Vec<Effect>) {
+        self.core.set_calibrating(on);
+        self.next_step = None;
+        if on {
+            log::warn!("calibrating: the calibration wizard drives the servos; targets refused until `calibrating` is false");
+            let why = "calibrating: the calibration wizard drives the servos";
+            self.end_arm(GoalEnd::Aborted, Fjt::INVALID_GOAL, why.into(), effects);
+            self.end_gripper(GoalEnd::Aborted, false, why, true, effects);
+            self.hold_leader("calibrating".into(), effects);
+        } else {
+            let reported = self
+                .last_servo_state
+                .as_ref()
+                .and_then(|msg| self.core.model().reported_axes(msg));
+            match reported {
+                Some(axes) => {
+                    log::info!("calibrating ended: taking the arm where servo_state says it is");
+                    effects.push(Effect::Publish(self.core.take_reported(&axes, wall)));
+                }
+                None => log::info!(
+                    "calibrating ended; no servo_state heard, the arm is taken where it was commanded before"
+                ),
+            }
+        }
+        effects.push(Effect::Report);
     }
 
     fn apply(&mut self, batch: Vec<Input>, now: Instant, wall: Time, effects: &mut Vec<Effect>) {
@@ -540,10 +581,10 @@ impl<M: ArmModel> Driver<M> {
                 text: "this arm has no trajectory controller (the EezyBot only)".into(),
             });
         };
-        if self.core.estop() {
+        if let Some(why) = self.core.halted() {
             return Err(controller::Refusal {
                 code: Fjt::INVALID_GOAL,
-                text: "the emergency stop is engaged".into(),
+                text: why.to_string(),
             });
         }
         if let Some(g) = goal {
@@ -871,6 +912,7 @@ impl<M: ArmModel> Driver<M> {
             msg.header.stamp
         };
         self.servo_state_at = Some(seconds(wall));
+        self.last_servo_state = Some(msg.clone());
         self.actual = Some((
             Actual {
                 positions,
@@ -908,8 +950,8 @@ impl<M: ArmModel> Driver<M> {
         };
         let position = g.goal.command.position;
         let opening = position / gm.rad_per_unit;
-        let refusal = if self.core.estop() {
-            Some("the emergency stop is engaged".to_string())
+        let refusal = if let Some(why) = self.core.halted() {
+            Some(why.to_string())
         } else if !(position.is_finite() && (-1e-9..=1.0 + 1e-9).contains(&opening)) {
             Some(format!(
                 "position {position} rad is outside {}'s range 0 … {:.4} rad (closed … open)",
@@ -1111,8 +1153,12 @@ impl<M: ArmModel> Driver<M> {
             }
             return;
         }
-        if self.core.estop() {
-            self.hold_leader("emergency stop engaged".into(), effects);
+        if let Some(why) = self.core.halted() {
+            let why = match why {
+                Reason::Calibrating => "calibrating".to_string(),
+                _ => "emergency stop engaged".to_string(),
+            };
+            self.hold_leader(why, effects);
             return;
         }
         if !self.leader.following {

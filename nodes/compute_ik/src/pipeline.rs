@@ -227,6 +227,7 @@ pub struct Pipeline<M: ArmModel> {
     planner: Planner,
     motion: MotionSettings,
     estop: bool,
+    calibrating: bool,
     counters: Counters,
     last_rejection: Option<Rejection>,
     last_event_rejected: bool,
@@ -255,6 +256,7 @@ impl<M: ArmModel> Pipeline<M> {
             planner,
             motion,
             estop: false,
+            calibrating: false,
             counters: Counters::default(),
             last_rejection: None,
             last_event_rejected: false,
@@ -391,6 +393,35 @@ impl<M: ArmModel> Pipeline<M> {
         self.estop
     }
 
+    /// Start or end calibrating (the parameter `calibrating`): while calibrating the
+    /// calibration wizard drives the servos, the motion stops where it is and every
+    /// target is refused ([`Reason::Calibrating`]), as under the e-stop.
+    pub fn set_calibrating(&mut self, on: bool) {
+        if on {
+            self.planner.stop();
+            self.goal = self.state.clone();
+        }
+        self.calibrating = on;
+    }
+
+    /// Is the arm being calibrated?
+    pub fn calibrating(&self) -> bool {
+        self.calibrating
+    }
+
+    /// Why no motion is taken now, if none is: the e-stop, or calibrating.
+    pub fn halted(&self) -> Option<Reason> {
+        self.check_estop().err()
+    }
+
+    /// Take the arm where it is reported to be (`servo_state` through the current
+    /// calibration, `axes`), clamped into the joint limits, at rest: after calibrating,
+    /// when the wizard left the servos wherever the last reference was. Returns the
+    /// step to publish (the same angles, so nothing moves unless the clamp did).
+    pub fn take_reported(&mut self, axes: &[f64], now: Time) -> Step {
+        self.command_axes(axes, now)
+    }
+
     /// Handle one target input arriving at `now` (`None` for `estop`, which is
     /// [`Pipeline::set_estop`]'s).
     pub fn handle(&mut self, input: &Input, now: Time) -> Option<Result<Step, Rejection>> {
@@ -513,6 +544,8 @@ impl<M: ArmModel> Pipeline<M> {
     fn check_estop(&self) -> Result<(), Reason> {
         if self.estop {
             Err(Reason::EmergencyStop)
+        } else if self.calibrating {
+            Err(Reason::Calibrating)
         } else {
             Ok(())
         }
@@ -779,6 +812,11 @@ impl<M: ArmModel> Pipeline<M> {
     pub fn diagnostic_status(&self, name: &str) -> DiagnosticStatus {
         let (level, message) = if self.estop {
             (DiagnosticStatus::WARN, "emergency stop engaged".to_string())
+        } else if self.calibrating {
+            (
+                DiagnosticStatus::WARN,
+                "calibrating: the wizard drives the servos, no target is taken".to_string(),
+            )
         } else if self.last_event_rejected {
             let r = self
                 .last_rejection
@@ -797,6 +835,7 @@ impl<M: ArmModel> Pipeline<M> {
             ("too_old".into(), c.too_old.to_string()),
             ("superseded".into(), c.superseded.to_string()),
             ("estop".into(), self.estop.to_string()),
+            ("calibrating".into(), self.calibrating.to_string()),
             (
                 "motion".into(),
                 if self.planner.is_moving() {
