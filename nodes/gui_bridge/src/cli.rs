@@ -27,6 +27,7 @@ pub const EXIT_USAGE: u8 = 2;
                       gui_bridge once X Y Z [--gripper G] [--line] [--timeout S] [--ros-args ...]\n       \
                       gui_bridge play FILE.csv|FILE.mcap [--line] [--timeout S] [--ros-args ...]\n       \
                       gui_bridge record FILE.csv|FILE.mcap                 [--ros-args ...]\n       \
+                      gui_bridge calibrate [--leader]                       [--ros-args ...]\n       \
                       (the commands are also flags: --once X Y Z, --play FILE, --record FILE)"
 )]
 pub struct Cli {
@@ -49,6 +50,19 @@ pub enum Command {
     /// Save every target the operator sends as such rows, until Ctrl-C
     #[command(long_flag = "record")]
     Record(RecordArgs),
+    /// Calibrate the arm's servos (or a leader arm's potentiometers) step by step from
+    /// the terminal: jog, mark two reference poses per joint, save and apply. Type ? for
+    /// the commands. Exit 0 saved, 1 cancelled
+    Calibrate(CalibrateArgs),
+}
+
+/// `calibrate`
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Calibrate a leader arm's potentiometers (serial_node role:=leader) instead of
+    /// the servos
+    #[arg(long)]
+    pub leader: bool,
 }
 
 /// `once X Y Z`

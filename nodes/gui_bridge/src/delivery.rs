@@ -57,6 +57,9 @@ pub enum NotDelivered {
     /// No answer in time.
     #[error("no answer from compute_ik within {0:.1} s")]
     NoAnswer(f64),
+    /// `calibrate` ended without saving (cancelled, failed, or not started).
+    #[error("{0}")]
+    NotCalibrated(String),
     /// Taken, but the arm was not there in time.
     #[error("the arm did not arrive at {xyz:?} within {timeout_s:.1} s")]
     DidNotArrive {

@@ -2,6 +2,9 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod access;
+pub mod calibrate;
+pub mod calibrate_cli;
+pub mod calibration_ros;
 pub mod cli;
 pub mod delivery;
 pub mod desk;
@@ -42,7 +45,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
         name: "gui_bridge",
         description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
-        usage: "[serve | once X Y Z [--gripper G] [--line] [--timeout S] | play WAYPOINTS.csv|RUN.mcap [--line] [--timeout S] | record OUT.csv|OUT.mcap]",
+        usage: "[serve | once X Y Z [--gripper G] [--line] [--timeout S] | play WAYPOINTS.csv|RUN.mcap [--line] [--timeout S] | record OUT.csv|OUT.mcap | calibrate [--leader]]",
         params: vec![
             ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
             ParamSpec::new(
@@ -66,6 +69,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String(p) => load_arm(p).map(|_| ()),
                 _ => Ok(()),
             }),
+            ParamSpec::new(
+                "calibration_file",
+                ParameterValue::String(String::new()),
+                "where the calibration wizard saves (atomically, the previous file kept as FILE.bak), then sets arm_config to it on compute_ik and every serial_node heard; empty = arm_config if set, else $XDG_CONFIG_HOME/eezybot/arm.yaml (~/.config/eezybot/arm.yaml), made from the shipped config",
+            )
+            .read_only(),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
             ParamSpec::new(
                 "program_dir",
@@ -122,6 +131,10 @@ pub enum Input {
     ServoState(JointState),
     /// `estop`
     Estop(bool),
+    /// `leader/joint_states`: a leader arm's joints, shown beside the follower
+    LeaderJoints(JointState),
+    /// `leader/deadman`
+    LeaderDeadman(bool),
     /// A sample on `topic` that could not be deserialized (malformed CDR): logged,
     /// counted in `diagnostics`, otherwise ignored (an unreadable `estop` changes nothing).
     Unreadable {
@@ -144,6 +157,57 @@ pub trait Outputs {
     fn estop(&self, engaged: bool);
     /// Publish a `diagnostics` report with this status.
     fn diagnostics(&self, status: DiagnosticStatus);
+}
+
+/// How often the page gets a leader arm's joints, at most.
+pub const LEADER_VIEW_RATE_HZ: f64 = 20.0;
+
+/// A calibration to write and apply ([`crate::calibrate::Effect::Save`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SaveJob {
+    /// the servos' calibration
+    pub servos: eezybot_kinematics::ServoCalibrations,
+    /// the leader section
+    pub leader: Option<eezybot_kinematics::LeaderCalibration>,
+    /// set compute_ik's `calibrating` false once `arm_config` is applied
+    pub end_calibrating: bool,
+    /// the nodes to set `arm_config` on (compute_ik and the serial_nodes heard)
+    pub nodes: Vec<String>,
+}
+
+/// The calibration wizard's ROS side: compute_ik's `calibrating`, and saving and
+/// applying a calibration (`arm_config` on the other nodes).
+pub trait CalibrationControl {
+    /// Set compute_ik's `calibrating`.
+    fn set_calibrating(&self, on: bool) -> LocalBoxFuture<'_, Result<(), String>>;
+    /// Write the calibration, set `arm_config` on the job's nodes, then end calibrating
+    /// if asked.
+    fn save(&self, job: SaveJob) -> LocalBoxFuture<'_, calibrate::SaveOutcome>;
+    /// Publish on `servo_angles` (horn angles in deg), while calibrating.
+    fn servo_angles(&self, deg: [f64; 4], stamp: Time);
+    /// These nodes were heard: make their parameter clients now, so that the services
+    /// are matched long before a calibration is saved.
+    fn prepare(&self, nodes: &[String]);
+}
+
+/// No ROS side (tests of the loop without calibration): every job fails with the reason.
+pub struct NoCalibration;
+
+impl CalibrationControl for NoCalibration {
+    fn set_calibrating(&self, _on: bool) -> LocalBoxFuture<'_, Result<(), String>> {
+        Box::pin(async { Err("no compute_ik parameters to set".to_string()) })
+    }
+    fn save(&self, _job: SaveJob) -> LocalBoxFuture<'_, calibrate::SaveOutcome> {
+        Box::pin(async {
+            calibrate::SaveOutcome {
+                written: Err("no calibration file".into()),
+                applied: vec![],
+                failed: vec![],
+            }
+        })
+    }
+    fn servo_angles(&self, _deg: [f64; 4], _stamp: Time) {}
+    fn prepare(&self, _nodes: &[String]) {}
 }
 
 /// The topics whose peers the web panel watches (resolved names): `xyz_target`
@@ -206,6 +270,8 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
     pub reporting: Reporting<F>,
     /// compute_ik's `motion`, for the program's move modes.
     pub motion: &'a dyn MotionControl,
+    /// The calibration wizard's ROS side.
+    pub calibration: &'a dyn CalibrationControl,
     /// The loop ends when this resolves.
     pub shutdown: S,
 }
@@ -234,6 +300,7 @@ where
         params,
         mut reporting,
         motion,
+        calibration,
         shutdown,
     } = io;
     let mut sink = Sink {
@@ -242,10 +309,12 @@ where
         snapshot: &snapshot,
         web,
         motion,
+        calibration,
     };
     let mut jobs = Jobs {
         file: None,
         motion: None,
+        calibration: None,
     };
     let mut diag_tick = tokio::time::interval(Duration::from_secs(1));
     let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
@@ -266,7 +335,16 @@ where
         let wake = panel.next_wakeup(clock.now);
         tokio::select! {
             biased;
-            _ = &mut shutdown => break,
+            _ = &mut shutdown => {
+                if panel.calibrating() {
+                    // compute_ik was told to send nothing: let it take the arm back
+                    log::warn!("stopping while calibrating: setting compute_ik's calibrating false");
+                    if let Err(e) = tokio::time::timeout(Duration::from_secs(3), calibration.set_calibrating(false)).await.unwrap_or_else(|_| Err("no answer".into())) {
+                        log::error!("compute_ik's calibrating is still true ({e}): `ros2 param set /compute_ik calibrating false`");
+                    }
+                }
+                break;
+            }
             Some(from) = requests.estops.recv() => {
                 sink.apply(panel.on_request(from.request, Clock::read()), Some(&from.reply), &mut jobs);
             }
@@ -283,7 +361,14 @@ where
                     sink.apply(panel.on_mode_set(result, Clock::read()), None, &mut jobs);
                 }
             }
-            _ = status_tick.tick() => sink.apply(panel.on_status_tick(Clock::read()), None, &mut jobs),
+            done = finished(&mut jobs.calibration), if jobs.calibration.is_some() => {
+                jobs.calibration = None;
+                sink.apply(panel.on_calibration_done(done, Clock::read()), None, &mut jobs);
+            }
+            _ = status_tick.tick() => {
+                calibration.prepare(&panel.calibration_nodes());
+                sink.apply(panel.on_status_tick(Clock::read()), None, &mut jobs)
+            }
             _ = diag_tick.tick() => sink.report(&panel, &reporting),
             _ = peer_poll.tick() => {
                 let changes = reporting.peers.update(&(reporting.counts)(), Instant::now());
@@ -315,6 +400,8 @@ where
 struct Jobs<'m> {
     file: Option<BoxFuture<'static, FileDone>>,
     motion: Option<LocalBoxFuture<'m, Option<Result<(), String>>>>,
+    /// compute_ik's `calibrating` being set, or a calibration saved and applied
+    calibration: Option<LocalBoxFuture<'m, panel::CalibrationDone>>,
 }
 
 /// The job's output once it is done (never, without one).
@@ -332,6 +419,7 @@ struct Sink<'a, 'm, O> {
     snapshot: &'a watch::Sender<Snapshot>,
     web: WebStats,
     motion: &'m dyn MotionControl,
+    calibration: &'m dyn CalibrationControl,
 }
 
 impl<'m, O: Outputs> Sink<'_, 'm, O> {
@@ -388,6 +476,24 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                     self.snapshot.send_replace(s);
                 }
                 Effect::Log(level, text) => log(Some((level, text))),
+                Effect::Calibration(work) => {
+                    let c = self.calibration;
+                    match work {
+                        panel::CalibrationWork::ServoAngles(deg) => {
+                            c.servo_angles(deg, Time::now())
+                        }
+                        panel::CalibrationWork::SetCalibrating(on) => {
+                            jobs.calibration = Some(Box::pin(async move {
+                                panel::CalibrationDone::Calibrating(on, c.set_calibrating(on).await)
+                            }));
+                        }
+                        panel::CalibrationWork::Save(job) => {
+                            jobs.calibration = Some(Box::pin(async move {
+                                panel::CalibrationDone::Saved(c.save(*job).await)
+                            }));
+                        }
+                    }
+                }
             }
         }
     }

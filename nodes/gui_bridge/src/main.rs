@@ -59,6 +59,9 @@ async fn run(cli: Cli, argv: Vec<String>) -> anyhow::Result<()> {
             foxglove::record_mcap(&mut node, &args.file, shutdown).await
         }
         Command::Record(args) => record::record(&mut node, &args.file, shutdown).await,
+        Command::Calibrate(args) => {
+            gui_bridge::calibrate_cli::calibrate(&mut node, args.leader, shutdown).await
+        }
     };
     node.shutdown().await;
     result

@@ -78,6 +78,129 @@ pub enum ToClient {
     },
     /// Something was published.
     Sent(Sent),
+    /// The calibration wizard ([`crate::calibrate::Wizard::view`]).
+    Calibration(Box<CalibrationView>),
+    /// A leader arm's joints (`leader/joint_states`) and its deadman (`leader/deadman`),
+    /// at most [`crate::LEADER_VIEW_RATE_HZ`] a second.
+    Leader {
+        /// joint name -> rad
+        joints: BTreeMap<String, f64>,
+        /// the deadman is held (null: not heard yet)
+        deadman: Option<bool>,
+    },
+}
+
+/// `{"t": "calibration", …}`: the wizard as the page shows it (the step list, the
+/// reference to show next with its pose for a picture, the jog range, the result).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CalibrationView {
+    /// a calibration is under way
+    pub active: bool,
+    /// `follower` or `leader`
+    pub arm: String,
+    /// idle, starting, moving, jog, reading, review, saving, testing, done, failed
+    pub phase: String,
+    /// the active step (index into `steps`)
+    pub step: usize,
+    /// every servo, in calibration order
+    pub steps: Vec<StepView>,
+    /// the reference to mark next in the active step (0 = A, 1 = B)
+    pub reference: usize,
+    /// the active servo's commanded angle (deg; follower only)
+    pub commanded_deg: Option<f64>,
+    /// the active servo's `servo_state` (deg; follower only)
+    pub state_deg: Option<f64>,
+    /// where the active servo may be jogged now
+    pub jog: Option<JogView>,
+    /// the leader's live ADC counts, A0 … A3 (leader only)
+    pub counts: Option<[f64; 4]>,
+    /// what to do now
+    pub instruction: String,
+    /// the last refusal or failure
+    pub error: Option<String>,
+    /// where the calibration was saved and applied
+    pub saved: Option<SavedView>,
+    /// the guided test move
+    pub test: Option<TestView>,
+    /// the claw's swing (rad) from closed to open, for pictures of an opening
+    pub gripper_open_rad: f64,
+}
+
+/// One servo's step.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StepView {
+    /// base, shoulder, elbow, gripper
+    pub servo: String,
+    /// what the user calls it
+    pub title: String,
+    /// the leader's potentiometer input for this joint (A0 … A3 = 0 … 3)
+    pub channel: usize,
+    /// what its input measures
+    pub input_name: String,
+    /// `deg` or `opening`
+    pub unit: String,
+    /// references A and B
+    pub references: [ReferenceView; 2],
+    /// B's alternative, if any
+    pub alternative_b: Option<ReferenceView>,
+    /// the alternative is used
+    pub use_alternative: bool,
+    /// the joints held while this servo is calibrated
+    pub holds: Vec<String>,
+    /// the marks: servo deg (follower) or ADC counts (leader)
+    pub marks: [Option<f64>; 2],
+    /// what the marks gave
+    pub derived: Option<serde_json::Value>,
+    /// why the marks were refused
+    pub error: Option<String>,
+}
+
+/// A reference pose.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReferenceView {
+    /// the servo's input there (deg, or the claw's opening)
+    pub input: f64,
+    /// what the user looks for
+    pub description: String,
+    /// the whole arm there, joint name -> rad, for a picture drawn from the URDF
+    pub pose: BTreeMap<&'static str, f64>,
+}
+
+/// The jog range and steps.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct JogView {
+    /// lowest servo angle, deg
+    pub min_deg: f64,
+    /// highest, deg
+    pub max_deg: f64,
+    /// the fine step, deg
+    pub fine_deg: f64,
+    /// the coarse step, deg
+    pub coarse_deg: f64,
+}
+
+/// Where the calibration went.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SavedView {
+    /// the file written (null: not written)
+    pub path: Option<String>,
+    /// the previous file's copy
+    pub backup: Option<String>,
+    /// nodes whose `arm_config` was set
+    pub applied: Vec<String>,
+    /// nodes that refused it, with why
+    pub failed: Vec<String>,
+}
+
+/// The guided test move.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TestView {
+    /// joint name -> rad
+    pub pose: BTreeMap<String, f64>,
+    /// what the arm should show
+    pub description: String,
+    /// the arm arrived there (`joint_states`)
+    pub done: bool,
 }
 
 impl ToClient {
@@ -296,6 +419,8 @@ pub struct Snapshot {
     pub arm: Arc<ArmFacts>,
     /// the text of `robot_description`, for `/robot.urdf`
     pub urdf: Option<Arc<str>>,
+    /// the latest `calibration` message (none: no wizard here)
+    pub calibration: Option<Arc<ToClient>>,
 }
 
 /// `{"t": "hello", …}`.
@@ -307,6 +432,7 @@ struct Hello<'a> {
     rate: f64,
     robot: &'a RobotInfo,
     program: &'a ToClient,
+    calibration: Option<&'a ToClient>,
     #[serde(flatten)]
     arm: &'a ArmFacts,
 }
@@ -320,6 +446,7 @@ impl Snapshot {
             rate,
             robot: &self.robot,
             program: &self.program,
+            calibration: self.calibration.as_deref(),
             arm: &self.arm,
         })
         .unwrap_or_default()
@@ -530,6 +657,7 @@ mod tests {
             program: Arc::new(program),
             arm: Arc::new(ArmFacts::of(&arm)),
             urdf: None,
+            calibration: None,
         };
         let hello: serde_json::Value = serde_json::from_str(&snapshot.hello(50.0)).unwrap();
         assert_eq!(hello["t"], "hello");

@@ -3,6 +3,7 @@
 //! ([`Clock`]); [`Effect`]s come out for the loop to apply (publish, answer a browser,
 //! tell every browser, set compute_ik's move mode, run a file job, log). No I/O here.
 
+use crate::calibrate::{self as cal, Wizard};
 use crate::desk::{Desk, DeskOutcome, FileDone, FileJob};
 use crate::message::{
     ArmFacts, ArmJointsMsg, NodeEntry, Pose, RobotInfo, Sent, Snapshot, ToClient, UrdfScene,
@@ -82,6 +83,30 @@ pub enum Effect {
     Snapshot(Snapshot),
     /// Log this.
     Log(log::Level, String),
+    /// The calibration wizard's work on ROS: set compute_ik's `calibrating`, publish
+    /// `servo_angles`, save and apply (then call [`Panel::on_calibration_done`]).
+    Calibration(CalibrationWork),
+}
+
+/// What the calibration wizard needs done on ROS ([`crate::calibrate::Effect`]s the
+/// panel does not do itself).
+#[derive(Clone, Debug, PartialEq)]
+pub enum CalibrationWork {
+    /// Set compute_ik's `calibrating`.
+    SetCalibrating(bool),
+    /// Publish `servo_angles` at these horn angles (deg).
+    ServoAngles([f64; 4]),
+    /// Write and apply this calibration.
+    Save(Box<crate::SaveJob>),
+}
+
+/// The outcome of a [`CalibrationWork`] job.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CalibrationDone {
+    /// compute_ik's `calibrating` was set to this (or not).
+    Calibrating(bool, Result<(), String>),
+    /// The save.
+    Saved(crate::calibrate::SaveOutcome),
 }
 
 /// Longest node name (and task, hardware id) the panel shows.
@@ -163,6 +188,17 @@ impl NodeHealth {
             seen: BTreeMap::new(),
             last_rejection: None,
         }
+    }
+
+    /// The nodes up now whose task is one of `tasks`.
+    fn nodes_doing(&self, tasks: &[&str], now: Instant) -> Vec<String> {
+        self.seen
+            .iter()
+            .filter(|(_, h)| {
+                tasks.contains(&h.task.as_str()) && now.duration_since(h.at) < UP_WITHIN
+            })
+            .map(|(n, _)| n.clone())
+            .collect()
     }
 
     fn update(&mut self, heard: &[Feedback], now: Instant) {
@@ -320,6 +356,22 @@ pub struct Panel {
     arm_facts: Arc<ArmFacts>,
     /// the snapshot changed since the last [`Effect::Snapshot`]
     changed: bool,
+    /// the calibration wizard (the EezyBot's only)
+    wizard: Option<Wizard>,
+    /// its latest view
+    calibration: Option<Arc<ToClient>>,
+    /// the leader arm's latest joints and deadman, and when they were last sent
+    leader: LeaderView,
+}
+
+/// The leader arm as the page shows it beside the follower.
+#[derive(Debug, Default)]
+struct LeaderView {
+    joints: BTreeMap<String, f64>,
+    deadman: Option<bool>,
+    sent_at: Option<Instant>,
+    /// a change not sent yet (held back by the rate)
+    pending: bool,
 }
 
 impl Panel {
@@ -344,7 +396,118 @@ impl Panel {
             urdf: None,
             pose: None,
             changed: false,
+            wizard: None,
+            calibration: None,
+            leader: LeaderView::default(),
         }
+    }
+
+    /// Enable the calibration wizard for an EezyBot with this configuration.
+    pub fn enable_calibration(
+        &mut self,
+        config: eezybot_kinematics::ArmConfig,
+    ) -> Result<(), String> {
+        let wizard = Wizard::new(config).map_err(|e| e.to_string())?;
+        self.calibration = Some(Arc::new(ToClient::Calibration(Box::new(wizard.view()))));
+        self.wizard = Some(wizard);
+        self.changed = true;
+        Ok(())
+    }
+
+    /// Whether compute_ik was told to send nothing by the wizard (set it back when the
+    /// node stops).
+    pub fn calibrating(&self) -> bool {
+        self.wizard.as_ref().is_some_and(|w| w.holds_compute_ik())
+    }
+
+    /// The nodes whose `arm_config` a saved calibration goes to: compute_ik and every
+    /// serial_node (follower or leader) heard on `diagnostics`.
+    pub fn calibration_nodes(&self) -> Vec<String> {
+        self.health
+            .nodes_doing(&["inverse kinematics", "servo link"], Instant::now())
+    }
+
+    /// A wizard request, or its ROS work done.
+    fn calibrate(&mut self, op: Result<cal::Op, String>, clock: Clock, effects: &mut Vec<Effect>) {
+        let Some(wizard) = self.wizard.as_mut() else {
+            let reason = "calibration: only for the EezyBot (this arm has no servos to calibrate)"
+                .to_string();
+            effects.push(Effect::Rejected {
+                kind: "calibration",
+                reason: reason.clone(),
+            });
+            effects.push(Effect::Answer(ToClient::Refused {
+                reason,
+                reachable: None,
+            }));
+            return;
+        };
+        let out = op.and_then(|op| wizard.request(op, clock.now));
+        match out {
+            Ok(fx) => self.calibration_effects(fx, clock, effects),
+            Err(reason) => {
+                let fx = wizard.refused(&reason);
+                effects.push(Effect::Rejected {
+                    kind: "calibration",
+                    reason: reason.clone(),
+                });
+                effects.push(Effect::Answer(ToClient::Refused {
+                    reason: shorten(&reason, web::REASON_MAX).into_owned(),
+                    reachable: None,
+                }));
+                self.calibration_effects(fx, clock, effects);
+            }
+        }
+    }
+
+    fn calibration_effects(
+        &mut self,
+        fx: Vec<cal::Effect>,
+        clock: Clock,
+        effects: &mut Vec<Effect>,
+    ) {
+        for e in fx {
+            match e {
+                cal::Effect::SetCalibrating(on) => {
+                    effects.push(Effect::Calibration(CalibrationWork::SetCalibrating(on)))
+                }
+                cal::Effect::ServoAngles(deg) => {
+                    effects.push(Effect::Calibration(CalibrationWork::ServoAngles(deg)))
+                }
+                cal::Effect::Save(mut job) => {
+                    job.nodes = self.calibration_nodes();
+                    effects.push(Effect::Calibration(CalibrationWork::Save(job)))
+                }
+                cal::Effect::JointTarget(q) => effects.push(Effect::Publish {
+                    command: Command::Joints(q),
+                    stamp: clock.wall,
+                }),
+                cal::Effect::View => {
+                    if let Some(w) = &self.wizard {
+                        let view = Arc::new(ToClient::Calibration(Box::new(w.view())));
+                        effects.push(Effect::Broadcast((*view).clone()));
+                        self.calibration = Some(view);
+                        self.changed = true;
+                    }
+                }
+                cal::Effect::Log(level, text) => effects.push(Effect::Log(level, text)),
+            }
+        }
+    }
+
+    /// A [`CalibrationWork`] job is done.
+    pub fn on_calibration_done(&mut self, done: CalibrationDone, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        if let Some(w) = self.wizard.as_mut() {
+            let fx = match done {
+                CalibrationDone::Calibrating(on, result) => {
+                    w.on_calibrating_set(on, result, clock.now)
+                }
+                CalibrationDone::Saved(outcome) => w.on_saved(outcome, clock.now),
+            };
+            self.calibration_effects(fx, clock, &mut effects);
+        }
+        self.finish(effects)
     }
 
     /// What a browser that connects now gets.
@@ -356,6 +519,7 @@ impl Panel {
             program: self.program.clone(),
             arm: self.arm_facts.clone(),
             urdf: self.urdf.as_ref().map(|(text, _)| text.clone()),
+            calibration: self.calibration.clone(),
         }
     }
 
@@ -422,12 +586,24 @@ impl Panel {
         if self.desk.next_wakeup().is_some_and(|w| w <= clock.now) {
             self.desk_step(clock.now, &mut effects);
         }
+        if self.leader.pending {
+            self.send_leader(clock.now, &mut effects);
+        }
         self.finish(effects)
     }
 
-    /// Every half second: the other nodes' health to every browser.
-    pub fn on_status_tick(&self, clock: Clock) -> Vec<Effect> {
-        vec![Effect::Broadcast(self.health.status(clock.now))]
+    /// Every half second: the other nodes' health to every browser; the wizard's
+    /// timeouts.
+    pub fn on_status_tick(&mut self, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![Effect::Broadcast(self.health.status(clock.now))];
+        if let Some(w) = self.wizard.as_mut() {
+            let fx = w.on_tick(clock.now);
+            self.calibration_effects(fx, clock, &mut effects);
+        }
+        if self.leader.pending {
+            self.send_leader(clock.now, &mut effects);
+        }
+        self.finish(effects)
     }
 
     /// A browser's request; its answer is an [`Effect::Answer`].
@@ -449,13 +625,31 @@ impl Panel {
                 self.desk_step(clock.now, &mut effects);
                 return self.finish(effects);
             }
+            ClientRequest::Calibrate(op) => {
+                self.calibrate(op.into_op(), clock, &mut effects);
+                return self.finish(effects);
+            }
+            ClientRequest::Estop { on } => Event::Estop { engaged: on },
+            _ if self.calibrating() => {
+                let reason =
+                    "calibrating: the wizard drives the servos (finish or cancel it first)"
+                        .to_string();
+                effects.push(Effect::Rejected {
+                    kind: "calibrating",
+                    reason: reason.clone(),
+                });
+                effects.push(Effect::Answer(ToClient::Refused {
+                    reason,
+                    reachable: Some(false),
+                }));
+                return self.finish(effects);
+            }
             ClientRequest::Target { xyz } => Event::SetTarget { xyz },
             ClientRequest::Jog { d } => Event::Jog { dxyz: d },
             ClientRequest::Gripper { v } => Event::Gripper { opening: v },
             ClientRequest::Joints { q } => Event::Joints {
                 positions: q.into_iter().collect(),
             },
-            ClientRequest::Estop { on } => Event::Estop { engaged: on },
         };
         let engaged = matches!(event, Event::Estop { engaged: true });
         let eezybot = self.teleop.is_eezybot();
@@ -512,6 +706,16 @@ impl Panel {
         let mut effects = vec![];
         match input {
             Input::JointStates(js) => {
+                if let Some(w) = self.wizard.as_mut() {
+                    let joints = js
+                        .name
+                        .iter()
+                        .cloned()
+                        .zip(js.position.iter().copied())
+                        .collect();
+                    let fx = w.on_joint_states(&joints);
+                    self.calibration_effects(fx, clock, &mut effects);
+                }
                 if let Some(pose) = self.pose_of(&js) {
                     let pose = Arc::new(ToClient::Pose(pose));
                     effects.push(Effect::Broadcast((*pose).clone()));
@@ -525,6 +729,10 @@ impl Panel {
             Input::Diagnostics(d) => {
                 let heard = feedback::decode(&d);
                 self.health.update(&heard, clock.now);
+                if let (Some(w), Some(counts)) = (self.wizard.as_mut(), leader_counts(&d)) {
+                    let fx = w.on_leader_counts(counts, clock.now);
+                    self.calibration_effects(fx, clock, &mut effects);
+                }
                 if self.desk.playing() {
                     for refusal in heard.iter().filter_map(|f| f.refusal.as_ref()) {
                         self.desk.refused(refusal);
@@ -533,11 +741,19 @@ impl Panel {
                 }
             }
             Input::ServoState(s) => {
+                if let (Some(w), Some(deg)) = (self.wizard.as_mut(), servo_degrees(&s)) {
+                    let fx = w.on_servo_state(deg, clock.now);
+                    self.calibration_effects(fx, clock, &mut effects);
+                }
                 if let Some(latency) = self.latency.reply(s.header.stamp, clock.wall) {
                     effects.push(Effect::Broadcast(latency));
                 }
             }
             Input::Estop(on) => {
+                if let Some(w) = self.wizard.as_mut() {
+                    let fx = w.on_estop(on, clock.now);
+                    self.calibration_effects(fx, clock, &mut effects);
+                }
                 effects.push(Effect::Broadcast(ToClient::Estop { on }));
                 if on {
                     self.stop_playing(&mut effects);
@@ -545,6 +761,23 @@ impl Panel {
             }
             Input::Unreadable { topic, error } => {
                 effects.extend(self.unreadable.note(topic, &error, clock.now));
+            }
+            Input::LeaderJoints(js) => {
+                self.leader.joints = js
+                    .name
+                    .iter()
+                    .cloned()
+                    .zip(js.position.iter().copied())
+                    .collect();
+                self.leader.pending = true;
+                self.send_leader(clock.now, &mut effects);
+            }
+            Input::LeaderDeadman(held) => {
+                if self.leader.deadman != Some(held) {
+                    self.leader.deadman = Some(held);
+                    self.leader.pending = true;
+                    self.send_leader(clock.now, &mut effects);
+                }
             }
         }
         self.finish(effects)
@@ -596,6 +829,25 @@ impl Panel {
     }
 
     /// Append the snapshot if it changed.
+    /// The leader's joints to every browser, at most [`crate::LEADER_VIEW_RATE_HZ`] a
+    /// second (a held-back change goes with the next tick).
+    fn send_leader(&mut self, now: Instant, effects: &mut Vec<Effect>) {
+        let period = Duration::from_secs_f64(1.0 / crate::LEADER_VIEW_RATE_HZ);
+        if self
+            .leader
+            .sent_at
+            .is_some_and(|t| now.duration_since(t) < period)
+        {
+            return;
+        }
+        self.leader.sent_at = Some(now);
+        self.leader.pending = false;
+        effects.push(Effect::Broadcast(ToClient::Leader {
+            joints: self.leader.joints.clone(),
+            deadman: self.leader.deadman,
+        }));
+    }
+
     fn finish(&mut self, mut effects: Vec<Effect>) -> Vec<Effect> {
         if std::mem::take(&mut self.changed) {
             effects.push(Effect::Snapshot(self.snapshot()));
@@ -804,6 +1056,37 @@ fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
             ((b - a).norm() > 1e-6).then(|| ([a.x, a.y, a.z, b.x, b.y, b.z], j.child.clone()))
         })
         .collect()
+}
+
+/// `servo_state`'s four horn angles in degrees (`servo_angles` order), if it names them
+/// all with finite values.
+pub(crate) fn servo_degrees(msg: &JointState) -> Option<[f64; 4]> {
+    let mut deg = [0.0; 4];
+    for (i, id) in eezybot_kinematics::ServoId::ALL.iter().enumerate() {
+        let k = msg.name.iter().position(|n| n == id.name())?;
+        deg[i] = msg.position.get(k).filter(|v| v.is_finite())?.to_degrees();
+    }
+    Some(deg)
+}
+
+/// A leader serial_node's live ADC counts (`leader_counts`, "A0 A1 A2 A3"), from any
+/// status of a `diagnostics` array.
+pub(crate) fn leader_counts(
+    d: &eezybot_msgs::diagnostic_msgs::DiagnosticArray,
+) -> Option<[f64; 4]> {
+    let text = d
+        .status
+        .iter()
+        .flat_map(|s| &s.values)
+        .find(|kv| kv.key == "leader_counts")?;
+    let v: Vec<f64> = text
+        .value
+        .split_whitespace()
+        .map(|x| x.parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()?;
+    let counts: [f64; 4] = v.try_into().ok()?;
+    counts.iter().all(|c| c.is_finite()).then_some(counts)
 }
 
 #[cfg(test)]

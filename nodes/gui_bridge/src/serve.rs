@@ -29,6 +29,8 @@ pub async fn serve(
     let description = node.subscribe_to(&topics::ROBOT_DESCRIPTION)?;
     let servo_state = node.subscribe_to(&topics::SERVO_STATE)?;
     let estop = node.subscribe_to(&topics::ESTOP)?;
+    let leader_joints = node.subscribe_to(&topics::LEADER_JOINT_STATES)?;
+    let leader_deadman = node.subscribe_to(&topics::LEADER_DEADMAN)?;
     let (to_browsers, _) = tokio::sync::broadcast::channel(256);
     let limits = Limits::default();
     let (req_tx, req_rx) = crate::web::request_channels(&limits);
@@ -67,7 +69,20 @@ pub async fn serve(
         &params.string("program_dir").unwrap_or_default(),
     ));
     log::info!("waypoint programs in {}", desk.dir().display());
-    let panel = crate::panel::Panel::new(arm, rate, desk, node.resolver().node_name());
+    let mut panel = crate::panel::Panel::new(arm, rate, desk, node.resolver().node_name());
+    let arm_config = params.string("arm_config").unwrap_or_default();
+    match eezybot_kinematics::ArmConfig::load_or_shipped(&arm_config) {
+        Ok(config) => {
+            if let Err(e) = panel.enable_calibration(config) {
+                log::warn!("no calibration wizard: {e}");
+            }
+        }
+        Err(e) => log::warn!("no calibration wizard: {e}"),
+    }
+    let calibration_path = crate::calibration_ros::calibration_path(
+        &params.string("calibration_file").unwrap_or_default(),
+        &arm_config,
+    );
     // what a browser that connects gets first: the bridge loop keeps it current
     let (snapshot, view) = tokio::sync::watch::channel(panel.snapshot());
     // from here on shared with the Foxglove server, which subscribes topics on demand
@@ -124,6 +139,14 @@ pub async fn serve(
         inputs_of(&diagnostics, &topics::DIAGNOSTICS, Input::Diagnostics),
         inputs_of(&servo_state, &topics::SERVO_STATE, Input::ServoState),
         inputs_of(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
+        inputs_of(
+            &leader_joints,
+            &topics::LEADER_JOINT_STATES,
+            Input::LeaderJoints,
+        ),
+        inputs_of(&leader_deadman, &topics::LEADER_DEADMAN, |m| {
+            Input::LeaderDeadman(m.data)
+        }),
     ]);
     let reporting = crate::Reporting {
         name: panel_name,
@@ -137,6 +160,12 @@ pub async fn serve(
             ]
         },
     };
+    let calibration =
+        crate::calibration_ros::RosCalibration::new(&node, calibration_path, "compute_ik");
+    log::info!(
+        "the calibration wizard saves to {}",
+        calibration.path().display()
+    );
     let motion = ComputeIkMotion {
         client: ik_params,
         original: std::cell::RefCell::new(None),
@@ -153,6 +182,7 @@ pub async fn serve(
             params,
             reporting,
             motion: &motion,
+            calibration: &calibration,
             shutdown,
         },
     );

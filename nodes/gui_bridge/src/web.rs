@@ -120,6 +120,68 @@ pub enum ClientRequest {
     },
     /// The waypoint program: teach, edit, play, save, load.
     Program(ProgramOp),
+    /// The calibration wizard (`{"t": "calibrate", "op": …}`).
+    Calibrate(CalibrateOp),
+}
+
+/// What a browser asks of the calibration wizard ([`crate::calibrate::Op`]).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "op", rename_all = "snake_case")]
+pub enum CalibrateOp {
+    /// Begin: `arm` is `follower` (the default) or `leader`.
+    Start {
+        /// which arm
+        #[serde(default)]
+        arm: Option<String>,
+    },
+    /// Move the active servo by `deg` servo degrees.
+    Jog {
+        /// servo degrees, at most 5 either way
+        deg: f64,
+    },
+    /// Mark the current reference.
+    Mark,
+    /// Undo the last mark.
+    Back,
+    /// Use reference B's alternative.
+    Alternative {
+        /// use it
+        on: bool,
+    },
+    /// Save and apply, then the test move.
+    Save,
+    /// The test move again.
+    Test,
+    /// Leave without saving.
+    Cancel,
+    /// Leave after saving.
+    Finish,
+}
+
+impl CalibrateOp {
+    /// The wizard's operation, or why the request is no valid one.
+    pub fn into_op(self) -> Result<crate::calibrate::Op, String> {
+        use crate::calibrate::{Arm, Op};
+        Ok(match self {
+            CalibrateOp::Start { arm } => {
+                let arm = arm.unwrap_or_else(|| "follower".into());
+                Op::Start(Arm::parse(&arm).ok_or_else(|| {
+                    format!(
+                        "calibrate: arm must be `follower` or `leader`, not `{}`",
+                        shorten(&arm, 40)
+                    )
+                })?)
+            }
+            CalibrateOp::Jog { deg } => Op::Jog(deg),
+            CalibrateOp::Mark => Op::Mark,
+            CalibrateOp::Back => Op::Back,
+            CalibrateOp::Alternative { on } => Op::Alternative(on),
+            CalibrateOp::Save => Op::Save,
+            CalibrateOp::Test => Op::Test,
+            CalibrateOp::Cancel => Op::Cancel,
+            CalibrateOp::Finish => Op::Finish,
+        })
+    }
 }
 
 /// What a browser does with the waypoint program (`{"t": "program", "op": …}`).

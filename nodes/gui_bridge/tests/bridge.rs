@@ -74,6 +74,7 @@ fn handles<'a, I, O, S>(
             counts: Vec::new,
         },
         motion: &NoMotionControl,
+        calibration: &gui_bridge::NoCalibration,
         shutdown,
     }
 }

@@ -3,7 +3,18 @@ const $ = (id) => document.getElementById(id);
 let ws = null, hello = null, target = [0.186, 0, 0.229], reachable = true, pose = null, estop = false, mode = "xyz";
 // the arm (from robot_description, else the EezyBot): joint sliders, reach, EezyBot or not
 let robot = { name: "eezybot", eezybot: true, joints: [], reach: 0.33, from_urdf: false };
-const send = (msg) => { if (ws && ws.readyState === 1) ws.send(JSON.stringify(msg)); };
+// the calibration wizard as gui_bridge last told it (null: never told); the small arm pictures
+let cal = null, calRefusal = null, calSentAt = -1e9;
+const pictures = [];
+// what moves the arm: not sent while the wizard calibrates the arm's servos (compute_ik refuses it then)
+const MOTION = new Set(["target", "jog", "joints", "gripper"]);
+const send = (msg) => {
+  if (MOTION.has(msg.t)) {
+    if (calBusy()) return;
+    calSentAt = -1e9; // a refusal now is this request's
+  }
+  if (ws && ws.readyState === 1) ws.send(JSON.stringify(msg));
+};
 
 // Access token: from the URL gui_bridge printed (#token=..., or ?token=...), kept in this
 // origin's localStorage, which no other port or site can read (a cookie would go to every
@@ -70,13 +81,23 @@ function connect() {
 
 function handle(m) {
   switch (m.t) {
-    case "hello": hello = m; target = m.target; applyRobot(m.robot); setSliders(target); if (m.pose) handle(m.pose); if (m.program) showProgram(m.program); break;
+    case "hello":
+      hello = m; target = m.target; applyRobot(m.robot); setSliders(target);
+      if (m.pose) handle(m.pose);
+      if (m.program) showProgram(m.program);
+      if (m.calibration) showCalibration(m.calibration);
+      if (m.leader) showLeader(m.leader);
+      break;
     case "robot": applyRobot(m.robot); break;
     case "ack": reachable = true; target = m.target; showReach(true, ""); if (mode === "xyz") setSliders(target, true); break;
-    case "refused": reachable = false; showReach(false, m.reason); break;
+    case "refused":
+      if (calRefusedNow()) { calRefusal = m.reason; renderCalibration(); break; }
+      reachable = false; showReach(false, m.reason); break;
     case "check": showReach(m.reachable, m.reason || ""); break;
     case "pose": pose = m; draw(); showPose(m); posed3d(m); break;
     case "program": showProgram(m); break;
+    case "calibration": showCalibration(m); break;
+    case "leader": showLeader(m); break;
     case "status": showStatus(m); break;
     case "latency": $("latency").textContent = m.ms.toFixed(1) + " ms (median " + m.median_ms.toFixed(1) + ")"; break;
     case "estop": setEstop(m.on); break;
@@ -178,8 +199,9 @@ document.addEventListener("keydown", (ev) => {
   if (ev.target.tagName === "INPUT" && ev.target.type === "number") return;
   const key = ev.key.toLowerCase();
   if (key === " ") { ev.preventDefault(); $("estop").click(); return; }
+  if (calKey(ev)) return;
   const dir = KEYS[key];
-  if (!dir) return;
+  if (!dir || calOpen()) return; // the arm's jog keys do nothing while the Calibrate view is open
   ev.preventDefault();
   const step = parseFloat($("step").value);
   send({ t: "jog", d: dir.map((c) => c * step) });
@@ -195,7 +217,7 @@ function pollPad() {
   if (!pad) { $("pad-state").textContent = "gamepad: none"; requestAnimationFrame(pollPad); return; }
   const held = pad.buttons[PAD.deadman] && pad.buttons[PAD.deadman].pressed;
   $("pad-state").textContent = `gamepad: ${pad.id || "connected"} — deadman ${held ? "HELD" : "released"}`;
-  if (held) {
+  if (held && !calBusy()) {
     const ax = (i) => { const v = pad.axes[i] || 0; return Math.abs(v) < PAD.deadzone ? 0 : v; };
     const d = [-ax(1), -ax(0), -ax(3)].map((v) => v * PAD.speed * dt);
     if (d.some((v) => v !== 0)) send({ t: "jog", d });
@@ -284,18 +306,23 @@ function showView(three) {
 $("show-3d").onclick = () => showView(true);
 $("show-2d").onclick = () => showView(false);
 // the URDF from robot_description (sent with the robot) and the workspace envelope
-let urdfUrl = null;
+// (the pictures of the calibration and the leader's view draw it too, in 3D or 2D)
+let urdfUrl = null, urdfText = null;
 function scene3d(r) {
-  if (!view3d) return;
   // the URDF comes over HTTP (robot.urdf?rev=N), each new description with a new rev
   if (r.urdf && r.urdf !== urdfUrl) {
     urdfUrl = r.urdf;
     fetch(r.urdf, { cache: "no-store", headers: authHeaders() })
       .then((res) => { if (!res.ok) throw new Error("robot.urdf: HTTP " + res.status); return res.text(); })
-      .then((text) => { if (urdfUrl !== r.urdf) return; view3d.setRobot(text); urdf3d = text; if (pose) posed3d(pose); })
-      .catch((e) => { $("view3d-msg").textContent = "3D view: " + e.message; });
+      .then((text) => {
+        if (urdfUrl !== r.urdf) return;
+        urdfText = text;
+        if (view3d) { view3d.setRobot(text); urdf3d = text; if (pose) posed3d(pose); }
+        pictures.forEach((p) => p.draw());
+      })
+      .catch((e) => { if (view3d) $("view3d-msg").textContent = "3D view: " + e.message; });
   }
-  if (r.envelope !== envelope3d) { envelope3d = r.envelope; view3d.setEnvelope(r.envelope || null); }
+  if (view3d && r.envelope !== envelope3d) { envelope3d = r.envelope; view3d.setEnvelope(r.envelope || null); }
 }
 function posed3d(m) {
   if (!view3d || !urdf3d) return;
@@ -366,7 +393,7 @@ $("tz").addEventListener("input", () => {
 });
 function touchTick() {
   const now = performance.now(), dt = Math.min(0.1, (now - touch.last) / 1000); touch.last = now;
-  if (touch.held) {
+  if (touch.held && !calBusy()) {
     // up on the stick: away from the operator (+x); left: +y
     const [sx, sy] = touch.stick;
     const d = [-sy * TOUCH.speed * dt, -sx * TOUCH.speed * dt, 0];
@@ -439,6 +466,301 @@ $("prog-save").onclick = () => {
   progSend("save", { name: pendingSave });
 };
 $("prog-files").addEventListener("change", () => { const f = $("prog-files").value; if (f) { progSend("load", { name: f }); $("prog-name").value = f; } $("prog-files").value = ""; });
+
+// ---- small pictures of the arm at a pose (the calibration's references, the leader arm): the
+// URDF in 3D like the live view, else (no WebGL) drawView's 2D view of the URDF's kinematics
+function makePicture(box) {
+  let v = null, q = null, loaded = null;
+  if (view3d) try { v = EezyViewer3D.create(box); } catch (e) { /* out of WebGL contexts: 2D */ }
+  const canvas = v ? null : box.appendChild(Object.assign(document.createElement("canvas"), { width: 220, height: 180 }));
+  const pic = {
+    view: "side", // 2D only: "side" or "top"
+    set(joints) { q = joints; pic.draw(); },
+    draw() {
+      if (!q) return;
+      const all = withPassive(q);
+      if (!v) { drawPicture(canvas, all, pic.view); return; }
+      if (urdfText && loaded !== urdfText) {
+        loaded = urdfText;
+        try { v.setRobot(urdfText); } catch (e) { /* the live view says why */ }
+      }
+      v.setJoints(all);
+    },
+    resize() { if (v) v.resize(); },
+  };
+  pictures.push(pic);
+  return pic;
+}
+
+// The EezyBot's passive and mimic joints follow from its actuated ones (the terms of
+// eezybot_kinematics::PassiveJoints); joints given win. Any other arm: as given.
+function withPassive(q) {
+  if (!robot.eezybot || !("shoulder_joint" in q && "elbow_joint" in q)) return q;
+  const a = q.shoulder_joint, phi = a + q.elbow_joint;
+  const p = { wrist_joint: -phi, crank_joint: phi, drive_link_joint: -q.elbow_joint, level_link_joint: a, triangle_joint: -a, upper_link_joint: phi };
+  if ("gripper_joint" in q) p.gripper_mimic_joint = -q.gripper_joint;
+  return Object.assign(p, q);
+}
+
+// The URDF's joints, parsed once per text, for the 2D pictures' forward kinematics.
+let urdfTree = { text: null, joints: [] };
+function urdfJoints() {
+  if (urdfTree.text === urdfText) return urdfTree.joints;
+  const doc = new DOMParser().parseFromString(urdfText || "<robot/>", "text/xml");
+  const one = (el, tag) => [...el.children].find((c) => c.tagName === tag) || null;
+  const vec = (el, d) => (el && el.getAttribute("xyz") !== null ? el.getAttribute("xyz").trim().split(/\s+/).map(Number) : d);
+  const attr = (el, name, d) => (el && el.getAttribute(name) !== null ? el.getAttribute(name) : d);
+  const joints = [...doc.documentElement.children].filter((e) => e.tagName === "joint").map((j) => {
+    const o = one(j, "origin"), m = one(j, "mimic");
+    return {
+      name: j.getAttribute("name"), type: j.getAttribute("type"),
+      parent: attr(one(j, "parent"), "link", ""), child: attr(one(j, "child"), "link", ""),
+      xyz: vec(o, [0, 0, 0]), rpy: attr(o, "rpy", "0 0 0").trim().split(/\s+/).map(Number), axis: vec(one(j, "axis"), [1, 0, 0]),
+      mimic: m && { joint: m.getAttribute("joint"), k: +attr(m, "multiplier", 1), off: +attr(m, "offset", 0) },
+    };
+  });
+  urdfTree = { text: urdfText, joints };
+  return joints;
+}
+// 3x3 rotations, row-major
+const mat = (A, B) => A.map((_, i) => { const r = i - (i % 3), c = i % 3; return A[r] * B[c] + A[r + 1] * B[3 + c] + A[r + 2] * B[6 + c]; });
+const rot = (R, v) => [0, 3, 6].map((r) => R[r] * v[0] + R[r + 1] * v[1] + R[r + 2] * v[2]);
+function axisAngle(axis, t) {
+  const n = Math.hypot(...axis) || 1, [x, y, z] = axis.map((a) => a / n), c = Math.cos(t), s = Math.sin(t), k = 1 - c;
+  return [c + x * x * k, x * y * k - z * s, x * z * k + y * s, y * x * k + z * s, c + y * y * k, y * z * k - x * s, z * x * k - y * s, z * y * k + x * s, c + z * z * k];
+}
+const rpyRot = ([r, p, y]) => mat(axisAngle([0, 0, 1], y), mat(axisAngle([0, 1, 0], p), axisAngle([1, 0, 0], r)));
+// Segments (parent origin -> child origin, child link) at joint values q, like pose.segments.
+function urdfSegments(q) {
+  const joints = urdfJoints(), frames = {}, children = new Set(joints.map((j) => j.child));
+  for (const j of joints) if (!children.has(j.parent)) frames[j.parent] = { R: [1, 0, 0, 0, 1, 0, 0, 0, 1], p: [0, 0, 0] };
+  const value = (j) => (j.name in q ? q[j.name] : j.mimic && j.mimic.joint in q ? j.mimic.k * q[j.mimic.joint] + j.mimic.off : 0);
+  for (let grew = true; grew;) {
+    grew = false;
+    for (const j of joints) {
+      const f = frames[j.parent];
+      if (!f || frames[j.child]) continue;
+      let R = mat(f.R, rpyRot(j.rpy)), p = rot(f.R, j.xyz).map((v, i) => v + f.p[i]);
+      if (j.type === "revolute" || j.type === "continuous") R = mat(R, axisAngle(j.axis, value(j)));
+      else if (j.type === "prismatic") p = rot(R, j.axis.map((a) => a * value(j))).map((v, i) => v + p[i]);
+      frames[j.child] = { R, p };
+      grew = true;
+    }
+  }
+  return joints.filter((j) => frames[j.parent] && frames[j.child])
+    .map((j) => [frames[j.parent].p.concat(frames[j.child].p), j.child])
+    .filter(([s]) => Math.hypot(s[3] - s[0], s[4] - s[1], s[5] - s[2]) > 1e-6);
+}
+function drawPicture(canvas, q, view) {
+  const segs = urdfText ? urdfSegments(q) : [], reach = robot.eezybot ? 0.3 : robot.reach, scale = 150 / reach;
+  const [step, extent, grid] = robot.eezybot ? [0.05, 0.4, "grid 5 cm"] : [0.1, Math.ceil(reach * 10) / 10 + 0.1, "grid 10 cm"];
+  if (view === "top") { drawView(canvas, (p) => [-p[1], p[0]], [110, 165], scale, segs, null, "top, " + grid, step, extent); return; }
+  const yaw = robot.eezybot ? q.base_joint || 0 : 0;
+  drawView(canvas, (p) => [p[0] * Math.cos(yaw) + p[1] * Math.sin(yaw), p[2]], [40, 170], scale, segs, null, "side, " + grid, step, extent);
+}
+
+// ---- calibration wizard: gui_bridge runs it and tells every browser where it is; this view
+// shows that and sends the operator's operations
+const calBusy = () => !!(cal && cal.active && cal.arm === "follower"); // the servos are the wizard's
+const calOpen = () => !$("calibrate").hidden;
+const calSend = (op, extra) => {
+  calRefusal = null; calSentAt = performance.now();
+  $("cal-error").textContent = cal && cal.error || "";
+  send(Object.assign({ t: "calibrate", op }, extra || {}));
+};
+// a refusal within 2 s of this page's last calibrate request answers that request
+const calRefusedNow = () => performance.now() - calSentAt < 2000;
+// after the marks (gui_bridge says "saving" and "done"; the contract, "saved" and "tested")
+const AFTER_SAVE = ["saving", "saved", "testing", "tested", "done", "failed"];
+const num = (v, digits) => (typeof v === "number" && isFinite(v) ? v.toFixed(digits) : "–");
+const refsOf = (s) => [s.references[0], s.use_alternative && s.alternative_b ? s.alternative_b : s.references[1]].filter(Boolean);
+const short = (v, digits) => (typeof v === "number" && isFinite(v) ? String(Number(v.toFixed(digits))) : "–");
+const fmtInput = (s, v) => (s.unit === "opening" ? "opening " + short(v, 2) : short(v, 1) + "°");
+const fmtMark = (v) => (v === null || v === undefined ? "not marked" : cal.arm === "leader" ? short(v, 1) + " counts" : num(v, 1) + "°");
+function fmtDerived(s) {
+  const d = s.derived;
+  if ("offset_deg" in d) return `offset ${num(d.offset_deg, 1)}°, gain ${num(d.gain, 3)} (×${num(d.gain_ratio, 2)} of shipped), ${d.direction}`;
+  return `${short(d.counts_a, 1)} counts = ${fmtInput(s, d.input_a)}, ${short(d.counts_b, 1)} counts = ${fmtInput(s, d.input_b)}`;
+}
+
+function openCalibrate(on) {
+  $("calibrate").hidden = !on;
+  $("show-calibrate").className = on ? "active" : "";
+  renderCalibration();
+  if (on) $("calibrate").scrollIntoView({ block: "nearest" });
+}
+$("show-calibrate").onclick = () => openCalibrate(true);
+$("cal-close").onclick = () => openCalibrate(false);
+// a button clicked with the mouse gives the focus back, so Enter marks rather than clicks it again
+const calButton = (id, f) => { $(id).onclick = (ev) => { if (ev.detail) $(id).blur(); f(); }; };
+calButton("cal-start-follower", () => calSend("start", { arm: "follower" }));
+calButton("cal-start-leader", () => calSend("start", { arm: "leader" }));
+for (const [id, sign, size] of [["cal-jog-fine-minus", -1, "fine_deg"], ["cal-jog-fine-plus", 1, "fine_deg"], ["cal-jog-coarse-minus", -1, "coarse_deg"], ["cal-jog-coarse-plus", 1, "coarse_deg"]]) {
+  calButton(id, () => calSend("jog", { deg: sign * jogSize(size) }));
+}
+for (const op of ["mark", "back", "save", "test", "finish", "cancel"]) calButton("cal-" + op, () => calSend(op));
+$("cal-alternative").addEventListener("change", () => calSend("alternative", { on: $("cal-alternative").checked }));
+function jogSize(size) { const j = cal && cal.jog; return j && j[size] > 0 ? j[size] : size === "fine_deg" ? 0.5 : 5; }
+
+// [ ] fine, { } coarse, Enter marks: only while the view is open and nothing is being typed
+const CAL_KEYS = { "[": "cal-jog-fine-minus", "]": "cal-jog-fine-plus", "{": "cal-jog-coarse-minus", "}": "cal-jog-coarse-plus", Enter: "cal-mark" };
+function calKey(ev) {
+  const id = CAL_KEYS[ev.key], el = ev.target;
+  if (!id || !calOpen() || ev.ctrlKey || ev.metaKey || ev.altKey) return false;
+  const typing = (el.tagName === "INPUT" && !["checkbox", "radio", "range", "button"].includes(el.type)) || el.tagName === "SELECT" || el.tagName === "TEXTAREA" || el.isContentEditable;
+  if (typing || (ev.key === "Enter" && (el.tagName === "BUTTON" || el.tagName === "A"))) return false;
+  ev.preventDefault();
+  $(id).click(); // nothing when disabled
+  return true;
+}
+
+function showCalibration(m) {
+  const was = cal && cal.active;
+  cal = m;
+  if (m.active && !was) openCalibrate(true); // started here or in another browser
+  else renderCalibration();
+}
+
+function renderCalibration() {
+  document.body.classList.toggle("cal-busy", calBusy());
+  const c = cal || { active: false, steps: [] }, steps = c.steps || [], s = steps[c.step] || null;
+  const active = !!c.active, follower = c.arm !== "leader", phase = c.phase || "idle";
+  $("cal-begin").hidden = active;
+  $("cal-run").hidden = !active;
+  $("cal-head").textContent = !active ? "no calibration running"
+    : `${follower ? "arm servos" : "leader arm"} — step ${(c.step || 0) + 1} of ${steps.length}${s ? ": " + s.title : ""} — ${phase}`;
+  $("cal-instruction").textContent = c.instruction || (active ? "" : "Calibrate the arm's servos (it moves one servo at a time; keep the e-stop at hand) or the leader arm's potentiometers.");
+  $("cal-error").textContent = calRefusal || c.error || "";
+  if (!active) return;
+  // the active servo
+  $("cal-servo").hidden = !follower;
+  $("cal-commanded").textContent = typeof c.commanded_deg === "number" ? num(c.commanded_deg, 1) + "°" : "–";
+  $("cal-state").textContent = typeof c.state_deg === "number" ? num(c.state_deg, 1) + "°" : "–";
+  $("cal-range").textContent = c.jog ? `jog range ${num(c.jog.min_deg, 1)}° to ${num(c.jog.max_deg, 1)}°` : "";
+  showCounts(follower ? null : c.counts, s);
+  const jogging = follower && phase === "jog";
+  $("cal-jog").hidden = !follower;
+  for (const [id, sign, size] of [["cal-jog-fine-minus", "−", "fine_deg"], ["cal-jog-fine-plus", "+", "fine_deg"], ["cal-jog-coarse-minus", "−", "coarse_deg"], ["cal-jog-coarse-plus", "+", "coarse_deg"]]) {
+    $(id).disabled = !jogging;
+    $(id).textContent = sign + jogSize(size) + "°";
+  }
+  $("cal-mark").disabled = phase !== "jog";
+  const marked = steps.some((x) => (x.marks || []).some((v) => v !== null && v !== undefined));
+  $("cal-back").disabled = !(["jog", "review", "reading"].includes(phase) && (marked || c.step > 0 || phase === "reading"));
+  $("cal-alternative-box").hidden = !(s && s.alternative_b);
+  if (s && s.alternative_b) {
+    $("cal-alternative").checked = !!s.use_alternative;
+    $("cal-alternative").disabled = phase !== "jog";
+    $("cal-alternative-text").textContent = `B cannot be reached: use ${fmtInput(s, s.alternative_b.input)} instead`;
+  }
+  const derived = steps.length > 0 && steps.every((x) => x.derived && !x.error);
+  $("cal-save").disabled = !derived || AFTER_SAVE.includes(phase);
+  $("cal-test").hidden = !follower;
+  $("cal-test").disabled = !(c.saved && c.saved.path) || phase === "saving" || phase === "failed";
+  $("cal-finish").disabled = !(c.saved || ["done", "tested", "failed"].includes(phase)) || phase === "saving";
+  showCalSteps(c, steps);
+  showSaved(c);
+  $("cal-test-state").textContent = c.test ? `test move: ${c.test.description} — ${c.test.done ? "done" : phase === "testing" ? "moving…" : "not done"}` : "";
+  if (calOpen()) showCalPictures(c, s);
+}
+
+function showCounts(counts, s) {
+  const box = $("cal-counts");
+  box.hidden = !counts;
+  if (!counts) return;
+  box.innerHTML = "";
+  counts.forEach((v, i) => box.append(Object.assign(document.createElement("span"), {
+    textContent: `A${i} ${short(v, 1)}`, className: s && s.channel === i ? "current" : "" })));
+}
+
+function showCalSteps(c, steps) {
+  const list = $("cal-steps");
+  list.innerHTML = "";
+  steps.forEach((s, i) => {
+    const li = document.createElement("li");
+    li.className = [i === c.step ? "current" : "", s.error ? "bad" : s.derived ? "done" : ""].join(" ").trim();
+    const line = (className, textContent) => li.append(Object.assign(document.createElement("div"), { className, textContent }));
+    line("cal-title", `${i + 1}. ${s.title}`);
+    refsOf(s).forEach((r, k) => line("small", `${"AB"[k]} at ${fmtInput(s, r.input)}: ${fmtMark((s.marks || [])[k])}`));
+    if (s.derived) line("", fmtDerived(s));
+    if (s.error) line("cal-err", s.error);
+    if (i === c.step && s.holds && s.holds.length) line("small", "held: " + s.holds.join(", "));
+    list.append(li);
+  });
+}
+
+function showSaved(c) {
+  const box = $("cal-saved");
+  box.innerHTML = "";
+  if (!c.saved) return;
+  const line = (className, textContent) => box.append(Object.assign(document.createElement("div"), { className, textContent }));
+  const sv = c.saved, applied = sv.applied || [], failed = sv.failed || [];
+  if (sv.path) line("", `saved to ${sv.path}` + (sv.backup ? ` (the previous file kept as ${sv.backup})` : " (no previous file)"));
+  else line("bad", "not saved");
+  line("", "applied to: " + (applied.length ? applied.join(", ") : "no node"));
+  if (failed.length) line("bad", "not applied: " + failed.join("; "));
+}
+
+// The references of the active step, A and B side by side, the next one to mark highlighted;
+// after the save, the test move's pose.
+let calPics = [];
+function showCalPictures(c, s) {
+  const shown = [], testing = !!c.test && AFTER_SAVE.includes(c.phase);
+  if (testing) {
+    shown.push({ title: "test move", text: c.test.description, pose: c.test.pose, note: c.test.done ? "done" : "" });
+  } else if (s) {
+    refsOf(s).forEach((r, k) => {
+      const mark = (s.marks || [])[k], done = mark !== null && mark !== undefined;
+      shown.push({ title: `${"AB"[k]}: ${s.title} at ${fmtInput(s, r.input)}`, text: r.description, pose: r.pose,
+                   next: k === c.reference && !done, note: done ? "marked at " + fmtMark(mark) : k === c.reference ? "mark this next" : "" });
+    });
+  }
+  const box = $("cal-picture");
+  while (calPics.length < shown.length) {
+    const cell = Object.assign(document.createElement("div"), { className: "cal-pic" });
+    const title = document.createElement("b"), text = document.createElement("div"), note = document.createElement("div");
+    const holder = Object.assign(document.createElement("div"), { className: "pic" });
+    note.className = "small";
+    cell.append(title, holder, text, note);
+    box.append(cell);
+    calPics.push({ cell, title, text, note, pic: makePicture(holder) });
+  }
+  calPics.forEach((p, i) => {
+    const x = shown[i];
+    p.cell.hidden = !x;
+    if (!x) return;
+    p.cell.className = "cal-pic" + (x.next ? " next" : "");
+    p.title.textContent = x.title;
+    p.text.textContent = x.text || "";
+    p.note.textContent = x.note + (urdfText ? "" : " (no URDF yet: robot_description not heard)");
+    // 2D: the base turns and the claw opens in the horizontal plane, seen from above
+    p.pic.view = !testing && s && (s.servo === "base" || s.servo === "gripper") ? "top" : "side";
+    p.pic.set(x.pose || {});
+  });
+}
+
+// ---- the leader arm beside the follower: shown while its joint_states come
+let leaderPic = null, leaderTimer = null;
+function jointsText(q) {
+  const names = robot.eezybot ? ACTUATED.filter((n) => n in q) : Object.keys(q);
+  return names.map((n) => `${n.replace(/_joint$/, "")} ${deg(q[n])}`).join("  ");
+}
+const ACTUATED = ["base_joint", "shoulder_joint", "elbow_joint", "gripper_joint"];
+function showLeader(m) {
+  const q = m.joints || {};
+  if ($("leader-view").hidden) {
+    $("leader-view").hidden = false;
+    $("leader-pose").hidden = false;
+    if (!leaderPic) leaderPic = makePicture($("leader-3d"));
+    leaderPic.resize();
+  }
+  leaderPic.set(q);
+  $("leader-state").textContent = m.deadman ? "deadman held — following" : m.deadman === false ? "deadman released — holding" : "deadman not heard — holding";
+  $("leader-state").className = m.deadman ? "held" : "";
+  $("leader-pose").textContent = "leader: " + jointsText(q) + (m.deadman ? "" : " (not followed)");
+  clearTimeout(leaderTimer);
+  leaderTimer = setTimeout(() => { $("leader-view").hidden = true; $("leader-pose").hidden = true; }, 2000);
+}
 
 connect();
 draw();

@@ -617,8 +617,9 @@ impl<'a, O: Outputs> Node<'a, O> {
         }
     }
 
-    /// The parameters changed: load `arm_config` again (keeping the previous one if it
-    /// does not load), and apply `mock_stalled_servos`.
+    /// The parameters changed: load `arm_config` again (the servos' calibration, motion
+    /// limits and a leader's calibration; the previous ones kept if it does not load),
+    /// and apply `mock_stalled_servos`.
     pub fn on_params(&mut self) {
         self.apply_stall();
         match ArmConfig::load_or_shipped(&self.io.params.string("arm_config").unwrap_or_default()) {
@@ -627,8 +628,12 @@ impl<'a, O: Outputs> Node<'a, O> {
                 self.io
                     .link
                     .set_velocity_limits(c.motion.ticks_per_s(&self.cal));
+                // a leader's potentiometer calibration too (the wizard saves it live)
+                self.leader = (c.leader, c.geometry.gripper_open_rad);
             }
-            Err(e) => log::error!("keeping the previous calibration and motion limits: {e}"),
+            Err(e) => log::error!(
+                "keeping the previous calibration, motion limits and leader calibration: {e}"
+            ),
         }
     }
 

@@ -1,0 +1,332 @@
+//! `gui_bridge calibrate [--leader]`: the calibration wizard on the command line, for
+//! an arm without a browser at hand. The same [`Wizard`] as the web panel's Calibrate
+//! view, driven by lines on standard input:
+//!
+//! | line | does |
+//! |---|---|
+//! | `+` / `-` | jog the servo a fine step (0.5°) |
+//! | `++` / `--` | jog a coarse step (5°) |
+//! | `j DEG` | jog by DEG servo degrees (at most 5 either way) |
+//! | `m` | mark the reference the arm shows now |
+//! | `b` | undo the last mark |
+//! | `alt on` / `alt off` | use reference B's alternative (the base turned right) |
+//! | `s` | save, apply, and run the test move |
+//! | `t` | the test move again |
+//! | `q` | cancel (or, once saved, finish) and exit |
+//! | `?` | this list |
+//!
+//! Every change prints the wizard's instruction and where the servo is. Exit status: 0
+//! saved, 1 cancelled or failed, 2 a usage or configuration error. Ctrl-C or the end of
+//! the input cancels (compute_ik takes the arm back).
+
+use crate::calibrate::{self as cal, Arm, Op, Wizard};
+use crate::calibration_ros::{calibration_path, RosCalibration};
+use crate::delivery::NotDelivered;
+use crate::ros_outputs::RosOutputs;
+use crate::{CalibrationControl, Outputs};
+use anyhow::Context as _;
+use eezybot_kinematics::ArmConfig;
+use eezybot_msgs::Time;
+use futures::StreamExt as _;
+use ros_plumbing::{feedback, topics, RosNode};
+use std::collections::BTreeMap;
+use std::future::Future;
+use std::time::{Duration, Instant};
+use tokio::io::AsyncBufReadExt as _;
+
+/// What the lines of standard input ask.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Line {
+    /// A wizard operation.
+    Op(Op),
+    /// Print the commands.
+    Help,
+    /// Leave: cancel, or finish once saved.
+    Quit,
+    /// Nothing (an empty line).
+    Nothing,
+}
+
+/// The commands, for `?`.
+pub const HELP: &str =
+    "+ / - fine jog (0.5°), ++ / -- coarse jog (5°), j DEG jog by DEG, m mark, b back, \
+alt on|off reference B's alternative, s save, t test move again, q quit, ? this list";
+
+/// Read one line of input.
+///
+/// # Examples
+/// ```
+/// use gui_bridge::calibrate::Op;
+/// use gui_bridge::calibrate_cli::{parse_line, Line};
+/// assert_eq!(parse_line("++"), Ok(Line::Op(Op::Jog(5.0))));
+/// assert_eq!(parse_line(" j -1.5 "), Ok(Line::Op(Op::Jog(-1.5))));
+/// assert!(parse_line("j lots").is_err());
+/// ```
+pub fn parse_line(line: &str) -> Result<Line, String> {
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let fine = eezybot_kinematics::calibration::FINE_STEP_DEG;
+    let coarse = eezybot_kinematics::calibration::COARSE_STEP_DEG;
+    Ok(match words.as_slice() {
+        [] => Line::Nothing,
+        ["+"] => Line::Op(Op::Jog(fine)),
+        ["-"] => Line::Op(Op::Jog(-fine)),
+        ["++"] => Line::Op(Op::Jog(coarse)),
+        ["--"] => Line::Op(Op::Jog(-coarse)),
+        ["j" | "jog", deg] => Line::Op(Op::Jog(
+            deg.parse::<f64>()
+                .ok()
+                .filter(|d| d.is_finite())
+                .ok_or_else(|| format!("`{deg}` is no number of degrees"))?,
+        )),
+        ["m" | "mark"] => Line::Op(Op::Mark),
+        ["b" | "back"] => Line::Op(Op::Back),
+        ["alt", "on"] => Line::Op(Op::Alternative(true)),
+        ["alt", "off"] => Line::Op(Op::Alternative(false)),
+        ["s" | "save"] => Line::Op(Op::Save),
+        ["t" | "test"] => Line::Op(Op::Test),
+        ["q" | "quit"] => Line::Quit,
+        ["?" | "h" | "help"] => Line::Help,
+        _ => return Err(format!("`{}`: not a command ({HELP})", line.trim())),
+    })
+}
+
+/// What the user sees after a change: the instruction, the servo, the marks.
+pub fn describe(view: &crate::message::CalibrationView) -> String {
+    let mut out = String::new();
+    if let Some(step) = view.steps.get(view.step) {
+        let marks: Vec<String> = view
+            .steps
+            .iter()
+            .map(|s| {
+                let m = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.1}"));
+                format!("{} {}/{}", s.title, m(s.marks[0]), m(s.marks[1]))
+            })
+            .collect();
+        out.push_str(&format!(
+            "[{} {}/4 {}] ",
+            view.phase,
+            view.step + 1,
+            step.title
+        ));
+        if let (Some(c), Some(j)) = (view.commanded_deg, &view.jog) {
+            out.push_str(&format!(
+                "servo at {c:.1}° (servo_state {}; may jog {:.1}° … {:.1}°) ",
+                view.state_deg
+                    .map_or("–".to_string(), |s| format!("{s:.1}°")),
+                j.min_deg,
+                j.max_deg
+            ));
+        }
+        if let Some(c) = view.counts {
+            out.push_str(&format!(
+                "leader counts A0–A3 {:.0} {:.0} {:.0} {:.0} ",
+                c[0], c[1], c[2], c[3]
+            ));
+        }
+        out.push_str(&format!("marks: {}\n", marks.join(", ")));
+    }
+    out.push_str(&format!("  {}\n", view.instruction));
+    for s in &view.steps {
+        if let Some(e) = &s.error {
+            out.push_str(&format!("  {} refused: {e}\n", s.title));
+        }
+    }
+    if let Some(e) = &view.error {
+        out.push_str(&format!("  ! {e}\n"));
+    }
+    if let Some(saved) = &view.saved {
+        out.push_str(&format!(
+            "  saved to {} (previous: {}); applied to {}{}\n",
+            saved.path.as_deref().unwrap_or("nothing"),
+            saved.backup.as_deref().unwrap_or("none"),
+            saved.applied.join(", "),
+            if saved.failed.is_empty() {
+                String::new()
+            } else {
+                format!("; NOT applied: {}", saved.failed.join("; "))
+            }
+        ));
+    }
+    out
+}
+
+/// Run the wizard on `node` for `arm` until the user quits, the input ends or
+/// `shutdown` resolves.
+pub async fn calibrate(
+    node: &mut RosNode,
+    leader: bool,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let params = node.params().clone();
+    let arm_config = params.string("arm_config").unwrap_or_default();
+    let config = ArmConfig::load_or_shipped(&arm_config).map_err(anyhow::Error::msg)?;
+    let mut wizard = Wizard::new(config).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let outputs = RosOutputs::new(node)?;
+    let servo_state = node.subscribe_to(&topics::SERVO_STATE)?;
+    let diagnostics = node.subscribe_to(&topics::DIAGNOSTICS)?;
+    let estop = node.subscribe_to(&topics::ESTOP)?;
+    let joint_states = node.subscribe_to(&topics::JOINT_STATES)?;
+    let path = calibration_path(
+        &params.string("calibration_file").unwrap_or_default(),
+        &arm_config,
+    );
+    let node = std::cell::RefCell::new(node);
+    let control = RosCalibration::new(&node, path, "compute_ik");
+    println!(
+        "calibrating the {} arm; the result goes to {}\n{HELP}",
+        if leader { "leader" } else { "follower" },
+        control.path().display()
+    );
+    let mut heard: BTreeMap<String, (String, Instant)> = BTreeMap::new();
+    let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
+    let mut servo_state = servo_state.async_stream().boxed_local();
+    let mut diagnostics = diagnostics.async_stream().boxed_local();
+    let mut estop = estop.async_stream().boxed_local();
+    let mut joint_states = joint_states.async_stream().boxed_local();
+    let mut tick = tokio::time::interval(Duration::from_millis(250));
+    tokio::pin!(shutdown);
+    let arm = if leader { Arm::Leader } else { Arm::Follower };
+    let mut started = false;
+    // servo_state first: a follower's wizard starts where the servos are
+    let start_by = Instant::now() + Duration::from_secs(5);
+    let mut saved = false;
+    loop {
+        let mut fx = vec![];
+        if !started && (leader || Instant::now() > start_by || wizard_has_state(&wizard)) {
+            started = true;
+            match wizard.request(Op::Start(arm), Instant::now()) {
+                Ok(f) => fx = f,
+                Err(e) => {
+                    return Err(NotDelivered::NotCalibrated(format!(
+                        "calibration not started: {e}"
+                    ))
+                    .into())
+                }
+            }
+        } else {
+            tokio::select! {
+                _ = &mut shutdown => {
+                    cancel(&mut wizard, &control).await;
+                    return Err(NotDelivered::NotCalibrated("calibration cancelled (signal): nothing saved".into()).into());
+                }
+                line = lines.next_line() => {
+                    let line = line.context("reading standard input")?;
+                    let Some(line) = line else {
+                        if saved {
+                            return Ok(());
+                        }
+                        cancel(&mut wizard, &control).await;
+                        return Err(NotDelivered::NotCalibrated("end of input: calibration cancelled, nothing saved".into()).into());
+                    };
+                    match parse_line(&line) {
+                        Ok(Line::Nothing) => continue,
+                        Ok(Line::Help) => { println!("{HELP}"); continue; }
+                        Ok(Line::Quit) => {
+                            if saved {
+                                let _ = wizard.request(Op::Finish, Instant::now());
+                                return Ok(());
+                            }
+                            cancel(&mut wizard, &control).await;
+                            return Err(NotDelivered::NotCalibrated("calibration cancelled: nothing saved".into()).into());
+                        }
+                        Ok(Line::Op(op)) => match wizard.request(op, Instant::now()) {
+                            Ok(f) => fx = f,
+                            Err(e) => fx = { println!("  refused: {e}"); wizard.refused(&e) },
+                        },
+                        Err(e) => { println!("  {e}"); continue; }
+                    }
+                }
+                Some(Ok((msg, _))) = servo_state.next() => {
+                    if let Some(deg) = crate::panel::servo_degrees(&msg) {
+                        fx = wizard.on_servo_state(deg, Instant::now());
+                    }
+                }
+                Some(Ok((msg, _))) = diagnostics.next() => {
+                    for f in feedback::decode(&msg) {
+                        if let Some(n) = f.node {
+                            heard.insert(n, (f.task, Instant::now()));
+                        }
+                    }
+                    if let Some(counts) = crate::panel::leader_counts(&msg) {
+                        let before = wizard.view();
+                        fx = wizard.on_leader_counts(counts, Instant::now());
+                        // live counts alone are no news worth a line
+                        if wizard.view().steps == before.steps && wizard.view().phase == before.phase {
+                            fx.retain(|e| *e != cal::Effect::View);
+                        }
+                    }
+                }
+                Some(Ok((msg, _))) = estop.next() => fx = wizard.on_estop(msg.data, Instant::now()),
+                Some(Ok((msg, _))) = joint_states.next() => {
+                    let joints = msg.name.iter().cloned().zip(msg.position.iter().copied()).collect();
+                    fx = wizard.on_joint_states(&joints);
+                }
+                _ = tick.tick() => fx = wizard.on_tick(Instant::now()),
+            }
+        }
+        // the wizard's effects, and the effects of their outcomes, in order
+        let mut queue: std::collections::VecDeque<cal::Effect> = fx.into();
+        let mut printed = false;
+        while let Some(e) = queue.pop_front() {
+            match e {
+                cal::Effect::SetCalibrating(on) => {
+                    let r = control.set_calibrating(on).await;
+                    queue.extend(wizard.on_calibrating_set(on, r, Instant::now()));
+                }
+                cal::Effect::ServoAngles(deg) => control.servo_angles(deg, Time::now()),
+                cal::Effect::Save(mut job) => {
+                    let now = Instant::now();
+                    job.nodes = heard
+                        .iter()
+                        .filter(|(_, (task, at))| {
+                            (task == "inverse kinematics" || task == "servo link")
+                                && now.duration_since(*at) < Duration::from_secs(3)
+                        })
+                        .map(|(n, _)| n.clone())
+                        .collect();
+                    let outcome = control.save(*job).await;
+                    saved = outcome.written.is_ok();
+                    queue.extend(wizard.on_saved(outcome, Instant::now()));
+                }
+                cal::Effect::JointTarget(q) => outputs.joint_target(&q, Time::now()),
+                cal::Effect::View => {
+                    if !printed {
+                        print!("{}", describe(&wizard.view()));
+                        printed = true;
+                    }
+                }
+                cal::Effect::Log(level, text) => log::log!(level, "{text}"),
+            }
+        }
+        if !leader {
+            // let the heard nodes' parameter clients match before a save
+            let names: Vec<String> = heard
+                .iter()
+                .filter(|(_, (task, _))| task == "inverse kinematics" || task == "servo link")
+                .map(|(n, _)| n.clone())
+                .collect();
+            control.prepare(&names);
+        } else {
+            let names: Vec<String> = heard
+                .iter()
+                .filter(|(_, (task, _))| task == "servo link")
+                .map(|(n, _)| n.clone())
+                .collect();
+            control.prepare(&names);
+        }
+    }
+}
+
+fn wizard_has_state(w: &Wizard) -> bool {
+    w.has_servo_state()
+}
+
+/// Leave the wizard: compute_ik takes the arm back if it was told to send nothing.
+async fn cancel(wizard: &mut Wizard, control: &RosCalibration<'_, '_>) {
+    if wizard.holds_compute_ik() {
+        if let Err(e) = control.set_calibrating(false).await {
+            eprintln!("compute_ik's calibrating could not be set false ({e}): `ros2 param set /compute_ik calibrating false`");
+        }
+    }
+    let _ = wizard.request(Op::Cancel, Instant::now());
+}
