@@ -158,6 +158,29 @@ eezybot_ros_args() {
   fi
 }
 
+# The arm configuration the nodes load: ARM_CONFIG if set (empty: the shipped one), else
+# the calibration wizard's file, ${XDG_CONFIG_HOME:-~/.config}/eezybot/arm.yaml, when it
+# exists; else the shipped config/arm.yaml. Sets EEZYBOT_ARM_CONFIG (the path, or empty)
+# and EEZYBOT_ARM_ARGS (`-p arm_config:=PATH`, or nothing), and says which.
+eezybot_arm_config() {
+  local saved="${XDG_CONFIG_HOME:-${HOME:-}/.config}/eezybot/arm.yaml"
+  if [ "${ARM_CONFIG+set}" = set ]; then
+    EEZYBOT_ARM_CONFIG=$ARM_CONFIG
+  elif [ -f "$saved" ]; then
+    EEZYBOT_ARM_CONFIG=$saved
+  else
+    EEZYBOT_ARM_CONFIG=
+  fi
+  if [ -n "$EEZYBOT_ARM_CONFIG" ]; then
+    [ -f "$EEZYBOT_ARM_CONFIG" ] || { eezybot_say "no arm configuration at $EEZYBOT_ARM_CONFIG (ARM_CONFIG)"; exit 2; }
+    EEZYBOT_ARM_ARGS=(-p "arm_config:=$EEZYBOT_ARM_CONFIG")
+    eezybot_say "arm configuration: $EEZYBOT_ARM_CONFIG"
+  else
+    EEZYBOT_ARM_ARGS=()
+    eezybot_say "arm configuration: the shipped config/arm.yaml (calibrate in the web panel's Calibrate view, or gui_bridge calibrate)"
+  fi
+}
+
 # Start one node: eezybot_start NAME [ROS ARGS...]. The node gets --ros-args, then the
 # given node-specific arguments, then the user's (so the user's win).
 eezybot_start() {

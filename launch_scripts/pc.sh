@@ -13,6 +13,10 @@
 # ZENOH_TLS_DIR (launch_scripts/wan_certs.sh; ZENOH_CERT: another client certificate
 # name). A bad endpoint or TLS file: exit 2 before anything starts.
 #
+# The arm configuration: ARM_CONFIG=FILE, else the calibration wizard's saved
+# ${XDG_CONFIG_HOME:-~/.config}/eezybot/arm.yaml if it exists, else the shipped one.
+# On two machines, copy the file the wizard saved to the same path on the other one.
+#
 # Arguments are ROS arguments for every node, e.g.
 #   launch_scripts/pc.sh -r __ns:=/arm2
 # Ctrl-C (or SIGTERM) stops every node; the script then exits 0.
@@ -27,9 +31,10 @@ eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge"
 eezybot_enclave /eezybot/pc
 eezybot_wan pc
 
-eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}"
+eezybot_arm_config
+eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_ARM_ARGS[@]}"
 eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
-eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
+eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind" "${EEZYBOT_ARM_ARGS[@]}"
 eezybot_start_wan
 
 eezybot_banner

@@ -17,6 +17,10 @@
 # ZENOH_TLS_DIR (launch_scripts/wan_certs.sh; ZENOH_CERT: another client certificate
 # name). A bad endpoint or TLS file: exit 2 before anything starts.
 #
+# The arm configuration: ARM_CONFIG=FILE, else the calibration wizard's saved
+# ${XDG_CONFIG_HOME:-~/.config}/eezybot/arm.yaml if it exists (copy it here from the PC
+# where the wizard saved it), else the shipped one.
+#
 # Arguments are ROS arguments for serial_node, e.g.
 #   launch_scripts/pi.sh -r __ns:=/arm2
 # Ctrl-C (or SIGTERM) stops it; the script then exits 0.
@@ -31,7 +35,8 @@ eezybot_security /eezybot/pi serial_node
 eezybot_enclave /eezybot/pi
 eezybot_wan pi
 
-eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT"
+eezybot_arm_config
+eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT" "${EEZYBOT_ARM_ARGS[@]}"
 eezybot_start_wan
 
 eezybot_banner

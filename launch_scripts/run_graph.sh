@@ -10,6 +10,10 @@
 # serial_node (the Jaco has no hobby servos: compute_ik publishes no servo_angles).
 # `--arm eezybot` (the default) is the EezyBotArm.
 #
+# The arm configuration (geometry, limits, servo calibration): ARM_CONFIG=FILE, else the
+# calibration wizard's saved file ${XDG_CONFIG_HOME:-~/.config}/eezybot/arm.yaml if it
+# exists, else the shipped config/arm.yaml (ARM_CONFIG= forces it).
+#
 # SROS2: with ROS_SECURITY_ENABLE=true compute_ik, state_publisher and gui_bridge run
 # under the enclave /eezybot/pc and serial_node under /eezybot/pi, of
 # ROS_SECURITY_KEYSTORE (launch_scripts/keystore.sh; README: Securing the link).
@@ -42,12 +46,14 @@ case "$arm" in
     fi
     eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge" /eezybot/pi serial_node
 
+    eezybot_arm_config
+
     eezybot_enclave /eezybot/pc
-    eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}"
+    eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_ARM_ARGS[@]}"
     eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
-    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
+    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind" "${EEZYBOT_ARM_ARGS[@]}"
     eezybot_enclave /eezybot/pi
-    eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT"
+    eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT" "${EEZYBOT_ARM_ARGS[@]}"
 
     eezybot_banner
     eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($([ "$EEZYBOT_PORT" = mock ] && echo "virtual Arduino" || echo "Arduino on $EEZYBOT_PORT"))"

@@ -178,3 +178,31 @@ def test_a_node_that_dies_stops_the_others(domain):
             s.stop()
     assert code != 0
     assert "serial_node exited" in s.output() or "exited (code" in s.output(), s.output()
+
+
+def test_run_graph_loads_the_calibration_the_wizard_saved(domain, tmp_path):
+    """A calibration saved by the wizard ($XDG_CONFIG_HOME/eezybot/arm.yaml) is what
+    run_graph.sh gives compute_ik, serial_node and gui_bridge (`arm_config`), and it
+    says so; ARM_CONFIG= (empty) asks for the shipped one instead."""
+    saved = tmp_path / "eezybot" / "arm.yaml"
+    saved.parent.mkdir()
+    shutil.copy(Path(__file__).resolve().parent.parent / "config" / "arm.yaml", saved)
+    env = {"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock", "XDG_CONFIG_HOME": str(tmp_path)}
+    s = Script("run_graph.sh", env=env)
+    try:
+        nodes = s.nodes(4)
+        for node in ("compute_ik", "serial_node", "gui_bridge"):
+            assert f"arm_config:={saved}" in nodes[node], (node, nodes[node])
+        assert not any(a.startswith("arm_config:=") for a in nodes["state_publisher"])
+        assert f"arm configuration: {saved}" in s.output()
+    finally:
+        code = s.stop()
+    assert code == 0, s.output()
+    s = Script("run_graph.sh", env={**env, "ARM_CONFIG": ""})
+    try:
+        nodes = s.nodes(4)
+        assert not any(a.startswith("arm_config:=") for argv in nodes.values() for a in argv), nodes
+        assert "arm configuration: the shipped config/arm.yaml" in s.output()
+    finally:
+        code = s.stop()
+    assert code == 0, s.output()
