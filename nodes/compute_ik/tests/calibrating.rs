@@ -2,16 +2,17 @@
 //! as in `tests/driver.rs`: while true nothing is published and every target is
 //! refused; set false, the arm is taken where `servo_state` says it is.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
+mod common;
+use common::*;
 use compute_ik::core::Source;
 use compute_ik::driver::{Driver, Effect};
-use compute_ik::eezybot::{EezyBot, IkCore};
+use compute_ik::eezybot::EezyBot;
 use compute_ik::pipeline::GoalRequest;
 use compute_ik::Input;
 use eezybot_kinematics::calibration::calibration_text;
-use eezybot_kinematics::{ArmConfig, ServoCalibrations};
+use eezybot_kinematics::ServoCalibrations;
 use eezybot_msgs::builtin_interfaces::Duration as RosDuration;
 use eezybot_msgs::control_msgs::FollowJointTrajectoryGoal;
-use eezybot_msgs::geometry_msgs::{Point, PointStamped};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::trajectory_msgs::{JointTrajectory, JointTrajectoryPoint};
@@ -21,36 +22,7 @@ use ros2_client::service::request_id::RmwRequestId;
 use ros_plumbing::action::GoalEnd;
 use ros_plumbing::{ParameterValue, Params};
 use std::collections::BTreeMap;
-use std::time::{Duration, Instant};
-
-fn ms(n: u64) -> Duration {
-    Duration::from_millis(n)
-}
-
-/// The wall clock of the test: `t0_wall` at the monotonic `t0`, advancing with it.
-struct Clock {
-    t0: Instant,
-    t0_wall: Time,
-}
-
-impl Clock {
-    fn new() -> Clock {
-        Clock {
-            t0: Instant::now(),
-            t0_wall: Time::from_nanos(1_700_000_000_000_000_000),
-        }
-    }
-    fn at(&self, t: Duration) -> (Instant, Time) {
-        (self.t0 + t, self.wall(t))
-    }
-    fn wall(&self, t: Duration) -> Time {
-        Time::from_nanos(self.t0_wall.to_nanos() + t.as_nanos() as i64)
-    }
-}
-
-fn driver() -> Driver<EezyBot> {
-    Driver::new(IkCore::new(&ArmConfig::default(), "base_link"))
-}
+use std::time::Duration;
 
 /// The node's parameters at their defaults, with `calibrating` (and `arm_config`).
 fn params(calibrating: bool, arm_config: &str) -> Params {
@@ -65,16 +37,6 @@ fn params(calibrating: bool, arm_config: &str) -> Params {
         ParameterValue::String(arm_config.to_string()),
     );
     Params::new(values)
-}
-
-fn xyz(x: f64, y: f64, z: f64, stamp: Time) -> Input {
-    Input::XyzTarget(PointStamped {
-        header: Header {
-            stamp,
-            frame_id: String::new(),
-        },
-        point: Point { x, y, z },
-    })
 }
 
 fn joint_target(stamp: Time, joints: &[(&str, f64)]) -> Input {
@@ -105,20 +67,6 @@ fn servo_state(deg: [f64; 4]) -> Input {
     })
 }
 
-fn published(effects: &[Effect]) -> Vec<&JointState> {
-    effects
-        .iter()
-        .filter_map(|e| match e {
-            Effect::Publish(s) => Some(&s.joint_states),
-            _ => None,
-        })
-        .collect()
-}
-
-fn position(js: &JointState, name: &str) -> f64 {
-    js.position[js.name.iter().position(|n| n == name).unwrap()]
-}
-
 fn diag_value(d: &Driver<EezyBot>, key: &str) -> String {
     d.core()
         .diagnostic_status("compute_ik")
@@ -127,14 +75,6 @@ fn diag_value(d: &Driver<EezyBot>, key: &str) -> String {
         .find(|kv| kv.key == key)
         .unwrap_or_else(|| panic!("no {key} in diagnostics"))
         .value
-}
-
-fn leader_value(d: &Driver<EezyBot>) -> String {
-    d.controller_values()
-        .into_iter()
-        .find(|(k, _)| k == "leader")
-        .unwrap()
-        .1
 }
 
 /// Every effect of the driver's deadlines until `until`.
@@ -146,8 +86,6 @@ fn run_until(d: &mut Driver<EezyBot>, clock: &Clock, until: Duration) -> Vec<Eff
     }
     out
 }
-
-const ARM: [&str; 3] = ["base_joint", "shoulder_joint", "elbow_joint"];
 
 fn trajectory(to: [f64; 3], secs: f64) -> JointTrajectory {
     JointTrajectory {

@@ -1,67 +1,18 @@
 //! The node's loop policy ([`Driver`]) on a fixed clock: every event is handed its
 //! time, as `servo_protocol::host`'s tests do, so nothing here waits or reads a clock.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
+mod common;
+use common::*;
 use compute_ik::core::Source;
 use compute_ik::driver::{Driver, Effect, MIN_IMMEDIATE_DIAG_GAP};
-use compute_ik::eezybot::{EezyBot, IkCore};
+use compute_ik::eezybot::EezyBot;
 use compute_ik::urdf_arm::{UrdfArm, UrdfCore};
 use compute_ik::Input;
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::ArmConfig;
-use eezybot_msgs::geometry_msgs::{Point, PointStamped};
 use eezybot_msgs::sensor_msgs::JointState;
-use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
-use std::time::{Duration, Instant};
-
-fn ms(n: u64) -> Duration {
-    Duration::from_millis(n)
-}
-
-/// The wall clock of the test: `t0_wall` at the monotonic `t0`, advancing with it.
-struct Clock {
-    t0: Instant,
-    t0_wall: Time,
-}
-
-impl Clock {
-    fn new() -> Clock {
-        Clock {
-            t0: Instant::now(),
-            t0_wall: Time::from_nanos(1_700_000_000_000_000_000),
-        }
-    }
-    fn at(&self, t: Duration) -> (Instant, Time) {
-        (self.t0 + t, self.wall(t))
-    }
-    fn wall(&self, t: Duration) -> Time {
-        Time::from_nanos(self.t0_wall.to_nanos() + t.as_nanos() as i64)
-    }
-}
-
-fn xyz(x: f64, y: f64, z: f64, stamp: Time) -> Input {
-    Input::XyzTarget(PointStamped {
-        header: Header {
-            stamp,
-            frame_id: String::new(),
-        },
-        point: Point { x, y, z },
-    })
-}
-
-fn driver() -> Driver<EezyBot> {
-    Driver::new(IkCore::new(&ArmConfig::default(), "base_link"))
-}
-
-fn published(effects: &[Effect]) -> Vec<&JointState> {
-    effects
-        .iter()
-        .filter_map(|e| match e {
-            Effect::Publish(s) => Some(&s.joint_states),
-            _ => None,
-        })
-        .collect()
-}
+use std::time::Duration;
 
 fn reports(effects: &[Effect]) -> usize {
     effects.iter().filter(|e| **e == Effect::Report).count()
@@ -276,12 +227,6 @@ fn a_urdf_arm_runs_the_same_pipeline_and_publishes_no_servo_angles() {
 use eezybot_msgs::builtin_interfaces::Duration as RosDuration;
 use eezybot_msgs::trajectory_msgs::{JointTrajectory, JointTrajectoryPoint};
 
-const ARM: [&str; 3] = ["base_joint", "shoulder_joint", "elbow_joint"];
-
-fn position(js: &JointState, name: &str) -> f64 {
-    js.position[js.name.iter().position(|n| n == name).unwrap()]
-}
-
 fn arm_joints(js: &JointState) -> [f64; 3] {
     ARM.map(|n| position(js, n))
 }
@@ -476,14 +421,6 @@ fn leader(q: [f64; 3]) -> Input {
         position: q.to_vec(),
         ..Default::default()
     })
-}
-
-fn leader_value(d: &Driver<EezyBot>) -> String {
-    d.controller_values()
-        .into_iter()
-        .find(|(k, _)| k == "leader")
-        .unwrap()
-        .1
 }
 
 /// Steps published until `until` (run by the driver's own deadlines).

@@ -430,16 +430,12 @@ impl Panel {
     /// A wizard request, or its ROS work done.
     fn calibrate(&mut self, op: Result<cal::Op, String>, clock: Clock, effects: &mut Vec<Effect>) {
         let Some(wizard) = self.wizard.as_mut() else {
-            let reason = "calibration: only for the EezyBot (this arm has no servos to calibrate)"
-                .to_string();
-            effects.push(Effect::Rejected {
-                kind: "calibration",
-                reason: reason.clone(),
-            });
-            effects.push(Effect::Answer(ToClient::Refused {
-                reason,
-                reachable: None,
-            }));
+            refuse(
+                effects,
+                "calibration",
+                "calibration: only for the EezyBot (this arm has no servos to calibrate)".into(),
+                None,
+            );
             return;
         };
         let out = op.and_then(|op| wizard.request(op, clock.now));
@@ -447,14 +443,7 @@ impl Panel {
             Ok(fx) => self.calibration_effects(fx, clock, effects),
             Err(reason) => {
                 let fx = wizard.refused(&reason);
-                effects.push(Effect::Rejected {
-                    kind: "calibration",
-                    reason: reason.clone(),
-                });
-                effects.push(Effect::Answer(ToClient::Refused {
-                    reason: shorten(&reason, web::REASON_MAX).into_owned(),
-                    reachable: None,
-                }));
+                refuse(effects, "calibration", reason, None);
                 self.calibration_effects(fx, clock, effects);
             }
         }
@@ -631,17 +620,12 @@ impl Panel {
             }
             ClientRequest::Estop { on } => Event::Estop { engaged: on },
             _ if self.calibrating() => {
-                let reason =
-                    "calibrating: the wizard drives the servos (finish or cancel it first)"
-                        .to_string();
-                effects.push(Effect::Rejected {
-                    kind: "calibrating",
-                    reason: reason.clone(),
-                });
-                effects.push(Effect::Answer(ToClient::Refused {
-                    reason,
-                    reachable: Some(false),
-                }));
+                refuse(
+                    &mut effects,
+                    "calibrating",
+                    "calibrating: the wizard drives the servos (finish or cancel it first)".into(),
+                    Some(false),
+                );
                 return self.finish(effects);
             }
             ClientRequest::Target { xyz } => Event::SetTarget { xyz },
@@ -1056,6 +1040,16 @@ fn segments(model: &RobotModel, js: &JointState) -> Vec<([f64; 6], String)> {
             ((b - a).norm() > 1e-6).then(|| ([a.x, a.y, a.z, b.x, b.y, b.z], j.child.clone()))
         })
         .collect()
+}
+
+/// Refuse a request: count it (`kind`, the reason in full) and answer the browser (the
+/// reason cut to [`web::REASON_MAX`]).
+fn refuse(effects: &mut Vec<Effect>, kind: &'static str, reason: String, reachable: Option<bool>) {
+    effects.push(Effect::Answer(ToClient::Refused {
+        reason: shorten(&reason, web::REASON_MAX).into_owned(),
+        reachable,
+    }));
+    effects.push(Effect::Rejected { kind, reason });
 }
 
 /// `servo_state`'s four horn angles in degrees (`servo_angles` order), if it names them

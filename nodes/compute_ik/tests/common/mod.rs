@@ -1,0 +1,75 @@
+//! What the driver tests share (`tests/driver.rs`, `tests/calibrating.rs`): a fixed
+//! clock, a driver on the EezyBot, and readers of its effects.
+#![allow(dead_code)]
+use compute_ik::driver::{Driver, Effect};
+use compute_ik::eezybot::{EezyBot, IkCore};
+use compute_ik::Input;
+use eezybot_kinematics::ArmConfig;
+use eezybot_msgs::geometry_msgs::{Point, PointStamped};
+use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::Header;
+use eezybot_msgs::Time;
+use std::time::{Duration, Instant};
+
+pub fn ms(n: u64) -> Duration {
+    Duration::from_millis(n)
+}
+
+/// The wall clock of the test: `t0_wall` at the monotonic `t0`, advancing with it.
+pub struct Clock {
+    pub t0: Instant,
+    pub t0_wall: Time,
+}
+
+impl Clock {
+    pub fn new() -> Clock {
+        Clock {
+            t0: Instant::now(),
+            t0_wall: Time::from_nanos(1_700_000_000_000_000_000),
+        }
+    }
+    pub fn at(&self, t: Duration) -> (Instant, Time) {
+        (self.t0 + t, self.wall(t))
+    }
+    pub fn wall(&self, t: Duration) -> Time {
+        Time::from_nanos(self.t0_wall.to_nanos() + t.as_nanos() as i64)
+    }
+}
+
+pub fn driver() -> Driver<EezyBot> {
+    Driver::new(IkCore::new(&ArmConfig::default(), "base_link"))
+}
+
+pub fn xyz(x: f64, y: f64, z: f64, stamp: Time) -> Input {
+    Input::XyzTarget(PointStamped {
+        header: Header {
+            stamp,
+            frame_id: String::new(),
+        },
+        point: Point { x, y, z },
+    })
+}
+
+pub fn published(effects: &[Effect]) -> Vec<&JointState> {
+    effects
+        .iter()
+        .filter_map(|e| match e {
+            Effect::Publish(s) => Some(&s.joint_states),
+            _ => None,
+        })
+        .collect()
+}
+
+pub fn position(js: &JointState, name: &str) -> f64 {
+    js.position[js.name.iter().position(|n| n == name).unwrap()]
+}
+
+pub fn leader_value(d: &Driver<EezyBot>) -> String {
+    d.controller_values()
+        .into_iter()
+        .find(|(k, _)| k == "leader")
+        .unwrap()
+        .1
+}
+
+pub const ARM: [&str; 3] = ["base_joint", "shoulder_joint", "elbow_joint"];
