@@ -278,10 +278,15 @@ impl RosNode {
         }));
         let store = params.clone();
         options = options.parameter_set_action(Box::new(move |name, value| {
+            // the same value again is applied again: a file parameter (arm_config) set to
+            // the path it has reloads the file, which may have changed (the calibration
+            // wizard saves to the same file each time)
             if store.get(name).as_ref() != Some(value) {
                 log::info!("parameter {name} set to {}", show(value));
-                store.set(name, value.clone());
+            } else {
+                log::debug!("parameter {name} set again to {}", show(value));
             }
+            store.set(name, value.clone());
             Ok(())
         }));
 

@@ -329,7 +329,10 @@ where
     loop {
         let deadline = driver.deadline().map(tokio::time::Instant::from_std);
         let now = std::time::Instant::now;
+        // biased: a parameter set before a target was sent (the calibration wizard's
+        // `calibrating` false, then its test move) is applied before that target
         let effects = tokio::select! {
+                biased;
                 _ = &mut shutdown => break,
                 _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
                     driver.on_time(now(), Time::now())

@@ -481,7 +481,10 @@ pub async fn run<O: Outputs>(
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
+        // biased: a parameter set before a command was sent (the calibration wizard's
+        // arm_config, then servo_angles) is applied before that command is handled
         tokio::select! {
+            biased;
             _ = &mut shutdown => break,
             _ = ticker.tick() => node.report(),
             _ = peer_poll.tick() => node.on_peer_poll(),
