@@ -5,6 +5,7 @@ import fcntl
 import importlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -246,6 +247,23 @@ class NodeProcess:
             self.log.write(f"(no stacks: {e})\n")
 
 
+CHROMIUM = "/usr/bin/chromium"
+# --enable-unsafe-swiftshader: WebGL (the 3D view) through SwiftShader, Chromium's software
+# renderer, without the deprecation warning of the automatic fallback
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Chromium through Playwright, one per test module."""
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
 @pytest.fixture
 def launch(domain, observer):
     """launch(binary, *args, domain_id=None) starts a node; all are stopped with SIGINT afterwards
@@ -430,12 +448,22 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 # discovered nothing; and the other way round. Mark such a module with
 # `pytestmark = [pytest.mark.own_process, ...]`.
 
+# Every process a test starts is kept from the user's saved calibration: gui_bridge's
+# wizard saves to $XDG_CONFIG_HOME/eezybot/arm.yaml, and the launch scripts read it when
+# it exists. So from the session's start $XDG_CONFIG_HOME is an empty directory of the
+# session's own, whatever the caller's was; a test that needs its own sets it
+# (monkeypatch.setenv, or a process's env=). Removed at the session's end.
+_XDG_CONFIG_HOME = None
+
+
 def pytest_configure(config):
+    global _STDERR, _XDG_CONFIG_HOME
+    _XDG_CONFIG_HOME = tempfile.mkdtemp(prefix="eezybot-test-xdg-")
+    os.environ["XDG_CONFIG_HOME"] = _XDG_CONFIG_HOME
     config.addinivalue_line("markers", "own_process: run this module's tests in a pytest process of their own")
     config.addinivalue_line("markers", "background: (with own_process) that process may run alongside the other tests")
     config.addinivalue_line("markers", "timeout(seconds): this test's limit for each of setup, call and teardown "
                                        f"(default {TEST_TIMEOUT_S:.0f} s, EEZYBOT_TEST_TIMEOUT)")
-    global _STDERR
     _STDERR = os.dup(2)  # the terminal's stderr (output capture is suspended here)
 
 
@@ -480,6 +508,8 @@ def pytest_unconfigure(config):
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait(10)
+    if _XDG_CONFIG_HOME is not None:
+        shutil.rmtree(_XDG_CONFIG_HOME, ignore_errors=True)
 
 
 def _run_module_in_own_process(item):

@@ -21,7 +21,7 @@ import pytest
 
 from calibration_rig import (ISSUE_ARM, SHIPPED_CONFIG, CalibrationGraph, Target, WizardDriver, run_wizard,
                              servo_lines)
-from test_gui_bridge import CHROMIUM, CHROMIUM_ARGS, free_port
+from test_gui_bridge import free_port
 
 # in a process of its own, beside the other tests (like test_leader_arm.py): the firmware
 # in simavr, paced to wall time, mostly waited out; its checks tolerant of a busy host
@@ -92,15 +92,6 @@ class BrowserWizard(WizardDriver):
     def close(self):
         self.page.close()
         self.context.close()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def describe(results):

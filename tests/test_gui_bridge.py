@@ -26,12 +26,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 from conftest import LATCHED, OUTPUT, REPO, bin_path, latest_status, status_values
 
-CHROMIUM = "/usr/bin/chromium"
-# --enable-unsafe-swiftshader: WebGL (the 3D view) through SwiftShader, Chromium's software
-# renderer, without the deprecation warning of the automatic fallback
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-
 # A gamepad the page reads through navigator.getGamepads(); the test moves its sticks
 # and buttons through window.__pad.
 FAKE_GAMEPAD = """
@@ -48,15 +42,6 @@ def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 class Panel:

@@ -12,7 +12,7 @@ from rclpy.serialization import serialize_message
 
 from conftest import LATCHED, REPO
 from foxglove_client import free_port
-from test_gui_bridge import RawWs, another_site, browser, http_get, panel_status, rss_kib, start_panel  # noqa: F401 (fixture)
+from test_gui_bridge import RawWs, another_site, http_get, panel_status, rss_kib, start_panel
 
 FOXGLOVE = {"Sec-WebSocket-Protocol": "foxglove.sdk.v1"}
 

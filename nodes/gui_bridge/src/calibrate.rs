@@ -42,6 +42,11 @@ pub const TEST_POSE: [f64; 4] = [20.0, 70.0, -30.0, 0.3];
 pub const TEST_ARRIVED_RAD: f64 = 0.005;
 /// How long the test move may take.
 pub const TEST_TIMEOUT: Duration = Duration::from_secs(15);
+/// How long a leader mark waits for the next `leader_counts` report.
+pub const READING_TIMEOUT: Duration = Duration::from_secs(3);
+/// The view is sent again when the active servo's `servo_state` moved this far since
+/// the last view (deg), or arrived.
+pub const STATE_VIEW_DEG: f64 = 1.0;
 
 /// Which arm is calibrated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -210,6 +215,10 @@ pub struct Wizard {
     saved: Option<SaveOutcome>,
     test_started: Option<Instant>,
     test_done: bool,
+    /// when a leader mark started waiting for counts
+    reading_since: Option<Instant>,
+    /// the active servo's `servo_state` and arrival as last shown
+    shown_state: Option<(f64, bool)>,
 }
 
 /// Servo-degree velocity limits of the configuration, for how long a move may take.
@@ -267,6 +276,8 @@ impl Wizard {
             saved: None,
             test_started: None,
             test_done: false,
+            reading_since: None,
+            shown_state: None,
         })
     }
 
@@ -400,6 +411,7 @@ impl Wizard {
                     }
                     Arm::Leader => {
                         self.phase = Phase::Reading;
+                        self.reading_since = Some(now);
                     }
                 }
             }
@@ -890,6 +902,22 @@ impl Wizard {
             if self.arrived(m) {
                 self.next_move(now, &mut fx);
                 fx.push(Effect::View);
+                return fx;
+            }
+        }
+        if self.phase == Phase::Jog && self.arm == Arm::Follower {
+            // the page (and the terminal) see the servo arrive where it was jogged
+            let i = index(self.servo());
+            let arrived = self
+                .commanded
+                .is_some_and(|c| (deg[i] - c[i]).abs() <= ARRIVED_DEG);
+            let changed = match self.shown_state {
+                Some((shown, was)) => was != arrived || (deg[i] - shown).abs() >= STATE_VIEW_DEG,
+                None => true,
+            };
+            if changed {
+                self.shown_state = Some((deg[i], arrived));
+                fx.push(Effect::View);
             }
         }
         fx
@@ -900,6 +928,7 @@ impl Wizard {
         self.counts = Some(counts);
         let mut fx = vec![];
         if self.arm == Arm::Leader && self.phase == Phase::Reading {
+            self.reading_since = None;
             let c = counts[index(self.servo())];
             self.record_mark(c, now, &mut fx);
         }
@@ -973,6 +1002,19 @@ impl Wizard {
                     ),
                     true,
                 );
+            }
+        }
+        if self.phase == Phase::Reading {
+            if let Some(t) = self.reading_since {
+                if now.duration_since(t) > READING_TIMEOUT {
+                    self.phase = Phase::Jog;
+                    self.reading_since = None;
+                    self.error = Some(format!(
+                        "no leader_counts heard for {:.0} s: is the leader's serial_node (role:=leader) running?",
+                        READING_TIMEOUT.as_secs_f64()
+                    ));
+                    return vec![Effect::View];
+                }
             }
         }
         if self.phase == Phase::Testing && !self.test_done {

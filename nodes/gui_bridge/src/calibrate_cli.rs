@@ -13,6 +13,7 @@
 //! | `s` | save, apply, and run the test move |
 //! | `t` | the test move again |
 //! | `q` | cancel (or, once saved, finish) and exit |
+//! | `.` | where the wizard is now |
 //! | `?` | this list |
 //!
 //! Every change prints the wizard's instruction and where the servo is. Exit status: 0
@@ -43,6 +44,8 @@ pub enum Line {
     Help,
     /// Leave: cancel, or finish once saved.
     Quit,
+    /// Print where the wizard is.
+    Status,
     /// Nothing (an empty line).
     Nothing,
 }
@@ -50,7 +53,7 @@ pub enum Line {
 /// The commands, for `?`.
 pub const HELP: &str =
     "+ / - fine jog (0.5°), ++ / -- coarse jog (5°), j DEG jog by DEG, m mark, b back, \
-alt on|off reference B's alternative, s save, t test move again, q quit, ? this list";
+alt on|off reference B's alternative, s save, t test move again, . status, q quit, ? this list";
 
 /// Read one line of input.
 ///
@@ -86,6 +89,7 @@ pub fn parse_line(line: &str) -> Result<Line, String> {
         ["t" | "test"] => Line::Op(Op::Test),
         ["q" | "quit"] => Line::Quit,
         ["?" | "h" | "help"] => Line::Help,
+        ["." | "status"] => Line::Status,
         _ => return Err(format!("`{}`: not a command ({HELP})", line.trim())),
     })
 }
@@ -108,7 +112,8 @@ pub fn describe(view: &crate::message::CalibrationView) -> String {
             view.step + 1,
             step.title
         ));
-        if let (Some(c), Some(j)) = (view.commanded_deg, &view.jog) {
+        let driving = matches!(view.phase.as_str(), "moving" | "jog" | "review");
+        if let (Some(c), Some(j), true) = (view.commanded_deg, &view.jog, driving) {
             out.push_str(&format!(
                 "servo at {c:.1}° (servo_state {}; may jog {:.1}° … {:.1}°) ",
                 view.state_deg
@@ -126,11 +131,6 @@ pub fn describe(view: &crate::message::CalibrationView) -> String {
         out.push_str(&format!("marks: {}\n", marks.join(", ")));
     }
     out.push_str(&format!("  {}\n", view.instruction));
-    for s in &view.steps {
-        if let Some(e) = &s.error {
-            out.push_str(&format!("  {} refused: {e}\n", s.title));
-        }
-    }
     if let Some(e) = &view.error {
         out.push_str(&format!("  ! {e}\n"));
     }
@@ -177,6 +177,17 @@ pub async fn calibrate(
         if leader { "leader" } else { "follower" },
         control.path().display()
     );
+    if !leader {
+        // compute_ik must go silent before anything moves: its parameter services first
+        control
+            .wait_ready("compute_ik", Duration::from_secs(10))
+            .await
+            .map_err(|e| {
+                NotDelivered::NotCalibrated(format!(
+                    "calibration not started: compute_ik's parameters do not answer ({e}): is compute_ik running?"
+                ))
+            })?;
+    }
     let mut heard: BTreeMap<String, (String, Instant)> = BTreeMap::new();
     let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
     let mut servo_state = servo_state.async_stream().boxed_local();
@@ -190,6 +201,7 @@ pub async fn calibrate(
     // servo_state first: a follower's wizard starts where the servos are
     let start_by = Instant::now() + Duration::from_secs(5);
     let mut saved = false;
+    let mut shown_errors: Vec<String> = vec![];
     loop {
         let mut fx = vec![];
         if !started && (leader || Instant::now() > start_by || wizard_has_state(&wizard)) {
@@ -221,6 +233,7 @@ pub async fn calibrate(
                     match parse_line(&line) {
                         Ok(Line::Nothing) => continue,
                         Ok(Line::Help) => { println!("{HELP}"); continue; }
+                        Ok(Line::Status) => { print!("{}", describe(&wizard.view())); continue; }
                         Ok(Line::Quit) => {
                             if saved {
                                 let _ = wizard.request(Op::Finish, Instant::now());
@@ -284,6 +297,12 @@ pub async fn calibrate(
                         })
                         .map(|(n, _)| n.clone())
                         .collect();
+                    for name in &job.nodes {
+                        // matched before the save sets their arm_config (made when heard)
+                        if let Err(e) = control.wait_ready(name, Duration::from_secs(3)).await {
+                            log::warn!("calibration: {name}: {e}");
+                        }
+                    }
                     let outcome = control.save(*job).await;
                     saved = outcome.written.is_ok();
                     queue.extend(wizard.on_saved(outcome, Instant::now()));
@@ -291,7 +310,17 @@ pub async fn calibrate(
                 cal::Effect::JointTarget(q) => outputs.joint_target(&q, Time::now()),
                 cal::Effect::View => {
                     if !printed {
-                        print!("{}", describe(&wizard.view()));
+                        let view = wizard.view();
+                        print!("{}", describe(&view));
+                        // a step's refusal once, when it comes
+                        let errors: Vec<Option<String>> =
+                            view.steps.iter().map(|s| s.error.clone()).collect();
+                        for (s, e) in view.steps.iter().zip(&errors) {
+                            if let Some(e) = e.as_ref().filter(|e| !shown_errors.contains(e)) {
+                                println!("  {} refused: {e}", s.title);
+                            }
+                        }
+                        shown_errors = errors.into_iter().flatten().collect();
                         printed = true;
                     }
                 }

@@ -111,6 +111,17 @@ impl<'n, 'r> RosCalibration<'n, 'r> {
         Ok(c)
     }
 
+    /// Wait until `name`'s parameter services are matched (a request sent before is
+    /// lost), at most `timeout`. The node stays borrowed meanwhile: only for a caller
+    /// that runs nothing else on it then (the command line; the panel makes its clients
+    /// long before they are used, see [`CalibrationControl::prepare`]).
+    #[allow(clippy::await_holding_refcell_ref)]
+    pub async fn wait_ready(&self, name: &str, timeout: Duration) -> Result<(), String> {
+        let client = self.client(name)?;
+        let ros = self.node.borrow();
+        client.wait(&ros, timeout).await.map_err(|e| e.to_string())
+    }
+
     async fn set(&self, name: &str, param: &str, value: ParameterValue) -> Result<(), String> {
         let client = self.client(name)?;
         match tokio::time::timeout(PARAM_TIMEOUT, client.set(param, value)).await {

@@ -364,11 +364,16 @@ pub struct Panel {
     leader: LeaderView,
 }
 
+/// A leader's deadman is shown only with joints heard this recently.
+const LEADER_JOINTS_FRESH: Duration = Duration::from_millis(500);
+
 /// The leader arm as the page shows it beside the follower.
 #[derive(Debug, Default)]
 struct LeaderView {
     joints: BTreeMap<String, f64>,
     deadman: Option<bool>,
+    /// when the joints last came
+    joints_at: Option<Instant>,
     sent_at: Option<Instant>,
     /// a change not sent yet (held back by the rate)
     pending: bool,
@@ -753,14 +758,23 @@ impl Panel {
                     .cloned()
                     .zip(js.position.iter().copied())
                     .collect();
+                self.leader.joints_at = Some(clock.now);
                 self.leader.pending = true;
                 self.send_leader(clock.now, &mut effects);
             }
             Input::LeaderDeadman(held) => {
+                // shown with the leader's joints: without recent ones (none heard, or the
+                // joints stopped) there is no leader to show
+                let recent = self
+                    .leader
+                    .joints_at
+                    .is_some_and(|t| clock.now.duration_since(t) < LEADER_JOINTS_FRESH);
                 if self.leader.deadman != Some(held) {
                     self.leader.deadman = Some(held);
-                    self.leader.pending = true;
-                    self.send_leader(clock.now, &mut effects);
+                    if recent {
+                        self.leader.pending = true;
+                        self.send_leader(clock.now, &mut effects);
+                    }
                 }
             }
         }

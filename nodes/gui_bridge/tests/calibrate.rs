@@ -475,9 +475,10 @@ fn requests_out_of_place_are_refused_and_change_nothing() {
     assert_eq!(sim.view().commanded_deg, Some(94.5));
     assert_eq!(sim.view().state_deg, Some(99.5));
     assert!(sim.refused(Op::Mark).contains("not arrived"));
-    // it arrives: the mark is taken
+    // it arrives (the view shows it, nothing else happens): the mark is taken
     sim.tick();
-    assert!(sim.w.on_servo_state(sim.last, sim.now).is_empty());
+    assert_eq!(sim.w.on_servo_state(sim.last, sim.now), [Effect::View]);
+    assert_eq!(sim.view().state_deg, Some(94.5));
     sim.echo = true;
     sim.req(Op::Mark).unwrap();
     assert_eq!(sim.view().steps[0].marks, [Some(94.5), None]);
@@ -1221,4 +1222,29 @@ fn back_into_an_earlier_step_poses_its_holds_again() {
     assert_eq!((v.step, v.reference), (1, 1));
     // the forearm's hold: the main arm's servo at the shipped home angle, 90°
     assert_eq!(sim.last[idx(ServoId::Shoulder)], 90.0, "{:?}", sim.last);
+}
+
+/// A leader mark with no leader reader running does not wait for ever: after
+/// `READING_TIMEOUT` the wizard says why and lets the user mark again.
+#[test]
+fn a_leader_mark_without_counts_gives_up_and_says_why() {
+    let t0 = Instant::now();
+    let mut w = Wizard::new(shipped()).unwrap();
+    w.request(Op::Start(Arm::Leader), t0).unwrap();
+    w.request(Op::Mark, t0).unwrap();
+    assert_eq!(w.view().phase, "reading");
+    assert!(w.on_tick(t0 + Duration::from_secs(2)).is_empty());
+    let later = t0 + gui_bridge::calibrate::READING_TIMEOUT + Duration::from_millis(100);
+    assert_eq!(w.on_tick(later), [Effect::View]);
+    let v = w.view();
+    assert_eq!(v.phase, "jog");
+    assert!(
+        v.error.as_deref().unwrap_or("").contains("leader_counts"),
+        "{v:?}"
+    );
+    assert_eq!(v.steps[0].marks, [None, None]);
+    // the reader starts: the next mark takes its counts
+    w.request(Op::Mark, later).unwrap();
+    w.on_leader_counts([512.0, 452.0, 600.0, 300.0], later);
+    assert_eq!(w.view().steps[0].marks, [Some(512.0), None]);
 }
