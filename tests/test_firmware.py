@@ -10,7 +10,7 @@ import time
 import pytest
 
 from conftest import REPO
-from interop.servo_link import (CONFIG, ESTOP, HEARTBEAT, HELLO, HELLO_ACK, STATE, SimulatedUno, config, crc8,
+from interop.servo_link import (CONFIG, ESTOP, HEARTBEAT, HELLO, HELLO_ACK, STATE, SimulatedUno, config, frames_sent,
                                 frame, parse_state, pulses, set_pulses)
 
 FIRMWARE = REPO / "firmware" / "servo_control"
@@ -136,17 +136,7 @@ def tx_frames(uno):
         parts = line.split()
         if len(parts) == 3 and parts[0] == "t":
             tx.append((int(parts[1]), int(parts[2])))
-    out, i = [], 0
-    while i + 2 <= len(tx):
-        assert tx[i][1] == 0xA5, f"the AVR sent {tx[i][1]:#x} where a frame starts"
-        n = (tx[i + 1][1] & 0x0F) + 4
-        if i + n > len(tx):
-            break
-        body = bytes(b for _, b in tx[i + 1:i + n - 1])
-        assert crc8(body) == tx[i + n - 1][1]
-        out.append((tx[i][0], body[0] >> 4, body[2:]))
-        i += n
-    return out
+    return frames_sent(tx)
 
 
 # The frame rule (servo_pwm.h, config.h): a frame starts 20 ms after the one before; a

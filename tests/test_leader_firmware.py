@@ -13,7 +13,7 @@ import pytest
 
 from conftest import REPO
 from interop.servo_link import (AVCC_MV, FOLLOWER, HEARTBEAT, HELLO, HELLO_ACK, LEADER, LEADER_FULL_SCALE,
-                                LEADER_PERIOD_US, LEADER_STATE, ROLE, STATE, Decoder, SimulatedUno, crc8, frame,
+                                LEADER_PERIOD_US, LEADER_STATE, ROLE, STATE, Decoder, SimulatedUno, frame, frames_sent,
                                 leader_state, parse_leader_state, parse_state, pulses, role, set_pulses,
                                 write_adc_file)
 
@@ -71,17 +71,7 @@ def sim_events(path):
             d2.append((int(parts[1]), int(parts[2])))
         elif len(parts) == 4 and parts[0] == "e":
             edges.append((int(parts[1]), int(parts[2]), int(parts[3])))
-    frames, i = [], 0
-    while i + 2 <= len(tx):
-        assert tx[i][1] == 0xA5, f"the AVR sent {tx[i][1]:#x} where a frame starts"
-        n = (tx[i + 1][1] & 0x0F) + 4
-        if i + n > len(tx):
-            break
-        body = bytes(b for _, b in tx[i + 1:i + n - 1])
-        assert crc8(body) == tx[i + n - 1][1]
-        frames.append((tx[i][0], body[0] >> 4, body[2:]))
-        i += n
-    return frames, conversions, d2, edges
+    return frames_sent(tx), conversions, d2, edges
 
 
 def last_cycle(path):

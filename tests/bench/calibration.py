@@ -43,7 +43,7 @@ os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "relea
 from calibration_rig import (ISSUE_ARM, JOINTS, SHIPPED_CONFIG, ArmModel, CalibrationGraph, Target,  # noqa: E402
                              WsWizard, run_wizard, servo_lines)
 from conftest import DomainLease, Observer  # noqa: E402
-from leader_follow import Launcher, stats  # noqa: E402
+from benchkit import Launcher, stats  # noqa: E402
 from test_gui_bridge import free_port  # noqa: E402
 
 PAIRS = [(60.0, -100.0), (80.0, -120.0), (100.0, -110.0), (115.0, -140.0), (70.0, -65.0)]

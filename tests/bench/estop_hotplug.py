@@ -23,7 +23,6 @@ Hot-plug, --cycles of each kind (the cable pulled for 0.3 s mid-move, the board 
 import argparse
 import json
 import os
-import statistics
 import sys
 import tempfile
 import time
@@ -33,27 +32,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "release"))
 
-from conftest import DomainLease, NodeProcess, Observer  # noqa: E402
+from benchkit import Launcher, stats  # noqa: E402
+from conftest import DomainLease, Observer  # noqa: E402
 from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, A, Rig, engaged_estop_frames, reconnect_ms, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
-
-
-def stats(xs):
-    xs = sorted(xs)
-    return {"n": len(xs), "p50": round(statistics.median(xs), 2),
-            "p99": round(xs[min(len(xs) - 1, int(round(0.99 * (len(xs) - 1))))], 2), "max": round(xs[-1], 2)}
-
-
-class Launcher:
-    def __init__(self, domain):
-        self.domain, self.procs = domain, []
-
-    def __call__(self, name, *args):
-        p = NodeProcess(name, list(args), self.domain)
-        self.procs.append(p)
-        return p
-
-    def stop(self):
-        return [p.stop() for p in self.procs]
 
 
 def estop_trials(domain, action, trials, tmp):

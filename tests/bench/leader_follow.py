@@ -20,7 +20,6 @@ motion (servo_sim --adc-file), the deadman held. Per step:
 import argparse
 import json
 import os
-import statistics
 import sys
 import tempfile
 import time
@@ -30,7 +29,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "release"))
 
-from conftest import DomainLease, NodeProcess, Observer  # noqa: E402
+from benchkit import Launcher, stats  # noqa: E402
+from conftest import DomainLease, Observer  # noqa: E402
 from interop.servo_link import SimulatedUno, write_adc_file  # noqa: E402
 from safety_rig import CYCLES_PER_S, FIRMWARE, BoardEvents, Rig  # noqa: E402
 from test_leader_arm import LEADER_SECTION, SHIPPED, base_us, pots  # noqa: E402
@@ -40,27 +40,8 @@ POSES = (0.5, 0.625)  # base fractions: home and 22.5° left
 START_S = 6.0  # the first step, after the graph is up
 
 
-def stats(xs):
-    xs = sorted(xs)
-    return {"n": len(xs), "p50": round(statistics.median(xs), 2),
-            "p99": round(xs[min(len(xs) - 1, int(round(0.99 * (len(xs) - 1))))], 2), "max": round(xs[-1], 2)}
-
-
 def joint_deg(fraction):
     return (fraction * 1024 - 512) * 45.0 / 256
-
-
-class Launcher:
-    def __init__(self, domain):
-        self.domain, self.procs = domain, []
-
-    def __call__(self, name, *args):
-        p = NodeProcess(name, list(args), self.domain)
-        self.procs.append(p)
-        return p
-
-    def stop(self):
-        return [p.stop() for p in self.procs]
 
 
 def adc_events(path):

@@ -55,6 +55,23 @@ def role(seq, which):
     return frame(ROLE, seq, bytes([which]))
 
 
+def frames_sent(tx):
+    """(cycle of the first byte, type, payload) of every whole frame in `tx`, the
+    (cycle, byte) pairs an AVR sent (the simavr harness's `t` events); a frame cut off at
+    the end is left out. The start byte and every CRC are asserted."""
+    out, i = [], 0
+    while i + 2 <= len(tx):
+        assert tx[i][1] == SYNC, f"the AVR sent {tx[i][1]:#x} where a frame starts"
+        n = (tx[i + 1][1] & 0x0F) + 4
+        if i + n > len(tx):
+            break
+        body = bytes(b for _, b in tx[i + 1:i + n - 1])
+        assert crc8(body) == tx[i + n - 1][1]
+        out.append((tx[i][0], body[0] >> 4, body[2:]))
+        i += n
+    return out
+
+
 class Decoder:
     def __init__(self):
         self.buf = bytearray()

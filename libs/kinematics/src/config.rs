@@ -230,13 +230,7 @@ impl ArmConfig {
     /// Check that every value is usable: positive lengths, ordered finite limits,
     /// servo ranges inside 0–180° and plausible pulse widths.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
-        let invalid =
-            |field: &'static str, value: String, why: &'static str| ConfigError::Invalid {
-                origin: origin.to_string(),
-                field,
-                value,
-                why,
-            };
+        let invalid = invalid_in(origin);
         let g = &self.geometry;
         for (field, v) in [
             ("geometry.shoulder_height_m", g.shoulder_height_m),
@@ -392,13 +386,7 @@ impl LeaderCalibration {
     /// The loader's check (the plausibility is `calibration::derive_leader`'s): a positive full
     /// scale, finite values, readings within it, distinct readings and inputs.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
-        let invalid =
-            |field: &'static str, value: String, why: &'static str| ConfigError::Invalid {
-                origin: origin.to_string(),
-                field,
-                value,
-                why,
-            };
+        let invalid = invalid_in(origin);
         if self.adc_max == 0 {
             return Err(invalid("leader.adc_max", "0".into(), "must be positive"));
         }
@@ -434,6 +422,16 @@ impl LeaderCalibration {
             }
         }
         Ok(())
+    }
+}
+
+/// A maker of [`ConfigError::Invalid`] for the file `origin`.
+fn invalid_in(origin: &str) -> impl Fn(&'static str, String, &'static str) -> ConfigError + '_ {
+    move |field, value, why| ConfigError::Invalid {
+        origin: origin.to_string(),
+        field,
+        value,
+        why,
     }
 }
 

@@ -14,6 +14,7 @@ use ros_plumbing::{ParameterValue, Params};
 use serial_node::core::{angles_to_ticks, ticks_to_angles};
 use serial_node::link::{self, Link};
 use serial_node::{Handles, Input, Io, Outputs};
+use servo_protocol::device::VirtualArduino;
 use servo_protocol::host::HostConfig;
 use std::collections::BTreeMap;
 use std::sync::Mutex;
@@ -90,18 +91,13 @@ async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnosti
     let fake = Fake::default();
     let (inputs, samples) = mpsc::unbounded::<Input>();
     let (stop, stopped) = futures::channel::oneshot::channel::<()>();
-    let io = Io {
-        link: &link,
-        outputs: &fake,
-        params: Params::new(BTreeMap::new()),
-        diag_name: "serial_node: servo link".into(),
-        port_name: "mock".into(),
-        peers: PeerWatch::new(&serial_node::watched_topics(
-            "/servo_angles",
-            "/servo_state",
-        )),
-        mock: None,
-    };
+    let io = io_of(
+        &link,
+        &fake,
+        Params::new(BTreeMap::new()),
+        "serial_node: servo link",
+        None,
+    );
     let handles = Handles {
         io,
         inputs: samples,
@@ -178,6 +174,29 @@ async fn samples_reach_the_device_and_the_estop_and_rejections_show_in_diagnosti
 }
 
 /// The newest servo_state's pulse widths.
+/// The node's ends on the mock port: `link`, the fake outputs, `params`, the
+/// diagnostics name, and the virtual Arduino if the test drives it.
+fn io_of<'a>(
+    link: &'a Link,
+    fake: &'a Fake,
+    params: Params,
+    diag_name: &str,
+    mock: Option<VirtualArduino>,
+) -> Io<'a, Fake> {
+    Io {
+        link,
+        outputs: fake,
+        params,
+        diag_name: diag_name.into(),
+        port_name: "mock".into(),
+        peers: PeerWatch::new(&serial_node::watched_topics(
+            "/servo_angles",
+            "/servo_state",
+        )),
+        mock,
+    }
+}
+
 fn last_ticks(fake: &Fake) -> Option<[u16; 4]> {
     let cal = serial_node::load_calibration("").unwrap();
     let msgs = fake.servo_state.lock().unwrap();
@@ -202,18 +221,13 @@ async fn mock_stalled_servos_holds_a_servo_in_the_virtual_arduino_until_cleared(
         serial_node::MOCK_STALLED_SERVOS.to_string(),
         ParameterValue::String(String::new()),
     )]));
-    let io = Io {
-        link: &link,
-        outputs: &fake,
-        params: params.clone(),
-        diag_name: "serial_node: servo link".into(),
-        port_name: "mock".into(),
-        peers: PeerWatch::new(&serial_node::watched_topics(
-            "/servo_angles",
-            "/servo_state",
-        )),
-        mock: Some(device.clone()),
-    };
+    let io = io_of(
+        &link,
+        &fake,
+        params.clone(),
+        "serial_node: servo link",
+        Some(device.clone()),
+    );
     let handles = Handles {
         io,
         inputs: samples,
@@ -330,18 +344,13 @@ async fn the_leader_role_publishes_the_leaders_joints_and_deadman_and_no_servo_s
         ),
         ("role".to_string(), ParameterValue::String("leader".into())),
     ]));
-    let io = Io {
-        link: &link,
-        outputs: &fake,
+    let io = io_of(
+        &link,
+        &fake,
         params,
-        diag_name: "leader: servo link".into(),
-        port_name: "mock".into(),
-        peers: PeerWatch::new(&serial_node::watched_topics(
-            "/servo_angles",
-            "/servo_state",
-        )),
-        mock: Some(device.clone()),
-    };
+        "leader: servo link",
+        Some(device.clone()),
+    );
     let handles = Handles {
         io,
         inputs: samples,
