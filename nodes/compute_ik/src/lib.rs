@@ -302,6 +302,14 @@ pub struct Handles<I, O, S> {
     pub shutdown: S,
 }
 
+/// The parameters changed: the controller's settings, the leader's timeout, then the
+/// driver's own ([`Driver::on_params`]).
+fn apply_params<M: ArmModel>(driver: &mut Driver<M>, params: &Params) -> Vec<Effect> {
+    driver.set_controller_settings(controller_settings(params));
+    driver.set_leader_timeout(leader_timeout(params));
+    driver.on_params(params, Time::now())
+}
+
 /// The event loop: routes each event to the [`Driver`] and applies what it returns,
 /// until `shutdown` resolves or the inputs end.
 pub async fn run<M, I, O, S>(mut core: Pipeline<M>, mut h: Handles<I, O, S>)
@@ -329,36 +337,41 @@ where
     loop {
         let deadline = driver.deadline().map(tokio::time::Instant::from_std);
         let now = std::time::Instant::now;
-        // biased: a parameter set before a target was sent (the calibration wizard's
-        // `calibrating` false, then its test move) is applied before that target
         let effects = tokio::select! {
-                biased;
-                _ = &mut shutdown => break,
-                _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
-                    driver.on_time(now(), Time::now())
-                }
-                _ = ticker.tick() => vec![Effect::Report],
-                _ = subscriber_poll.tick() => {
-                    let counts = h.outputs.peer_counts();
-                    let changes = h.peers.update(&counts, std::time::Instant::now());
-                    changes.iter().for_each(|c| c.log());
-                    let report = (!changes.is_empty()).then_some(Effect::Report);
-                    report.into_iter().chain(driver.on_poll(counts[1], Time::now())).collect()
-                }
-                Ok(()) = param_changes.changed() => {
+            _ = &mut shutdown => break,
+            _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
+                driver.on_time(now(), Time::now())
+            }
+            _ = ticker.tick() => vec![Effect::Report],
+            _ = subscriber_poll.tick() => {
+                let counts = h.outputs.peer_counts();
+                let changes = h.peers.update(&counts, std::time::Instant::now());
+                changes.iter().for_each(|c| c.log());
+                let report = (!changes.is_empty()).then_some(Effect::Report);
+                report.into_iter().chain(driver.on_poll(counts[1], Time::now())).collect()
+            }
+            Ok(()) = param_changes.changed() => {
+                ticker = tokio::time::interval(period(&h.params));
+                apply_params(&mut driver, &h.params)
+            }
+            input = inputs.next() => {
+                let Some(first) = input else { break };
+                // A parameter set before this input was sent applies before it (the
+                // calibration wizard's `calibrating` false, then its test move): the
+                // store notified before the set was answered, but both may be ready
+                // now and select! picks at random.
+                let mut effects = vec![];
+                if param_changes.has_changed().unwrap_or(false) {
+                    param_changes.borrow_and_update();
                     ticker = tokio::time::interval(period(&h.params));
-                    driver.set_controller_settings(controller_settings(&h.params));
-                    driver.set_leader_timeout(leader_timeout(&h.params));
-        driver.set_leader_timeout(leader_timeout(&h.params));
-                    driver.on_params(&h.params, Time::now())
+                    effects = apply_params(&mut driver, &h.params);
                 }
-                input = inputs.next() => {
-                    let Some(first) = input else { break };
-                    // a burst (DDS repairing what a network outage held back) is applied
-                    // as its newest target; a lone target goes at once
-                    driver.on_inputs(burst::take_burst(first, &mut inputs), now(), Time::now())
-                }
-            };
+                // a burst (DDS repairing what a network outage held back) is applied
+                // as its newest target; a lone target goes at once
+                effects.extend(driver.on_inputs(burst::take_burst(first, &mut inputs), now(), Time::now()));
+                effects
+            }
+        };
         for effect in effects {
             match effect {
                 Effect::Publish(step) => {

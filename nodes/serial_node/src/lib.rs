@@ -481,10 +481,7 @@ pub async fn run<O: Outputs>(
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        // biased: a parameter set before a command was sent (the calibration wizard's
-        // arm_config, then servo_angles) is applied before that command is handled
         tokio::select! {
-            biased;
             _ = &mut shutdown => break,
             _ = ticker.tick() => node.report(),
             _ = peer_poll.tick() => node.on_peer_poll(),
@@ -496,6 +493,13 @@ pub async fn run<O: Outputs>(
             Some(sample) = leader.recv(), if has_leader => node.on_leader_state(&sample),
             input = inputs.next() => {
                 let Some(first) = input else { break };
+                // a parameter set before this command was sent (the calibration wizard's
+                // arm_config) applies before it, though select! picks at random
+                if param_changes.has_changed().unwrap_or(false) {
+                    param_changes.borrow_and_update();
+                    node.on_params();
+                    ticker = tokio::time::interval(period(&params));
+                }
                 // a burst (DDS repairing what a network outage held back) moves the
                 // arm to its newest command only; a lone command goes at once
                 for input in node.coalesce(burst::take_burst(first, &mut inputs)) {
