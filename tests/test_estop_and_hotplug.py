@@ -124,3 +124,53 @@ def test_hot_plug_while_streaming(launch, observer, tmp_path, kind):
             assert velocity_violations(rig.events(boot), LIMITS, start_us=HOLD_US) == [], f"boot {boot}"
     record("hotplug", kind=kind, cycles=cycles, reconnect_ms=reconnect_ms(rig, kind, up_at),
            counters={k: d[k] for k in ("reconnects", "frames_sent", "frames_ramped_by_velocity_limit")})
+
+
+
+def synthetic_board(tmp_path, frames, pulses):
+    """An events file as servo_sim writes it: each (cycle, wall_ns, base_us) of `frames` a
+    SET_PULSES whose bytes the harness read at wall_ns and the AVR got at that cycle, each
+    (rise cycle, width_us) of `pulses` a pulse on the base's pin."""
+    from interop.servo_link import set_pulses
+    from safety_rig import BoardEvents
+
+    lines = []
+    for seq, (c, ns, us) in enumerate(frames):
+        lines.append(f"w {c} {ns}")
+        lines += [f"r {c} {b}" for b in set_pulses(seq, [round(us * 2), 2944, 2944, 2325])]
+    for c, us in pulses:
+        lines += [f"e {c} 0 1", f"e {c + round(us * 16)} 0 0"]
+    path = tmp_path / "events.txt"
+    path.write_text("\n".join(lines) + "\n")
+    return BoardEvents(path)
+
+
+def test_the_velocity_check_catches_a_fast_step_and_allows_a_late_frame(tmp_path):
+    """The checker itself, on the base's limit. A ramp at the limit passes; three times the
+    limit, or a jump, fails. And a CI run's record under load: the simulation ran slower
+    than the wall clock, the harness read frames in pairs, and a pulse 14 ms after the
+    previous one (the firmware's frame sync) went from frame 105's width to frame 108's,
+    128 us, because 106-107 were still on the wire when it latched. serial_node sent them
+    at the limit: 105 and 108 arrived 38.8 ms apart. It passes; the same record with 108
+    further away fails."""
+    period = int(SERVO_PERIOD_S * CYCLES_PER_S)
+    ns_per_cycle = 1e9 / CYCLES_PER_S
+
+    def ramp(times_the_limit):
+        step = times_the_limit * LIMITS[0] * SERVO_PERIOD_S
+        frames = [(i * period, int(i * period * ns_per_cycle), 1500 + step * i) for i in range(10)]
+        pulses = [(c + period // 2, us) for c, _, us in frames]
+        return velocity_violations(synthetic_board(tmp_path, frames, pulses), [LIMITS[0]])
+
+    assert ramp(1) == []
+    assert len(ramp(3)) == 9
+    assert len(ramp(30)) == 9
+
+    def ci_record(frame_108_us):
+        frames = [(5094800, 0, 1692.5), (5094800, 0, 1693.5), (5327577, 23_555_732, 1755.0),
+                  (5327577, 23_555_732, 1763.5), (5495739, 38_818_347, frame_108_us)]
+        pulses = [(5115443, 1692.375), (5339443, 1693.5), (5563443, frame_108_us)]
+        return velocity_violations(synthetic_board(tmp_path, frames, pulses), [LIMITS[0]])
+
+    assert ci_record(1821.5) == []
+    assert [(pin, cycle) for pin, cycle, *_ in ci_record(1900.0)] == [(0, 5563443)]
