@@ -4,6 +4,7 @@ use std::{
   fmt,
   pin::Pin,
   sync::{Arc, Mutex},
+  time::Instant,
 };
 
 use futures::{
@@ -34,7 +35,7 @@ use crate::{
   ros_time::ROSTime,
   rosgraph_msgs::Clock,
   rosout::{NodeLoggingHandle, RosoutRaw},
-  service::{Client, Server, ServiceMapping},
+  service::{Client, RmwRequestId, Server, ServiceMapping},
 };
 
 // ----------------------------------------------------------------------------------------------------
@@ -99,6 +100,29 @@ struct ParameterServers {
     Server<rcl_interfaces::SetParametersRequest, rcl_interfaces::SetParametersAtomicallyResponse>,
   describe_parameters_server:
     Server<rcl_interfaces::DescribeParametersRequest, rcl_interfaces::DescribeParametersResponse>,
+}
+
+/// How long a parameter service answer waits for its client's response reader
+/// to match (`Spinner::answer`).
+const ANSWER_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Whether the local `writer` has matched the remote `reader`, in a node's
+/// writers-to-remote-readers map (kept by its Spinner).
+fn has_matched(map: &Mutex<BTreeMap<GUID, BTreeSet<GUID>>>, writer: GUID, reader: GUID) -> bool {
+  map
+    .lock()
+    .unwrap()
+    .get(&writer)
+    .is_some_and(|readers| readers.contains(&reader))
+}
+
+/// A parameter service answer waiting for the response writer `writer` to
+/// match the client's response reader `reader`.
+struct PendingAnswer {
+  writer: GUID,
+  reader: GUID,
+  since: Instant,
+  send: Box<dyn FnOnce(&ParameterServers) + Send>,
 }
 
 /// Publish `changes` as a `ParameterEvent`, unless there are none.
@@ -198,7 +222,12 @@ impl Spinner {
 
     info!("Spinner {} initialized", self.fully_qualified_node_name);
 
+    // Parameter service answers waiting for their client's response reader to
+    // match (see `answer`); each round looks again, after any event.
+    let mut pending_answers: Vec<PendingAnswer> = Vec::new();
+
     loop {
+      self.flush_answers(&mut pending_answers);
       if self.parameters.use_sim_time() != ros_clock_reader.is_some() {
         ros_clock_reader = if self.parameters.use_sim_time() {
           self
@@ -248,10 +277,7 @@ impl Spinner {
               info!("Get parameters response: {values:?}");
 
               // .unwrap() below should be safe, as we would not be here if the Server did not exist
-              self.parameter_servers.as_ref().unwrap().get_parameters_server
-                .async_send_response(req_id, rcl_interfaces::GetParametersResponse{ values })
-                .await
-                .unwrap_or_else(|e| warn!("GetParameter response error {e:?}"));
+              self.answer(&mut pending_answers, |s| &s.get_parameters_server, req_id, rcl_interfaces::GetParametersResponse{ values }, "GetParameter");
             }
             Err(e) => warn!("GetParameter request error {e:?}"),
           }
@@ -264,10 +290,7 @@ impl Spinner {
               let values = self.parameters.get_types(&req.names);
               info!("Get parameter types response: {values:?}");
               // .unwrap() below should be safe, as we would not be here if the Server did not exist
-              self.parameter_servers.as_ref().unwrap().get_parameter_types_server
-                .async_send_response(req_id, rcl_interfaces::GetParameterTypesResponse{ values })
-                .await
-                .unwrap_or_else(|e| warn!("GetParameterTypes response error {e:?}"));
+              self.answer(&mut pending_answers, |s| &s.get_parameter_types_server, req_id, rcl_interfaces::GetParameterTypesResponse{ values }, "GetParameterTypes");
             }
             Err(e) => warn!("GetParameterTypes request error {e:?}"),
           }
@@ -286,10 +309,7 @@ impl Spinner {
                   .collect();
               info!("Set parameters response: {results:?}");
               // .unwrap() below should be safe, as we would not be here if the Server did not exist
-              self.parameter_servers.as_ref().unwrap().set_parameters_server
-                .async_send_response(req_id, rcl_interfaces::SetParametersResponse{ results })
-                .await
-                .unwrap_or_else(|e| warn!("SetParameters response error {e:?}"));
+              self.answer(&mut pending_answers, |s| &s.set_parameters_server, req_id, rcl_interfaces::SetParametersResponse{ results }, "SetParameters");
             }
             Err(e) => warn!("SetParameters request error {e:?}"),
           }
@@ -304,10 +324,7 @@ impl Spinner {
               let result: raw::SetParametersResult = self.set_parameters_atomically(params).into();
               info!("Set parameters atomically response: {result:?}");
               // .unwrap() below should be safe, as we would not be here if the Server did not exist
-              self.parameter_servers.as_ref().unwrap().set_parameters_atomically_server
-                .async_send_response(req_id, rcl_interfaces::SetParametersAtomicallyResponse{ result })
-                .await
-                .unwrap_or_else(|e| warn!("SetParametersAtomically response error {e:?}"));
+              self.answer(&mut pending_answers, |s| &s.set_parameters_atomically_server, req_id, rcl_interfaces::SetParametersAtomicallyResponse{ result }, "SetParametersAtomically");
             }
             Err(e) => warn!("SetParametersAtomically request error {e:?}"),
           }
@@ -320,10 +337,7 @@ impl Spinner {
               let result = self.parameters.list(&req.prefixes, req.depth);
               // .unwrap() below should be safe, as we would not be here if the Server did not exist
               info!("List parameters response: {result:?}");
-              self.parameter_servers.as_ref().unwrap().list_parameters_server
-                .async_send_response(req_id, rcl_interfaces::ListParametersResponse{ result })
-                .await
-                .unwrap_or_else(|e| warn!("ListParameter response error {e:?}"));
+              self.answer(&mut pending_answers, |s| &s.list_parameters_server, req_id, rcl_interfaces::ListParametersResponse{ result }, "ListParameter");
             }
             Err(e) => warn!("ListParameter request error {e:?}"),
           }
@@ -339,10 +353,7 @@ impl Spinner {
                 .collect();
               info!("Describe parameters response: {values:?}");
               // .unwrap() below should be safe, as we would not be here if the Server did not exist
-              self.parameter_servers.as_ref().unwrap().describe_parameters_server
-                .async_send_response(req_id, rcl_interfaces::DescribeParametersResponse{ values })
-                .await
-                .unwrap_or_else(|e| warn!("DescribeParameters response error {e:?}"));
+              self.answer(&mut pending_answers, |s| &s.describe_parameters_server, req_id, rcl_interfaces::DescribeParametersResponse{ values }, "DescribeParameters");
             }
             Err(e) => warn!("DescribeParameters request error {e:?}"),
           }
@@ -431,6 +442,79 @@ impl Spinner {
     Ok(())
     //}
   } // fn
+
+  /// Send a parameter service's `response` to the request `req_id` now, or,
+  /// when the request names a client response reader that the response
+  /// writer has not matched yet, as soon as it has (`flush_answers`).
+  ///
+  /// A response written before that match went to nobody (both ends are
+  /// VOLATILE): a client that saw the service ready (its side matched ours)
+  /// and asked at once, while the SEDP announcement of its response reader
+  /// had not reached us yet (lost and repaired, or late under load), never
+  /// got an answer. rmw_fastrtps' servers wait for the same match before
+  /// answering (`check_for_subscription` in `__rmw_send_response`).
+  fn answer<Req, Resp>(
+    &self,
+    pending: &mut Vec<PendingAnswer>,
+    server: fn(&ParameterServers) -> &Server<Req, Resp>,
+    req_id: RmwRequestId,
+    response: Resp,
+    what: &'static str,
+  ) where
+    Req: Message + 'static,
+    Resp: Message + Send + 'static,
+  {
+    // .unwrap() is safe: we would not be here if the Server did not exist
+    let servers = self.parameter_servers.as_ref().unwrap();
+    let send = move |servers: &ParameterServers| {
+      server(servers)
+        .send_response(req_id, response)
+        .unwrap_or_else(|e| warn!("{what} response error {e:?}"));
+    };
+    let writer = server(servers).response_writer_guid();
+    match server(servers).response_reader(req_id) {
+      Some(reader) if !self.has_matched_reader(writer, reader) => {
+        debug!("{what}: the response waits for reader {reader:?} to match");
+        pending.push(PendingAnswer {
+          writer,
+          reader,
+          since: Instant::now(),
+          send: Box::new(send),
+        });
+      }
+      _ => send(servers),
+    }
+  }
+
+  /// Send the waiting answers whose reader has matched. One still unmatched
+  /// after `ANSWER_WAIT` is sent anyway and forgotten: its client has most
+  /// likely gone (an answer it can still take is not lost by sending).
+  fn flush_answers(&self, pending: &mut Vec<PendingAnswer>) {
+    let Some(servers) = self.parameter_servers.as_ref() else {
+      return;
+    };
+    let mut i = 0;
+    while i < pending.len() {
+      let p = &pending[i];
+      let matched = self.has_matched_reader(p.writer, p.reader);
+      if matched || p.since.elapsed() >= ANSWER_WAIT {
+        let p = pending.remove(i);
+        if !matched {
+          debug!(
+            "reader {:?} did not match in {ANSWER_WAIT:?}: answered anyway",
+            p.reader
+          );
+        }
+        (p.send)(servers);
+      } else {
+        i += 1;
+      }
+    }
+  }
+
+  fn has_matched_reader(&self, writer: GUID, reader: GUID) -> bool {
+    has_matched(&self.writers_to_remote_readers, writer, reader)
+  }
 
   fn send_status_event(&self, event: &NodeEvent) {
     let mut closed = Vec::new();
@@ -979,6 +1063,14 @@ impl Node {
       .map(BTreeSet::len)
       // The map has an entry only once something was matched.
       .unwrap_or(0)
+  }
+
+  /// Whether the local writer `writer` has matched the remote reader `reader`
+  /// (needs a running Spinner). With [`Server::response_reader`] and
+  /// [`Server::response_writer_guid`]: whether an answer written now reaches
+  /// the client.
+  pub fn has_matched_reader(&self, writer: GUID, reader: GUID) -> bool {
+    has_matched(&self.writers_to_remote_readers, writer, reader)
   }
 
   pub(crate) fn get_subscription_count(&self, publisher_guid: GUID) -> usize {
@@ -1830,6 +1922,126 @@ mod tests {
     assert_ne!(node.generate_node_info(), before);
     node.remove_publisher(publisher);
     assert_eq!(node.generate_node_info(), before);
+  }
+
+  // A parameter service answer waits for the client's response reader to match.
+  // An Enhanced client (rmw_fastrtps', this crate's) names that reader in its
+  // request. When the request came before the reader's SEDP announcement (lost
+  // and repaired, or late under load), the answer was written before the match
+  // and went to nobody: a Jazzy rclpy `list_parameters` right after
+  // `wait_for_services` had no answer in 15 s (one CI run). Staged here: the
+  // request names a reader that does not exist yet (the next GUID the client's
+  // participant gives out), created only once the server has had the request.
+  // Fails without `Spinner::answer`: nothing arrives.
+  #[test]
+  fn a_parameter_answer_waits_for_the_clients_response_reader() {
+    use std::time::{Duration, Instant};
+
+    use rustdds::{
+      policy::{Durability, History, Reliability},
+      *,
+    };
+
+    use crate::rcl_interfaces::{ListParametersRequest, ListParametersResponse};
+
+    let mut node = Node::new(
+      NodeName::new("/", "answer_waits_for_reader").unwrap(),
+      NodeOptions::new()
+        .enable_rosout(false)
+        .declare_parameter("waiting", ParameterValue::Integer(1)),
+      Context::new().unwrap(),
+    )
+    .unwrap();
+    let spinner = node.spinner().unwrap();
+    std::thread::spawn(move || futures::executor::block_on(spinner.spin()));
+
+    let client = Context::new().unwrap();
+    let dp = client.domain_participant();
+    let events = dp.status_listener();
+    let qos = QosPolicyBuilder::new()
+      .reliability(Reliability::Reliable {
+        max_blocking_time: rustdds::Duration::from_millis(100),
+      })
+      .durability(Durability::Volatile)
+      .history(History::KeepLast { depth: 1 })
+      .build();
+    let topic = |name: &str, ty: &str| {
+      dp.create_topic(name.to_string(), ty.to_string(), &qos, TopicKind::NoKey)
+        .unwrap()
+    };
+    let requests = topic(
+      "rq/answer_waits_for_reader/list_parametersRequest",
+      "rcl_interfaces::srv::dds_::ListParameters_Request_",
+    );
+    let replies = topic(
+      "rr/answer_waits_for_reader/list_parametersReply",
+      "rcl_interfaces::srv::dds_::ListParameters_Response_",
+    );
+    let writer = dp
+      .create_publisher(&qos)
+      .unwrap()
+      .create_datawriter_no_key_cdr::<ListParametersRequest>(&requests, None)
+      .unwrap();
+    let subscriber = dp.create_subscriber(&qos).unwrap();
+    // entity ids are handed out in order: the reader created next gets the next
+    // key (bytes 12..15 of the GUID), kind 0x04 (a user-defined reader, no key)
+    let mut bytes = writer.guid().to_bytes();
+    let next = u32::from_be_bytes([0, bytes[12], bytes[13], bytes[14]]) + 1;
+    bytes[12..15].copy_from_slice(&next.to_be_bytes()[1..]);
+    bytes[15] = 0x04;
+    let reader_guid = GUID::from_bytes(bytes);
+
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+      match events.try_recv_status() {
+        Some(DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, .. })
+          if local_writer == writer.guid() =>
+        {
+          break
+        }
+        Some(_) => {}
+        None => {
+          assert!(
+            Instant::now() < deadline,
+            "the server's request reader did not match"
+          );
+          std::thread::sleep(Duration::from_millis(10));
+        }
+      }
+    }
+    let options = WriteOptionsBuilder::new()
+      .related_sample_identity(SampleIdentity {
+        writer_guid: reader_guid,
+        sequence_number: SequenceNumber::from(1),
+      })
+      .build();
+    let request = ListParametersRequest {
+      prefixes: vec![],
+      depth: 0,
+    };
+    writer.write_with_options(request, options).unwrap();
+    std::thread::sleep(Duration::from_millis(500)); // the server has had it and answered
+
+    let mut reader = subscriber
+      .create_datareader_no_key_cdr::<ListParametersResponse>(&replies, None)
+      .unwrap();
+    assert_eq!(
+      reader.guid(),
+      reader_guid,
+      "the reader got the GUID the request named"
+    );
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let answer = loop {
+      if let Some(sample) = reader.take_next_sample().unwrap() {
+        break sample.into_value();
+      }
+      assert!(Instant::now() < deadline, "no answer in 10 s");
+      std::thread::sleep(Duration::from_millis(10));
+    };
+    assert!(
+      answer.result.names.contains(&"waiting".to_string()),
+      "{answer:?}"
+    );
   }
 
   #[test]

@@ -86,6 +86,25 @@ where
     } // match
   }
 
+  /// The client's response reader that an answer to `rmw_req_id` goes to, when
+  /// the request names it: an Enhanced-mapping request from rmw_fastrtps (or
+  /// from this crate) carries that reader's GUID in its related sample
+  /// identity. `None` when the id names the request's writer instead (Basic
+  /// and Cyclone mappings, or a request without the parameter).
+  ///
+  /// A response written before the response writer has matched that reader
+  /// is lost (both ends are VOLATILE): [`Node::has_matched_reader`] with
+  /// [`Self::response_writer_guid`] says whether it has.
+  pub fn response_reader(&self, rmw_req_id: RmwRequestId) -> Option<GUID> {
+    let guid = GUID::from(rmw_req_id.writer_gid);
+    guid.entity_id.entity_kind.is_reader().then_some(guid)
+  }
+
+  /// The GUID of the DataWriter that sends the responses.
+  pub fn response_writer_guid(&self) -> GUID {
+    self.response_sender.guid()
+  }
+
   /// Send response to request by Client.
   /// rmw_req_id identifies request being responded.
   pub fn send_response(&self, rmw_req_id: RmwRequestId, response: Resp) -> WriteResult<(), ()> {
