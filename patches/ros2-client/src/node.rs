@@ -106,23 +106,28 @@ struct ParameterServers {
 /// to match (`Spinner::answer`).
 const ANSWER_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
 
-/// Whether the local `writer` has matched the remote `reader`, in a node's
-/// writers-to-remote-readers map (kept by its Spinner).
-fn has_matched(map: &Mutex<BTreeMap<GUID, BTreeSet<GUID>>>, writer: GUID, reader: GUID) -> bool {
-  map
-    .lock()
-    .unwrap()
-    .get(&writer)
-    .is_some_and(|readers| readers.contains(&reader))
+/// A node's local writers and the remote readers each has matched, as its
+/// Spinner keeps them (from `RemoteReaderMatched` and `ReaderLost`).
+#[derive(Clone)]
+pub(crate) struct MatchedReaders(Arc<Mutex<BTreeMap<GUID, BTreeSet<GUID>>>>);
+
+impl MatchedReaders {
+  pub(crate) fn has_matched(&self, writer: GUID, reader: GUID) -> bool {
+    self
+      .0
+      .lock()
+      .unwrap()
+      .get(&writer)
+      .is_some_and(|readers| readers.contains(&reader))
+  }
 }
 
-/// A parameter service answer waiting for the response writer `writer` to
-/// match the client's response reader `reader`.
+/// A parameter service answer waiting for its client's response reader to
+/// match (`ready`), kept since `since`.
 struct PendingAnswer {
-  writer: GUID,
-  reader: GUID,
-  since: Instant,
+  ready: Box<dyn Fn(&ParameterServers) -> bool + Send>,
   send: Box<dyn FnOnce(&ParameterServers) + Send>,
+  since: Instant,
 }
 
 /// Publish `changes` as a `ParameterEvent`, unless there are none.
@@ -466,23 +471,20 @@ impl Spinner {
   {
     // .unwrap() is safe: we would not be here if the Server did not exist
     let servers = self.parameter_servers.as_ref().unwrap();
-    let send = move |servers: &ParameterServers| {
-      server(servers)
-        .send_response(req_id, response)
-        .unwrap_or_else(|e| warn!("{what} response error {e:?}"));
+    let answer = PendingAnswer {
+      ready: Box::new(move |servers| server(servers).response_reader_matched(req_id)),
+      send: Box::new(move |servers| {
+        server(servers)
+          .send_response(req_id, response)
+          .unwrap_or_else(|e| warn!("{what} response error {e:?}"))
+      }),
+      since: Instant::now(),
     };
-    let writer = server(servers).response_writer_guid();
-    match server(servers).response_reader(req_id) {
-      Some(reader) if !self.has_matched_reader(writer, reader) => {
-        debug!("{what}: the response waits for reader {reader:?} to match");
-        pending.push(PendingAnswer {
-          writer,
-          reader,
-          since: Instant::now(),
-          send: Box::new(send),
-        });
-      }
-      _ => send(servers),
+    if (answer.ready)(servers) {
+      (answer.send)(servers);
+    } else {
+      debug!("{what}: the answer to {req_id:?} waits for the client's response reader to match");
+      pending.push(answer);
     }
   }
 
@@ -495,25 +497,17 @@ impl Spinner {
     };
     let mut i = 0;
     while i < pending.len() {
-      let p = &pending[i];
-      let matched = self.has_matched_reader(p.writer, p.reader);
-      if matched || p.since.elapsed() >= ANSWER_WAIT {
-        let p = pending.remove(i);
-        if !matched {
-          debug!(
-            "reader {:?} did not match in {ANSWER_WAIT:?}: answered anyway",
-            p.reader
-          );
+      let ready = (pending[i].ready)(servers);
+      if ready || pending[i].since.elapsed() >= ANSWER_WAIT {
+        let answer = pending.remove(i);
+        if !ready {
+          debug!("a client's response reader did not match in {ANSWER_WAIT:?}: answered anyway");
         }
-        (p.send)(servers);
+        (answer.send)(servers);
       } else {
         i += 1;
       }
     }
-  }
-
-  fn has_matched_reader(&self, writer: GUID, reader: GUID) -> bool {
-    has_matched(&self.writers_to_remote_readers, writer, reader)
   }
 
   fn send_status_event(&self, event: &NodeEvent) {
@@ -1065,12 +1059,10 @@ impl Node {
       .unwrap_or(0)
   }
 
-  /// Whether the local writer `writer` has matched the remote reader `reader`
-  /// (needs a running Spinner). With [`Server::response_reader`] and
-  /// [`Server::response_writer_guid`]: whether an answer written now reaches
-  /// the client.
-  pub fn has_matched_reader(&self, writer: GUID, reader: GUID) -> bool {
-    has_matched(&self.writers_to_remote_readers, writer, reader)
+  /// The node's local writers and the remote readers each has matched, for
+  /// its servers (`Server::response_reader_matched`).
+  pub(crate) fn matched_readers(&self) -> MatchedReaders {
+    MatchedReaders(Arc::clone(&self.writers_to_remote_readers))
   }
 
   pub(crate) fn get_subscription_count(&self, publisher_guid: GUID) -> usize {

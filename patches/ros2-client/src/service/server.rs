@@ -14,7 +14,7 @@ use crate::{
   error::{CreateResult, ReadError, ReadResult, WriteError, WriteResult},
   message::Message,
   message_info::MessageInfo,
-  node::Node,
+  node::{MatchedReaders, Node},
   qos::QosProfile,
   service::*,
 };
@@ -30,6 +30,8 @@ where
   service_mapping: ServiceMapping,
   request_receiver: SimpleDataReaderR<RequestWrapper<Req>>,
   response_sender: DataWriterR<ResponseWrapper<Resp>>,
+  // the node's local writers -> matched remote readers (kept by its Spinner)
+  matched_readers: MatchedReaders,
 }
 
 impl<Req, Resp> Server<Req, Resp>
@@ -65,6 +67,7 @@ where
       service_mapping,
       request_receiver,
       response_sender,
+      matched_readers: node.matched_readers(),
     })
   }
 
@@ -91,18 +94,25 @@ where
   /// from this crate) carries that reader's GUID in its related sample
   /// identity. `None` when the id names the request's writer instead (Basic
   /// and Cyclone mappings, or a request without the parameter).
-  ///
-  /// A response written before the response writer has matched that reader
-  /// is lost (both ends are VOLATILE): [`Node::has_matched_reader`] with
-  /// [`Self::response_writer_guid`] says whether it has.
   pub fn response_reader(&self, rmw_req_id: RmwRequestId) -> Option<GUID> {
     let guid = GUID::from(rmw_req_id.writer_gid);
     guid.entity_id.entity_kind.is_reader().then_some(guid)
   }
 
-  /// The GUID of the DataWriter that sends the responses.
-  pub fn response_writer_guid(&self) -> GUID {
-    self.response_sender.guid()
+  /// Whether a response to `rmw_req_id` written now reaches the client: the
+  /// response writer has matched the reader the request names, or the request
+  /// names none. A response written before that match goes to nobody (both
+  /// ends are VOLATILE) and is not repeated, so a server answers such a request
+  /// once this is true (rmw_fastrtps' servers wait for it up to 100 ms). The
+  /// node's Spinner keeps the matches: without one running this stays false
+  /// for a request that names a reader.
+  pub fn response_reader_matched(&self, rmw_req_id: RmwRequestId) -> bool {
+    match self.response_reader(rmw_req_id) {
+      None => true,
+      Some(reader) => self
+        .matched_readers
+        .has_matched(self.response_sender.guid(), reader),
+    }
   }
 
   /// Send response to request by Client.
