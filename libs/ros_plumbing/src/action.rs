@@ -32,6 +32,13 @@ pub const RESULT_KEEP: Duration = Duration::from_secs(15 * 60);
 /// At most this many finished goals are kept (the oldest go first).
 pub const FINISHED_KEEP: usize = 100;
 
+/// How long an answer waits for its client's response reader to match before it is
+/// sent anyway (see [`ActionServer`]).
+const ANSWER_WAIT: Duration = Duration::from_secs(10);
+
+/// How often waiting answers are looked at again.
+const ANSWER_RECHECK: Duration = Duration::from_millis(5);
+
 /// How a goal ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GoalEnd {
@@ -272,7 +279,20 @@ pub fn server_qos() -> ActionServerQosPolicies {
     }
 }
 
+/// An answer to one of an action's three services.
+enum Answer<R> {
+    Goal(ros2_client::action::SendGoalResponse),
+    Cancel(CancelGoalResponse),
+    Result(ros2_client::action::GetResultResponse<R>),
+}
+
 /// An action server on one node's event loop. `G`, `R`, `F`: goal, result, feedback.
+///
+/// An answer waits until the service's response writer has matched the response
+/// reader its request names (`Server::response_reader_matched`): a client that sees
+/// the server ready asks at once, and we may learn of its response reader after the
+/// request; written before that match, the answer would go to nobody. Such answers
+/// are sent from [`ActionServer::next`] once the match comes (or after `ANSWER_WAIT`).
 pub struct ActionServer<G, R, F>
 where
     G: Message + Clone,
@@ -281,6 +301,7 @@ where
 {
     server: ros2_client::action::ActionServer<G, R, F>,
     table: Mutex<GoalTable<R, RmwRequestId>>,
+    waiting: Mutex<Vec<(RmwRequestId, Answer<R>, Instant)>>,
     name: String,
 }
 
@@ -315,6 +336,7 @@ where
         let s = ActionServer {
             server,
             table: Mutex::new(GoalTable::default()),
+            waiting: Mutex::new(Vec::new()),
             name: resolved,
         };
         s.publish_statuses();
@@ -337,13 +359,16 @@ where
         }
     }
 
-    /// The next goal or accepted cancel; result requests are answered on the way.
+    /// The next goal or accepted cancel; result requests are answered on the way, and
+    /// answers waiting for their client's response reader are sent once it matched.
     pub async fn next(&self) -> ActionRequest<G> {
         loop {
+            let waiting = self.send_waiting();
             let goal = self.server.goal_server_ref().async_receive_request();
             let cancel = self.server.cancel_server_ref().async_receive_request();
             let result = self.server.result_server_ref().async_receive_request();
             tokio::select! {
+                _ = tokio::time::sleep(ANSWER_RECHECK), if waiting => {}
                 r = goal => match r {
                     Ok((request, g)) => return ActionRequest::Goal { request, id: g.goal_id, goal: g.goal },
                     Err(e) => return ActionRequest::Unreadable(format!("send_goal: {e:?}")),
@@ -371,9 +396,7 @@ where
             return_code,
             goals_canceling: canceling,
         };
-        if let Err(e) = self.server.send_cancel_response(request, response) {
-            log::warn!("{}: cannot answer a cancel request: {e:?}", self.name);
-        }
+        self.answer(request, Answer::Cancel(response));
         if ids.is_empty() {
             return None;
         }
@@ -393,9 +416,7 @@ where
 
     fn send_result(&self, request: RmwRequestId, status: GoalStatusEnum, result: R) {
         let response = ros2_client::action::GetResultResponse { status, result };
-        if let Err(e) = self.server.send_result(request, response) {
-            log::warn!("{}: cannot send a result: {e:?}", self.name);
-        }
+        self.answer(request, Answer::Result(response));
     }
 
     /// Accept goal `id` (it executes at once).
@@ -417,8 +438,81 @@ where
 
     fn answer_goal(&self, request: RmwRequestId, accepted: bool, stamp: Time) {
         let response = ros2_client::action::SendGoalResponse { accepted, stamp };
-        if let Err(e) = self.server.send_goal_response(request, response) {
-            log::warn!("{}: cannot answer a goal request: {e:?}", self.name);
+        self.answer(request, Answer::Goal(response));
+    }
+
+    /// Whether an answer to `request` written now reaches its client.
+    fn reaches(&self, request: RmwRequestId, answer: &Answer<R>) -> bool {
+        match answer {
+            Answer::Goal(_) => self
+                .server
+                .goal_server_ref()
+                .response_reader_matched(request),
+            Answer::Cancel(_) => self
+                .server
+                .cancel_server_ref()
+                .response_reader_matched(request),
+            Answer::Result(_) => self
+                .server
+                .result_server_ref()
+                .response_reader_matched(request),
+        }
+    }
+
+    /// Send `answer` to `request` now, or once its client's response reader matched.
+    fn answer(&self, request: RmwRequestId, answer: Answer<R>) {
+        if self.reaches(request, &answer) {
+            self.send(request, answer);
+        } else {
+            log::debug!(
+                "{}: an answer waits for its client's response reader to match",
+                self.name
+            );
+            self.waiting().push((request, answer, Instant::now()));
+        }
+    }
+
+    fn waiting(&self) -> std::sync::MutexGuard<'_, Vec<(RmwRequestId, Answer<R>, Instant)>> {
+        self.waiting.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Send the waiting answers whose client's reader has matched, and those that
+    /// waited `ANSWER_WAIT` (their client has most likely gone; sending loses
+    /// nothing). Whether any still wait.
+    fn send_waiting(&self) -> bool {
+        let due: Vec<_> = {
+            let mut waiting = self.waiting();
+            let all = std::mem::take(&mut *waiting);
+            let (due, wait): (Vec<_>, Vec<_>) =
+                all.into_iter().partition(|(request, answer, since)| {
+                    self.reaches(*request, answer) || since.elapsed() >= ANSWER_WAIT
+                });
+            *waiting = wait;
+            due
+        };
+        for (request, answer, _) in due {
+            self.send(request, answer);
+        }
+        !self.waiting().is_empty()
+    }
+
+    fn send(&self, request: RmwRequestId, answer: Answer<R>) {
+        let sent = match answer {
+            Answer::Goal(a) => self
+                .server
+                .send_goal_response(request, a)
+                .map_err(|e| format!("a goal request: {e:?}")),
+            Answer::Cancel(a) => self
+                .server
+                .send_cancel_response(request, a)
+                .map_err(|e| format!("a cancel request: {e:?}")),
+            Answer::Result(a) => self
+                .server
+                .send_result(request, a)
+                .map_err(|e| format!("a result request: {e:?}")),
+        };
+        if let Err(e) = sent {
+            log::warn!("{}: cannot answer {e}", self.name);
         }
     }
 
