@@ -482,6 +482,9 @@ where
     fn send_waiting(&self) -> bool {
         let due: Vec<_> = {
             let mut waiting = self.waiting();
+            if waiting.is_empty() {
+                return false;
+            }
             let all = std::mem::take(&mut *waiting);
             let (due, wait): (Vec<_>, Vec<_>) =
                 all.into_iter().partition(|(request, answer, since)| {

@@ -471,20 +471,20 @@ impl Spinner {
   {
     // .unwrap() is safe: we would not be here if the Server did not exist
     let servers = self.parameter_servers.as_ref().unwrap();
-    let answer = PendingAnswer {
-      ready: Box::new(move |servers| server(servers).response_reader_matched(req_id)),
-      send: Box::new(move |servers| {
-        server(servers)
-          .send_response(req_id, response)
-          .unwrap_or_else(|e| warn!("{what} response error {e:?}"))
-      }),
-      since: Instant::now(),
+    let send = move |servers: &ParameterServers| {
+      server(servers)
+        .send_response(req_id, response)
+        .unwrap_or_else(|e| warn!("{what} response error {e:?}"))
     };
-    if (answer.ready)(servers) {
-      (answer.send)(servers);
+    if server(servers).response_reader_matched(req_id) {
+      send(servers);
     } else {
       debug!("{what}: the answer to {req_id:?} waits for the client's response reader to match");
-      pending.push(answer);
+      pending.push(PendingAnswer {
+        ready: Box::new(move |servers| server(servers).response_reader_matched(req_id)),
+        send: Box::new(send),
+        since: Instant::now(),
+      });
     }
   }
 
