@@ -6,13 +6,13 @@ serial_node in the leader role publishes; compute_ik follows it while the deadma
 held, so the follower's angles shown converge to the leader's."""
 import math
 import re
-import socket
 import time
 
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
 from conftest import COMMANDS
+from test_gui_bridge import start_panel
 
 ARM = ["base_joint", "shoulder_joint", "elbow_joint", "gripper_joint"]
 # the leader's pose, in degrees (the gripper in rad): inside the follower's limits
@@ -25,12 +25,6 @@ window.__csp = [];
 document.addEventListener('securitypolicyviolation',
   (e) => window.__csp.push(e.violatedDirective + ' ' + e.blockedURI));
 """
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def angles(text, prefix=""):
@@ -46,11 +40,10 @@ def close_to(got, want, tol):
 
 
 def test_the_panel_shows_the_leader_beside_the_follower(launch, observer, browser):
-    port = free_port()
     launch("compute_ik")
     launch("state_publisher")
     launch("serial_node", "--ros-args", "-p", "port:=mock")
-    launch("gui_bridge", "--ros-args", "-p", f"bind:=127.0.0.1:{port}", "-p", "foxglove_bind:=")
+    _, port = start_panel(launch, observer, "-p", "foxglove_bind:=")
     joint_states = observer.sub("joint_states", JointState)
     leader = observer.pub("leader/joint_states", JointState, COMMANDS)
     deadman = observer.pub("leader/deadman", Bool, COMMANDS)
@@ -59,14 +52,6 @@ def test_the_panel_shows_the_leader_beside_the_follower(launch, observer, browse
                              "compute_ik and gui_bridge do not both subscribe leader/joint_states and leader/deadman")
     observer.spin_for(0.3)
     assert observer.spin_until(lambda: joint_states, 10), "no joint_states from compute_ik"
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
-            break
-        except OSError:
-            assert time.monotonic() < deadline, "the web server did not come up"
-            time.sleep(0.05)
 
     context = browser.new_context(viewport={"width": 1280, "height": 820})
     page = context.new_page()

@@ -230,12 +230,7 @@ fn while_calibrating_trajectories_are_rejected_and_a_running_goal_is_aborted() {
         .iter()
         .any(|e| matches!(e, Effect::AnswerGoal { accepted: true, .. })));
     assert!(published(&e).is_empty());
-    let why = d
-        .controller_values()
-        .into_iter()
-        .find(|(k, _)| k == "last_trajectory")
-        .unwrap()
-        .1;
+    let why = controller_value(&d, "last_trajectory");
     assert!(
         why.contains("INVALID_GOAL") && why.contains("calibrat"),
         "{why}"

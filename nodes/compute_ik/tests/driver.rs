@@ -310,12 +310,7 @@ fn a_refused_trajectory_moves_nothing_and_says_why() {
     assert!(published(&effects).is_empty());
     assert_eq!(reports(&effects), 1);
     assert!(d.deadline().is_none());
-    let why = d
-        .controller_values()
-        .into_iter()
-        .find(|(k, _)| k == "last_trajectory")
-        .unwrap()
-        .1;
+    let why = controller_value(&d, "last_trajectory");
     assert!(
         why.contains("INVALID_GOAL")
             && why.contains("base servo")

@@ -64,12 +64,17 @@ pub fn position(js: &JointState, name: &str) -> f64 {
     js.position[js.name.iter().position(|n| n == name).unwrap()]
 }
 
-pub fn leader_value(d: &Driver<EezyBot>) -> String {
+/// The controller's diagnostics value `key` (`leader`, `last_trajectory`, ...).
+pub fn controller_value(d: &Driver<EezyBot>, key: &str) -> String {
     d.controller_values()
         .into_iter()
-        .find(|(k, _)| k == "leader")
+        .find(|(k, _)| k == key)
         .unwrap()
         .1
+}
+
+pub fn leader_value(d: &Driver<EezyBot>) -> String {
+    controller_value(d, "leader")
 }
 
 pub const ARM: [&str; 3] = ["base_joint", "shoulder_joint", "elbow_joint"];
