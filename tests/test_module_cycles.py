@@ -1,18 +1,30 @@
 """No two modules of one of our crates import each other, directly or around a loop
 (issue 19: "no module imports form a cycle outside patches/"). A module's imports are the
 `crate::NAME` paths in its code (comments, doc links included, are not imports), grouped
-ones (`crate::{a, b::c}`) too; a file's module is its top-level name under src/."""
+ones (`crate::{a, b::c}`) too; a file's module is its top-level name under src/, and
+each crate root (lib.rs, main.rs, a file under bin/) is a module of its own that no
+`crate::NAME` path names.
+
+The crates are read from the workspace's members, the excluded crates of ours that have
+a src/ (not patches/), and wan/ (a workspace of its own), so a crate missing from the
+scan, or a scan that finds no file, fails rather than passes."""
 import re
+import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+ROOTS = ("lib", "main", "bin")
 
 
 def crate_sources():
-    for cargo in sorted(REPO.glob("*/*/Cargo.toml")) + [REPO / "msgs" / "Cargo.toml"]:
-        src = cargo.parent / "src"
-        if "patches" not in cargo.parts and src.is_dir():
-            yield src
+    """Each crate's src/, by its path from the repository: the main workspace's members,
+    its excluded crates outside patches/ that have a src/ (the fuzz crate's one target is
+    fuzz_targets/decode.rs, a crate root with no modules), and wan/."""
+    workspace = tomllib.loads((REPO / "Cargo.toml").read_text())["workspace"]
+    dirs = list(workspace["members"])
+    dirs += [d for d in workspace.get("exclude", []) if Path(d).parts[0] != "patches" and (REPO / d / "src").is_dir()]
+    dirs.append("wan")
+    return {d: REPO / d / "src" for d in dirs}
 
 
 def imports(text):
@@ -33,11 +45,14 @@ def imports(text):
 
 
 def module_graph(src):
+    """Module -> the modules of the same crate it imports. A crate root is named by its
+    file (lib.rs, bin/x.rs): a name with a dot, which no import can name."""
     graph = {}
     for f in src.rglob("*.rs"):
-        top = f.relative_to(src).parts[0].removesuffix(".rs")
-        if top in ("lib", "main", "bin"):
-            continue
+        rel = f.relative_to(src)
+        top = rel.parts[0].removesuffix(".rs")
+        if top in ROOTS:
+            top = "/".join(rel.parts[:2]) if top == "bin" else rel.parts[0]
         graph.setdefault(top, set()).update(imports(f.read_text(errors="replace")))
     return {m: {d for d in deps if d in graph and d != m} for m, deps in graph.items()}
 
@@ -79,5 +94,11 @@ def test_the_checker_sees_a_cycle_and_a_grouped_import():
 
 
 def test_no_module_imports_form_a_cycle():
-    found = {str(src.relative_to(REPO)): c for src in crate_sources() if (c := cycles(module_graph(src)))}
+    crates = crate_sources()
+    assert {"msgs", "nodes/serial_node", "libs/ros_plumbing", "wan"} <= set(crates), sorted(crates)
+    graphs = {d: module_graph(src) for d, src in crates.items()}
+    # every crate was read: at least its root (lib.rs or main.rs) is a module of it
+    empty = sorted(d for d, g in graphs.items() if not {"lib.rs", "main.rs"} & set(g))
+    assert not empty, f"crates whose src/ has no lib.rs or main.rs: {empty}"
+    found = {d: c for d, g in graphs.items() if (c := cycles(g))}
     assert not found, f"module import cycles: {found}"
