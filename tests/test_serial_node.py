@@ -8,6 +8,7 @@ import subprocess
 import time
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
@@ -15,7 +16,7 @@ from std_msgs.msg import Bool
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 
-from conftest import REPO, bin_path, status_values
+from conftest import REPO, Observer, bin_path, status_values
 from interop.servo_link import HELLO, HELLO_ACK, STATE, Decoder, SimulatedUno, frame, pulses
 from safety_rig import SerialNodeRig
 import struct
@@ -28,6 +29,19 @@ def angles(deg, sec=0):
     m = JointState(name=list(SERVOS), position=[math.radians(d) for d in deg])
     m.header.stamp.sec = sec
     return m
+
+
+def now_stamped(deg):
+    """angles(deg) stamped now, to a nanosecond no other message here has: a
+    servo_state that answers it carries that stamp."""
+    m = angles(deg)
+    t = time.time_ns()
+    m.header.stamp.sec, m.header.stamp.nanosec = t // 1_000_000_000, t % 1_000_000_000
+    return m
+
+
+def stamp_s(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
 
 
 def pulse_us(deg):
@@ -65,25 +79,27 @@ def test_servo_state_is_a_steady_stream_while_idle(launch, observer):
     arm's state at once, and its positions are the ones the device holds."""
     rig = SerialRig(launch, observer)
     assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
+    commanded = time.time()
     rig.angles.publish(angles([80, 100, 70, 120], sec=42))
+    # the horns are there: the move is over
     assert observer.spin_until(lambda: [round(math.degrees(p), 1) for p in rig.state[-1][1].position]
                                == [80.0, 100.0, 70.0, 120.0], 10)
-    observer.spin_for(1)  # the move is over
     idle = observer.sub("/servo_state", JointState)  # a late subscriber
     t0 = time.monotonic()
-    assert observer.spin_until(lambda: idle, 2), "no servo_state within 2 s of subscribing, while idle"
+    # as soon as it is discovered, however long that takes (the suite's discovery timeout)
+    assert observer.spin_until(lambda: idle, Observer.MATCH_TIMEOUT), \
+        f"no servo_state within {Observer.MATCH_TIMEOUT} s of subscribing, while idle"
     first_s = time.monotonic() - t0
-    observer.spin_for(3)
-    window = [(t, m) for t, m in idle if t >= t0 + 0.5]
-    rate = (len(window) - 1) / (window[-1][0] - window[0][0])
+    # it does not stop: a dozen more (counted, not timed: the rate is the benchmark's business)
+    assert observer.spin_until(lambda: len(idle) >= 13, 30), f"{len(idle)} idle servo_state"
+    rate = (len(idle) - 1) / (idle[-1][0] - idle[0][0])
     print(f"\nidle servo_state: first {first_s * 1e3:.0f} ms after subscribing, {rate:.1f} Hz")
-    # the rate is the benchmark's business; here: it does not stop (25 expected in 2.5 s)
-    assert len(window) >= 12, f"{len(window)} idle servo_state in 2.5 s ({rate:.1f} Hz)"
-    assert {tuple(round(math.degrees(p), 1) for p in m.position) for _, m in window} == {(80.0, 100.0, 70.0, 120.0)}
-    now = time.time()
-    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in window]
-    assert all(now - 5 < s <= now + 0.1 for s in stamps), "idle servo_state is not stamped when the device reported"
-    assert stamps == sorted(stamps)
+    assert {tuple(round(math.degrees(p), 1) for p in m.position) for _, m in idle} == {(80.0, 100.0, 70.0, 120.0)}
+    # stamped when the device reported (each heartbeat's own, after the command was
+    # sent and before it arrived here), not with the command's stamp
+    stamps = [stamp_s(m.header.stamp) for _, m in idle]
+    assert all(commanded < s <= time.time() for s in stamps), "idle servo_state is not stamped when the device reported"
+    assert all(a < b for a, b in zip(stamps, stamps[1:])), stamps
 
 
 # the firmware's hold pose (config.h): the device reports it before the first command,
@@ -102,37 +118,54 @@ def test_bad_servo_angles_are_refused_and_nothing_is_sent(launch, observer):
         (JointState(name=["base_servo"], position=[1.0]), "no position"),
         (JointState(name=SERVOS + ["x"], position=[1.0] * 5), "unknown servo"),
     ]
+    refused = set()
     for i, (msg, text) in enumerate(bad, start=1):
+        t = time.time_ns()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = t // 1_000_000_000, t % 1_000_000_000
+        refused.add(stamp_s(msg.header.stamp))
         rig.angles.publish(msg)
         assert rig.wait_diag(lambda s, v: v["inputs_rejected"] == str(i)), text
         assert text in rig.diag()[1]["last_rejection"].lower()
-    observer.spin_for(0.3)
-    assert rig.diag()[1]["frames_sent"] == "1"
+        assert rig.diag()[1]["frames_sent"] == "1"
+    # none was sent later either: the device answered none of them before a good
+    # command sent after them (its answers carry the command's stamp, in order)
+    good = now_stamped([91, 90, 90, 60])
+    rig.angles.publish(good)
+    assert observer.spin_until(lambda: any(m.header.stamp == good.header.stamp for _, m in rig.state), 10)
+    assert not [m for _, m in rig.state if stamp_s(m.header.stamp) in refused], "a refused command was sent"
     assert rig.node.proc.poll() is None
 
 
-def test_latest_wins_at_1khz(launch, observer):
+def test_latest_wins_however_fast_commands_come(launch, observer):
     rig = SerialRig(launch, observer)
     assert rig.wait_diag(lambda s, v: v.get("connection") == "connected")
     assert rig.diag()[1]["frames_sent"] == "0"
-    start = time.monotonic()
-    n = 0
-    while n < 2000:
-        rig.angles.publish(angles([60 + (n % 60), 90, 90, 90]))
-        n += 1
-        observer.executor.spin_once(timeout_sec=0.0005)
-    last = 60 + ((n - 1) % 60)
-    observer.spin_for(1.0)
-    sent = int(rig.diag()[1]["frames_sent"])
-    window = time.monotonic() - start  # every frame counted was sent within it
     rate = 100  # serial_node's default send_rate (frames a second; a token bucket of 2)
-    print(f"\n{n} commands in {window:.2f} s: {sent} frames (at most {rate * window + 2:.0f})")
-    # at most the rate however fast commands come (a slower host sends fewer, never
-    # more); many commands to a frame: latest wins, none is queued
+
+    # as fast as rclpy publishes (a burst from a tight loop: thousands a second here,
+    # under load too, where the send rate is 100): at most the rate's frames however fast
+    # they come (a slower host sends fewer, never more), many commands to a frame
+    # (serial_node counts those superseded by a newer one before they were sent: a node
+    # that queued them would count none), and the newest is the one applied
+    n, start = 2000, time.monotonic()
+    for i in range(n):
+        newest = now_stamped([60 + (i % 60), 90, 90, 90])
+        rig.angles.publish(newest)
+    last = 60 + ((n - 1) % 60)
+
+    def applied():
+        """The device answered the newest and then reported its horn there."""
+        answers = [k for k, (_, m) in enumerate(rig.state) if m.header.stamp == newest.header.stamp]
+        return answers and any(round(math.degrees(m.position[0]), 1) == last for _, m in rig.state[answers[0]:])
+    assert observer.spin_until(applied, 10), [round(math.degrees(m.position[0]), 1) for _, m in rig.state[-5:]]
+    # the counts from a diagnostics entry stamped after that (no frame follows it)
+    seen = time.time()
+    assert rig.wait_diag(lambda s, v: stamp_s(rig.diags[-1][1].header.stamp) > seen)
+    window = time.monotonic() - start  # every frame counted was sent within it
+    sent, superseded = int(rig.diag()[1]["frames_sent"]), int(rig.diag()[1]["inputs_superseded"])
+    print(f"\n{n} commands in {window:.2f} s: {sent} frames (at most {rate * window + 2:.0f}), {superseded} superseded")
     assert sent <= rate * window + 2, f"{sent} frames in {window:.2f} s for {n} commands: more than the {rate} Hz rate"
-    assert 2 <= sent <= n // 5, f"{sent} frames for {n} commands"
-    # the newest command is the one applied
-    assert observer.spin_until(lambda: round(math.degrees(rig.state[-1][1].position[0]), 1) == last, 3)
+    assert superseded > 0, f"{sent} frames, none of {n} commands superseded by a newer one"
 
 
 def test_estop_drops_commands_until_released(launch, observer):
@@ -142,18 +175,19 @@ def test_estop_drops_commands_until_released(launch, observer):
     assert rig.wait_diag(lambda s, v: v["frames_sent"] == "1")
     rig.estop.publish(Bool(data=True))
     assert rig.wait_diag(lambda s, v: v["device_state"] == "e-stop")
-    rig.angles.publish(angles([100, 90, 90, 60]))
-    observer.spin_for(0.5)
+    during = now_stamped([100, 90, 90, 60])
+    rig.angles.publish(during)
+    assert rig.wait_diag(lambda s, v: v["inputs_dropped_in_estop"] == "1")
     assert rig.diag()[1]["frames_sent"] == "1"
-    assert rig.diag()[1]["inputs_dropped_in_estop"] == "1"
     rig.estop.publish(Bool(data=False))
     assert rig.wait_diag(lambda s, v: v["device_state"] == "running")
-    observer.spin_for(0.3)
-    assert rig.diag()[1]["frames_sent"] == "1", "a command from during the e-stop was sent"
-    # a new command ramps (10 deg at the base servo's 300 deg/s: two frames)
+    # a new command ramps (10 deg at the base servo's 300 deg/s: two frames); the
+    # device answered nothing with the dropped command's stamp before it (answers come
+    # in order)
     rig.angles.publish(angles([110, 90, 90, 60], sec=5))
     assert observer.spin_until(lambda: rig.state and round(math.degrees(rig.state[-1][1].position[0]), 1) == 110.0, 5)
-    assert int(rig.diag()[1]["frames_sent"]) >= 2
+    assert not [m for _, m in rig.state if m.header.stamp == during.header.stamp], "a command from during the e-stop was sent"
+    assert rig.wait_diag(lambda s, v: int(v["frames_sent"]) >= 2)
 
 
 def set_stalled_servos(observer, value):
@@ -189,8 +223,10 @@ def test_mock_stalled_servos_holds_a_servo_where_it_stopped_until_cleared(launch
     sent = int(rig.diag()[1]["frames_acknowledged"])
     rig.angles.publish(angles([100, 110, 90, 140]))
     assert observer.spin_until(lambda: deg() == [100.0, 110.0, 70.0, 140.0], 10), deg()
-    observer.spin_for(0.5)  # idle: the heartbeats' reports hold it there too
-    assert deg() == [100.0, 110.0, 70.0, 140.0]
+    # idle: the next three reports (the heartbeats') hold it there too
+    k = len(rig.state)
+    assert observer.spin_until(lambda: len(rig.state) >= k + 3, 10)
+    assert all([round(math.degrees(p), 1) for p in m.position] == [100.0, 110.0, 70.0, 140.0] for _, m in rig.state[k:])
     # the protocol did not notice: acknowledged, nothing rejected, still connected
     assert rig.wait_diag(lambda s, v: int(v["frames_acknowledged"]) > sent)
     _, v = rig.diag()
@@ -199,6 +235,18 @@ def test_mock_stalled_servos_holds_a_servo_where_it_stopped_until_cleared(launch
     assert set_stalled_servos(observer, "").successful
     assert observer.spin_until(lambda: deg() == [100.0, 110.0, 90.0, 140.0], 10), deg()
     assert rig.wait_diag(lambda s, v: "mock_stalled_servos" not in v and "stall" not in s.message)
+
+
+def ik_at_rest(diags, after):
+    """compute_ik's diagnostics, in one stamped after `after` (time.time()), say its
+    motion is at rest."""
+    for _, arr in reversed(diags):
+        if stamp_s(arr.header.stamp) <= after:
+            return False
+        s = next((s for s in arr.status if s.name.startswith("compute_ik")), None)
+        if s is not None:
+            return status_values(s).get("motion") == "at rest"
+    return False
 
 
 def start_virtual_arduino(link):
@@ -267,10 +315,11 @@ def test_garbage_from_the_device_is_counted_and_ignored(launch, observer, tmp_pa
     rig = SerialRig(launch, observer, str(link))
     decoder, seq = Decoder(), 0
     try:
-        def serve(seconds):
+        def serve(until, timeout=15):
+            """Play the device until `until()` holds (returns whether it did)."""
             nonlocal seq
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
+            end = time.monotonic() + timeout
+            while time.monotonic() < end and not until():
                 observer.executor.spin_once(timeout_sec=0.01)
                 try:
                     data = os.read(master, 256)
@@ -285,12 +334,11 @@ def test_garbage_from_the_device_is_counted_and_ignored(launch, observer, tmp_pa
                     broken = bytearray(reply)
                     broken[-1] ^= 0xFF
                     os.write(master, b"\x00garbage\xff" + bytes(broken) + reply)
-        serve(2.0)
-        assert rig.diags and rig.diag()[1].get("connection") == "connected"
-        assert int(rig.diag()[1]["garbage_from_device"]) > 0
+            return until()
+        assert serve(lambda: rig.diags and rig.diag()[1].get("connection") == "connected"
+                     and int(rig.diag()[1].get("garbage_from_device", 0)) > 0), rig.diag()
         rig.angles.publish(angles([90, 90, 90, 90], sec=5))
-        serve(1.0)
-        assert any(m.header.stamp.sec == 5 for _, m in rig.state)
+        assert serve(lambda: any(m.header.stamp.sec == 5 for _, m in rig.state))
         assert rig.node.proc.poll() is None
     finally:
         os.close(master)
@@ -305,6 +353,7 @@ def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_p
         launch("compute_ik")
         rig = SerialRig(launch, observer, str(uno.tty_path))
         sa = observer.sub("/servo_angles", JointState)
+        diags = observer.sub("/diagnostics", DiagnosticArray)
         xyz = observer.pub("/xyz_target", PointStamped)
         observer.wait_matched(xyz)
         assert rig.wait_diag(lambda s, v: v.get("connection") == "connected", 15)
@@ -316,16 +365,17 @@ def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_p
             m.point.x, m.point.y, m.point.z = p
             xyz.publish(m)
             assert observer.spin_until(lambda: any(s.header.stamp == m.header.stamp for _, s in rig.state), 10)
-            # compute_ik streams the motion: the last servo_angles is where it ends
-            n = len(sa)
-            observer.spin_for(1.5)
-            assert len(sa) > n or sa, "no servo_angles"
+            # compute_ik streams the motion: the last servo_angles is where it ends, once
+            # its diagnostics (stamped after the device answered the first) say it is at rest
+            answered = time.time()
+            assert observer.spin_until(lambda: ik_at_rest(diags, answered), 15), "compute_ik's motion did not end"
             deg = [math.degrees(a) for a in sa[-1][1].position]
             # serial_node ramps to it within the servos' speed limit: wait until it is there
             assert observer.spin_until(lambda: [round(math.degrees(a), 1) for a in rig.state[-1][1].position]
                                        == [round(d, 1) for d in deg], 5), (rig.state[-1][1].position, deg)
             acked_at = uno.events()[1][-1][0]
-            observer.spin_for(0.25)
+            # the pulses of the next servo frames (simulated time: 9 periods after the ack)
+            assert observer.spin_until(lambda: all(len(pulses(uno.events()[0], pin, acked_at)) >= 9 for pin in range(4)), 15)
             edges, _ = uno.events()
             for pin in range(4):
                 widths = [w for _, w in pulses(edges, pin, acked_at)][2:9]
