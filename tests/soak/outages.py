@@ -13,7 +13,9 @@ were logged. One graph lives through every trial, as in a long teleoperation ses
     $EEZYBOT_PYTHON tests/soak/outages.py [--trials 20] [--lengths 3,12,25,60]
         [--sides pc,pi] [--mode lan|wan] [--json FILE]
 
-20 trials of 3, 12, 25 and 60 s at each end take about 75 minutes.
+20 trials of 3, 12, 25 and 60 s at each end take about 75 minutes. Exits 1 if a trial
+failed (no resume within 5 s, a stale or out-of-order command, a cut longer than the
+lease without the lost and regained peer reported) or a process did not exit 0.
 
 --mode wan: the WAN mode (issue 20) instead of one LAN: namespaces pc, wan and pi
 (tests/wanhost.py), launch_scripts/router.sh in `wan` with certificates of its own,
@@ -30,6 +32,22 @@ import wanhost
 from split_graph import SplitGraph
 
 RESUME_WITHIN_S = 5.0  # issue 8: the graph resumes within 5 s of the link returning
+# a cut longer than the lease loses the peers: our DDS participants' 5 s, Zenoh's 10 s
+LEASE_S = {"lan": 5.0, "wan": 10.0}
+
+
+def trial_failed(r, mode):
+    """Why an outage trial failed (None: it passed): no resume within 5 s, a command of
+    the outage applied after it or out of order, or a cut longer than the lease whose
+    lost and regained peer serial_node did not report."""
+    why = []
+    if r["resume_s"] is None or r["resume_s"] > RESUME_WITHIN_S:
+        why.append(f"resumed after {r['resume_s']} s")
+    if r["stale"] or r["out_of_order"]:
+        why.append(f"stale {r['stale']}, out of order {r['out_of_order']}")
+    if r["length_s"] > LEASE_S[mode] and not ((r["serial_angles_lost"] or 0) >= 1 and (r["serial_angles_regained"] or 0) >= 1):
+        why.append(f"lost/regained {r['serial_angles_lost']}/{r['serial_angles_regained']} not reported")
+    return "; ".join(why)
 
 
 def summarize(results):
@@ -92,6 +110,9 @@ def main():
               f"{row['unreachable_lines_max']:8d}")
     print(f"exit codes {codes}, {time.time() - t_start:.0f} s in all")
     soaklib.write_json(args.json, summary, trials=results, exit_codes=codes, mode=args.mode)
+    bad = soaklib.failures(results, lambda r: trial_failed(r, args.mode))
+    bad += [f"{proc} exited {code}" for proc, code in codes.items() if code != 0]
+    soaklib.finish(bad, len(results))
 
 
 if __name__ == "__main__":

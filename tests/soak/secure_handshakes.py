@@ -15,8 +15,9 @@ failed ... 'Unspecified'`).
         [--timeout 20] [--json FILE]
 
 100 trials of 10 nodes take about 15 minutes on a quiet 2-core machine. Prints each
-trial, the nodes whose logs have decode errors, and the count of failed trials.
-Timing is not asserted.
+trial, the nodes whose logs have decode errors, and the count of failed trials; exits 1
+if a trial failed (not every node matched, a node's log has decode errors, or a node did
+not exit 0). Timing is not asserted.
 """
 import argparse
 import json
@@ -32,6 +33,7 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "bench"))
 
 import secure_harness as S  # noqa: E402
+import soaklib  # noqa: E402
 import twohost  # noqa: E402
 from conftest import DomainLease  # noqa: E402
 
@@ -94,6 +96,19 @@ def main():
           f"with decode errors; load at end {os.getloadavg()}")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
+    soaklib.finish(soaklib.failures(out, trial_failed), len(out))
+
+
+def trial_failed(r):
+    """Why a trial failed (None: it passed)."""
+    why = []
+    if r["all_matched_s"] is None:
+        why.append("not every node matched")
+    if r["nodes_with_decode_errors"]:
+        why.append(f"decode errors in {r['nodes_with_decode_errors']}")
+    if any(c != 0 for c in r["exit_codes"]):
+        why.append(f"exit codes {r['exit_codes']}")
+    return "; ".join(why)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,9 @@
 """What the soak scripts share: their command line, the ROS domain they hold, the
-record of an outage trial, the p50 and maximum of a measurement, and the JSON record
-they write.
+record of an outage trial, the p50 and maximum of a measurement, the JSON record
+they write, and their exit status (1 when a trial failed).
 
-Imported by outages.py, secure_outages.py and starts.py (this folder is on sys.path when
-one of them runs); it puts tests/ on sys.path for twohost, conftest and the harnesses.
+Imported by every soak script (this folder is on sys.path when one of them runs); it
+puts tests/ on sys.path for twohost, conftest and the harnesses.
 """
 import argparse
 import contextlib
@@ -66,3 +66,29 @@ def write_json(path, summary, date_format="%Y-%m-%d", **rest):
     """If `path`: the run as JSON there: today's date, the summary, then `rest`."""
     if path:
         path.write_text(json.dumps({"date": time.strftime(date_format), "summary": summary, **rest}, indent=1))
+
+
+def failures(results, why, name="trial"):
+    """["trial N (...): reason"] for each result (a dict) whose `why(result)` gives a
+    reason (a falsy value: it passed); N counts from 1 as the scripts print them, the
+    parenthesis has the result's length_s and side when it has them."""
+    out = []
+    for i, r in enumerate(results):
+        reason = why(r)
+        if reason:
+            where = ", ".join(f"{r[k]:g} s" if k == "length_s" else str(r[k]) for k in ("length_s", "side") if k in r)
+            out.append(f"{name} {r.get('trial', i) + 1}{f' ({where})' if where else ''}: {reason}")
+    return out
+
+
+def finish(failed, total, what="trials"):
+    """End the soak: exit status 0 when `failed` (a line per failed trial, and any other
+    failure, e.g. a node's exit status) is empty, else print them and exit 1, so that
+    whoever runs the soak (a script, CI) sees the failure without reading its output."""
+    if not failed:
+        print(f"soak passed: {total} {what}, none failed", flush=True)
+        sys.exit(0)
+    print(f"soak FAILED: {len(failed)} failure(s) in {total} {what}:", flush=True)
+    for line in failed:
+        print(f"  {line}", flush=True)
+    sys.exit(1)

@@ -12,7 +12,9 @@ No node is ever restarted.
     $EEZYBOT_PYTHON tests/soak/starts.py [--starts 204] [--orders together,rclpy_first,nodes_first]
         [--hosts one,split] [--json FILE]
 
-The starts are spread evenly over every (order, hosts) combination; ~5 s each.
+The starts are spread evenly over every (order, hosts) combination; ~5 s each. Exits 1
+if a start failed either way (a start whose nodes did not exit 0 stops the soak with an
+error).
 """
 import itertools
 import time
@@ -56,6 +58,9 @@ def main():
     print(f"all: {total} starts, node list missing in {sum(r['node_list_failures'] for r in summary)}, "
           f"endpoints missing in {sum(r['endpoint_failures'] for r in summary)}; {time.time() - t0:.0f} s")
     soaklib.write_json(args.json, summary, starts=results)
+    soaklib.finish(soaklib.failures(results, lambda r: (r["missing_nodes"] or r["missing_endpoints"]) and
+                                    f"{r['order']} {r['hosts']}: missing nodes {r['missing_nodes']}, endpoints "
+                                    f"{r['missing_endpoints']}", name="start"), len(results), "starts")
 
 
 if __name__ == "__main__":
