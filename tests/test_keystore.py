@@ -378,24 +378,43 @@ def test_help_exits_0():
 # ---------------------------------------------------------------------------------------
 # our nodes under its enclaves
 
-def test_a_node_runs_under_its_enclave_and_is_refused_under_another(keystore, domain):
-    """serial_node under /eezybot/pi with Enforce starts secured and stays up; under
-    /eezybot/pc it may not serve its own parameter services (rq/serial_node/...), which
-    access control refuses: it stops with the topic named."""
+# How long nodes may take to say they are ready (a secured start of debug builds on a
+# busy host takes a few seconds): it only bounds a failure.
+READY_TIMEOUT = 30.0
+READY = " ready in ROS domain "
+
+
+def wait_ready(read, proc, n, timeout=READY_TIMEOUT):
+    """Until `n` nodes have said they are ready in `read()` (the log so far), or `proc`
+    exited, or the timeout: whether they did."""
+    end = time.monotonic() + timeout
+    while read().count(READY) < n and proc.poll() is None and time.monotonic() < end:
+        time.sleep(0.1)
+    return read().count(READY) >= n
+
+
+def test_a_node_runs_under_its_enclave_and_is_refused_under_another(keystore, domain, tmp_path):
+    """serial_node under /eezybot/pi with Enforce starts secured: it says it is ready
+    (every endpoint made, access control passed) and runs until Ctrl-C stops it with 0;
+    under /eezybot/pc it may not serve its own parameter services (rq/serial_node/...),
+    which access control refuses: it stops with the topic named."""
     env = {**os.environ, **NO_SECURITY, "ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
            "ROS_SECURITY_STRATEGY": "Enforce", "ROS_SECURITY_KEYSTORE": str(keystore)}
     exe = bin_path("serial_node")
-    ok = subprocess.Popen([exe, "--ros-args", "-p", "port:=mock", "--enclave", "/eezybot/pi"], env=env,
-                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                          preexec_fn=default_sigint)
+    log = tmp_path / "serial_node.log"
+    with open(log, "w") as out_file:
+        ok = subprocess.Popen([exe, "--ros-args", "-p", "port:=mock", "--enclave", "/eezybot/pi"], env=env,
+                              stdout=out_file, stderr=subprocess.STDOUT, preexec_fn=default_sigint)
     try:
-        time.sleep(4)
-        assert ok.poll() is None, ok.communicate(timeout=10)[0]
+        ready = wait_ready(log.read_text, ok, 1)
+        running = ok.poll() is None
     finally:
         ok.send_signal(signal.SIGINT)
-        out, _ = ok.communicate(timeout=20)
+        ok.wait(20)
+    out = log.read_text()
+    assert ready and running, f"serial_node under /eezybot/pi: ready {ready}, still running {running}\n{out}"
     assert ok.returncode == 0, out
-    assert "/eezybot/pi" in out and "ready" in out, out
+    assert "/eezybot/pi" in out, out
     bad = subprocess.run([exe, "--ros-args", "-p", "port:=mock", "--enclave", "/eezybot/pc"], env=env,
                          capture_output=True, text=True, timeout=30)
     assert bad.returncode != 0
@@ -425,8 +444,8 @@ def enclave_of(argv):
 ])
 def test_scripts_give_each_node_its_enclave_and_say_security_is_on(script, expect, keystore, domain):
     """ROS_SECURITY_ENABLE=true: the script says security is on (keystore, enclave,
-    strategy), each node runs with --enclave of its machine and stays up under Enforce
-    (the keystore is good), and Ctrl-C stops them with 0."""
+    strategy), each node runs with --enclave of its machine and says it is ready under
+    Enforce (the keystore is good), and Ctrl-C stops them with 0."""
     s = KeystoreScript(script, {"ROS_DOMAIN_ID": str(domain), "ROS_SECURITY_ENABLE": "true",
                         "ROS_SECURITY_STRATEGY": "Enforce", "ROS_SECURITY_KEYSTORE": str(keystore)},
                "--log-level", "info")
@@ -435,7 +454,9 @@ def test_scripts_give_each_node_its_enclave_and_say_security_is_on(script, expec
         assert {n: enclave_of(a) for n, a in found.items()} == expect
         for argv in found.values():
             assert argv[-2:] == ["--log-level", "info"], argv  # the user's arguments still come last
-        time.sleep(3)
+        # every node said it is ready (its endpoints made: access control passed) and the
+        # script still runs; a node that failed would also fail the exit status below
+        assert wait_ready(s.output, s.proc, len(expect)), f"not every node said it is ready:\n{s.output()}"
         assert s.proc.poll() is None, s.output()
         out = s.output()
         for e in set(expect.values()):
