@@ -83,6 +83,8 @@ def test_a_cyclone_dds_reader_of_our_tf_prints_no_malformed_packets(launch, obse
 # load (tshark of 600 trials with both cores busy: 2 lost of 600 at 0.3 s, 0 of 400 at
 # 1 s). A sample Fast DDS ignores our first request for is repaired by the repetition 25
 # or 75 ms later (entry 18), else only by its next periodic HEARTBEAT, 3 s later.
+# Publish -> joint_states with the target's stamp, beside two busy loops (120 samples,
+# 2026-11-29): p50 59 ms, p99 288 ms, max 349 ms, so 1 s keeps 3.5x over the p99.
 ONE_SHOT_STAYS_S = 1.0
 
 
@@ -106,14 +108,23 @@ def test_one_sample_from_a_fresh_fast_dds_publisher_that_leaves_reaches_compute_
             t = time.time()
             m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
             m.point.x, m.point.y, m.point.z = 0.2, 0.02 * (i % 3 - 1), 0.15
+            published = time.monotonic()
             pub.publish(m)
-            sent.append((m.header.stamp.sec, m.header.stamp.nanosec))
+            sent.append(((m.header.stamp.sec, m.header.stamp.nanosec), published))
             observer.spin_for(ONE_SHOT_STAYS_S)  # the publisher's DDS threads deliver meanwhile
         finally:
             once.close()
     # compute_ik's first step of each motion carries the target's stamp
     def received():
         stamps = {(j.header.stamp.sec, j.header.stamp.nanosec) for _, j in joints}
-        return [s for s in sent if s not in stamps]
+        return [s for s, _ in sent if s not in stamps]
     observer.spin_until(lambda: not received(), 10)
     assert not received(), f"{len(received())} of {len(sent)} never reached compute_ik"
+    # ONE_SHOT_STAYS_S is a requirement with a bound: printed for the benchmark table, the
+    # time from the publish to the joint_states carrying its stamp (an upper bound of the
+    # time the sample took to reach compute_ik)
+    first = {}
+    for t, j in joints:
+        first.setdefault((j.header.stamp.sec, j.header.stamp.nanosec), t)
+    waits = sorted(first[s] - published for s, published in sent)
+    print(f"\npublish -> joint_states with its stamp, ms: {' '.join(f'{w * 1e3:.0f}' for w in waits)}")
