@@ -660,6 +660,28 @@ def panel_status(diags):
     return level, s.message, status_values(s)
 
 
+def tcp_queued(local_port, remote_port):
+    """(send queue, receive queue) in bytes of this host's IPv4 TCP socket from
+    local_port to remote_port (/proc/net/tcp), or (0, 0) without one."""
+    for line in Path("/proc/net/tcp").read_text().splitlines()[1:]:
+        f = line.split()
+        if int(f[1].split(":")[1], 16) == local_port and int(f[2].split(":")[1], 16) == remote_port:
+            tx, rx = (int(x, 16) for x in f[4].split(":"))
+            return tx, rx
+    return 0, 0
+
+
+def all_stopped(pid):
+    """Every thread of `pid` is stopped (state T, after SIGSTOP)."""
+    return all((t / "stat").read_text().rsplit(")", 1)[1].split()[0] == "T" for t in Path(f"/proc/{pid}/task").iterdir())
+
+
+# The flood's bytes the server must have in its socket, unread, when the judged e-stop is
+# pressed (some 3500 requests; the kernel's buffers hold megabytes of them while the
+# server works through them)
+FLOOD_BACKLOG = 256 * 1024
+
+
 def rss_kib(pid):
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -858,13 +880,13 @@ def flood(port, n):
             if op == 0x8:
                 break
             if op == 0x1 and b'"check"' in payload and json.loads(payload).get("xyz") == last["xyz"]:
-                served_at.append(time.monotonic())
+                served_at.append((time.monotonic(), time.time_ns()))
                 done.set()
     threading.Thread(target=read, daemon=True).start()
     frames = [RawWs.frame(json.dumps(m).encode()) for m in (
         {"t": "target", "xyz": [0.2, 0.0, 0.15]}, {"t": "check", "xyz": [0.21, 0.01, 0.14]},
         {"t": "target", "xyz": [0.2, 0.01, 0.15]}, {"t": "jog", "d": [0.0, 0.0, 0.0]})]
-    print("flooding", flush=True)
+    print("flooding", ws.sock.getsockname()[1], flush=True)
     t0 = time.monotonic()
     batch = 1000
     for i in range(0, n, batch):
@@ -875,7 +897,8 @@ def flood(port, n):
     sent_all_at = time.monotonic()  # every request of the flood is on its way
     served = done.wait(120)
     print(json.dumps({"sent": n, "send_s": sent, "served_s": time.monotonic() - t0 if served else None,
-                      "sent_all_at": sent_all_at, "served_at": served_at[0] if served else None}), flush=True)
+                      "sent_all_at": sent_all_at, "served_at": served_at[0][0] if served else None,
+                      "served_wall_ns": served_at[0][1] if served else None}), flush=True)
     ws.close()
 
 
@@ -906,11 +929,42 @@ def test_flooding_client_neither_grows_memory_nor_delays_another_clients_estop(l
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parent)}
     flooder = subprocess.Popen([sys.executable, "-c", f"import test_gui_bridge as t; t.flood({port}, {FLOOD_MESSAGES})"],
                                stdout=subprocess.PIPE, text=True, env=env)
-    assert flooder.stdout.readline().strip() == "flooding"
+    said, flood_port = flooder.stdout.readline().split()
+    assert said == "flooding"
+    flood_port = int(flood_port)
+
+    # The e-stop judged: pressed while the flood waits in the server's socket, unread.
+    # Stopped (SIGSTOP) once that holds FLOOD_BACKLOG bytes, the server cannot work
+    # through them before the e-stop is in: the e-stop comes after them, whatever the
+    # host's speed; let go (SIGCONT), the server must publish it first. Its DDS source
+    # stamp (when gui_bridge wrote it) is compared with when the flood's last request was
+    # answered.
+    def backlog():
+        return tcp_queued(port, flood_port)[1] + tcp_queued(flood_port, port)[0]
+    judged = []
+    observer.node.create_subscription(Bool, "/estop", lambda m, info: judged.append((m.data, info["source_timestamp"])), LATCHED)
+    deadline = time.monotonic() + 30
+    while True:
+        assert observer.spin_until(lambda: backlog() >= FLOOD_BACKLOG, deadline - time.monotonic()), \
+            f"the flood never waited in the server's socket: {backlog()} bytes"
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            assert observer.spin_until(lambda: all_stopped(pid), 10), "gui_bridge did not stop"
+            frozen = backlog()
+            if frozen >= FLOOD_BACKLOG:
+                n = len(judged)
+                operator.send({"t": "estop", "on": True})
+                break
+        finally:
+            os.kill(pid, signal.SIGCONT)
+    assert observer.spin_until(lambda: len(judged) > n and judged[-1][0] is True, 10), "the e-stop did not arrive"
+    estop_written_ns = judged[-1][1]
+
+    # measured for the report: e-stops under the flood, and the server's memory
     observer.spin_for(0.2)
     flooded, rss_peak = [], rss_before
     while (flooder.poll() is None or not flooded) and len(flooded) < 400:
-        flooded.append(press_estop(len(flooded) % 2 == 0))
+        flooded.append(press_estop(len(flooded) % 2 == 1))
         rss_peak = max(rss_peak, rss_kib(pid))
         observer.spin_for(0.1)
     flooding_while_measured = flooder.poll() is None
@@ -937,15 +991,16 @@ def test_flooding_client_neither_grows_memory_nor_delays_another_clients_estop(l
     (OUTPUT / "gui_flood.txt").write_text(report)
     print(report)
     assert result["sent"] == FLOOD_MESSAGES and result["served_s"] is not None
-    assert len(flooded) >= 3, "the flood ended before the e-stop could be measured under it"
-    # Not delayed by the flood, as an order of events rather than a time: e-stops
-    # pressed after the flooder had sent all its requests (its last check included)
-    # were published before the server had worked through them (before that last
-    # check was answered). Queued behind the flood, none could be.
+    # Not delayed by the flood, as an order of events rather than a time: the e-stop
+    # pressed with FLOOD_BACKLOG bytes of the flood waiting ahead of it was published
+    # before the server had worked through the flood (its last request answered).
+    # Queued behind the flood, it could not be.
     ahead = [(t, a) for t, a in presses if t > result["sent_all_at"] and a < result["served_at"]]
     pending = [(t, a) for t, a in presses if result["sent_all_at"] < t < result["served_at"]]
-    print(f"e-stops pressed with the whole flood pending: {len(pending)}, {len(ahead)} of them published ahead of it")
-    assert len(ahead) >= 3, f"{len(ahead)} of {len(pending)} e-stops pressed with the flood pending overtook it\n{report}"
+    print(f"the judged e-stop pressed with {frozen} bytes of the flood waiting, published "
+          f"{(result['served_wall_ns'] - estop_written_ns) / 1e9:.2f} s before the flood was through; "
+          f"e-stops pressed with the whole flood pending: {len(pending)}, {len(ahead)} of them published ahead of it")
+    assert estop_written_ns < result["served_wall_ns"], f"the e-stop waited for the flood ({frozen} bytes ahead of it)\n{report}"
     assert rss_peak - rss_before < 64 * 1024, report
 
 
