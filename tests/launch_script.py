@@ -57,6 +57,15 @@ def alive(pid):
     return state != "Z"
 
 
+def left_alive(pids, timeout=10):
+    """Those of `pids` still running once every one has ended or `timeout` has passed (a
+    node stopped by its script may take a moment to exit; the bound only ends a failure)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and any(alive(p) for p in pids):
+        time.sleep(0.05)
+    return [p for p in pids if alive(p)]
+
+
 def graph_ends(observer, command, command_type, answer, answer_type, nodes):
     """rclpy's ends of the graph a script started: a publisher of `command` and the list
     `answer` is received into, once both are matched and every node of `nodes` is in the

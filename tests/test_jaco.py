@@ -14,7 +14,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from conftest import REPO, TfListener, compose_chain, latest_status, status_values
-from launch_script import Script, alive, graph_ends, reap_scripts  # noqa: F401 (fixture)
+from launch_script import Script, graph_ends, left_alive, reap_scripts  # noqa: F401 (fixture)
 
 JACO_URDF = REPO / "urdf" / "jaco.urdf"
 TIP = "jaco_end_effector"
@@ -209,8 +209,8 @@ def test_run_graph_arm_jaco_starts_the_jaco_graph(domain, observer):
     finally:
         code = s.stop(signal.SIGINT)
     assert code == 0, s.output()
-    time.sleep(0.5)
-    assert not [k for k in kids if alive(k)]
+    orphans = left_alive(kids)
+    assert not orphans, f"orphans left: {orphans}"
     bad = Script("run_graph.sh", "--arm", "ur5", env={"ROS_DOMAIN_ID": str(domain)})
     assert bad.proc.wait(20) == 2
     assert "unknown arm `ur5`" in bad.output()

@@ -15,7 +15,7 @@ from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
 from conftest import bin_path, default_sigint, latest_status, status_values
-from launch_script import SCRIPTS, STARTED, Script, alive, graph_ends, node_processes, reap_scripts  # noqa: F401 (fixture)
+from launch_script import SCRIPTS, STARTED, Script, graph_ends, left_alive, node_processes, reap_scripts  # noqa: F401 (fixture)
 
 
 def now_stamp():
@@ -24,15 +24,26 @@ def now_stamp():
 
 
 def target_answered(observer, xyz, state, y):
-    """A target at (0.2, y, 0.15) stamped now, published on `xyz`: whether servo_state
-    answers it (with its stamp) on `state` within 10 s."""
-    m = PointStamped()
-    m.header.frame_id = "base_link"
-    m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
-    m.point.x, m.point.y, m.point.z = 0.2, y, 0.15
-    xyz.publish(m)
-    stamp = (m.header.stamp.sec, m.header.stamp.nanosec)
-    return observer.spin_until(lambda: any((x.header.stamp.sec, x.header.stamp.nanosec) == stamp for _, x in state), 10)
+    """Targets at (0.2, y, 0.15), each stamped when published on `xyz`: whether
+    servo_state answers one of them (with its stamp) on `state` within 20 s. Published
+    again every half second until then: the nodes' readers may learn of our writer a
+    moment after ours matched them, and a target sent before is lost to them."""
+    sent = set()
+
+    def answered():
+        return any((x.header.stamp.sec, x.header.stamp.nanosec) in sent for _, x in state)
+
+    end = time.monotonic() + 20
+    while time.monotonic() < end:
+        m = PointStamped()
+        m.header.frame_id = "base_link"
+        m.header.stamp.sec, m.header.stamp.nanosec = now_stamp()
+        m.point.x, m.point.y, m.point.z = 0.2, y, 0.15
+        sent.add((m.header.stamp.sec, m.header.stamp.nanosec))
+        xyz.publish(m)
+        if observer.spin_until(answered, min(0.5, max(0.0, end - time.monotonic()))):
+            return True
+    return answered()
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl_c", "sigterm"])
@@ -54,8 +65,8 @@ def test_run_graph_runs_every_node_with_the_ros_arguments_and_stops_them_all(sig
     finally:
         code = s.stop(sig)
     assert code == 0, s.output()
-    time.sleep(0.5)
-    assert not [k for k in kids if alive(k)], f"orphans left: {[k for k in kids if alive(k)]}"
+    orphans = left_alive(kids)
+    assert not orphans, f"orphans left: {orphans}"
 
 
 def test_pc_and_pi_scripts_split_the_graph(domain, observer):
@@ -109,13 +120,16 @@ def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
     shutil.copy(bin_path("serial_node"), bundle / "bin" / "serial_node")
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock", "PATH": "/usr/bin:/bin"}
     env.pop("EEZYBOT_BIN_DIR", None)
-    proc = subprocess.Popen([str(bundle / "launch_scripts" / "pi.sh")], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, env=env, text=True, start_new_session=True,
-                            preexec_fn=default_sigint)
+    log = tmp_path / "pi.log"
+    with open(log, "w") as f:
+        proc = subprocess.Popen([str(bundle / "launch_scripts" / "pi.sh")], stdout=f, stderr=subprocess.STDOUT,
+                                env=env, text=True, start_new_session=True, preexec_fn=default_sigint)
     STARTED.append(proc.pid)
     try:
+        # its start-up done (the banner, which names the binaries, comes before this line)
         end = time.monotonic() + 20
-        while time.monotonic() < end and not node_processes(proc.pid):
+        while "] running here" not in log.read_text():
+            assert time.monotonic() < end and proc.poll() is None, f"pi.sh did not start:\n{log.read_text()}"
             time.sleep(0.1)
         kids = list(node_processes(proc.pid))
         assert kids, "pi.sh started nothing"
@@ -123,7 +137,8 @@ def test_a_bundle_uses_its_own_binaries_without_cargo(domain, tmp_path):
         assert exe == str(bundle / "bin" / "serial_node")
     finally:
         proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=20)
+        proc.wait(20)
+    out = log.read_text()
     assert proc.returncode == 0, out
     assert "cargo" not in out and str(bundle / "bin") in out
 
@@ -141,27 +156,58 @@ def group_alive(pgid):
     return out
 
 
+def release(fifo, timeout=20):
+    """Let the process blocked reading `fifo` go on: open it for writing (at once once
+    the reader has it open) and write one line."""
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+            break
+        except OSError:  # ENXIO: its reader has not opened it yet
+            assert time.monotonic() < end, f"nobody reads {fifo}"
+            time.sleep(0.05)
+    try:
+        os.write(fd, b"go\n")
+    finally:
+        os.close(fd)
+
+
 @pytest.mark.parametrize("script", ["run_graph.sh", "pc.sh", "pi.sh"])
 def test_ctrl_c_while_starting_leaves_nothing_behind(script, domain, tmp_path):
     """Ctrl-C while the script is still starting up (its nodes are running, it is printing
-    where: a slow `hostname` holds it there): every node started is stopped and the script
-    exits 0. Before the fix the signal was only trapped once the script waited on its
-    nodes, so the script went on to wait forever, or died leaving its nodes running."""
+    where: a `hostname` that waits for the test holds it there): every node started is
+    stopped and the script exits 0. Before the fix the signal was only trapped once the
+    script waited on its nodes, so the script went on to wait forever, or died leaving its
+    nodes running."""
+    # The first `hostname` blocks on a FIFO until the test writes to it, so the signal
+    # comes while the script is provably in its start-up, however busy the host.
+    held, go = tmp_path / "held", tmp_path / "go"
+    os.mkfifo(go)
     shim = tmp_path / "hostname"
-    shim.write_text(f"#!/bin/sh\nsleep 1\nexec {shutil.which('hostname')} \"$@\"\n")
+    shim.write_text(f"#!/bin/sh\nif mkdir {held} 2>/dev/null; then read _ < {go}; fi\n"
+                    f"exec {shutil.which('hostname')} \"$@\"\n")
     shim.chmod(0o755)
     s = Script(script, env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "mock",
                             "PATH": f"{tmp_path}:{os.environ['PATH']}"})
     try:
         s.children(1)
+        end = time.monotonic() + 20
+        while not held.exists():
+            assert time.monotonic() < end and s.proc.poll() is None, f"the script never asked for its host name:\n{s.output()}"
+            time.sleep(0.05)
         # the script's own lines (gui_bridge, already running, prints its URL too)
         assert "] running here" not in s.output() and "] web panel" not in s.output()
-        code = s.stop()
+        s.proc.send_signal(signal.SIGINT)
+        # bash runs the trap once the command it waits for (the held `hostname`) is done
+        release(go)
+        code = s.proc.wait(20)
     finally:
         if s.proc.poll() is None:
             s.stop(signal.SIGKILL)
+        s.stop()
     assert code == 0, s.output()
-    end = time.monotonic() + 2
+    end = time.monotonic() + 20
     while time.monotonic() < end and group_alive(s.proc.pid):
         time.sleep(0.1)
     assert not group_alive(s.proc.pid), s.output()
