@@ -40,6 +40,8 @@ with this forwarder copying Ethernet frames between them.
     write_errors (e.g. the destination link is down), pending_at_exit,
     delay_ms:     applied delay, read() to the start of write(): p50, p99, max, min, mean
     scheduled_ms: the delay that was scheduled (after the FIFO clamp), same fields
+    drawn_ms:     the delay drawn (before the FIFO clamp), same fields: how the sender
+                  paced its frames does not move these, only which frames are clamped
     late_ms:      applied minus scheduled, i.e. the timing error, same fields
   plus `config` (with `realtime`: whether SCHED_FIFO was granted) and `duration_s`.
 
@@ -154,13 +156,14 @@ class _Direction:
         self.last_release = 0.0
         self.applied = array("d")
         self.scheduled = array("d")
+        self.drawn = array("d")
 
     def stats(self):
         late = array("d", (a - s for a, s in zip(self.applied, self.scheduled)))
         return {"received": self.received, "forwarded": self.forwarded, "dropped": self.dropped,
                 "overflow": self.overflow, "write_errors": self.write_errors, "pending_at_exit": self.queued,
                 "delay_ms": _summary(self.applied), "scheduled_ms": _summary(self.scheduled),
-                "late_ms": _summary(late)}
+                "drawn_ms": _summary(self.drawn), "late_ms": _summary(late)}
 
 
 class Forwarder:
@@ -205,6 +208,7 @@ class Forwarder:
                 d.overflow += 1
                 continue
             release = now + rng.uniform(self.lo, self.hi)
+            d.drawn.append(release - now)
             if self.fifo:
                 if release < d.last_release:
                     release = d.last_release

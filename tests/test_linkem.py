@@ -176,11 +176,14 @@ def test_rtt_is_twice_the_delay():
         d = stats[direction]
         assert d["forwarded"] >= 200 and d["dropped"] == 0
         assert d["delay_ms"]["min"] >= 15.0, d  # never released early
-        # the delays drawn: uniform in [15, 25] ms (the FIFO clamp keeps each within it),
-        # centred on 20 ms (the median of 200+ draws is within 2 ms of it)
-        sched = d["scheduled_ms"]
+        # the delays drawn: uniform in [15, 25] ms, centred on 20 ms (the median of 200+
+        # draws is within 2 ms of it); the FIFO clamp keeps each scheduled one within
+        # [15, 25] ms too, but moves their median up when the host hands the frames over
+        # in bursts (a busy host), so the median is judged on the draws
+        sched, drawn = d["scheduled_ms"], d["drawn_ms"]
+        assert 15.0 <= drawn["min"] and drawn["max"] <= 25.0, d
         assert 15.0 <= sched["min"] and sched["max"] <= 25.0, d
-        assert 18.0 <= sched["p50"] <= 22.0, d
+        assert 18.0 <= drawn["p50"] <= 22.0, d
 
 
 def test_loss_rate():
