@@ -430,6 +430,13 @@ def pytest_report_teststatus(report, config):
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if _OWN_PROCESS_SPANS:
+        # where the time of the modules in processes of their own went (the background
+        # lanes run beside the rest: the session's own end is the last number here or
+        # pytest's total)
+        terminalreporter.write_sep("-", "modules in processes of their own (s since the session's start)")
+        for module, (start, end) in sorted(_OWN_PROCESS_SPANS.items(), key=lambda kv: kv[1]):
+            terminalreporter.write_line(f"{start:7.1f} -> {end:7.1f}  ({end - start:6.1f} s)  {Path(module).name}")
     skipped = terminalreporter.stats.get(ROOT_SKIPPED, [])
     if not skipped:
         return
@@ -461,7 +468,8 @@ def pytest_configure(config):
     _XDG_CONFIG_HOME = tempfile.mkdtemp(prefix="eezybot-test-xdg-")
     os.environ["XDG_CONFIG_HOME"] = _XDG_CONFIG_HOME
     config.addinivalue_line("markers", "own_process: run this module's tests in a pytest process of their own")
-    config.addinivalue_line("markers", "background: (with own_process) that process may run alongside the other tests")
+    config.addinivalue_line("markers", "background(seconds=60): (with own_process) that process may run alongside the "
+                                       "other tests; `seconds`, about how long it takes, orders the lanes (longest first)")
     config.addinivalue_line("markers", "timeout(seconds): this test's limit for each of setup, call and teardown "
                                        f"(default {TEST_TIMEOUT_S:.0f} s, EEZYBOT_TEST_TIMEOUT)")
     _STDERR = os.dup(2)  # the terminal's stderr (output capture is suspended here)
@@ -469,12 +477,23 @@ def pytest_configure(config):
 
 _OWN_PROCESS_RESULTS = {}
 # Such a module marked `background` too (test_link_outages.py: link outages, mostly
-# waited out, whose checks do not depend on how busy the host is) runs in a background
-# thread from the end of collection, alongside the other tests; its results are
-# reported where pytest reaches them. EEZYBOT_OWN_PROCESS_SERIAL=1 runs it where
+# waited out, whose checks do not depend on how busy the host is) runs in a pytest
+# process of its own from the end of collection, alongside the other tests; its results
+# are reported where pytest reaches them. Background modules run in BACKGROUND_LANES
+# lanes, each taking the next module when its last one ends, the longest first: a
+# module's marker says about how long it takes (`pytest.mark.background(seconds=60)`).
+# EEZYBOT_BACKGROUND_LANES sets the number; EEZYBOT_OWN_PROCESS_SERIAL=1 runs each where
 # pytest reaches it instead, as every other own_process module is.
+BACKGROUND_LANES = int(os.environ.get("EEZYBOT_BACKGROUND_LANES", "1"))
 _OWN_PROCESS_DONE = {}  # module -> threading.Event, set when its results are in
-_OWN_PROCESS_RUNNING = []  # the module process under way, to end it if the session ends first
+_OWN_PROCESS_RUNNING = []  # the module processes under way, to end them if the session ends first
+_OWN_PROCESS_SPANS = {}  # module -> (start, end), seconds since the session started
+_SESSION_START = time.monotonic()
+
+
+def _background_seconds(item):
+    marker = item.get_closest_marker("background")
+    return float(marker.kwargs.get("seconds", 60)) if marker is not None else 0.0
 
 
 def pytest_collection_finish(session):
@@ -487,16 +506,22 @@ def pytest_collection_finish(session):
             first_items.setdefault(str(item.fspath), item)
     for module in first_items:
         _OWN_PROCESS_DONE[module] = threading.Event()
+    todo = sorted(first_items.items(), key=lambda kv: -_background_seconds(kv[1]))
+    lock = threading.Lock()
 
-    def run_modules():
-        for module, item in first_items.items():
+    def lane():
+        while True:
+            with lock:
+                if not todo:
+                    return
+                module, item = todo.pop(0)
             try:
                 _run_module_in_own_process(item)
             finally:
                 _OWN_PROCESS_DONE[module].set()
 
-    if first_items:
-        threading.Thread(target=run_modules, name="own_process modules", daemon=True).start()
+    for n in range(min(BACKGROUND_LANES, len(todo))):
+        threading.Thread(target=lane, name=f"background lane {n}", daemon=True).start()
 
 
 def pytest_unconfigure(config):
@@ -543,6 +568,7 @@ def _run_module_in_own_process(item):
                 for case in ET.parse(junit).getroot().iter("testcase"):
                     cases[case.get("name")] = case
             _OWN_PROCESS_RESULTS[module] = (cases, proc, time.monotonic() - started)
+            _OWN_PROCESS_SPANS[module] = (started - _SESSION_START, time.monotonic() - _SESSION_START)
     return _OWN_PROCESS_RESULTS[module]
 
 
