@@ -369,10 +369,12 @@ def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_p
             # its diagnostics (stamped after the device answered the first) say it is at rest
             answered = time.time()
             assert observer.spin_until(lambda: ik_at_rest(diags, answered), 15), "compute_ik's motion did not end"
-            deg = [math.degrees(a) for a in sa[-1][1].position]
             # serial_node ramps to it within the servos' speed limit: wait until it is there
+            # (the board in simavr runs slower than the wall clock on a busy host)
             assert observer.spin_until(lambda: [round(math.degrees(a), 1) for a in rig.state[-1][1].position]
-                                       == [round(d, 1) for d in deg], 5), (rig.state[-1][1].position, deg)
+                                       == [round(math.degrees(d), 1) for d in sa[-1][1].position], 30), \
+                (rig.state[-1][1].position, sa[-1][1].position)
+            deg = [math.degrees(a) for a in sa[-1][1].position]
             acked_at = uno.events()[1][-1][0]
             # the pulses of the next servo frames (simulated time: 9 periods after the ack)
             assert observer.spin_until(lambda: all(len(pulses(uno.events()[0], pin, acked_at)) >= 9 for pin in range(4)), 15)
