@@ -97,6 +97,17 @@ class BoardEvents:
         c, ns = self.walls[max(i - 1, 0)]
         return ns + (cycle - c) * 1_000_000_000 // CYCLES_PER_S
 
+    def cycle_after(self, ns):
+        """The cycle of the first pty read at or after CLOCK_REALTIME `ns`: the board
+        simulated every cycle from it on after `ns` (an order of events, whatever the
+        host's load; None: no read after it)."""
+        return next((c for c, w in self.walls if w >= ns), None)
+
+    def cycle_before(self, ns):
+        """The cycle of the last pty read at or before CLOCK_REALTIME `ns`: the board
+        simulated every cycle before it before `ns` (None: no read before it)."""
+        return next((c for c, w in reversed(self.walls) if w <= ns), None)
+
 
 def step_allowed_us(limit_us_per_s, seconds):
     """The most a pulse width may change over `seconds` plus one servo period (two frames

@@ -4,7 +4,6 @@ the handshake and ROLE leader, LEADER_STATE frames come every 9.6 ms of simulate
 recorded hand motion: steps and ramps, --adc-file), the deadman bit follows D2, no
 servo pulse goes out, and ROLE follower or a HELLO ends it all. Every time here is
 simulated time (cycles in servo_sim's event file), never the wall clock."""
-import os
 import statistics
 import struct
 import time
@@ -20,6 +19,7 @@ from interop.servo_link import (AVCC_MV, FOLLOWER, HEARTBEAT, HELLO, HELLO_ACK, 
 FIRMWARE = REPO / "firmware" / "servo_control"
 CYCLES_PER_MS = 16_000
 PERIOD_CYCLES = LEADER_PERIOD_US * 16
+UART_BYTE_CYCLES = 16_000_000 * 10 / 115_200  # a byte at 115200 baud, 8N1
 # what simavr's ADC returns for a voltage: (mv * 1023) // AVCC (its scale; the datasheet's
 # is mv * 1024 / AVCC, truncated; either way within 2 codes of the voltage)
 LSB_MV = AVCC_MV / 1024
@@ -74,20 +74,13 @@ def sim_events(path):
     return frames_sent(tx), conversions, d2, edges
 
 
-def last_cycle(path):
-    """The simulated cycle of the event file's last whole line."""
-    with open(path, "rb") as f:
-        f.seek(max(0, os.path.getsize(path) - 256))
-        lines = f.read().split(b"\n")[:-1]
-    return int(lines[-1].split()[1]) if lines else 0
-
-
 def run_until_sim_ms(uno, ms, heartbeat_s=0.1, seq=100):
     """Keep the link alive as a host does (a HEARTBEAT every 100 ms, or none:
-    `heartbeat_s` None) until the simulation reaches `ms`; the frames received."""
+    `heartbeat_s` None) until the simulation reaches `ms`; the frames received. (The
+    deadline only bounds a failure: a starved simavr runs slower than real time.)"""
     got = []
-    deadline = time.monotonic() + ms / 1000 * 3 + 10
-    while last_cycle(uno.events_path) < ms * CYCLES_PER_MS:
+    deadline = time.monotonic() + ms / 1000 * 10 + 30
+    while uno.sim_cycle() < ms * CYCLES_PER_MS:
         assert time.monotonic() < deadline, "the simulation does not get on"
         if heartbeat_s:
             seq += 1
@@ -117,6 +110,25 @@ def test_the_python_side_speaks_protocol_md_s_leader_examples():
     # a LEADER_STATE one byte short is no frame
     short = frame(LEADER_STATE, 1, bytes(10))
     assert Decoder().feed(short) == []
+
+
+def run_past(uno, pred, ms):
+    """Keep the link alive (a HEARTBEAT every 50 ms: the event file grows only with
+    what happens on the board, and an idle AVR does nothing else) until the event file
+    holds the frame the AVR sent that `pred(cycle, type, payload)` picks and the
+    simulation has run `ms` of simulated time past it; that frame's cycle. What did not
+    happen by then did not happen in `ms` of the board's time, however busy the host."""
+    deadline = time.monotonic() + ms / 1000 * 10 + 30
+    cycle, k = None, 0
+    while cycle is None or uno.sim_cycle() < cycle + ms * CYCLES_PER_MS:
+        assert time.monotonic() < deadline, "the simulation does not get on"
+        uno.send(frame(HEARTBEAT, 100 + k % 100))  # sequence numbers no test step uses
+        k += 1
+        uno.receive(0.05)
+        if cycle is None:
+            frames, *_ = sim_events(uno.events_path)
+            cycle = next((c for c, kind, p in frames if pred(c, kind, p)), None)
+    return cycle
 
 
 @pytest.fixture
@@ -182,13 +194,23 @@ def test_leader_streams_every_9_6_ms_with_exact_oversampled_values_and_the_deadm
     starts = [c for c, *_ in windows]
 
     # the rate, in simulated time: one window every 9.6 ms, never missed, none late. On
-    # the wire (a frame's first byte; a STATE answering a heartbeat may go first: 16
-    # bytes, 1.5 ms in simavr's UART)
+    # the wire (a frame's first byte), each LEADER_STATE within 1 ms of its window's end
+    # (measured: at most 0.32 ms) but for the time the UART spent on the frames before it:
+    # a STATE answering a heartbeat goes first, 16 bytes, 1.4 ms, and a host busy
+    # elsewhere may hand the board several heartbeats at once
     span = [c for c in starts if 1000 * CYCLES_PER_MS <= c < 4000 * CYCLES_PER_MS]
     rate = (len(span) - 1) / ((span[-1] - span[0]) / 16e6)
     gaps = [(b - a) / CYCLES_PER_MS for a, b in zip(starts, starts[1:])]
     assert len(span) >= 300 and rate >= 100, (len(span), rate)
-    assert all(abs(g - 9.6) < 2.0 for g in gaps), (min(gaps), max(gaps))
+    on_wire = [(c, (4 + len(p)) * UART_BYTE_CYCLES) for c, _, p in frames]  # (first byte, cycles on the wire)
+
+    def uart_idle_us(t0, t1):
+        """The time between t0 and t1 the UART sent nothing (frames go one after another)."""
+        busy = sum(max(0, min(t1, c + n) - max(t0, c)) for c, n in on_wire if c < t1)
+        return (t1 - t0 - busy) / 16
+
+    idle = [uart_idle_us(isrs[-1], c) for c, _, _, isrs in windows]
+    assert max(idle) <= 1000, max(idle)
     # and where the windows end (each one's last interrupt): 9.6 ms to the cycle
     ends = [isrs[-1] for *_, isrs in windows]
     window_rate = (len(ends) - 1) / ((ends[-1] - ends[0]) / 16e6)
@@ -241,9 +263,16 @@ def test_leader_streams_every_9_6_ms_with_exact_oversampled_values_and_the_deadm
 
     checked, cleared = 0, []
     for cycle, s, _, isrs in windows:
-        if any(abs(c - i) < 200 for c, _ in d2 for i in isrs):
-            continue  # an edge within a few us of a read: either is right
-        want = all(level(i) == 0 for i in isrs)
+        # a read within a few us of an edge may see either level; the window's bit is
+        # due whenever the other reads decide it (one released read clears it)
+        near = {i for i in isrs if any(abs(c - i) < 200 for c, _ in d2)}
+        clear = [level(i) for i in isrs if i not in near]
+        if 1 in clear:
+            want = False
+        elif not near:
+            want = True
+        else:
+            continue
         assert s["deadman"] == want, (cycle / CYCLES_PER_MS, s, [level(i) for i in isrs])
         checked += 1
         if not want and 2400 < cycle / CYCLES_PER_MS < 2600:
@@ -258,7 +287,7 @@ def test_leader_streams_every_9_6_ms_with_exact_oversampled_values_and_the_deadm
 
     print(f"{len(windows)} LEADER_STATEs; rate over 1-4 s simulated: {rate:.3f} Hz on the wire, windows "
           f"{window_rate:.4f} Hz; intervals "
-          f"{min(gaps):.3f}-{max(gaps):.3f} ms; error (host's conversion - mean driven mV) per segment "
+          f"{min(gaps):.3f}-{max(gaps):.3f} ms, each at most {max(idle):.0f} us late but for the UART; error (host's conversion - mean driven mV) per segment "
           f"(windows, min, max mV): " + "; ".join(f"{k} {n} {lo:+.2f}..{hi:+.2f}" for k, (n, lo, hi) in report.items()))
 
 
@@ -272,39 +301,42 @@ def test_the_leader_streams_through_host_silence_and_role_follower_or_hello_end_
     late = [c for c, kind, _ in frames if kind == LEADER_STATE and c > 1200 * CYCLES_PER_MS]
     assert len(late) >= 55, len(late)  # 600 ms of 9.6 ms windows
 
-    # ROLE follower: idle, the stream stops, and the board follows commands again
+    # ROLE follower: idle, the stream stops (none in the 300 ms of simulated time after
+    # the answer), and the board follows commands again
     leader.send(role(10, FOLLOWER))
     f, _ = leader.wait_for(lambda f: f[0] == STATE and f[2][0] == 10)
     assert parse_state(f[2])["state"] == "idle"
-    leader.receive(0.3)
+    stop = run_past(leader, lambda c, kind, p: kind == STATE and p[0] == 10, 300)
     frames, *_ = sim_events(leader.events_path)
-    stop = next(c for c, kind, p in frames if kind == STATE and p[0] == 10)
     assert not [c for c, kind, _ in frames if kind == LEADER_STATE and c > stop]
     leader.send(set_pulses(11, [3000] * 4))
     f, _ = leader.wait_for(lambda f: f[0] == STATE and f[2][0] == 11)
     assert parse_state(f[2])["state"] == "running"
-    leader.receive(0.1)
+    running = run_past(leader, lambda c, kind, p: kind == STATE and p[0] == 11, 100)
     *_, edges = sim_events(leader.events_path)
+    # every pulse ever the command's (none before it), and every pin pulsing: 100 ms of
+    # simulated time hold 5 servo frames
     widths = [w for pin in range(4) for _, w in pulses(edges, pin)]
     assert widths and all(w == pytest.approx(1500, abs=1) for w in widths), widths[:8]
+    assert all(len(pulses(edges, pin, running)) >= 3 for pin in range(4)), [pulses(edges, pin, running) for pin in range(4)]
 
     # leader again (the pulses stop at once), then a HELLO: a new session, a follower
     leader.send(role(12, LEADER))
     f, _ = leader.wait_for(lambda f: f[0] == STATE and f[2][0] == 12)
     assert parse_state(f[2])["state"] == "leader"
-    leader.receive(0.1)
+    lead = run_past(leader, lambda c, kind, p: kind == STATE and p[0] == 12, 100)
     frames, *_, edges = sim_events(leader.events_path)
-    lead = next(c for c, kind, p in frames if kind == STATE and p[0] == 12)
     again = [parse_leader_state(p)["window"] for c, kind, p in frames if kind == LEADER_STATE and c > lead]
     assert again[:3] == [0, 1, 2], "a new stream counts from 0"
-    # the pulse under way may end: none starts 3 ms after the ROLE's answer
+    # the pulse under way may end: none starts from 3 ms after the ROLE's answer to the
+    # 100 ms of simulated time past it
     assert not [c for c, _, level in edges if level == 1 and c > lead + 3 * CYCLES_PER_MS]
     leader.send(frame(HELLO, 13, bytes([3])))
     leader.wait_for(lambda f: f[0] == HELLO_ACK)
     leader.send(frame(HEARTBEAT, 14))
     f, _ = leader.wait_for(lambda f: f[0] == STATE and f[2][0] == 14)
     assert parse_state(f[2])["state"] == "idle"
-    leader.receive(0.2)
+    run_past(leader, lambda c, kind, p: kind == STATE and p[0] == 14, 200)
     frames, *_ = sim_events(leader.events_path)
     hello = next(c for c, kind, p in frames if kind == HELLO_ACK and c > lead)
     assert not [c for c, kind, _ in frames if kind == LEADER_STATE and c > hello]

@@ -199,6 +199,14 @@ class SimulatedUno:
                 rx.append((int(parts[1]), int(parts[2])))
         return edges, rx
 
+    def sim_cycle(self):
+        """The simulated cycle of the event file's last whole line (the harness flushes
+        it every few ms of simulated time)."""
+        with open(self.events_path, "rb") as f:
+            f.seek(max(0, os.path.getsize(self.events_path) - 256))
+            lines = f.read().split(b"\n")[:-1]
+        return int(lines[-1].split()[1]) if lines else 0
+
     def toggle_cable(self, plugged):
         """Pull the USB cable (the pty goes away, the AVR runs on) or plug it back."""
         self.proc.send_signal(signal.SIGUSR1)
