@@ -140,6 +140,16 @@ class SecurePeer:
         """{(writer|reader, DDS topic)} of the other participants it discovered."""
         return {(line.split(" ")[0], line.split(" ")[1]) for _, line in self.said("writer ") + self.said("reader ")}
 
+    def endpoint_participants(self, kind, topic):
+        """{GUID prefix} of the participants whose `kind` ("writer"/"reader") of `topic`
+        it discovered."""
+        return {line.split(" ")[3] for _, line in self.said(f"{kind} {dds_topic(topic)} ")}
+
+    def participants_named(self, name):
+        """{GUID prefix} of the participants named `name` it discovered (their SPDP
+        announcement, in clear even in a secured domain)."""
+        return {line.split(" ")[2] for _, line in self.said("participant discovered ") if line.split(" ", 3)[3:] == [name]}
+
     def authenticated(self):
         return {line.split(" ")[2] for _, line in self.said("auth ok ")}
 
@@ -414,7 +424,7 @@ class SecureGraph:
         return {p.name: p.stop() for p in self.procs}
 
 
-def drive(peer, xyz, timeout=20.0, period=0.5):
+def drive(peer, xyz, timeout=30.0, period=0.5):
     """Publish a target stamped now every `period` until serial_node's servo_state
     answers one of them (serial_node copies the command's stamp): returns
     (sent stamps, the answered stamp) or (sent, None) after the timeout."""
@@ -424,12 +434,14 @@ def drive(peer, xyz, timeout=20.0, period=0.5):
         payload, st = point_target(*xyz)
         peer.publish("xyz_target", payload)
         sent.append(st)
-        if peer.wait(lambda: _answered(peer, sent), period):
-            return sent, _answered(peer, sent)
-    return sent, _answered(peer, sent)
+        if peer.wait(lambda: answered_stamp(peer, sent), period):
+            return sent, answered_stamp(peer, sent)
+    return sent, answered_stamp(peer, sent)
 
 
-def _answered(peer, sent):
+def answered_stamp(peer, sent):
+    """The first of the `sent` stamps that a servo_state the peer received carries
+    (serial_node copies the command's stamp), or None."""
     wanted = set(sent)
     for _, payload in peer.received("servo_state"):
         st = stamp(joint_state(payload))
