@@ -39,7 +39,7 @@ def test_estop_stops_the_arm_mid_move_and_a_release_moves_nothing(launch, observ
         rig.spin(0.5)  # released, a while without commands: nothing moves until a new one
         new = [100.0, 90.0, 95.0, 100.0]
         rig.target = new
-        assert rig.spin(until=lambda: rig.at(new), timeout=5)
+        assert rig.spin(until=lambda: rig.at(new), timeout=15)
         # the board's pulses get there (judged below on the simulation's clock)
         assert rig.spin(until=lambda: all(rig.events().pulses(pin)[-1][1] == pytest.approx(pulse_us(new[pin]), abs=1.0)
                                           for pin in range(4)), timeout=10)
@@ -85,10 +85,10 @@ def test_a_serial_node_started_during_an_estop_moves_nothing(launch, observer, t
         assert rig.spin(until=lambda: int(rig.diag().get("inputs_dropped_in_estop", 0)) > 0, timeout=10), rig.diag()
         rig.target = None
         estop.publish(Bool(data=False))
-        assert rig.spin(until=lambda: rig.diag().get("device_state") == "idle", timeout=5)
+        assert rig.spin(until=lambda: rig.diag().get("device_state") == "idle", timeout=15)
         rig.spin(0.5)  # released, a while without commands
         rig.target = A
-        assert rig.spin(until=lambda: rig.at(A), timeout=5)
+        assert rig.spin(until=lambda: rig.at(A), timeout=15)
     finally:
         rig.stop()
     # judged in the board's order of events: no servo frame before the release, no
