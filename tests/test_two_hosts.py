@@ -48,8 +48,8 @@ def close_graph(g):
 def test_a_target_from_the_pc_comes_back_from_the_firmware_on_the_pi(hosts, domain, tmp_path):
     """rclpy in `pc` -> compute_ik (pc) -> serial_node (pi) -> the firmware in simavr ->
     servo_state back in `pc`: the first step of the motion (compute_ik's servo_angles)
-    carries the target's stamp, and the arm comes to rest at ROBOT.md's servo angles (within the firmware's 0.5 us
-    pulse resolution, 0.05 deg)."""
+    carries the target's stamp, and the arm comes to rest at ROBOT.md's servo angles
+    (within the firmware's 0.5 us pulse resolution, 0.05 deg)."""
     g = SplitGraph(hosts, domain, tmp_path, device="simavr")
     angles = g.o.sub("/servo_angles", JointState)
     try:
