@@ -304,6 +304,10 @@ def test_outsiders_see_nothing_and_cannot_move_the_arm(hosts, domain, other_doma
         moved = [s for s in states if stamp(s) in foreign]
         assert not moved, f"an outsider's target moved the arm: {len(moved)} servo_state replies"
         assert all(list(s.position) == list(rest.position) for s in states[n_states:]), "servo_state changed"
+        # the controls are done: their processes stop before gui_bridge's secured start
+        control.close()
+        control = None
+        control_graph.close()
 
         # gui_bridge as a command-line driver: refused without security, fine with it
         plain = subprocess.run(["ip", "netns", "exec", hosts.pc, bin_path("gui_bridge"), "once", *map(str, TARGET),
@@ -311,7 +315,7 @@ def test_outsiders_see_nothing_and_cannot_move_the_arm(hosts, domain, other_doma
                                env={**os.environ, **NO_SECURITY, "ROS_DOMAIN_ID": str(domain)})
         assert plain.returncode == 1, f"gui_bridge once without security exited {plain.returncode}\n{plain.stderr}"
         secure = subprocess.run(["ip", "netns", "exec", hosts.pc, bin_path("gui_bridge"), "once", "0.19", "0.02", "0.16",
-                                 "--timeout", "20", "--ros-args", "--enclave", "/eezybot/pc"],
+                                 "--timeout", str(HANDSHAKE_TIMEOUT), "--ros-args", "--enclave", "/eezybot/pc"],
                                 capture_output=True, text=True, timeout=60,
                                 env={**os.environ, **security_env(keystore), "ROS_DOMAIN_ID": str(domain)})
         assert secure.returncode == 0, f"gui_bridge once with the pc enclave exited {secure.returncode}\n{secure.stderr}"
