@@ -11,6 +11,10 @@ use servo_protocol::{DeviceState, StopAction};
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::{unbounded_channel, UnboundedReceiver};
 
+/// How long an awaited event may take before the test fails: it bounds a failure on a
+/// busy host, the verdicts are the events and their order.
+const WAIT: Duration = Duration::from_secs(10);
+
 fn stamp(n: i32) -> Time {
     Time::from_nanos(i64::from(n) * 1_000_000_000)
 }
@@ -34,7 +38,7 @@ impl Rig {
             events,
             seen: vec![],
         };
-        assert!(rig.wait_for(Duration::from_secs(2), connected).is_some());
+        assert!(rig.wait_for(WAIT, connected).is_some());
         rig
     }
 
@@ -88,6 +92,30 @@ fn connected(e: &LinkEvent) -> bool {
     matches!(e, LinkEvent::Connected { .. })
 }
 
+fn is_state(e: &LinkEvent) -> bool {
+    matches!(e, LinkEvent::State { .. })
+}
+
+fn estop(e: &LinkEvent) -> bool {
+    matches!(
+        e,
+        LinkEvent::State {
+            state: DeviceState::Estop,
+            ..
+        }
+    )
+}
+
+fn running(e: &LinkEvent) -> bool {
+    matches!(
+        e,
+        LinkEvent::State {
+            state: DeviceState::Running,
+            ..
+        }
+    )
+}
+
 fn answers(n: i32) -> impl Fn(&LinkEvent) -> bool {
     move |e| matches!(e, LinkEvent::State { answered: Some((s, _)), .. } if *s == stamp(n))
 }
@@ -96,7 +124,7 @@ fn answers(n: i32) -> impl Fn(&LinkEvent) -> bool {
 fn a_command_is_acknowledged_with_its_stamp() {
     let mut r = Rig::new(HostConfig::default());
     r.command([3000; 4], 7);
-    let e = r.wait_for(Duration::from_secs(2), answers(7));
+    let e = r.wait_for(WAIT, answers(7));
     assert!(e.is_some(), "{:?}", r.seen);
     assert_eq!(r.device_state(), (DeviceState::Running, [3000; 4]));
     assert_eq!(r.link().send_stats().sent, 1);
@@ -113,7 +141,7 @@ fn a_jump_is_ramped_within_the_velocity_limit() {
     let target = [3944, 2944, 2944, 2325];
     r.command(target, 1);
     let reached = r.wait_for(
-        Duration::from_secs(5),
+        WAIT,
         |e| matches!(e, LinkEvent::State { ticks, .. } if *ticks == target),
     );
     assert!(reached.is_some(), "{:?}", r.seen);
@@ -143,30 +171,43 @@ fn a_jump_is_ramped_within_the_velocity_limit() {
 fn estop_holds_drops_commands_and_after_release_waits_for_a_new_one() {
     let mut r = Rig::new(HostConfig::default());
     r.command([3000; 4], 1);
-    assert!(r.wait_for(Duration::from_secs(2), answers(1)).is_some());
+    assert!(r.wait_for(WAIT, answers(1)).is_some());
     r.link().set_estop(true);
-    assert!(r
-        .wait_for(Duration::from_secs(1), |e| matches!(
+    assert!(r.wait_for(WAIT, estop).is_some());
+    r.command([4000; 4], 2);
+    assert!(
+        r.wait_for(WAIT, |e| *e == LinkEvent::DroppedInEstop)
+            .is_some(),
+        "{:?}",
+        r.seen
+    );
+    assert_eq!(r.device_state(), (DeviceState::Estop, [3000; 4]));
+    r.link().set_estop(false);
+    // released: the device runs again, and the replies that follow (the heartbeats'),
+    // which come after anything the link sent on the release, show it where it was
+    let released = r.seen.len();
+    assert!(r.wait_for(WAIT, running).is_some(), "{:?}", r.seen);
+    for _ in 0..3 {
+        assert!(r.wait_for(WAIT, is_state).is_some(), "{:?}", r.seen);
+    }
+    let after: Vec<_> = r.seen[released..]
+        .iter()
+        .filter(|(_, e)| is_state(e))
+        .collect();
+    assert!(
+        after.iter().all(|(_, e)| matches!(
             e,
             LinkEvent::State {
-                state: DeviceState::Estop,
+                ticks: [3000, 3000, 3000, 3000],
+                answered: None,
                 ..
             }
-        ))
-        .is_some());
-    r.command([4000; 4], 2);
-    r.settle(Duration::from_millis(200));
-    assert_eq!(r.device_state(), (DeviceState::Estop, [3000; 4]));
-    assert!(r.seen.iter().any(|(_, e)| *e == LinkEvent::DroppedInEstop));
-    r.link().set_estop(false);
-    r.settle(Duration::from_millis(300));
-    assert_eq!(
-        r.device_state(),
-        (DeviceState::Running, [3000; 4]),
-        "moved after the release"
+        )),
+        "moved after the release: {after:?}"
     );
+    assert_eq!(r.device_state(), (DeviceState::Running, [3000; 4]));
     r.command([3100; 4], 3);
-    assert!(r.wait_for(Duration::from_secs(1), answers(3)).is_some());
+    assert!(r.wait_for(WAIT, answers(3)).is_some());
     assert_eq!(r.device_state().1, [3100; 4]);
 }
 
@@ -177,9 +218,10 @@ fn a_detaching_estop_stops_the_pulses() {
         ..HostConfig::default()
     });
     r.command([3000; 4], 1);
-    assert!(r.wait_for(Duration::from_secs(2), answers(1)).is_some());
+    assert!(r.wait_for(WAIT, answers(1)).is_some());
     r.link().set_estop(true);
-    r.settle(Duration::from_millis(100));
+    // the device's reply to the e-stop comes once it has detached
+    assert!(r.wait_for(WAIT, estop).is_some(), "{:?}", r.seen);
     assert_eq!(r.device_state(), (DeviceState::Estop, [0; 4]));
 }
 
@@ -200,11 +242,8 @@ fn unplug_and_replug_twenty_times_while_streaming() {
         }
         r.device.set_plugged(false);
         assert!(
-            r.wait_for(Duration::from_secs(1), |e| matches!(
-                e,
-                LinkEvent::Disconnected { .. }
-            ))
-            .is_some(),
+            r.wait_for(WAIT, |e| matches!(e, LinkEvent::Disconnected { .. }))
+                .is_some(),
             "cycle {cycle}: the unplug went unnoticed"
         );
         for _ in 0..3 {
@@ -216,24 +255,22 @@ fn unplug_and_replug_twenty_times_while_streaming() {
         let replugged = Instant::now();
         r.device.set_plugged(true); // a fresh power-up: the device is in its hold pose
         assert!(
-            r.wait_for(Duration::from_secs(3), connected).is_some(),
+            r.wait_for(WAIT, connected).is_some(),
             "cycle {cycle}: no reconnection"
         );
         reconnect_ms.push(replugged.elapsed().as_secs_f64() * 1e3);
         // the newest command is applied, ramped from the hold pose the device reported
-        assert!(
-            r.wait_for(Duration::from_secs(2), answers(newest))
-                .is_some(),
-            "cycle {cycle}"
-        );
-        // ... and reached (a bound for a loaded machine, not a timing requirement)
+        assert!(r.wait_for(WAIT, answers(newest)).is_some(), "cycle {cycle}");
+        // ... and reached
         let want = [3300 + (newest % 7) as u16; 4];
-        let until = Instant::now() + Duration::from_secs(3);
+        let until = Instant::now() + WAIT;
         while r.device_state().1 != want && Instant::now() < until {
             r.settle(Duration::from_millis(20));
         }
         assert_eq!(r.device_state().1, want, "cycle {cycle}");
     }
+    // the one time bound here, the requirement of a reconnection within a few seconds:
+    // 3 s, over 10x the slowest of 100 measured on a busy host (228 ms)
     reconnect_ms.sort_by(f64::total_cmp);
     println!(
         "reconnect after replug: p50 {:.0} ms, max {:.0} ms",
