@@ -6,7 +6,7 @@ mod common;
 
 use common::{
     advertise, assert_no_sample, channel_ids, channels, client_message, connect, next_json,
-    next_message_data, next_sample, offers, start, start_in, subscribe, WAIT,
+    next_message_data, next_sample, offers, round_trip, start, start_in, subscribe, WAIT,
 };
 use eezybot_msgs::geometry_msgs::{Point, PointStamped};
 use eezybot_msgs::sensor_msgs::JointState;
@@ -14,7 +14,6 @@ use eezybot_msgs::std_msgs::{Header, String as RosString};
 use foxglove_bridge::{ros2msg_schema, ClientPublish, TopicNames, TOPICS};
 use futures::SinkExt;
 use serde_json::json;
-use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
 
 fn joint_state(position: f64) -> JointState {
@@ -40,6 +39,7 @@ async fn a_client_sees_every_topic_with_its_ros2msg_schema_and_gets_raw_cdr() {
     .unwrap();
     bridge.log("robot_description", &urdf, 1_000).unwrap();
 
+    let mut watched = bridge.watched();
     let mut ws = connect(bridge.local_addr()).await;
     let info = next_json(&mut ws, "serverInfo").await;
     assert_eq!(info["name"], "test");
@@ -68,8 +68,12 @@ async fn a_client_sees_every_topic_with_its_ros2msg_schema_and_gets_raw_cdr() {
     assert_eq!((sub, t), (7, 1_000));
     assert_eq!(payload, urdf);
 
-    // give the server a moment to register the subscription, then stream
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    // the subscription is registered (its client's sink among joint_states' own) before
+    // the watched set has the topic: stream once it has
+    tokio::time::timeout(WAIT, watched.wait_for(|w| w.contains("joint_states")))
+        .await
+        .expect("joint_states not watched in time")
+        .unwrap();
     for i in 0..3 {
         let cdr = eezybot_msgs::cdr::encode(&joint_state(f64::from(i))).unwrap();
         bridge.log("joint_states", &cdr, 2_000 + i as u64).unwrap();
@@ -160,16 +164,20 @@ async fn the_watched_topics_follow_the_clients_subscriptions() {
     a.send(subscribe(1, "/joint_states")).await.unwrap();
     a.send(subscribe(2, "/tf")).await.unwrap();
     wait_for(&mut watched, vec!["joint_states", "tf"]).await;
-    // a second client on the same topic: still watched after the first lets go
+    // a second client on the same topic (registered once a later request of b's is
+    // answered): still watched after the first lets go, and b still gets its samples
     channels(&mut b).await;
     b.send(subscribe(9, "/joint_states")).await.unwrap();
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    round_trip(&mut b).await;
     a.send(Message::text(
         json!({"op": "unsubscribe", "subscriptionIds": [1, 2]}).to_string(),
     ))
     .await
     .unwrap();
     wait_for(&mut watched, vec!["joint_states"]).await;
+    let cdr = eezybot_msgs::cdr::encode(&joint_state(1.0)).unwrap();
+    bridge.log("joint_states", &cdr, 7).unwrap();
+    assert_eq!(next_message_data(&mut b).await, (9, 7, cdr));
     // a client that goes away ends its subscriptions
     a.send(subscribe(3, "/tf")).await.unwrap();
     wait_for(&mut watched, vec!["joint_states", "tf"]).await;

@@ -6,7 +6,7 @@
 use foxglove_bridge::{
     ClientPublish, ClientSample, FoxgloveBridge, FrontLimits, Gate, TopicNames, TOPICS,
 };
-use futures::StreamExt;
+use futures::{SinkExt, StreamExt};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -19,8 +19,9 @@ use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
 pub type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
-/// How long a test waits for what must come.
-pub const WAIT: Duration = Duration::from_secs(5);
+/// How long a test waits for what must come (it only bounds a failure: cargo runs the
+/// test binaries beside each other on a busy host, in debug builds).
+pub const WAIT: Duration = Duration::from_secs(30);
 /// The subprotocol a Foxglove client asks for (and the server must echo).
 const SUBPROTOCOL: &str = "foxglove.sdk.v1";
 
@@ -204,4 +205,38 @@ pub fn offers(info: &Value, capability: &str) -> bool {
         .as_array()
         .unwrap()
         .contains(&json!(capability))
+}
+
+/// A channel no server advertises, and the subscription that asks for it.
+const NO_CHANNEL: u64 = 999_999;
+const NO_CHANNEL_SUB: u32 = 999_999;
+
+/// One round trip: a subscription to a channel that does not exist, which the server
+/// answers at once with an error status; returns what the client received before that
+/// answer. The server handles a client's messages one after the other, so everything the
+/// client sent before has been handled (a sample taken, a subscription registered) when
+/// the answer comes.
+pub async fn round_trip(ws: &mut Ws) -> Vec<Received> {
+    ws.send(subscribe(NO_CHANNEL_SUB, NO_CHANNEL)).await.unwrap();
+    let answer = format!("Unknown channel ID: {NO_CHANNEL}");
+    let end = Instant::now() + WAIT;
+    let mut before = Vec::new();
+    loop {
+        match next_until(ws, end).await {
+            Some(Received::Json(v))
+                if v["op"] == "status" && v["message"].as_str() == Some(answer.as_str()) =>
+            {
+                return before
+            }
+            Some(r) => before.push(r),
+            None => panic!("no answer to the round trip in time"),
+        }
+    }
+}
+
+/// Whether any of `received` is a messageData.
+pub fn has_message_data(received: &[Received]) -> bool {
+    received
+        .iter()
+        .any(|r| matches!(r, Received::Binary(b) if b.first() == Some(&1)))
 }
