@@ -24,8 +24,9 @@ from calibration_rig import (ISSUE_ARM, SHIPPED_CONFIG, CalibrationGraph, Target
 from test_gui_bridge import free_port
 
 # in a process of its own, beside the other tests (like test_leader_arm.py): the firmware
-# in simavr, paced to wall time, mostly waited out; its checks tolerant of a busy host
-pytestmark = [pytest.mark.own_process, pytest.mark.background, pytest.mark.timeout(240)]
+# in simavr, paced to wall time, mostly waited out; its checks tolerant of a busy host (the
+# limit only bounds a failure: a starved simavr and browser make it minutes)
+pytestmark = [pytest.mark.own_process, pytest.mark.background, pytest.mark.timeout(600)]
 
 # well inside every limit row (shoulder 42.5..125, elbow -145..-60, forearm elevation
 # -65..20, base ±45 and the calibrated arm's -41.5..45)
@@ -123,7 +124,9 @@ def test_the_wizard_calibrates_a_miscalibrated_arm_to_within_half_a_degree(launc
         assert path.resolve() == graph.calibration_file.resolve(), saved
         applied = {n.rsplit("/", 1)[-1] for n in saved.get("applied") or []}  # node names, with or without a namespace
         assert {"compute_ik", "serial_node"} <= applied and not saved.get("failed"), saved
-        assert not [m for m in wizard.console if "calibrat" in m[1].lower()], wizard.console
+        # the page said nothing wrong on the way: no console error (a CSP violation is
+        # one too) and no uncaught exception
+        assert not wizard.console, wizard.console
 
         # 3. with the saved calibration, applied live (compute_ik back from calibrating)
         for node in ("compute_ik", "serial_node"):
