@@ -366,7 +366,7 @@ def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_p
             m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
             m.point.x, m.point.y, m.point.z = p
             xyz.publish(m)
-            assert observer.spin_until(lambda: any(s.header.stamp == m.header.stamp for _, s in rig.state), 10)
+            assert observer.spin_until(lambda: any(s.header.stamp == m.header.stamp for _, s in rig.state), 30)
             # compute_ik streams the motion: the last servo_angles is where it ends, once
             # its diagnostics (stamped after the device answered the first) say it is at rest
             answered = time.time()
