@@ -16,7 +16,7 @@ from std_msgs.msg import Bool
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 
-from conftest import REPO, Observer, bin_path, status_values
+from conftest import REPO, Observer, bin_path, latest_status, status_values
 from interop.servo_link import HELLO, HELLO_ACK, STATE, Decoder, SimulatedUno, frame, pulses
 from safety_rig import SerialNodeRig
 import struct
@@ -237,16 +237,11 @@ def test_mock_stalled_servos_holds_a_servo_where_it_stopped_until_cleared(launch
     assert rig.wait_diag(lambda s, v: "mock_stalled_servos" not in v and "stall" not in s.message)
 
 
-def ik_at_rest(diags, after):
-    """compute_ik's diagnostics, in one stamped after `after` (time.time()), say its
-    motion is at rest."""
-    for _, arr in reversed(diags):
-        if stamp_s(arr.header.stamp) <= after:
-            return False
-        s = next((s for s in arr.status if s.name.startswith("compute_ik")), None)
-        if s is not None:
-            return status_values(s).get("motion") == "at rest"
-    return False
+def ik_done(diags, accepted):
+    """compute_ik's latest diagnostics say it accepted `accepted` targets and its motion
+    is at rest."""
+    v = status_values(latest_status(diags, "compute_ik"))
+    return int(v.get("accepted", 0)) >= accepted and v.get("motion") == "at rest"
 
 
 def start_virtual_arduino(link):
@@ -366,11 +361,10 @@ def test_target_to_pulses_through_the_firmware_in_simavr(launch, observer, tmp_p
             m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
             m.point.x, m.point.y, m.point.z = p
             xyz.publish(m)
-            assert observer.spin_until(lambda: any(s.header.stamp == m.header.stamp for _, s in rig.state), 30)
-            # compute_ik streams the motion: the last servo_angles is where it ends, once
-            # its diagnostics (stamped after the device answered the first) say it is at rest
-            answered = time.time()
-            assert observer.spin_until(lambda: ik_at_rest(diags, answered), 15), "compute_ik's motion did not end"
+            # compute_ik streams the motion (serial_node may skip a step for a newer one):
+            # the last servo_angles is where it ends, once its diagnostics say it took
+            # this target and is at rest
+            assert observer.spin_until(lambda: ik_done(diags, i + 1), 30), "compute_ik did not take the target and stop"
             # serial_node ramps to it within the servos' speed limit: wait until it is there
             # (the board in simavr runs slower than the wall clock on a busy host)
             assert observer.spin_until(lambda: [round(math.degrees(a), 1) for a in rig.state[-1][1].position]
