@@ -130,25 +130,45 @@ def test_a_bridge_dialling_a_name_not_in_the_routers_certificate_is_not_let_in(t
     port = 7447
     env = {**os.environ, "EEZYBOT_WAN_BIN_DIR": str(wanhost.wan_bin_dir()), "ZENOH_TLS_DIR": str(d),
            "ZENOH_LISTEN": f"tls/0.0.0.0:{port}", "ROS_DOMAIN_ID": str(domain)}
-    r = subprocess.Popen([*lo_ns, str(ROUTER_SH)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    logs = {n: tmp_path / f"{n}.log" for n in ("router", "127.0.0.1", "127.0.0.2")}
+
+    def out(name):
+        return logs[name].read_text(errors="replace") if logs[name].exists() else ""
+
+    def start(argv, name, **kw):
+        with open(logs[name], "w") as f:
+            return subprocess.Popen([*lo_ns, *argv], stdout=f, stderr=subprocess.STDOUT, **kw)
+
+    def wait_for(done, what, timeout=60):
+        """Until done() (the deadline only bounds a failure)."""
+        deadline = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < deadline, f"{what}\n" + "\n".join(f"--- {n}\n{out(n)[-2000:]}" for n in logs)
+            time.sleep(0.05)
+
+    r = start([str(ROUTER_SH)], "router", env=env)
     bridges = []
     try:
-        time.sleep(1)
+        # the bridges dial once the router listens (its own line), as a user's would
+        wait_for(lambda: "eezybot_wan_router: listening on" in out("router") or r.poll() is not None,
+                 "the router did not say it listens")
+        assert r.poll() is None, out("router")
         bin_ = str(wanhost.wan_bin_dir() / "eezybot_wan_bridge")
         for host in ("127.0.0.1", "127.0.0.2"):
-            bridges.append(subprocess.Popen(
-                [*lo_ns, bin_, "pc", "--router", f"tls/{host}:{port}"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                text=True, env={**env, "RUST_LOG": "warn,zenoh::net::runtime::orchestrator=debug"}))
-        time.sleep(12)
+            bridges.append(start([bin_, "pc", "--router", f"tls/{host}:{port}"], host,
+                                 env={**env, "RUST_LOG": "warn,zenoh::net::runtime::orchestrator=debug"}))
+        # the one dialling its name gets in; the other is refused for the name (each
+        # attempt's reason at debug level) and says it is not connected (every 10 s)
+        wait_for(lambda: "eezybot_wan_bridge: connected to the router tls/127.0.0.2" in out("127.0.0.2")
+                 and "not connected to the router" in out("127.0.0.1")
+                 and ("NotValidForName" in out("127.0.0.1") or "not valid for name" in out("127.0.0.1")),
+                 "the bridges did not show both outcomes")
     finally:
-        outs = []
         for b in bridges:
             b.terminate()
-            outs.append(b.communicate(timeout=20)[0])
+            b.wait(20)
         r.terminate()
-        router_out = r.communicate(timeout=20)[0]
-    wrong, right = outs
-    assert "not connected to the router" in wrong and "eezybot_wan_bridge: connected to the router" not in wrong, wrong[-3000:]
-    assert "NotValidForName" in wrong or "not valid for name" in wrong, wrong[-3000:]
-    assert "eezybot_wan_bridge: connected to the router tls/127.0.0.2" in right, right[-3000:] + router_out[-2000:]
+        r.wait(20)
+    wrong = out("127.0.0.1")
+    assert "eezybot_wan_bridge: connected to the router" not in wrong, wrong[-3000:]
     assert [b.returncode for b in bridges] == [0, 0] and r.returncode == 0

@@ -66,6 +66,7 @@ class WanHosts:
         self.link = None
         self.stats = None
         self.router = None
+        self.router_code = None  # the router's exit status, once close() stopped it
         self._up()
 
     def _up(self):
@@ -131,7 +132,7 @@ class WanHosts:
     def restore(self, site):
         """Plug it back: interface up, the routes re-added."""
         _ip("-n", self.ns[site], "link", "set", "eth0", "up")
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 30  # only bounds a failure
         while True:
             try:
                 self._routes(site)
@@ -155,6 +156,7 @@ class WanHosts:
                 self.router.kill()
                 self.router.wait(10)
             self.router_log.close()
+            self.router_code = self.router.returncode
             self.router = None
         if self.link is not None:
             self.stats = stop_link(self.link)
