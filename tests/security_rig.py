@@ -395,7 +395,10 @@ class SecureGraph:
 
         self.hosts, self.domain, self.keystore = hosts, domain, keystore
         env = security_env(keystore) if keystore is not None else dict(NO_SECURITY)
-        ik_args = ["--ros-args", "--enclave", pc_enclave] if keystore is not None else []
+        # No age limit on targets: these tests are about who may talk, not stale targets
+        # (test_compute_ik's), and on a busy host a target can take longer than the
+        # default 0.5 s to arrive, which compute_ik refuses.
+        ik_args = ["--ros-args", "-p", "max_target_age:=0.0"] + (["--enclave", pc_enclave] if keystore is not None else [])
         serial_args = ["--ros-args", "-p", "port:=mock"] + (["--enclave", pi_enclave] if keystore is not None else [])
         self.procs = []
         self.ik = NodeProcess("compute_ik", ik_args, domain, env=env, netns=hosts.pc)
