@@ -83,6 +83,9 @@ case "$profile" in
   *) _say "EEZYBOT_PI_PROFILE=$profile: pi or pi-check"; exit 2 ;;
 esac
 version=$(git describe --always --dirty 2>/dev/null || echo unknown)
+# cargo's target directory (CARGO_TARGET_DIR: tests/run_all.sh keeps the Pi's build per
+# machine), absolute
+target_dir=$(realpath -m "${CARGO_TARGET_DIR:-target}")
 declare -A need_glibc bridge_glibc
 mkdir -p dist
 for arch in "${arches[@]}"; do
@@ -107,7 +110,7 @@ for arch in "${arches[@]}"; do
   # explicitly, so OpenSSL is never configured with the host's gcc
   env "CC_${t//-/_}=$(cc_of "$arch")" "AR_${t//-/_}=$(ar_of "$arch")" "${openssl_env[@]}" \
     cargo build -q --profile "$profile" --target "$t" -p serial_node --bins --features ros_plumbing/vendored-openssl
-  out="target/$t/$profile"
+  out="$target_dir/$t/$profile"
   if [ "$openssl_cache" != off ] && [ ${#openssl_env[@]} = 0 ]; then
     for built in "$out"/build/openssl-sys-*/out/openssl-build/install; do
       [ -f "$built/lib/libssl.a" ] || continue
@@ -130,11 +133,12 @@ for arch in "${arches[@]}"; do
   # are read only if an engine or provider module is loaded by name (none is: the
   # providers are built in, and OPENSSL_ENGINES/OPENSSL_MODULES would override them).
   root_re=$(printf '%s' "$root" | sed 's/[][\.*^$+?(){}|/]/\\&/g')
-  openssl_dirs="^$root_re/target/$t/$profile/build/openssl-sys-[0-9a-f]+/out/openssl-build/install/lib/(engines-3|ossl-modules)\$"
+  target_re=$(printf '%s' "$target_dir" | sed 's/[][\.*^$+?(){}|/]/\\&/g')
+  openssl_dirs="^$target_re/$t/$profile/build/openssl-sys-[0-9a-f]+/out/openssl-build/install/lib/(engines-3|ossl-modules)\$"
   for b in "${bins[@]}"; do
-    leaks=$(grep -aoE "$root_re/[[:print:]]*" "$out/$b" | grep -vE "$openssl_dirs" | sort -u || true)
+    leaks=$(grep -aoE "($root_re|$target_re)/[[:print:]]*" "$out/$b" | grep -vE "$openssl_dirs" | sort -u || true)
     if [ -n "$leaks" ]; then
-      _say "$out/$b names a path in $root:"; echo "$leaks" >&2; exit 1
+      _say "$out/$b names a path in $root or $target_dir:"; echo "$leaks" >&2; exit 1
     fi
   done
 
@@ -231,7 +235,7 @@ _say "stripped binaries:"
 for arch in "${arches[@]}"; do
   t=$(triple "$arch")
   for b in "${bins[@]}"; do
-    printf '  %-30s %-16s %6s KiB\n' "$t" "$b" $(( $(stat -c %s "target/$t/$profile/$b") / 1024 )) >&2
+    printf '  %-30s %-16s %6s KiB\n' "$t" "$b" $(( $(stat -c %s "$target_dir/$t/$profile/$b") / 1024 )) >&2
   done
   if [ "$wan" = 1 ]; then
     printf '  %-30s %-16s %6s KiB  (needs glibc >= %s)\n' "$t" eezybot_wan_bridge \

@@ -7,8 +7,9 @@
 #    run against the patched rustdds;
 # 2. the unit tests of both copies pass, as we build them (feature `security`),
 #    ros2-client's against the patched rustdds.
-# Both crates build in one target directory of their own (target/patches): their
-# dependencies are shared between the two, not with the workspace (other profile).
+# Both crates build in one target directory of their own (CARGO_TARGET_DIR, default
+# target/patches; tests/run_all.sh keeps it per machine): their dependencies are shared
+# between the two, not with the workspace (other profile).
 # `--no-tests` runs only the resolution checks.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -58,7 +59,7 @@ check_resolution "wan (wan/Cargo.lock)" zenoh-plugin-ros2dds=wan/patches/zenoh-p
 [[ ${1:-} == --no-tests ]] && exit 0
 # debug info as the workspace has it (line tables, none for dependencies): smaller
 # and quicker to build than the crates' default
-export CARGO_TARGET_DIR=$PWD/target/patches
+export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$PWD/target/patches}
 profile=(--config 'profile.dev.debug="line-tables-only"' --config 'profile.dev.package."*".debug=false')
 cargo test --locked --manifest-path patches/rustdds/Cargo.toml "${profile[@]}" --features security --lib
 cargo test --locked --manifest-path patches/ros2-client/Cargo.toml "${profile[@]}" "${patch_rustdds[@]}" \
