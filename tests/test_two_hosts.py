@@ -55,16 +55,26 @@ def test_a_target_from_the_pc_comes_back_from_the_firmware_on_the_pi(hosts, doma
     try:
         g.wait_flowing()
         goal = (0.2, 0.05, 0.15)
-        m = stamp_of(time.time())
-        m.point.x, m.point.y, m.point.z = goal
-        g.xyz.publish(m)
-        want = seconds(m.header.stamp)
+        want = set()
+
+        def answered():
+            """compute_ik's servo_angles carries one of the goal's stamps, else the goal
+            goes again, stamped now (once a second: compute_ik refuses a target older
+            than max_target_age, which a host with a load of 50 made one)."""
+            if any(seconds(a.header.stamp) in want for _, a in angles):
+                return True
+            if not want or time.time() > max(want) + 1:
+                m = stamp_of(time.time())
+                m.point.x, m.point.y, m.point.z = goal
+                g.xyz.publish(m)
+                want.add(seconds(m.header.stamp))
+            return False
+
         # judged on compute_ik's servo_angles: serial_node may supersede that first step by
         # the next one when both reach it together (latest wins, a busy host), so the
         # servo_state answering it is not sure to come; the arm at rest below is the
         # round trip through the board (the bounds only bound a failure)
-        assert g.pump_until(lambda: any(seconds(a.header.stamp) == want for _, a in angles), 15, send=False), \
-            f"no servo_angles for the target\n{g.logs_tail()}"
+        assert g.pump_until(answered, 30, send=False), f"no servo_angles for the target\n{g.logs_tail()}"
         expected = servo_deg(*goal)
 
         def at_rest():
