@@ -4,7 +4,7 @@ tests/test_jazzy.py, which runs under Kilted and checks what this prints. Import
 nothing of the tests that needs pytest or Kilted.
 
     python tests/jazzy_client.py --domain N graph --expect NODE... [--endpoints JSON] [--timeout S]
-    python tests/jazzy_client.py --domain N target --xyz X Y Z [--timeout S]
+    python tests/jazzy_client.py --domain N target --xyz X Y Z --expect-deg B S E G [--timeout S]
     python tests/jazzy_client.py --domain N params --node NAME [--get PARAM...] [--timeout S]
     python tests/jazzy_client.py --domain N trajectory --move RAD [--timeout S]
 
@@ -14,6 +14,7 @@ services answered; what the FollowJointTrajectory action answered)."""
 import argparse
 import importlib.metadata
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -100,15 +101,20 @@ def graph(c, a):
 
 
 def target(c, a):
-    """Publish one xyz_target stamped now; the first joint_states and servo_angles it
-    causes (which carry its stamp) and the last of each once the motion has ended, with
-    servo_state where the device came to rest."""
+    """Publish one xyz_target stamped now; the first servo_angles it causes and the
+    joint_states of that step (which carry its stamp), the last of each once the motion
+    has ended (a servo_angles equal to --expect-deg, the servo angles the test knows the
+    target's IK puts the arm at), and the servo_state the device answered that step
+    with (it carries the step's stamp) once within --device-tol-deg of it."""
     from geometry_msgs.msg import PointStamped
     from sensor_msgs.msg import JointState
 
     got = {t: [] for t in ("joint_states", "servo_angles", "servo_state")}
     for t in got:
-        c.node.create_subscription(JointState, f"/{t}", lambda m, t=t: got[t].append(m), qos(t))
+        # every sample kept until taken (the contract's depth of 10 is 0.2 s of steps)
+        deep = qos(t)
+        deep.depth = 10_000
+        c.node.create_subscription(JointState, f"/{t}", lambda m, t=t: got[t].append(m), deep)
     pub = c.node.create_publisher(PointStamped, "/xyz_target", qos("xyz_target"))
     if not c.spin_until(lambda: pub.get_subscription_count() > 0
                         and all(c.node.count_publishers(f"/{t}") > 0 for t in got), a.timeout):
@@ -123,26 +129,52 @@ def target(c, a):
     stamp = [msg.header.stamp.sec, msg.header.stamp.nanosec]
     n = {t: len(ms) for t, ms in got.items()}
     pub.publish(msg)
+    def stamp_of(m):
+        return [m.header.stamp.sec, m.header.stamp.nanosec]
+
+    def step_js(sa):
+        # the joint_states of a step: its stamp (compute_ik also greets a new
+        # joint_states reader with the pose, so they are not counted)
+        js = [m for m in got["joint_states"][n["joint_states"]:] if stamp_of(m) == stamp_of(sa)]
+        return js[-1] if js else None
+
     if not c.spin_until(lambda: len(got["servo_angles"]) > n["servo_angles"]
-                        and len(got["joint_states"]) > n["joint_states"], a.timeout):
+                        and step_js(got["servo_angles"][n["servo_angles"]]), a.timeout):
         return {"error": "no joint_states/servo_angles for the target"}
-    # at rest: no new servo_angles for 0.3 s (servo_state goes on: a steady stream)
-    end = time.monotonic() + a.timeout
-    while time.monotonic() < end:
-        k = len(got["servo_angles"])
-        c.spin_for(0.3)
-        if len(got["servo_angles"]) == k:
-            break
-    c.spin_for(0.3)  # the device's state reply to the last step
+    first_sa = got["servo_angles"][n["servo_angles"]]
+
+    # the motion's end: a step at the expected angles (the planner may publish it twice,
+    # its velocity coming to 0 a step after its position: either is the end)
+    def final_steps():
+        return [m for m in got["servo_angles"][n["servo_angles"]:]
+                if all(abs(math.degrees(p) - e) <= 1e-9 for p, e in zip(m.position, a.expect_deg))]
+
+    def replied():
+        # the device's state answering a step from the one that arrived on (its stamp,
+        # or a later one's: the last step may come twice), once the servos got there: it
+        # reports where they are, and they move on after the last command
+        arrived = stamp_of(final_steps()[0])
+        return [m for m in got["servo_state"] if stamp_of(m) >= arrived
+                and all(abs(math.degrees(p) - e) <= a.device_tol_deg for p, e in zip(m.position, a.expect_deg))]
+
+    if not c.spin_until(lambda: final_steps() and step_js(final_steps()[-1]), a.timeout):
+        return {"error": f"no servo_angles at {a.expect_deg}; the last: "
+                         f"{[math.degrees(p) for p in got['servo_angles'][-1].position]}"}
+    if not c.spin_until(replied, a.timeout):
+        last = got["servo_state"][-1] if got["servo_state"] else None
+        return {"error": "no servo_state answering the last step within --device-tol-deg of it; the last: "
+                         f"{last and (stamp_of(last), [math.degrees(p) for p in last.position])}"}
 
     def js(m):
-        return {"stamp": [m.header.stamp.sec, m.header.stamp.nanosec], "name": list(m.name),
-                "position": list(m.position)}
+        return {"stamp": stamp_of(m), "name": list(m.name), "position": list(m.position)}
 
+    state = replied()[-1]
+    last_sa = final_steps()[-1]
     return {
         "stamp": stamp,
-        "first": {t: js(got[t][n[t]]) for t in ("joint_states", "servo_angles")},
-        "last": {t: js(ms[-1]) for t, ms in got.items() if ms},
+        "first": {"joint_states": js(step_js(first_sa)), "servo_angles": js(first_sa)},
+        "last": {"joint_states": js(step_js(last_sa)), "servo_angles": js(last_sa), "servo_state": js(state)},
+        "arrived_stamp": stamp_of(final_steps()[0]),
         "counts": {t: len(ms) - n[t] for t, ms in got.items()},
     }
 
@@ -217,7 +249,9 @@ def trajectory(c, a):
     out = {"start": start, "end": end, "accepted": handle.accepted}
     if handle.accepted:
         res = c.wait(handle.get_result_async(), a.timeout)
-        c.spin_for(0.2)
+        # the last joint_states may come after the result: wait for the goal's end point
+        # (or the timeout: the test then says how far the arm was)
+        c.spin_until(lambda: max(abs(p - q) for p, q in zip(joints(), end)) < 1e-9, a.timeout)
         out.update(status=res.status, error_code=res.result.error_code, error_string=res.result.error_string,
                    feedback=len(feedback), final=joints())
         if feedback:
@@ -238,6 +272,8 @@ def main():
     g.add_argument("--endpoints", default="[]")
     t = sub.add_parser("target")
     t.add_argument("--xyz", nargs=3, type=float, required=True)
+    t.add_argument("--expect-deg", nargs=4, type=float, required=True)
+    t.add_argument("--device-tol-deg", type=float, default=0.1)
     p = sub.add_parser("params")
     p.add_argument("--node", required=True)
     p.add_argument("--get", nargs="+", default=["diagnostics_period"])

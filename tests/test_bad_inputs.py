@@ -63,6 +63,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, String
 
 from conftest import OUTPUT, REPO, DomainLease, NodeProcess, Observer, qos
+from robot_facts import servo_deg
+
+# The campaign runs in the first test's setup: 3 to 6 minutes on a busy 2-core host (the
+# inputs are paced, and a publish waits while the debug nodes catch up). The limit only
+# ends a hang.
+pytestmark = pytest.mark.timeout(900)
 from interop.servo_link import SET_PULSES, STATE, Decoder, SimulatedUno, parse_state, pulses
 
 SEED = int(os.environ.get("EEZYBOT_BAD_INPUTS_SEED", "9007"))
@@ -590,7 +596,9 @@ class WsClient:
     """One connection to gui_bridge's /ws; a thread reads and keeps every message."""
 
     def __init__(self, port, key_seed=0):
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+        # (a bound that only ends a failure: a debug gui_bridge on a busy host takes
+        # seconds over a 3000-link robot_description, and answers the upgrade after it)
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
         key = base64.b64encode(hashlib.sha256(str(key_seed).encode()).digest()[:16]).decode()
         self.sock.sendall((f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
                            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
@@ -777,6 +785,7 @@ CDR_TOPICS = {"xyz_target": "geometry_msgs::msg::dds_::PointStamped_", "gripper_
               "servo_state": "sensor_msgs::msg::dds_::JointState_", "diagnostics": "diagnostic_msgs::msg::dds_::DiagnosticArray_",
               "robot_description": "std_msgs::msg::dds_::String_"}
 CDR_PER_TOPIC = 24
+CDR_END_TOPIC = "campaign_cdr_end"  # the observer's own: ends the malformed-sample phase
 
 
 def cdr_junk(rng, topic, i):
@@ -817,7 +826,12 @@ def cdr_phase(g, rng, r):
         qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(100),
                   *([Policy.Durability.TransientLocal] if latched else []))
         writers[topic] = (DataWriter(dp, Topic(dp, "rt/" + topic, types[typename]), qos=qos), types[typename])
-    time.sleep(2.0)  # discovery of the new participant
+    # every node that reads a topic has matched its writer: nothing written is lost to
+    # discovery (the observer's Fast DDS readers need not match: a Raw type is not theirs)
+    wanted = {t: len(g.SUBSCRIBERS[t]) for t in CDR_TOPICS}
+    matched = lambda: {t: w.get_publication_matched_status().current_count for t, (w, _) in writers.items()}  # noqa: E731
+    if not g.wait(lambda: all(matched()[t] >= n for t, n in wanted.items()), 30):
+        r["problems"].append(f"malformed-sample writers matched {matched()}, not {wanted}")
     order = [t for t in CDR_TOPICS for _ in range(CDR_PER_TOPIC)]
     rng.shuffle(order)
     seen = Counter()
@@ -828,7 +842,17 @@ def cdr_phase(g, rng, r):
         r["sent"][topic] += 1
         r["kinds"][(topic, "malformed_cdr")] += 1
         time.sleep(0.01)
-    time.sleep(1.0)
+    # the end of the phase for the observer: every malformed sample acknowledged by
+    # every reader that matched it, then a sample of the observer's own, published after
+    # that: once its spin thread took it, it took (or failed to take) every sample that
+    # was in its readers before (the executor serves ready readers in the order they
+    # were made, this one last)
+    for topic, (w, _) in writers.items():
+        if not w.wait_for_acks(duration(seconds=30)):
+            r["problems"].append(f"malformed samples on {topic} not acknowledged in 30 s")
+    end = g.pubs["cdr_end"]
+    if not g.wait(lambda: (end.publish(String(data="end")), g.cdr_end_at is not None)[1], 30):
+        r["problems"].append("the observer did not take the end-of-phase sample")
     del writers
     dp = None  # noqa: F841  (deletes the participant)
     return seen
@@ -985,6 +1009,7 @@ class Graph:
             "diagnostics": node.create_publisher(DiagnosticArray, "/diagnostics", SEND),
             "robot_description": node.create_publisher(String, "/robot_description", DESCRIPTION),
             "estop": node.create_publisher(Bool, "/estop", qos("estop")),
+            "cdr_end": node.create_publisher(String, "/" + CDR_END_TOPIC, COUNT),
         }
         # what went over each topic (ours and the nodes'), counted as it arrives
         self.counts = Counter()
@@ -1000,6 +1025,8 @@ class Graph:
         node.create_subscription(JointState, "/servo_angles", self._on_servo_angles, COUNT)
         node.create_subscription(JointState, "/servo_state", self._on_servo_state, COUNT)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, COUNT)
+        self.cdr_end_at = None  # when the observer took the sample that ends the malformed-sample phase
+        node.create_subscription(String, "/" + CDR_END_TOPIC, self._on_cdr_end, COUNT)
         self.spin_errors = []
         self._stop = threading.Event()
         self._spinner = threading.Thread(target=self._spin, daemon=True)
@@ -1014,6 +1041,10 @@ class Graph:
                 # test_the_observer_missed_only_the_malformed_samples
                 ours = any(f.filename == __file__ for f in traceback.extract_tb(e.__traceback__))
                 self.spin_errors.append((time.monotonic(), ours, repr(e)[:200]))
+
+    def _on_cdr_end(self, m):
+        if m.data == "end":
+            self.cdr_end_at = time.monotonic()
 
     def _on_joint_states(self, m):
         self.counts.update(["joint_states"])
@@ -1310,8 +1341,8 @@ def campaign(tmp_path_factory):
         cdr_log = {n: g.log_offset(n) for n in g.procs}
         cdr_start = time.monotonic()
         r["cdr_sent"] = cdr_phase(g, rng, r)
-        time.sleep(1.0)
-        r["cdr_window"] = (cdr_start, time.monotonic() + 2.0)  # when rclpy may fail to take a sample
+        # when rclpy may fail to take a sample: until it took the end-of-phase sample
+        r["cdr_window"] = (cdr_start, g.cdr_end_at or time.monotonic())
         patterns = {"compute_ik": ("rejected: unreadable sample", "unreadable sample on estop ignored"),
                     "serial_node": ("unreadable sample ignored", "unreadable sample on estop ignored"),
                     "state_publisher": ("unreadable joint_states sample ignored", None), "gui_bridge": ("unreadable", None)}
@@ -1353,7 +1384,7 @@ def campaign(tmp_path_factory):
             n0 = counter(g.values(node), ckey)
             g.pubs[topic].publish(msg)
             r["sent"][topic] += 1
-            g.wait(lambda: counter(g.values(node), ckey) > n0, 2)
+            g.wait(lambda: counter(g.values(node), ckey) > n0, 10)
             v = g.values(node)
             r["rules"][name] = (counter(v, ckey) - n0, v.get("last_rejection") or v.get("last_skipped") or "")
 
@@ -1387,7 +1418,7 @@ def campaign(tmp_path_factory):
         for name, make in WS_PROTOCOL_JUNK:
             if (c := send_on_new_connection(name, make)) is None:
                 continue
-            closed = c.closed.wait(5)
+            closed = c.closed.wait(20)
             r["ws_protocol"].append((name, "closed" if closed else "open", c.close_reason))
             c.sock.close()
         for name, make in WS_ODD_FRAMING:
@@ -1399,10 +1430,10 @@ def campaign(tmp_path_factory):
                                      c.closed.is_set()))
             c.close()
         for name, data in HTTP_JUNK:
-            with socket.create_connection(("127.0.0.1", g.port), timeout=5) as s:
+            with socket.create_connection(("127.0.0.1", g.port), timeout=30) as s:
                 try:
                     s.sendall(data)
-                    s.settimeout(5)
+                    s.settimeout(30)
                     reply = s.recv(200)
                 except OSError as e:
                     reply = repr(e).encode()
@@ -1444,9 +1475,8 @@ def campaign(tmp_path_factory):
 
         # ---- every node still answers: fresh diagnostics, and its parameter service
         t_now = time.monotonic()
-        time.sleep(1.5)
-        r["answering"] = {n: (g.diag.get(n, (0,))[0] > t_now, get_params(g, n, WATCHED_PARAMS[n][:1]) is not None)
-                          for n in WATCHED_PARAMS}
+        fresh = {n: g.wait(lambda: g.diag.get(n, (0,))[0] > t_now, 10) for n in WATCHED_PARAMS}
+        r["answering"] = {n: (fresh[n], get_params(g, n, WATCHED_PARAMS[n][:1]) is not None) for n in WATCHED_PARAMS}
         r["diag_longest"] = dict(g.diag_longest)
         r["gui_diag"] = dict(g.values("gui_bridge"))
         r["alive_at_end"] = g.alive()
@@ -1491,7 +1521,7 @@ def expected_pulse_us(deg, key):
     return s["pulse_min_us"] + (s["pulse_max_us"] - s["pulse_min_us"]) * deg / 180.0
 
 
-def settled_widths(uno, after_cycle, want, timeout=5.0):
+def settled_widths(uno, after_cycle, want, timeout=20.0):
     """Wait until the last 4 pulses on every pin are within 2 us of `want`; the widths."""
     end = time.monotonic() + timeout
     while True:
@@ -1505,16 +1535,14 @@ def settled_widths(uno, after_cycle, want, timeout=5.0):
         time.sleep(0.1)
 
 
-def motion_done(g, quiet=0.5, timeout=15.0):
-    """compute_ik's last servo_angles once it has sent none for `quiet` s (the arm moves
-    within config/arm.yaml's motion limits, so a target takes a while)."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        n = len(g.servo_angles_from_ik)
-        time.sleep(quiet)
-        if len(g.servo_angles_from_ik) == n:
-            break
-    return g.servo_angles_from_ik[-1][3]
+def motion_done(g, expected_deg, timeout=30.0):
+    """Whether compute_ik's servo_angles got where a target puts the arm (its first
+    servos at `expected_deg`, the target's IK, known in advance), and its last one then
+    (or at the timeout)."""
+    def arrived():
+        return bool(g.servo_angles_from_ik) and all(
+            abs(math.degrees(a) - e) <= 1e-9 for a, e in zip(g.servo_angles_from_ik[-1][3], expected_deg))
+    return g.wait(arrived, timeout), g.servo_angles_from_ik[-1][3]
 
 
 def after_checks(g, ws):
@@ -1529,7 +1557,7 @@ def after_checks(g, ws):
     g.pubs["xyz_target"].publish(m)
     ok = g.wait(lambda: any(s == stamp for _, s, _ in g.servo_state), 10)
     out["rclpy_target_acknowledged"] = bool(ok)
-    final = motion_done(g)
+    out["rclpy_target_reached"], final = motion_done(g, servo_deg(0.2, 0.05, 0.15))
     deg = [math.degrees(a) for a in final]
     want = [expected_pulse_us(d, k) for d, k in zip(deg, SERVO_KEYS)]
     acked_at = g.uno.events()[1][-1][0]
@@ -1779,16 +1807,20 @@ def test_bad_parameters_are_refused_with_a_reason_and_change_nothing(campaign):
     assert r["params_after"] == r["params_before"]
 
 
-def test_gui_bridge_answers_every_text_frame_with_a_reason(campaign):
+def test_gui_bridge_answers_text_frames_with_a_reason_dropping_under_1_percent(campaign):
+    """Every text frame is answered, or its answer counted in dropped_replies (the loop
+    drops an answer rather than wait for a client whose 32-answer queue is full; this
+    client reads all the time, so that is rare): at most 1 % of them."""
     r = campaign
     texts = [(k, e) for k, e in r["ws_sent"] if e != "none"]
     answers = r["ws_answers"][:len(texts)]  # the check afterwards adds one
     assert not r["ws_closed"][0], r["ws_closed"]
-    # a parse error is answered at once, a request after the bridge loop took it: count, not order;
-    # the loop drops (and counts) an answer rather than wait for a slow client
+    # a parse error is answered at once, a request after the bridge loop took it: count, not order
     dropped = int(r["gui_diag"].get("dropped_replies", "0") or 0)
     got, want = Counter(a.get("t") for a in answers), Counter(e for _, e in texts)
+    print(f"\n{len(texts)} text frames, {sum(got.values())} answered, {dropped} answers dropped")
     assert sum(got.values()) + dropped == len(texts) and all(got[k] <= want[k] for k in got), (got, want, dropped)
+    assert dropped <= 0.01 * len(texts), (dropped, len(texts))
     assert all(a.get("reason", "").strip() for a in answers if a.get("t") == "refused")
 
 
@@ -1813,6 +1845,7 @@ def test_every_node_still_answers_at_the_end(campaign):
 def test_the_graph_still_works_after_the_campaign(campaign):
     c = campaign["after_checks"]
     assert c["rclpy_target_acknowledged"]
+    assert c["rclpy_target_reached"], c["rclpy_target_pulses"]
     want, got = c["rclpy_target_pulses"]
     assert all(g is not None and abs(g - w) <= 2.0 for g, w in zip(got, want)), (want, got)
     assert c["gripper_target_applied"]
@@ -1895,9 +1928,9 @@ def test_a_long_parameter_error_reply_does_not_kill_the_node(launch, observer):
     assert cli.wait_for_service(timeout_sec=15)
     value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="/" + "p" * 1300)
     fut = cli.call_async(SetParameters.Request(parameters=[Parameter(name="arm_config", value=value)]))
-    answered = observer.spin_until(fut.done, 5)
+    answered = observer.spin_until(fut.done, 15)
     n = len(diags)
-    still_reporting = observer.spin_until(lambda: len(diags) >= n + 3, 3)
+    still_reporting = observer.spin_until(lambda: len(diags) >= n + 3, 10)
     assert answered and not fut.result().results[0].successful and still_reporting, (answered, still_reporting)
 
 

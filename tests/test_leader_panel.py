@@ -97,9 +97,10 @@ def test_the_panel_shows_the_leader_beside_the_follower(launch, observer, browse
             })""")
 
         # 2. the deadman held: the leader shows, followed; the follower converges to it
-        assert lead(True, lambda: not view()["hidden"], 8), f"the leader's view did not show: {view()}"
+        # (the bounds of these waits only end a failure: browser and graph round trips on a busy host)
+        assert lead(True, lambda: not view()["hidden"], 15), f"the leader's view did not show: {view()}"
         want = dict(LEADER_DEG, gripper=round(math.degrees(LEADER_GRIPPER), 1))
-        assert lead(True, lambda: close_to(angles(view()["leader"], "leader:"), want, 0.05), 5), view()
+        assert lead(True, lambda: close_to(angles(view()["leader"], "leader:"), want, 0.05), 15), view()
         v = view()
         assert not v["poseHidden"] and v["canvases"] >= 1, v
         assert "deadman held" in v["state"] and "following" in v["state"] and v["held"] == "held", v
@@ -116,20 +117,23 @@ def test_the_panel_shows_the_leader_beside_the_follower(launch, observer, browse
             document.getElementById('leader-pose')) & Node.DOCUMENT_POSITION_FOLLOWING""")
         assert order, "the leader's pose is not under the follower's"
         # compute_ik follows while the deadman is held: the follower's angles shown converge
-        assert lead(True, lambda: close_to(angles(view()["follower"]), LEADER_DEG, 0.1), 10), \
+        assert lead(True, lambda: close_to(angles(view()["follower"]), LEADER_DEG, 0.1), 15), \
             f"the follower's angles shown did not reach the leader's: {view()}"
-        js = joint_states[-1][1]
-        got = {n: js.position[list(js.name).index(n)] for n in ARM}
-        for name, value in zip(ARM, sample.position):
-            assert abs(got[name] - value) < 1e-3, (got, sample.position)
+        # and on joint_states (the page shows 0.1 deg; the motion may still be in its
+        # last steps, or the observer's sample older than the page's): until within 1e-3 rad
+        def follower():
+            js = joint_states[-1][1]
+            return {n: js.position[list(js.name).index(n)] for n in ARM}
+        assert lead(True, lambda: all(abs(follower()[n] - v) < 1e-3 for n, v in zip(ARM, sample.position)), 15), \
+            (follower(), sample.position)
 
         # 3. the deadman released: the panel says the follower holds
-        assert lead(False, lambda: "deadman released" in view()["state"], 5), view()
+        assert lead(False, lambda: "deadman released" in view()["state"], 15), view()
         v = view()
         assert not v["hidden"] and "holding" in v["state"] and v["held"] == "" and "not followed" in v["leader"], v
 
         # 4. the leader stops: its view hides again (2 s after the last message)
-        page.wait_for_function("() => document.getElementById('leader-view').hidden", timeout=6000)
+        page.wait_for_function("() => document.getElementById('leader-view').hidden", timeout=15000)
         assert page.evaluate("() => document.getElementById('leader-pose').hidden")
         assert not page.is_visible("#leader-view") and not page.is_visible("#leader-pose")
 
