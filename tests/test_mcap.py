@@ -1,19 +1,17 @@
 """gui_bridge's MCAP recordings (`record FILE.mcap`, `play FILE.mcap`), read with the
 `mcap` and `mcap-ros2-support` packages: the profile, every channel's ros2msg schema
-and CDR encoding, message counts; and a recording played back at its recorded pace."""
+and CDR encoding, message counts; and a recording played back, in order and restamped
+(its pace is checked on a simulated clock by gui_bridge's unit test of `play`)."""
 import os
 import signal
 import subprocess
-import time
 
-import pytest
 from geometry_msgs.msg import PointStamped
+from mcap import reader as mcap_reader
+from mcap_ros2 import decoder as mcap_ros2_decoder
 from std_msgs.msg import Float64
 
 from conftest import bin_path
-
-mcap_reader = pytest.importorskip("mcap.reader")
-mcap_ros2_decoder = pytest.importorskip("mcap_ros2.decoder")
 
 RECORDED = {
     "/xyz_target": "geometry_msgs/msg/PointStamped",
@@ -40,7 +38,9 @@ def read(path):
 
 
 def record_session(launch, observer, domain, path):
-    launch("compute_ik")
+    """Record compute_ik's motion through TARGETS (and one gripper target) into `path`;
+    returns compute_ik's process (still running) and the recorder's output."""
+    ik = launch("compute_ik")
     launch("state_publisher")
     observer.wait_publisher("/joint_states")
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
@@ -48,21 +48,26 @@ def record_session(launch, observer, domain, path):
                            stderr=subprocess.STDOUT, text=True, env=env)
     xyz = observer.pub("/xyz_target", PointStamped)
     grip = observer.pub("/gripper_target", Float64)
-    observer.wait_matched(xyz)
-    observer.wait_matched(grip)
-    time.sleep(1.0)  # the recorder's subscriptions discovered by compute_ik's publishers too
+    # Two readers on each, compute_ik's and the recorder's, before the first target: our
+    # writers send to the recorder from then on (a sleep stood for this). Whether its
+    # readers know our writers as early is not something the recorder tells.
+    assert observer.spin_until(lambda: xyz.get_subscription_count() >= 2 and grip.get_subscription_count() >= 2, 30), \
+        f"the recorder's subscriptions were not matched: {xyz.get_subscription_count()}, {grip.get_subscription_count()}"
     for (x, y, z), gap in zip(TARGETS, GAPS_S):
-        observer.spin_for(gap)
+        observer.spin_for(gap)  # the pace being recorded (an input, not a verdict)
         m = PointStamped()
         m.header.frame_id = "base_link"
         m.point.x, m.point.y, m.point.z = x, y, z
         xyz.publish(m)
     grip.publish(Float64(data=0.5))
+    # Nothing the recorder says tells that it has taken the last samples: this settle
+    # stands in for it (gui_bridge record would need to report its readers' matches and
+    # samples taken; see the report of issue 32).
     observer.spin_for(1.5)
     rec.send_signal(signal.SIGINT)
     out, _ = rec.communicate(timeout=15)
     assert rec.returncode == 0, out
-    return out
+    return ik, out
 
 
 def test_record_writes_ros2msg_schemas_and_cdr_that_the_mcap_packages_read(launch, observer, domain, tmp_path):
@@ -92,31 +97,26 @@ def test_record_writes_ros2msg_schemas_and_cdr_that_the_mcap_packages_read(launc
     assert "<robot" in urdf.data
 
 
-def test_play_republishes_the_recorded_targets_at_their_recorded_pace(launch, observer, domain, tmp_path):
+def test_play_republishes_the_recorded_targets_in_order_restamped(launch, observer, domain, tmp_path):
     path = tmp_path / "run.mcap"
-    record_session(launch, observer, domain, path)
+    ik, _ = record_session(launch, observer, domain, path)
     _, _, messages = read(path)
     recorded_times = [t for topic, _, t, _ in messages if topic == "/xyz_target"]
+    # `play` waits for a subscriber of xyz_target before its first target: with
+    # compute_ik gone, that subscriber is our reader.
+    assert ik.stop() == 0, ik.output()
 
     got = observer.sub("/xyz_target", PointStamped)
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     play = subprocess.Popen([bin_path("gui_bridge"), "play", str(path)], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=env)
-    observer.spin_until(lambda: play.poll() is not None, 60)  # spinning: arrival times are real
+    observer.spin_until(lambda: play.poll() is not None, 60)
     out, _ = play.communicate(timeout=10)
     assert play.returncode == 0, out
-    assert observer.spin_until(lambda: len(got) >= len(TARGETS), 5), f"{len(got)} of {len(TARGETS)} targets arrived"
+    assert observer.spin_until(lambda: len(got) >= len(TARGETS), 10), f"{len(got)} of {len(TARGETS)} targets arrived"
     assert [(round(m.point.x, 4), round(m.point.y, 4), round(m.point.z, 4)) for _, m in got] == TARGETS
-    # The pace, from the player's own clock: it stamps each target when it publishes it
-    # (`play` restamps), so the stamps' offsets from the first are its schedule, which
-    # never runs ahead of the recording (it may fall behind on a loaded host: not
-    # asserted, printed).
-    stamped = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in got]
-    played = [t - stamped[0] for t in stamped]
-    recorded = [(t - recorded_times[0]) / 1e9 for t in recorded_times]
-    arrived = [t - got[0][0] for t, _ in got]
-    print(f"\nrecorded offsets {[round(r, 3) for r in recorded]} s, published at {[round(p, 3) for p in played]} s, "
-          f"arrived at {[round(a, 3) for a in arrived]} s")
-    assert recorded[-1] >= sum(GAPS_S) * 0.5, f"the recording lost its gaps (the check below would be vacuous): {recorded}"
-    for p, want in zip(played, recorded):
-        assert p >= want - 0.02, f"a target was played ahead of its recorded time: {played} vs {recorded}"
+    # Stamped anew when played: later than the recording took them (a player that kept
+    # the recorded stamps, older than their log times, fails here).
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in got]
+    assert all(s > recorded_times[-1] for s in stamps), f"not restamped: {stamps} vs recorded at {recorded_times}"
+    assert stamps == sorted(stamps), stamps

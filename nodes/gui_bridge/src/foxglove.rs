@@ -16,7 +16,7 @@ use eezybot_msgs::std_msgs::Float64;
 use eezybot_msgs::{RosMessage, Time};
 use foxglove_bridge::{
     now_ns, Admitted, ClientPublish, ClientSample, FoxgloveBridge, FrontLimits, Gate, McapRecorder,
-    McapTargets, Refused, TopicNames, UpgradeRequest,
+    McapTargets, RecordedTarget, Refused, TopicNames, UpgradeRequest,
 };
 use futures::future::{FutureExt, LocalBoxFuture};
 use futures::stream::{LocalBoxStream, StreamExt};
@@ -506,18 +506,102 @@ pub async fn play_mcap(
         }
         // the subscriber's reader may match ours a moment later
         tokio::time::sleep(Duration::from_millis(300)).await;
-        let first = recording.targets()[0].log_time_ns;
         let start = tokio::time::Instant::now();
         let n = recording.len();
-        for t in recording.targets() {
-            let at = start + Duration::from_nanos(t.log_time_ns.saturating_sub(first));
-            tokio::time::sleep_until(at).await;
-            publishers.publish(t.topic, &t.cdr, true)?;
-        }
+        play_at_recorded_times(
+            recording.targets(),
+            |offset| tokio::time::sleep_until(start + offset),
+            |t| publishers.publish(t.topic, &t.cdr, true),
+        )
+        .await?;
         // let the last samples leave before the node shuts down
         tokio::time::sleep(Duration::from_millis(300)).await;
         println!("played {n} targets from {shown}");
         anyhow::Ok(())
     };
     crate::delivery::until_shutdown(work, shutdown).await
+}
+
+/// `play`'s schedule: each target once `wait_until` (given its recorded time after the
+/// first target's) returns, then `publish`ed, in the recording's order.
+async fn play_at_recorded_times<W, F>(
+    targets: &[RecordedTarget],
+    mut wait_until: W,
+    mut publish: impl FnMut(&RecordedTarget) -> anyhow::Result<()>,
+) -> anyhow::Result<()>
+where
+    W: FnMut(Duration) -> F,
+    F: Future<Output = ()>,
+{
+    let Some(first) = targets.first().map(|t| t.log_time_ns) else {
+        return Ok(());
+    };
+    for t in targets {
+        wait_until(Duration::from_nanos(t.log_time_ns.saturating_sub(first))).await;
+        publish(t)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::{Cell, RefCell};
+    use std::io::Cursor;
+
+    /// A recording of xyz targets at these log times (ns), written and read back as
+    /// `play` reads a file.
+    fn recording(log_times_ns: &[u64]) -> McapTargets {
+        let mut out = Cursor::new(Vec::new());
+        let mut rec = McapRecorder::new(&mut out, &TopicNames::default()).unwrap();
+        for (i, &t) in log_times_ns.iter().enumerate() {
+            let target = PointStamped {
+                point: eezybot_msgs::geometry_msgs::Point {
+                    x: i as f64,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let cdr = eezybot_msgs::cdr::encode(&target).unwrap();
+            assert!(rec.write("xyz_target", &cdr, t).unwrap(), "xyz_target is recorded");
+        }
+        rec.finish().unwrap();
+        McapTargets::from_bytes(out.get_ref()).unwrap()
+    }
+
+    /// The simulated time (since the first target) at which each target was published,
+    /// and which target (its x): the clock moves only when the player waits.
+    fn played(targets: &McapTargets) -> Vec<(Duration, f64)> {
+        let now = Cell::new(Duration::ZERO);
+        let log = RefCell::new(Vec::new());
+        let wait_until = |at: Duration| {
+            now.set(now.get().max(at));
+            std::future::ready(())
+        };
+        let publish = |t: &RecordedTarget| {
+            let m: PointStamped = eezybot_msgs::cdr::decode(&t.cdr)?;
+            log.borrow_mut().push((now.get(), m.point.x));
+            Ok(())
+        };
+        futures::executor::block_on(play_at_recorded_times(targets.targets(), wait_until, publish))
+            .unwrap();
+        log.into_inner()
+    }
+
+    #[test]
+    fn play_publishes_each_target_at_its_recorded_time_after_the_first() {
+        let t0 = 1_795_000_000_000_000_000;
+        let ms = |n: u64| Duration::from_millis(n);
+        let got = played(&recording(&[t0, t0 + 600_000_000, t0 + 1_500_000_000]));
+        assert_eq!(got, vec![(ms(0), 0.0), (ms(600), 1.0), (ms(1500), 2.0)]);
+    }
+
+    #[test]
+    fn play_follows_the_log_times_not_the_order_of_writing() {
+        let t0 = 1_795_000_000_000_000_000;
+        let ms = |n: u64| Duration::from_millis(n);
+        // written late: the second sample was received before the first
+        let got = played(&recording(&[t0 + 200_000_000, t0, t0 + 900_000_000]));
+        assert_eq!(got, vec![(ms(0), 1.0), (ms(200), 0.0), (ms(900), 2.0)]);
+    }
 }
