@@ -194,10 +194,11 @@ def test_leader_streams_every_9_6_ms_with_exact_oversampled_values_and_the_deadm
     starts = [c for c, *_ in windows]
 
     # the rate, in simulated time: one window every 9.6 ms, never missed, none late. On
-    # the wire (a frame's first byte), each LEADER_STATE within 1 ms of its window's end
-    # (measured: at most 0.32 ms) but for the time the UART spent on the frames before it:
-    # a STATE answering a heartbeat goes first, 16 bytes, 1.4 ms, and a host busy
-    # elsewhere may hand the board several heartbeats at once
+    # the wire (a frame's first byte), each LEADER_STATE within 3 ms of its window's end
+    # but for the time the UART spent on the frames before it: a STATE answering a
+    # heartbeat goes first, 16 bytes, 1.4 ms, and a host busy elsewhere may hand the board
+    # several heartbeats at once, which its loop handles before the window (measured on a
+    # host loaded far past its cores: at most 0.86 ms)
     span = [c for c in starts if 1000 * CYCLES_PER_MS <= c < 4000 * CYCLES_PER_MS]
     rate = (len(span) - 1) / ((span[-1] - span[0]) / 16e6)
     gaps = [(b - a) / CYCLES_PER_MS for a, b in zip(starts, starts[1:])]
@@ -210,7 +211,7 @@ def test_leader_streams_every_9_6_ms_with_exact_oversampled_values_and_the_deadm
         return (t1 - t0 - busy) / 16
 
     idle = [uart_idle_us(isrs[-1], c) for c, _, _, isrs in windows]
-    assert max(idle) <= 1000, max(idle)
+    assert max(idle) <= 3000, max(idle)
     # and where the windows end (each one's last interrupt): 9.6 ms to the cycle
     ends = [isrs[-1] for *_, isrs in windows]
     window_rate = (len(ends) - 1) / ((ends[-1] - ends[0]) / 16e6)
