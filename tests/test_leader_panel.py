@@ -106,8 +106,16 @@ def test_the_panel_shows_the_leader_beside_the_follower(launch, observer, browse
         assert "deadman held" in v["state"] and "following" in v["state"] and v["held"] == "held", v
         assert re.search(r"base 20(\.0)?°", v["leader"]) and "not followed" not in v["leader"], v
         # drawn, beside the follower's live view (to its right, level with it), in 3D (WebGL)
-        assert page.is_visible("#leader-view") and page.is_visible("#leader-pose") and page.is_visible("#leader-3d canvas")
-        main, side = page.locator("#live-main").bounding_box(), page.locator("#leader-view").bounding_box()
+        # (the canvas is laid out a moment after the view shows: waited for, not assumed)
+        boxes = {}
+
+        def laid_out():
+            boxes.update(main=page.locator("#live-main").bounding_box(), side=page.locator("#leader-view").bounding_box())
+            return (page.is_visible("#leader-view") and page.is_visible("#leader-pose") and page.is_visible("#leader-3d canvas")
+                    and None not in boxes.values())
+        assert lead(True, laid_out, 15), \
+            (page.is_visible("#leader-view"), page.is_visible("#leader-pose"), page.is_visible("#leader-3d canvas"), boxes)
+        main, side = boxes["main"], boxes["side"]
         assert side["x"] >= main["x"] + main["width"] - 1 and abs(side["y"] - main["y"]) < 50, (main, side)
         assert side["width"] > 200, side
         assert page.evaluate("() => document.querySelector('#leader-3d canvas').getContext('2d') === null"), \
