@@ -2087,21 +2087,39 @@ mod tests {
         participant_status_sender,
       )
     };
-    // the reader's timed events due within `window`, handled as the event loop does;
-    // returns how many ACKNACKs they sent
-    let run_timer = |reader: &mut Reader, timer: &SharedTimer<DpTimerEvent>, window: u64| {
-      let before = reader.matched_writers.values().next().unwrap().sent_ack_nack_count;
-      let end = std::time::Instant::now() + std::time::Duration::from_millis(window);
-      while std::time::Instant::now() < end {
-        let fired = timer.borrow_mut().poll();
-        match fired {
+    // The reader's timed events, handled in their order once each deadline has passed,
+    // as the event loop does: for each, the time from `since` (then from the previous
+    // deadline) to its deadline, and the ACKNACKs it sent. Judged by the deadlines the
+    // reader set and their order, never by a window of wall time: on a busy host the
+    // events only come late, each still alone and in order. `all`: until none is left
+    // (else the next one only).
+    let fire = |reader: &mut Reader,
+                timer: &SharedTimer<DpTimerEvent>,
+                mut since: std::time::Instant,
+                all: bool| {
+      let mut fired = Vec::new();
+      loop {
+        let next = timer.borrow().next_deadline();
+        let Some(deadline) = next else { break };
+        assert!(fired.len() < 20, "the reader keeps setting timed events: {fired:?}");
+        std::thread::sleep(deadline.saturating_duration_since(std::time::Instant::now()));
+        let before = reader.matched_writers.values().next().unwrap().sent_ack_nack_count;
+        let polled = timer.borrow_mut().poll();
+        match polled {
           Some(DpTimerEvent::Reader { event, .. }) => reader.handle_timed_event(event),
           Some(_) => {}
-          None => std::thread::sleep(std::time::Duration::from_millis(1)),
+          None => unreachable!("a deadline that has passed is polled"),
+        }
+        let sent = reader.matched_writers.values().next().unwrap().sent_ack_nack_count - before;
+        fired.push((deadline.saturating_duration_since(since), sent));
+        since = deadline;
+        if !all {
+          break;
         }
       }
-      reader.matched_writers.values().next().unwrap().sent_ack_nack_count - before
+      fired
     };
+    let ms = std::time::Duration::from_millis;
     for data_comes in [true, false] {
       let timer = new_shared_timer();
       let mut reader = make_reader(&timer);
@@ -2118,8 +2136,13 @@ mod tests {
         last_sn: SequenceNumber::new(1),
         count: 1,
       };
+      let nacked = std::time::Instant::now();
       assert!(reader.handle_heartbeat_msg(&heartbeat, false, &mr_state)); // the NACK of SN 1
-      assert_eq!(run_timer(&mut reader, &timer, 40), 1, "asked again after 25 ms");
+      let first = fire(&mut reader, &timer, nacked, false);
+      assert!(
+        first.len() == 1 && first[0].0 >= ms(25) && first[0].1 == 1,
+        "asked again 25 ms after the NACK: {first:?}"
+      );
       if data_comes {
         // the missing sample and newer ones, as from a streaming writer: what the reader
         // has is then past what the HEARTBEAT announced
@@ -2132,11 +2155,24 @@ mod tests {
           };
           reader.handle_data_msg(data, BitFlags::<DATA_Flags>::from_flag(DATA_Flags::Data), &mr_state);
         }
-        assert_eq!(run_timer(&mut reader, &timer, 400), 0, "the sample came: no more requests");
+        // the repetition already set goes, and asks nothing
+        let rest = fire(&mut reader, &timer, nacked, true);
+        assert!(
+          rest.iter().all(|(_, sent)| *sent == 0),
+          "the sample came: no more requests: {rest:?}"
+        );
       } else {
-        // at 75, 175 and 375 ms, then left to the writer
-        assert_eq!(run_timer(&mut reader, &timer, 500), 3);
-        assert_eq!(run_timer(&mut reader, &timer, 300), 0);
+        // 50, 100 and 200 ms apart (at 75, 175 and 375 ms), then none: left to the writer
+        let rest = fire(&mut reader, &timer, nacked + first[0].0, true);
+        let waits: Vec<_> = rest.iter().map(|(wait, _)| *wait).collect();
+        assert!(
+          rest.len() == 3
+            && rest.iter().all(|(_, sent)| *sent == 1)
+            && waits[0] >= ms(50)
+            && waits[1] >= ms(100)
+            && waits[2] >= ms(200),
+          "asked again at doubling waits, three times: {rest:?}"
+        );
       }
       assert!(reader.matched_writers.values().next().unwrap().nack_repeat.is_none());
     }
