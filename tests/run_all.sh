@@ -98,4 +98,6 @@ patches_pid=
 cat "$patches_log"
 [ "$patches_code" = 0 ] || { echo "tests/check_patches.sh, or wan/'s build or unit tests, failed (exit $patches_code)"; exit 1; }
 stage "integration tests (real ROS 2)"
-"$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider --durations=25 "$@"
+mkdir -p test-output
+# (test-output/pytest.xml: every test's outcome and duration, for where the time went)
+"$EEZYBOT_PYTHON" -m pytest tests -q -p no:cacheprovider --durations=25 --junitxml=test-output/pytest.xml "$@"

@@ -26,7 +26,7 @@ from test_gui_bridge import free_port
 # in a process of its own, beside the other tests (like test_leader_arm.py): the firmware
 # in simavr, paced to wall time, mostly waited out; its checks tolerant of a busy host (the
 # limit only bounds a failure: a starved simavr and browser make it minutes)
-pytestmark = [pytest.mark.own_process, pytest.mark.background, pytest.mark.timeout(600)]
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=40), pytest.mark.timeout(600)]
 
 # well inside every limit row (shoulder 42.5..125, elbow -145..-60, forearm elevation
 # -65..20, base ±45 and the calibrated arm's -41.5..45)

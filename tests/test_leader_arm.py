@@ -30,7 +30,7 @@ from safety_rig import CYCLES_PER_S, FIRMWARE, BoardEvents, Rig, pulse_us
 # in a process of its own, beside the other tests: about 17 s of simulated time (the
 # recorded motion plays in real time); its verdict is the order of events
 # (its deadlines only bound a failure: a starved simavr runs slower than real time)
-pytestmark = [pytest.mark.own_process, pytest.mark.background, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=35), pytest.mark.timeout(900)]
 
 MV = 5000.0  # the ADC's reference (AVcc)
 SHIPPED = (REPO / "config" / "arm.yaml").read_text()

@@ -40,7 +40,7 @@ from test_gui_bridge import free_port
 # in a process of its own, beside the other tests (like test_leader_arm.py): the firmware
 # in simavr, paced to wall time, mostly waited out (a starved simavr runs slower than real
 # time: the limit only bounds a failure)
-pytestmark = [pytest.mark.own_process, pytest.mark.background, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=40), pytest.mark.timeout(900)]
 
 AVCC_MV = 5000
 ADC_MAX = 1023  # what the `leader:` section is written in (serial_node: fraction x 1024)

@@ -14,7 +14,7 @@ import pytest
 import twohost
 from split_graph import SplitGraph
 
-pytestmark = [pytest.mark.own_process, pytest.mark.background,
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=120),
               pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")]
 
 

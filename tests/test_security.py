@@ -22,7 +22,9 @@ from security_rig import (NO_SECURITY, PERMISSIONS_TOPIC, Capture, SecureGraph, 
                           handshake_permissions_removed, joint_state, make_keystore, point_target, security_env,
                           servo_deg, stamp, udp_datagrams, wait_at_rest)
 
-pytestmark = pytest.mark.own_process
+# in a process of its own (Fast DDS and network namespaces, conftest), beside the other
+# modules: mostly handshakes and an outage waited out, judged by order
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=60)]
 # the tests across the veth need network namespaces (root); the bad-keystore cases run
 # one node on the host's own network and run anywhere
 two_hosts = pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")

@@ -26,7 +26,7 @@ from conftest import REPO, NodeProcess, bin_path
 from robot_facts import servo_deg
 from split_graph import SplitGraph, seconds, streaming_summary
 
-pytestmark = [pytest.mark.own_process, pytest.mark.background]
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=120)]
 # the tests that set up the sites (network namespaces: root); the launch scripts' own
 # checks need none
 needs_hosts = pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")

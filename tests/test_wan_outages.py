@@ -15,7 +15,7 @@ import pytest
 import wanhost
 from split_graph import SplitGraph
 
-pytestmark = [pytest.mark.own_process, pytest.mark.background,
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=140),
               pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")]
 
 
