@@ -496,13 +496,28 @@ def _background_seconds(item):
     return float(marker.kwargs.get("seconds", 60)) if marker is not None else 0.0
 
 
+def _lanes_on(config):
+    return not (os.environ.get("EEZYBOT_OWN_PROCESS") or os.environ.get("EEZYBOT_OWN_PROCESS_SERIAL")
+                or config.option.collectonly)
+
+
+def _in_background(item):
+    return item.get_closest_marker("own_process") is not None and item.get_closest_marker("background") is not None
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The background modules' tests are reported last: where pytest reaches one before its
+    lane has run it, it waits for it, and the modules after it would wait too."""
+    if _lanes_on(config):
+        items[:] = [i for i in items if not _in_background(i)] + [i for i in items if _in_background(i)]
+
+
 def pytest_collection_finish(session):
-    if (os.environ.get("EEZYBOT_OWN_PROCESS") or os.environ.get("EEZYBOT_OWN_PROCESS_SERIAL")
-            or session.config.option.collectonly):
+    if not _lanes_on(session.config):
         return
     first_items = {}
     for item in session.items:
-        if item.get_closest_marker("own_process") is not None and item.get_closest_marker("background") is not None:
+        if _in_background(item):
             first_items.setdefault(str(item.fspath), item)
     for module in first_items:
         _OWN_PROCESS_DONE[module] = threading.Event()

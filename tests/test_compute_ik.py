@@ -14,6 +14,10 @@ from std_msgs.msg import Bool, Float64
 
 from conftest import Observer, bin_path, qos
 
+# in a process of its own, beside the other modules (conftest: `background`): judged by
+# the steps compute_ik publishes, their stamps and sentinels, not by time
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=70)]
+
 # ROBOT.md, written out again here so the test does not trust the code under test.
 H, L2, L3, TOOL_DX = 0.094, 0.135, 0.147, 0.0393
 GRIPPER_OPEN_RAD = 0.6

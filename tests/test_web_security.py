@@ -7,12 +7,17 @@ import socket
 import struct
 import time
 
+import pytest
 from geometry_msgs.msg import PointStamped
 from rclpy.serialization import serialize_message
 
 from conftest import LATCHED, REPO
 from foxglove_client import free_port
 from test_gui_bridge import RawWs, another_site, http_get, panel_status, rss_kib, start_panel
+
+# in a process of its own, beside the other modules (conftest: `background`): its
+# timeouts are judged from before the connection, so a busy host only makes them later
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=25)]
 
 FOXGLOVE = {"Sec-WebSocket-Protocol": "foxglove.sdk.v1"}
 
