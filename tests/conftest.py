@@ -484,7 +484,7 @@ _OWN_PROCESS_RESULTS = {}
 # module's marker says about how long it takes (`pytest.mark.background(seconds=60)`).
 # EEZYBOT_BACKGROUND_LANES sets the number; EEZYBOT_OWN_PROCESS_SERIAL=1 runs each where
 # pytest reaches it instead, as every other own_process module is.
-BACKGROUND_LANES = int(os.environ.get("EEZYBOT_BACKGROUND_LANES", "2"))
+BACKGROUND_LANES = int(os.environ.get("EEZYBOT_BACKGROUND_LANES", "1"))
 _OWN_PROCESS_DONE = {}  # module -> threading.Event, set when its results are in
 _OWN_PROCESS_RUNNING = []  # the module processes under way, to end them if the session ends first
 _OWN_PROCESS_SPANS = {}  # module -> (start, end), seconds since the session started
