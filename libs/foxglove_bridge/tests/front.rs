@@ -141,7 +141,10 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
     send_target(&mut publisher).await;
     assert_eq!(next_sample(&mut samples).await.topic, "xyz_target");
     round_trip(&mut publisher).await;
-    assert_no_sample(&mut samples, "a second sample of the publisher's one target");
+    assert_no_sample(
+        &mut samples,
+        "a second sample of the publisher's one target",
+    );
     bridge.stop().await;
 }
 

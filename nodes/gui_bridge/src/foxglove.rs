@@ -563,7 +563,10 @@ mod tests {
                 ..Default::default()
             };
             let cdr = eezybot_msgs::cdr::encode(&target).unwrap();
-            assert!(rec.write("xyz_target", &cdr, t).unwrap(), "xyz_target is recorded");
+            assert!(
+                rec.write("xyz_target", &cdr, t).unwrap(),
+                "xyz_target is recorded"
+            );
         }
         rec.finish().unwrap();
         McapTargets::from_bytes(out.get_ref()).unwrap()
@@ -583,8 +586,12 @@ mod tests {
             log.borrow_mut().push((now.get(), m.point.x));
             Ok(())
         };
-        futures::executor::block_on(play_at_recorded_times(targets.targets(), wait_until, publish))
-            .unwrap();
+        futures::executor::block_on(play_at_recorded_times(
+            targets.targets(),
+            wait_until,
+            publish,
+        ))
+        .unwrap();
         log.into_inner()
     }
 

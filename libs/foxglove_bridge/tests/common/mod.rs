@@ -217,7 +217,9 @@ const NO_CHANNEL_SUB: u32 = 999_999;
 /// client sent before has been handled (a sample taken, a subscription registered) when
 /// the answer comes.
 pub async fn round_trip(ws: &mut Ws) -> Vec<Received> {
-    ws.send(subscribe(NO_CHANNEL_SUB, NO_CHANNEL)).await.unwrap();
+    ws.send(subscribe(NO_CHANNEL_SUB, NO_CHANNEL))
+        .await
+        .unwrap();
     let answer = format!("Unknown channel ID: {NO_CHANNEL}");
     let end = Instant::now() + WAIT;
     let mut before = Vec::new();
