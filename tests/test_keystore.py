@@ -382,11 +382,6 @@ def test_help_exits_0():
 # busy host takes a few seconds): it only bounds a failure.
 READY_TIMEOUT = 30.0
 READY = " ready in ROS domain "
-# A secured start of run_graph.sh's four nodes at once hung once in three fresh-clone runs
-# (2026-11-29): compute_ik logged this every 100 ms for the 30 s of the wait, never ready
-# (the thread it names is the last to have taken the lock). A real deadlock in the patched
-# RustDDS, found when this test stopped judging readiness by a 4 s sleep; not yet fixed.
-SECURITY_LOCK_HANG = "I need my lock!!"
 
 
 def wait_ready(read, proc, n, timeout=READY_TIMEOUT):
@@ -461,12 +456,8 @@ def test_scripts_give_each_node_its_enclave_and_say_security_is_on(script, expec
             assert argv[-2:] == ["--log-level", "info"], argv  # the user's arguments still come last
         # every node said it is ready (its endpoints made: access control passed) and the
         # script still runs; a node that failed would also fail the exit status below
-        if not wait_ready(s.output, s.proc, len(expect)):
-            if SECURITY_LOCK_HANG in s.output():
-                # A known bug, not a pass: see SECURITY_LOCK_HANG. Any other reason fails.
-                pytest.xfail("a node hung in its secured start, waiting for RustDDS' security plugins' lock "
-                             "(issue 32's closing note: found by this test, to be fixed in patches/rustdds)")
-            raise AssertionError(f"not every node said it is ready:\n{s.output()}")
+        # (a node that never got ready here was patches/README.md's rustdds entry 33)
+        assert wait_ready(s.output, s.proc, len(expect)), f"not every node said it is ready:\n{s.output()}"
         assert s.proc.poll() is None, s.output()
         out = s.output()
         for e in set(expect.values()):

@@ -246,11 +246,11 @@ impl SecureDiscovery {
     }
     info!("Completed setting local crypto tokens as remote tokens");
 
+    drop(plugins); // Drop plugins so that they can be moved to self (and before the DB's lock)
+
     // Set ourself as authenticated
     discovery_db_write(discovery_db)
       .update_authentication_status(participant_guid_prefix, AuthenticationStatus::Authenticated);
-
-    drop(plugins); // Drop plugins so that they can be moved to self
 
     Ok(Self {
       security_plugins,
@@ -1427,8 +1427,9 @@ impl SecureDiscovery {
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
     discovery_updated_sender: &WakeSender<DiscoveryNotificationType>,
   ) {
-    let mut db = discovery_db_write(discovery_db);
-    db.update_authentication_status(participant_guid_prefix, new_status);
+    // The DB's guard is dropped before the notification: its channel is bounded and
+    // only the event loop drains it, which needs the DB to do so.
+    discovery_db_write(discovery_db).update_authentication_status(participant_guid_prefix, new_status);
 
     send_discovery_notification(
       discovery_updated_sender,
@@ -2660,13 +2661,15 @@ impl SecureDiscovery {
     remote_guid_prefix: GuidPrefix,
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
   ) -> SecurityResult<()> {
-    let mut sec_plugins = self.security_plugins.get_plugins();
-
-    // Get PermissionsToken
+    // Get PermissionsToken. (Before the plugins' lock: the event loop takes that lock
+    // while it holds the DB's read lock, and a thread creating an endpoint may be
+    // queued for the DB's write lock, which keeps a new read waiting.)
     let permissions_token = discovery_db_read(discovery_db)
       .find_participant_proxy(remote_guid_prefix)
       .and_then(|data| data.permissions_token.clone())
       .ok_or_else(|| security_error("Could not get PermissionsToken from DiscoveryDB"))?;
+
+    let mut sec_plugins = self.security_plugins.get_plugins();
 
     // Get AuthenticatedPeerCredentialToken
     let auth_credential_token =

@@ -733,15 +733,23 @@ impl DPEventLoop {
       participant_guid_prefix == self.domain_info.domain_participant_guid.prefix
     );
 
+    // What is needed of the participant is copied out of the discovery DB and its
+    // guard dropped here: the proxy updates below send the first HEARTBEATs and
+    // ACKNACKs, which with security take the security plugins' lock, and the
+    // discovery thread may wait for the DB's lock while it holds the plugins' one
+    // (behind a thread queued for the DB's write lock): a deadlock of the three.
     let db = discovery_db_read(&self.discovery_db);
     // new Remote Participant discovered
     let discovered_participant =
       if let Some(dpd) = db.find_participant_proxy(participant_guid_prefix) {
-        dpd
+        dpd.clone()
       } else {
         error!("Participant was updated, but DB does not have it. Strange.");
         return;
       };
+    #[cfg(feature = "security")]
+    let authentication_status = db.get_authentication_status(participant_guid_prefix);
+    drop(db);
 
     // Select which builtin endpoints of the remote participant are updated to local
     // readers & writers
@@ -764,7 +772,7 @@ impl DPEventLoop {
       let mut readers_init_list = vec![];
       let mut writers_init_list = vec![];
 
-      match db.get_authentication_status(participant_guid_prefix) {
+      match authentication_status {
         Some(AuthenticationStatus::Authenticating) => {
           // Add just the stateless endpoint used for authentication
           readers_init_list.extend_from_slice(AUTHENTICATION_BUILTIN_READERS_INIT_LIST);
