@@ -311,6 +311,12 @@ impl<E> Timer<E> {
   pub(crate) fn next_deadline(&self) -> Option<Instant> {
     self.deadlines.keys().next().map(|(when, _)| *when)
   }
+
+  /// Every event set and not yet polled, with its deadline, the earliest first.
+  #[cfg(test)]
+  pub(crate) fn pending(&self) -> impl Iterator<Item = (Instant, &E)> {
+    self.deadlines.iter().map(|((when, _), event)| (*when, event))
+  }
 }
 
 pub(crate) type SharedTimer<E> = std::rc::Rc<std::cell::RefCell<Timer<E>>>;

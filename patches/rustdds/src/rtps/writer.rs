@@ -2947,29 +2947,23 @@ mod tests {
           .handle_ack_nack(self.reader_guid.prefix, &AckSubmessage::AckNack(ack_nack));
       }
 
-      // Timed events addressed to our reader that expire within `max_wait`.
-      // This keeps SendRepairFrags, which next_repair_event skips.
-      fn reader_events(&self, max_wait: StdDuration) -> Vec<TimedEvent> {
-        let give_up = Instant::now() + max_wait;
-        let mut found = Vec::new();
-        loop {
-          while let Some(fired) = self.timer.borrow_mut().poll() {
-            if let DpTimerEvent::Writer { event, .. } = fired {
-              let to_reader = match event {
-                TimedEvent::SendRepairData { to_reader }
-                | TimedEvent::SendRepairFrags { to_reader } => Some(to_reader),
-                TimedEvent::Heartbeat | TimedEvent::CacheCleaning => None,
-              };
-              if to_reader == Some(self.reader_guid) {
-                found.push(event);
-              }
-            }
-          }
-          if Instant::now() >= give_up {
-            return found;
-          }
-          std::thread::sleep(StdDuration::from_millis(1));
-        }
+      // The repair events set for our reader and not yet handled, with their
+      // deadlines: what the writer scheduled, read without waiting for any.
+      fn scheduled_repairs(&self) -> Vec<(Instant, TimedEvent)> {
+        self
+          .timer
+          .borrow()
+          .pending()
+          .filter_map(|(when, fired)| match fired {
+            DpTimerEvent::Writer {
+              event:
+                event @ (TimedEvent::SendRepairData { to_reader }
+                | TimedEvent::SendRepairFrags { to_reader }),
+              ..
+            } if *to_reader == self.reader_guid => Some((when, *event)),
+            _ => None,
+          })
+          .collect()
       }
 
       // The next SendRepairData timeout scheduled for our reader, waiting up to
@@ -3012,12 +3006,17 @@ mod tests {
     fn acknack_schedules_repair_after_nack_response_delay() {
       for mut f in [Fixture::sedp(5, 8), Fixture::user(5, 8, None)] {
         f.writer.nack_response_delay = StdDuration::from_millis(200);
+        let acked = Instant::now();
         f.ack_nack(1..=5, 1);
         assert_eq!(f.unsent(), 5, "repaired on the ACKNACK");
         assert!(f.reader_proxy().repair_mode);
+        // judged by the deadline the writer set, not by a window of wall time
+        let repairs = f.scheduled_repairs();
         assert!(
-          f.next_repair_event(StdDuration::from_millis(100)).is_none(),
-          "repair before nack_response_delay"
+          repairs.len() == 1
+            && matches!(repairs[0].1, TimedEvent::SendRepairData { .. })
+            && repairs[0].0 >= acked + f.writer.nack_response_delay,
+          "one repair, nack_response_delay after the ACKNACK: {repairs:?}"
         );
         assert_eq!(f.repair_round(), 5);
         assert!(!f.reader_proxy().repair_mode);
@@ -3037,7 +3036,7 @@ mod tests {
       assert!(f.reader_proxy().repair_mode);
       assert_eq!(f.repair_round(), 4);
       assert!(!f.reader_proxy().repair_mode);
-      assert!(f.next_repair_event(StdDuration::from_millis(50)).is_none());
+      assert!(f.scheduled_repairs().is_empty());
 
       // Small SEDP-sized samples: many per round, still more than one round.
       let mut f = Fixture::sedp(250, 64);
@@ -3065,9 +3064,9 @@ mod tests {
       }
       assert!(!f.reader_proxy().repair_mode);
       assert!(f
-        .reader_events(StdDuration::from_millis(50))
+        .scheduled_repairs()
         .iter()
-        .all(|event| !matches!(event, TimedEvent::SendRepairFrags { .. })));
+        .all(|(_, event)| !matches!(event, TimedEvent::SendRepairFrags { .. })));
     }
 
     // A repeated ACKNACK count is a copy and changes nothing; a new count does.
@@ -3081,7 +3080,7 @@ mod tests {
       f.ack_nack(1..=5, 1);
       assert_eq!(f.unsent(), 0);
       assert!(!f.reader_proxy().repair_mode);
-      assert!(f.next_repair_event(StdDuration::from_millis(50)).is_none());
+      assert!(f.scheduled_repairs().is_empty());
 
       f.ack_nack(1..=5, 2);
       assert_eq!(f.unsent(), 5);
