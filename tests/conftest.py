@@ -470,6 +470,8 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "own_process: run this module's tests in a pytest process of their own")
     config.addinivalue_line("markers", "background(seconds=60): (with own_process) that process may run alongside the "
                                        "other tests; `seconds`, about how long it takes, orders the lanes (longest first)")
+    config.addinivalue_line("markers", "alone: (with own_process) that process runs while no background module runs: "
+                                       "something it asserts depends on how busy the host is")
     config.addinivalue_line("markers", "timeout(seconds): this test's limit for each of setup, call and teardown "
                                        f"(default {TEST_TIMEOUT_S:.0f} s, EEZYBOT_TEST_TIMEOUT)")
     _STDERR = os.dup(2)  # the terminal's stderr (output capture is suspended here)
@@ -483,8 +485,10 @@ _OWN_PROCESS_RESULTS = {}
 # lanes, each taking the next module when its last one ends, the longest first: a
 # module's marker says about how long it takes (`pytest.mark.background(seconds=60)`).
 # EEZYBOT_BACKGROUND_LANES sets the number; EEZYBOT_OWN_PROCESS_SERIAL=1 runs each where
-# pytest reaches it instead, as every other own_process module is.
-BACKGROUND_LANES = int(os.environ.get("EEZYBOT_BACKGROUND_LANES", "1"))
+# pytest reaches it instead, as every other own_process module is. A module marked
+# `alone` (test_two_hosts.py: the partition's count of stale commands depends on how
+# busy the host is) runs after the other foreground modules, once the lanes are done.
+BACKGROUND_LANES = int(os.environ.get("EEZYBOT_BACKGROUND_LANES", "2"))
 _OWN_PROCESS_DONE = {}  # module -> threading.Event, set when its results are in
 _OWN_PROCESS_RUNNING = []  # the module processes under way, to end them if the session ends first
 _OWN_PROCESS_SPANS = {}  # module -> (start, end), seconds since the session started
@@ -505,11 +509,18 @@ def _in_background(item):
     return item.get_closest_marker("own_process") is not None and item.get_closest_marker("background") is not None
 
 
+def _alone(item):
+    return item.get_closest_marker("own_process") is not None and item.get_closest_marker("alone") is not None
+
+
 def pytest_collection_modifyitems(session, config, items):
     """The background modules' tests are reported last: where pytest reaches one before its
-    lane has run it, it waits for it, and the modules after it would wait too."""
+    lane has run it, it waits for it, and the modules after it would wait too. Before them
+    come the modules that run alone (`alone`): they wait for the lanes to finish."""
     if _lanes_on(config):
-        items[:] = [i for i in items if not _in_background(i)] + [i for i in items if _in_background(i)]
+        items[:] = ([i for i in items if not _in_background(i) and not _alone(i)]
+                    + [i for i in items if _alone(i) and not _in_background(i)]
+                    + [i for i in items if _in_background(i)])
 
 
 def pytest_collection_finish(session):
@@ -597,6 +608,9 @@ def pytest_runtest_protocol(item, nextitem):
     done = _OWN_PROCESS_DONE.get(str(item.fspath))
     if done is not None:
         done.wait()  # the background run (bounded by its module's limit)
+    if _alone(item) and str(item.fspath) not in _OWN_PROCESS_RESULTS:
+        for background in _OWN_PROCESS_DONE.values():
+            background.wait()  # (each bounded by its module's limit)
     cases, proc, _ = _run_module_in_own_process(item)
     case = cases.get(item.name)
     outcome, longrepr, duration, sections = "passed", None, 0.0, []

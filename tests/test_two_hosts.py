@@ -24,10 +24,11 @@ from conftest import Observer, latest_status
 from split_graph import SplitGraph, seconds, stamp_of, streaming_summary
 from startup import run_in_subprocess
 
-# in a process of its own (Fast DDS and network namespaces, conftest); not in a background
-# lane: the partition's count of stale commands (split_graph.outage) still depends on the
-# host's load (3 in one run of four with two lanes)
-pytestmark = pytest.mark.own_process
+# in a process of its own (Fast DDS and network namespaces, conftest), alone: not beside
+# the background lanes, as the partition's count of stale commands (split_graph.outage)
+# depends on the host's load (3 in one run of four with two lanes, serial_node's late-hold
+# gate waiting 50 ms of wall time for the rest of a burst)
+pytestmark = [pytest.mark.own_process, pytest.mark.alone]
 # the namespaces need root; the one-host start-ups do not, and run without it
 needs_two_hosts = pytest.mark.skipif(twohost.available() is not None, reason=f"two hosts: {twohost.available()}")
 
