@@ -32,6 +32,11 @@
 //               a CYCLE CH MV       (--adc-file: a conversion of channel CH started with
 //                                    MV millivolts on it)
 //               d CYCLE LEVEL       (--adc-file: D2 driven to LEVEL, 0 = deadman held)
+//               c CYCLE             (the simulated clock, every simulated millisecond,
+//                                    with the file flushed up to it: a reader knows how
+//                                    far the board has run even when nothing happens,
+//                                    and every byte the AVR sent before CYCLE is in the
+//                                    pty; a test judges on this clock, not the wall's)
 // SIGUSR1 pulls the USB cable (the pty is closed and its link removed; the AVR runs on,
 // holding its pulses as a board on its own supply does) or plugs it back (a new pty at
 // the same link). Stops on SIGINT/SIGTERM with exit code 0.
@@ -64,6 +69,7 @@ static uint32_t pin_level[4] = {2, 2, 2, 2};
 
 // --adc-file: the recorded inputs
 #define AVCC_MV 5000
+#define CLOCK_LINE_CYCLES 16000  // a `c` line every simulated millisecond
 struct adc_point {
   double t_ms;
   double mv[4];
@@ -350,6 +356,7 @@ int main(int argc, char **argv) {
   uint8_t pending[256];
   size_t npending = 0, next = 0;
   uint64_t t0 = now_ns();
+  avr_cycle_count_t next_clock = 0;
   int exit_code = 0;
   while (!stop) {
     for (int i = 0; i < 4000; i++) {
@@ -390,10 +397,13 @@ int main(int argc, char **argv) {
       uint64_t wall_ns = now_ns() - t0;
       if (sim_ns > wall_ns + 1000000ull) usleep((useconds_t)((sim_ns - wall_ns) / 1000));
     }
-    static unsigned flushes;
-    if ((++flushes & 63) == 0) fflush(events);
+    if (avr->cycle >= next_clock) {
+      fprintf(events, "c %llu\n", (unsigned long long)avr->cycle);
+      fflush(events);
+      next_clock = avr->cycle + CLOCK_LINE_CYCLES;
+    }
   }
-  fflush(events);
+  fprintf(events, "c %llu\n", (unsigned long long)avr->cycle);
   fclose(events);
   if (master >= 0) unplug(link_path);
   return exit_code;
