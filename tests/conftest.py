@@ -167,7 +167,11 @@ class Observer:
         """Our publisher is matched by the node's subscription."""
         self._wait_discovery(lambda: publisher.get_subscription_count() > 0, f"nobody subscribes {publisher.topic_name}")
         # the node's reader may match our writer a moment after ours matched it; until
-        # then a volatile reader misses what is published
+        # then a volatile reader misses what is published. A guess, not an event: nothing
+        # rclpy shows tells when a RustDDS reader has matched our writer (the two SEDP
+        # directions are independent; wait_for_all_acked was measured to prove nothing
+        # toward RustDDS readers). A test that must not lose its first sample sends it
+        # again until its effect comes (a sentinel), or waits for the node's own report.
         self.spin_for(0.3)
 
     def wait_publisher(self, topic):
