@@ -245,16 +245,17 @@ def test_compute_ik_steps_a_motion_at_motion_rate(launch, observer):
     xyz = observer.pub("/xyz_target", PointStamped)
     observer.wait_matched(xyz)
     observer.wait_publisher("/servo_angles")
-    observer.spin_for(0.5)
     n0 = len(sa)
     # a zero stamp means now: never refused as too old on a slow host, and the first
-    # step carries the instant the target arrived
+    # step carries the instant the target arrived (on this host's clock: later than
+    # `sent`, so nothing compute_ik published before it is taken for it)
     m = PointStamped()
     m.header.frame_id = "base_link"
     m.point.x, m.point.y, m.point.z = 0.16, -0.08, 0.21
+    sent = time.time()
     xyz.publish(m)
-    assert observer.spin_until(lambda: len(sa) > n0, 10), "no first step"
-    first = seconds(sa[n0][1].header.stamp)
+    assert observer.spin_until(lambda: any(seconds(s.header.stamp) >= sent for _, s in sa[n0:]), 30), "no first step"
+    first = next(seconds(s.header.stamp) for _, s in sa[n0:] if seconds(s.header.stamp) >= sent)
     # the motion ends at the target's IK (known in advance: ROBOT.md's servo angles)
     final = servo_deg(m.point.x, m.point.y, m.point.z)
     assert observer.spin_until(lambda: all(abs(math.degrees(a) - d) <= 1e-9 for a, d in zip(sa[-1][1].position, final)), 30), \
