@@ -9,7 +9,7 @@ from rcl_interfaces.srv import DescribeParameters, GetParameterTypes, ListParame
 
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-from conftest import TOPICS, bin_path
+from conftest import TOPICS, bin_path, latest_status
 
 ROS_NODES = ["compute_ik", "serial_node", "state_publisher"]
 NODE_ARGS = {"serial_node": ["--ros-args", "-p", "port:=mock"]}
@@ -166,12 +166,16 @@ def test_no_library_warnings_at_start_and_stop_with_an_rclpy_peer(launch, observ
     """Neither starting next to a Fast DDS peer nor Ctrl-C makes RustDDS or ros2-client
     complain. At shutdown a node drops all its endpoints at once; RustDDS' removal
     channels held 4 and logged `Cannot remove Reader … Full` (42 of 1542 test logs)."""
+    from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
     observer.pub("chatter", String)  # a Fast DDS peer with endpoints of its own
+    diags = observer.sub("/diagnostics", DiagnosticArray)
     procs = [launch(name, *NODE_ARGS.get(name, [])) for name in ROS_NODES]
-    for name in ROS_NODES:
-        observer.spin_until(lambda: name in observer.node.get_node_names(), 10)
-    observer.spin_for(4.0)
+    # each node has started next to the peer once its diagnostics reach the peer's
+    # reader (it discovered the peer's participant and endpoints; the bound only ends a
+    # failure)
+    assert observer.spin_until(lambda: all(latest_status(diags, name) for name in ROS_NODES), 30), \
+        [name for name in ROS_NODES if not latest_status(diags, name)]
     for p in procs:
         assert p.proc.poll() is None, p.output()
         assert library_warnings(p.output()) == [], p.output()
