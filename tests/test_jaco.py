@@ -147,7 +147,9 @@ def test_compute_ik_and_state_publisher_drive_the_jaco_to_poses_and_positions(la
         rig.pose.publish(pose_msg(goal))
         assert rig.wait_tip([goal[i][3] for i in range(3)], quaternion(goal)), (q, rig.tip(), rig.values())
     rig.wait_rest()
-    assert rig.values()["last_solve"].startswith("dls: converged"), rig.values()
+    # the solve is reported in the diagnostics after it (the bound only ends a failure)
+    assert observer.spin_until(lambda: rig.values().get("last_solve", "").startswith("dls: converged"), 10), \
+        rig.values()
     # the motion stays within the URDF's joint speeds (50 Hz steps)
     steps = [m for _, m in rig.joint_states[n0:]]
     assert len(steps) > 20
