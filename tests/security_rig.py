@@ -13,6 +13,7 @@ keystores, the enclaves a test spoils on purpose, and wire captures.
 """
 import fcntl
 import hashlib
+import math
 import os
 import re
 import shutil
@@ -451,6 +452,23 @@ def answered_stamp(peer, sent):
         if st in wanted:
             return st
     return None
+
+
+def wait_at(peer, topic, expected_deg, tolerance_deg=0.1, timeout=30.0):
+    """Until `topic`'s newest message has its first servos within `tolerance_deg` of
+    `expected_deg` (where the target puts the arm, known in advance: an event, not a
+    quiet period; the timeout only bounds a failure): that message, or the newest (None
+    if none came) once the timeout has passed."""
+    end = time.monotonic() + timeout
+    while True:
+        got = peer.received(topic)
+        last = joint_state(got[-1][1]) if got else None
+        if last is not None and all(abs(math.degrees(a) - e) < tolerance_deg
+                                    for a, e in zip(last.position, expected_deg)):
+            return last
+        if time.monotonic() >= end:
+            return last
+        time.sleep(0.05)
 
 
 def wait_at_rest(peer, topic="servo_state", quiet=0.5, timeout=10.0):

@@ -20,7 +20,7 @@ import twohost
 from conftest import NodeProcess, Observer, bin_path
 from security_rig import (NO_SECURITY, PERMISSIONS_TOPIC, Capture, SecureGraph, SecurePeer, answered_stamp, drive,
                           handshake_permissions_removed, joint_state, make_keystore, point_target, security_env,
-                          servo_deg, stamp, udp_datagrams, wait_at_rest)
+                          servo_deg, stamp, udp_datagrams, wait_at, wait_at_rest)
 
 # in a process of its own (Fast DDS and network namespaces, conftest), beside the other
 # modules: mostly handshakes and an outage waited out, judged by order
@@ -93,9 +93,11 @@ def test_a_secured_fast_dds_operator_drives_the_arm(hosts, domain, keystore, sec
         assert answered, f"no servo_state for the target\n{peer.stderr()[-2000:]}\n{graph.logs_tail()}"
         angles = [joint_state(p) for _, p in peer.received("servo_angles")]
         assert any(stamp(m) == answered for m in angles), "no servo_angles carries the answered target's stamp"
-        state = wait_at_rest(peer, "servo_state")
-        last_angles = wait_at_rest(peer, "servo_angles")
+        # the motion ends where the target's IK puts the arm: compute_ik's last step, then
+        # the device's state (a quiet period could end in a stall mid-motion)
         expected = servo_deg(*TARGET)
+        last_angles = wait_at(peer, "servo_angles", expected)
+        state = wait_at(peer, "servo_state", expected)
         print(f"\n{'secured' if secured else 'plain'}: matched after {handshake_s:.2f} s; at rest "
               f"servo_angles {[round(a, 2) for a in degrees(last_angles)]}, servo_state "
               f"{[round(a, 2) for a in degrees(state)]}, ROBOT.md {[round(a, 2) for a in expected]}")
