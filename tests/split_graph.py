@@ -12,6 +12,7 @@ how long the round trip took (one machine, one clock).
 import math
 import re
 import statistics
+import struct
 import subprocess
 import time
 from pathlib import Path
@@ -63,6 +64,62 @@ def streaming_summary(graph, t0, replies, link_stats, what):
     return {"sent": sent, "replies": replies, "answered": answered, "longest_unanswered": longest}
 
 
+# A frame starts at most 22.5 ms after the one before (firmware/servo_control/config.h);
+# a width stored after a frame's pulses were read shows in the next frame.
+FRAME_MAX_CYCLES = 22_500 * 16
+
+
+def hold_across_the_outage(ev, t_heal_ns):
+    """A link outage judged on the board's own clock and counts: the last SET_PULSES the
+    AVR received from reads before the heal (wall clock `t_heal_ns`, taken before the link
+    came up again; an order of events: bytes read after it come at or after the first
+    read's cycle) and the first after it.
+    Between them serial_node must have sent heartbeats only, and at least one (it kept
+    the board's watchdog fed), and from one frame
+    after the last command on, every pulse on every pin must show that command's width
+    (the arm holds), one a frame in simulated time (the board holds, it does not detach);
+    after the first command after the heal, a pin must go on more than 5 us (a new target
+    applied). Returns what is wrong, [] when nothing is.
+
+    How many heartbeats reach the board in the silence is not a count to judge: the
+    host's link waits for the board's replies, so a simavr starved of CPU gets fewer (9 of
+    about 50 in one run on a busy host, with 0.14 s of simulated time in a 5 s cut)."""
+    from interop.servo_link import HEARTBEAT, SET_PULSES
+
+    split = ev.cycle_after(t_heal_ns)
+    if split is None:
+        return ["the board read nothing after the link returned"]
+    frames = ev.frames()
+    sets = [(c, struct.unpack("<4H", p)) for t, _, p, c in frames if t == SET_PULSES]
+    before = [f for f in sets if f[0] < split]
+    after = [f for f in sets if f[0] >= split]
+    if not before or not after:
+        return [f"SET_PULSES: {len(before)} before the heal, {len(after)} after it"]
+    (c0, ticks), (c1, _) = before[-1], after[0]
+    problems = []
+    heartbeats = sum(1 for t, _, _, c in frames if c0 < c < c1 and t == HEARTBEAT)
+    others = [t for t, _, _, c in frames if c0 < c < c1 and t != HEARTBEAT]
+    print(f"outage: {heartbeats} heartbeats and {(c1 - c0) / 16e6:.2f} s of simulated time between the last "
+          f"command before the heal and the first after it")
+    if heartbeats < 1 or others:
+        problems.append(f"between the last command before the heal and the first after it: {heartbeats} "
+                        f"heartbeats (want >= 1) and other frames {others}")
+    for pin in range(4):
+        held = [w for c, w in ev.pulses(pin) if c0 + FRAME_MAX_CYCLES <= c < c1]
+        want_pulses = (c1 - c0) // FRAME_MAX_CYCLES - 2
+        if len(held) < want_pulses:
+            problems.append(f"pin {pin}: {len(held)} pulses in {(c1 - c0) / 16e6:.2f} s of simulated hold, "
+                            f"want >= {want_pulses} (one a frame)")
+        off = [w for w in held if abs(w - ticks[pin] / 2) > 1.0]
+        if off:
+            problems.append(f"pin {pin} moved while the link was down: the last command {ticks[pin] / 2} us, "
+                            f"pulses {min(off)}..{max(off)} us")
+    moved = [abs(ps[-1][1] - ticks[pin] / 2) for pin in range(4) if (ps := [p for p in ev.pulses(pin) if p[0] > c1])]
+    if max(moved, default=0.0) <= 5:
+        problems.append("the arm did not go on to a new target after the link returned")
+    return problems
+
+
 class VirtualArduinoPty:
     """The virtual_arduino binary serving a pty (in the root namespace: a pty is a file)."""
 
@@ -82,6 +139,15 @@ class VirtualArduinoPty:
             return self.proc.wait(10)
         finally:
             self.log.close()
+
+
+def delta(now, then, key):
+    """How much counter `key` of a diagnostics entry grew from `then` to `now` (None: not
+    a number)."""
+    try:
+        return int(now.get(key, 0)) - int(then.get(key, 0))
+    except ValueError:
+        return None
 
 
 class SplitGraph:
@@ -198,6 +264,15 @@ class SplitGraph:
         s = latest_status(self.diags, node_prefix)
         return (None, None, {}) if s is None else (s.level, s.message, status_values(s))
 
+    def diag_after(self, node_prefix, t_wall):
+        """The first diagnostics entry of a node stamped at or after wall time t, or None."""
+        fresh = [(a, m) for a, m in self.diags if seconds(m.header.stamp) >= t_wall]
+        for _, arr in fresh:
+            for s in arr.status:
+                if s.name.startswith(node_prefix):
+                    return s
+        return None
+
     def unreachable_lines(self):
         """Log lines about an unreachable network, per launch script."""
         return {p.name: sum(1 for line in p.log_path.read_text().splitlines() if UNREACHABLE.search(line))
@@ -211,9 +286,15 @@ class SplitGraph:
         return "\n".join(out)
 
     # ---- one outage
-    def outage(self, length, side, resume_timeout=30.0, settle=3.0):
+    def outage(self, length, side, resume_timeout=30.0, settle_timeout=30.0):
         """Pull the cable at `side` for `length` s while targets keep coming, then plug it
-        back. Returns what happened."""
+        back. Returns what happened, judged on what arrived up to two events after the
+        heal (the timeouts only bound a failure): the first reply to a target sent after
+        it (resumed), then the first reply to a target sent after that one had come back
+        (settled). servo_state has one writer, serial_node, and reaches us reliable and in
+        order, and serial_node gets compute_ik's servo_angles likewise: a command from the
+        outage that serial_node applies after the heal is answered before its answer to a
+        newer target, so every stale reply has arrived once the settling one has."""
         self.wait_flowing()
         ns = self._namespace()
         before = {
@@ -230,12 +311,34 @@ class SplitGraph:
             level, msg, _ = self.diag_values("compute_ik")
             ik_lost_seen |= bool(msg and "lost" in msg)
         last_before = self.sent[-1][1]
-        self.hosts.restore(side)
+        # the heal's time is taken before the plug goes in: restore() brings the link up
+        # first and then re-adds the routes (with retries), and what was queued during
+        # the outage crosses, and a command may reach the board, in between (with the time
+        # taken after it, that command counted as one before the heal: the hold then
+        # ended 10 ms before the next command, with no heartbeat between them, at load 26)
         t_restore = time.time()
+        self.hosts.restore(side)
         resumed = self.pump_until(lambda: self.answers_after(t_restore), resume_timeout)
         t_resumed = time.time()
         first_new = min((a for a, _ in self.answers_after(t_restore)), default=None)
-        self.pump(settle)
+        settled = resumed and self.pump_until(lambda: self.answers_after(t_resumed), settle_timeout)
+        # the peers lost and regained, as the nodes report them: once each has published
+        # diagnostics after the first new answer (their stamps), until every loss is
+        # regained (a node looks at its peers at its own pace, and a loss longer than the
+        # lease is regained a moment after the data flows again; the timeout only bounds
+        # a failure, which the counts then show)
+        peer_keys = {("serial_node", "serial"): f"{ns}/servo_angles publishers",
+                     ("compute_ik", "ik"): f"{ns}/servo_angles subscribers"}
+
+        def peers_reported():
+            if not all(self.diag_after(n, t_resumed) for n, _ in peer_keys):
+                return False
+            now = {n: self.diag_values(n)[2] for n, _ in peer_keys}
+            return all(delta(now[n], before[b], f"{k} lost") == delta(now[n], before[b], f"{k} regained")
+                       for (n, b), k in peer_keys.items())
+
+        if settled:
+            self.pump_until(peers_reported, settle_timeout)
         after = self.replies_after(t_restore)
         # replies that answer a target (servo_state from a heartbeat is stamped "now")
         targets = {s for _, s in self.sent}
@@ -247,6 +350,7 @@ class SplitGraph:
             "t_cut": t_cut,
             "t_restore": t_restore,
             "resumed": resumed,
+            "settled": settled,
             "resume_s": (first_new - t_restore) if first_new is not None else None,
             "wait_s": t_resumed - t_restore,
             # commands applied after the link returned although a newer one had been
@@ -258,12 +362,6 @@ class SplitGraph:
         }
         serial = self.diag_values("serial_node")[2]
         ik = self.diag_values("compute_ik")[2]
-
-        def delta(now, then, key):
-            try:
-                return int(now.get(key, 0)) - int(then.get(key, 0))
-            except ValueError:
-                return None
 
         result["serial_angles_lost"] = delta(serial, before["serial"], f"{ns}/servo_angles publishers lost")
         result["serial_angles_regained"] = delta(serial, before["serial"], f"{ns}/servo_angles publishers regained")

@@ -67,6 +67,7 @@ def test_the_graph_resumes_after_a_link_outage(split_graph, length, side):
           f"lost/regained {r['serial_angles_lost']}/{r['serial_angles_regained']}, "
           f"unreachable log lines {r['unreachable_lines']}")
     assert r["resumed"], f"no servo_state for a new target after the link returned: {r}\n{split_graph.logs_tail()}"
+    assert r["settled"], f"no servo_state for a second new target after the first: {r}\n{split_graph.logs_tail()}"
     assert r["stale"] == 0, f"commands from the outage applied after it: {r}"
     assert r["out_of_order"] == 0, r
     if length > LEASE_S + 2:
