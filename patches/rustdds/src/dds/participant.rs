@@ -1832,6 +1832,8 @@ mod tests {
       signal::{sigaction, SaFlags, SigAction, SigHandler, SigSet, Signal},
     };
 
+    use crate::structure::entity::RTPSEntity;
+
     extern "C" fn ignore(_: nix::libc::c_int) {}
     // Without SA_RESTART; epoll_wait is never restarted anyway. Not SIG_IGN: an
     // ignored signal does not interrupt a system call.
@@ -1849,7 +1851,32 @@ mod tests {
       pthread_kill(discovery.as_pthread_t(), Signal::SIGUSR2).unwrap();
       std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    std::thread::sleep(std::time::Duration::from_millis(100));
+    // Both still work after the signals, which each thread handles before anything it
+    // does next: a writer of a participant created now is discovered (the event loop
+    // receives its announcements, the discovery thread adds it). The deadline only
+    // bounds a failure.
+    let other = DomainParticipant::new(test_domain_id(20)).unwrap();
+    let qos = QosPolicies::qos_none();
+    let topic = other
+      .create_topic("interrupted".to_string(), "u32".to_string(), &qos, TopicKind::NoKey)
+      .unwrap();
+    let writer = other
+      .create_publisher(&qos)
+      .unwrap()
+      .create_datawriter_no_key_cdr::<u32>(&topic, None)
+      .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while !dp
+      .discovered_writers()
+      .iter()
+      .any(|w| w.writer_proxy.remote_writer_guid == writer.guid())
+    {
+      assert!(
+        std::time::Instant::now() < deadline,
+        "a participant created after the signals was never discovered"
+      );
+      std::thread::sleep(std::time::Duration::from_millis(10));
+    }
 
     assert!(!discovery.is_finished(), "the discovery thread stopped");
     let dpi = dp.dpi.lock().unwrap();

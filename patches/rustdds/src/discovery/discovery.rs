@@ -2921,7 +2921,7 @@ mod tests {
       }),
       "the observer did not discover the new participant"
     );
-    wait_until(StdDuration::from_secs(2), &|r| {
+    wait_until(StdDuration::from_secs(10), &|r| {
       reader_known(reader_guid)
         && writer_known(writer_guid)
         && !reader_known(disposed_reader_guid)

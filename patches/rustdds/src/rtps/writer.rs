@@ -3224,6 +3224,10 @@ mod tests {
         );
         let heartbeats =
           |f: &Fixture| f.writer.heartbeat_message_counter.load(atomic::Ordering::Relaxed);
+        // A fast period no busy host outlasts between the sample and the tick below;
+        // the pause is then staged by moving the sample's time back, not by sleeping.
+        f.writer.heartbeat_period_fast = Some(Duration::from_secs(30));
+        let fast = StdDuration::from_secs(30);
         f.writer.process_pending(); // the sample goes out, with its HEARTBEAT
         let streaming = heartbeats(&f);
         f.writer.handle_timed_event(TimedEvent::Heartbeat);
@@ -3235,14 +3239,31 @@ mod tests {
         if keep_all {
           continue;
         }
-        // the tick comes again once the stream has paused for the fast period
-        let fast = StdDuration::from(f.writer.heartbeat_period_fast.unwrap());
-        assert!(f
+        // the tick is set again for when the stream will have paused for the fast
+        // period
+        let pushed = f.writer.last_push.unwrap();
+        let ticks: Vec<_> = f
           .timer
           .borrow()
-          .next_deadline()
-          .is_some_and(|t| t <= Instant::now() + fast));
-        std::thread::sleep(fast + StdDuration::from_millis(20));
+          .pending()
+          .filter(|(_, event)| {
+            matches!(
+              event,
+              DpTimerEvent::Writer {
+                event: TimedEvent::Heartbeat,
+                ..
+              }
+            )
+          })
+          .map(|(when, _)| when)
+          .collect();
+        assert!(
+          ticks
+            .iter()
+            .any(|&when| when >= pushed + fast && when <= Instant::now() + fast),
+          "no tick set for the end of the fast period after the sample: {ticks:?}"
+        );
+        f.writer.last_push = Some(pushed - fast);
         f.writer.handle_timed_event(TimedEvent::Heartbeat);
         assert_ne!(heartbeats(&f), streaming, "no HEARTBEAT after the stream paused");
       }
