@@ -411,28 +411,37 @@ mod tests {
       .create_client::<String, String>(ServiceMapping::Enhanced, &name, &type_name, qos.clone(), qos)
       .unwrap();
 
-    // a request sent before the endpoints matched is lost (volatile): resend until one comes
+    // A request sent before the request endpoints matched is lost (volatile), and so
+    // is a reply sent before the response endpoints did, which the client creates
+    // second: send again, answering every request the server has, until a reply comes.
     let mut sent = Vec::new();
-    let (server_id, request) = poll("the request", || {
+    let mut answered = Vec::new();
+    let (reply_id, reply) = poll("a reply", || {
       sent.push(client.send_request("ping".to_string()).unwrap());
       std::thread::sleep(Duration::from_millis(50));
-      server.receive_request().unwrap()
+      while let Some((server_id, request)) = server.receive_request().unwrap() {
+        assert_eq!(request, "ping");
+        assert_eq!(
+          server_id.writer_gid,
+          Gid::from(client.response_receiver.guid()),
+          "the server answers to the client's response reader"
+        );
+        server.send_response(server_id, "pong".to_string()).unwrap();
+        answered.push(server_id);
+      }
+      client.receive_response().unwrap()
     });
-    assert_eq!(request, "ping");
-    assert_eq!(
-      server_id.writer_gid,
-      Gid::from(client.response_receiver.guid()),
-      "the server answers to the client's response reader"
-    );
+    // the reply comes under the id send_request returned for a request it answers
+    let server_id = answered
+      .iter()
+      .find(|id| id.sequence_number == reply_id.sequence_number)
+      .unwrap_or_else(|| panic!("{reply_id:?} answers none of the requests: {answered:?}"));
     let ours = sent
       .iter()
       .find(|id| id.sequence_number == server_id.sequence_number)
       .copied()
       .unwrap_or_else(|| panic!("{server_id:?} is none of the ids sent: {sent:?}"));
     assert_eq!(ours.writer_gid, Gid::from(client.client_guid));
-
-    server.send_response(server_id, "pong".to_string()).unwrap();
-    let (reply_id, reply) = poll("the reply", || client.receive_response().unwrap());
     assert_eq!((reply_id, reply.as_str()), (ours, "pong"));
   }
 }
