@@ -486,6 +486,11 @@ impl Spinner {
         since: Instant::now(),
       });
     }
+    #[cfg(test)]
+    tests::ANSWERED
+      .lock()
+      .unwrap()
+      .push(self.fully_qualified_node_name.clone());
   }
 
   /// Send the waiting answers whose reader has matched. One still unmatched
@@ -1823,6 +1828,11 @@ mod tests {
   use super::{Node, NodeName};
   use crate::{NodeOptions, context::Context, parameters::ParameterValue};
 
+  // The fully qualified names of the nodes whose spinner has answered a parameter
+  // request or kept the answer (`Spinner::answer`, each time): a test waits for
+  // this, not for a time.
+  pub(super) static ANSWERED: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
   #[test]
   fn node_parameter_rules() {
     let node = Node::new(
@@ -2012,7 +2022,18 @@ mod tests {
       depth: 0,
     };
     writer.write_with_options(request, options).unwrap();
-    std::thread::sleep(Duration::from_millis(500)); // the server has had it and answered
+    // the server has had it and answered (or kept the answer): the deadline only
+    // bounds a failure
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !ANSWERED
+      .lock()
+      .unwrap()
+      .iter()
+      .any(|name| name == "/answer_waits_for_reader")
+    {
+      assert!(Instant::now() < deadline, "the server never had the request");
+      std::thread::sleep(Duration::from_millis(10));
+    }
 
     let mut reader = subscriber
       .create_datareader_no_key_cdr::<ListParametersResponse>(&replies, None)
