@@ -3,8 +3,10 @@
 and CDR encoding, message counts; and a recording played back, in order and restamped
 (its pace is checked on a simulated clock by gui_bridge's unit test of `play`)."""
 import os
+import re
 import signal
 import subprocess
+import threading
 
 from geometry_msgs.msg import PointStamped
 from mcap import reader as mcap_reader
@@ -37,6 +39,32 @@ def read(path):
     return header, summary, messages
 
 
+class Output:
+    """A process's output lines, read as they come (a thread), so that a test can wait
+    for a line while the process runs."""
+
+    def __init__(self, proc):
+        self.lines = []
+        self.thread = threading.Thread(target=self._read, args=(proc.stdout,), daemon=True)
+        self.thread.start()
+
+    def _read(self, stream):
+        for line in stream:
+            self.lines.append(line)
+
+    def has(self, text):
+        return any(text in line for line in list(self.lines))
+
+    def text(self):
+        self.thread.join(15)
+        return "".join(self.lines)
+
+    def own(self):
+        """Its own lines, not its libraries' (`[INFO] [stamp] [gui_bridge:rustdds::…]: …`
+        at debug level)."""
+        return "".join(line for line in list(self.lines) if not re.match(r"\[\w+\] \[[\d.]+\] \[[^\]]*:", line))
+
+
 def record_session(launch, observer, domain, path):
     """Record compute_ik's motion through TARGETS (and one gripper target) into `path`;
     returns compute_ik's process (still running) and the recorder's output."""
@@ -44,13 +72,16 @@ def record_session(launch, observer, domain, path):
     launch("state_publisher")
     observer.wait_publisher("/joint_states")
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
-    rec = subprocess.Popen([bin_path("gui_bridge"), "record", str(path)], stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True, env=env)
+    # at debug level the recorder says each target it has written
+    rec = subprocess.Popen([bin_path("gui_bridge"), "record", str(path), "--ros-args", "--log-level", "debug"],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    out = Output(rec)
     xyz = observer.pub("/xyz_target", PointStamped)
     grip = observer.pub("/gripper_target", Float64)
     # Two readers on each, compute_ik's and the recorder's, before the first target: our
-    # writers send to the recorder from then on (a sleep stood for this). Whether its
-    # readers know our writers as early is not something the recorder tells.
+    # writers send to the recorder from then on (reliable: a sample that reaches the
+    # recorder's reader before that reader knows our writer is sent again on the
+    # writer's next heartbeat).
     assert observer.spin_until(lambda: xyz.get_subscription_count() >= 2 and grip.get_subscription_count() >= 2, 30), \
         f"the recorder's subscriptions were not matched: {xyz.get_subscription_count()}, {grip.get_subscription_count()}"
     for (x, y, z), gap in zip(TARGETS, GAPS_S):
@@ -60,19 +91,26 @@ def record_session(launch, observer, domain, path):
         m.point.x, m.point.y, m.point.z = x, y, z
         xyz.publish(m)
     grip.publish(Float64(data=0.5))
-    # Nothing the recorder says tells that it has taken the last samples: this settle
-    # stands in for it (gui_bridge record would need to report its readers' matches and
-    # samples taken; see the report of issue 32).
-    observer.spin_for(1.5)
+    # Ctrl-C once the recorder has written the last target and the gripper target (the
+    # deadline only bounds a failure)
+    last = [f"/xyz_target: sample {len(TARGETS)} recorded", "/gripper_target: sample 1 recorded"]
+    reported = observer.spin_until(lambda: all(out.has(line) for line in last), 30)
     rec.send_signal(signal.SIGINT)
-    out, _ = rec.communicate(timeout=15)
-    assert rec.returncode == 0, out
-    return ik, out
+    rec.wait(15)
+    assert reported, f"the recorder did not report {last}:\n{out.own()}"
+    assert rec.returncode == 0, out.text()
+    return ik, out.own()
+
+
+def reported_counts(out):
+    """The recorder's last line's count of each topic: `recorded N messages into F: /a 3, /b 0`."""
+    line = next(line for line in out.splitlines() if line.startswith("recorded "))
+    return {topic: int(n) for topic, n in (item.split(" ") for item in line.split(": ", 1)[1].split(", "))}
 
 
 def test_record_writes_ros2msg_schemas_and_cdr_that_the_mcap_packages_read(launch, observer, domain, tmp_path):
     path = tmp_path / "run.mcap"
-    record_session(launch, observer, domain, path)
+    _, out = record_session(launch, observer, domain, path)
     header, summary, messages = read(path)
     assert header.profile == "ros2"
     channels = {c.topic: c for c in summary.channels.values()}
@@ -90,6 +128,8 @@ def test_record_writes_ros2msg_schemas_and_cdr_that_the_mcap_packages_read(launc
     assert counts["/tf_static"] >= 1
     assert counts["/joint_states"] > 10 and counts["/tf"] > 10
     assert summary.statistics.message_count == len(messages)
+    # what it says it recorded is what the file holds
+    assert reported_counts(out) == {topic: counts.get(topic, 0) for topic in RECORDED}, out
     xyz = [(round(m.point.x, 4), round(m.point.y, 4), round(m.point.z, 4))
            for topic, _, _, m in messages if topic == "/xyz_target"]
     assert xyz == TARGETS

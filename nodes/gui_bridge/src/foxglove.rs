@@ -449,7 +449,9 @@ async fn forward(
 
 /// `record FILE.mcap`: the targets and what it takes to view the session again
 /// (`joint_states`, `tf`, `tf_static`, `robot_description`, `servo_state`) into an MCAP
-/// file, until `shutdown`.
+/// file, until `shutdown`. It says what it records as it goes: each topic's first
+/// sample (info), each target (debug: a user checking that the operator's targets were
+/// taken, a test waiting for its last one), and each topic's count when it stops.
 pub async fn record_mcap(
     node: &mut RosNode,
     path: &Path,
@@ -461,20 +463,73 @@ pub async fn record_mcap(
         .with_context(|| format!("cannot record into {shown}"))?;
     let samples = taps(node, |t| recorder.records(t))?;
     println!("recording the targets, joint_states, tf, tf_static, robot_description and servo_state into {shown}; Ctrl-C to stop");
-    tokio::pin!(samples, shutdown);
-    loop {
-        tokio::select! {
-            _ = &mut shutdown => break,
-            Some((topic, cdr)) = samples.next() => {
-                recorder.write(topic, &cdr, now_ns()).with_context(|| format!("writing {shown}"))?;
-            }
-        }
-    }
+    let counts = record_until(&mut recorder, &names, samples, shutdown, now_ns)
+        .await
+        .with_context(|| format!("writing {shown}"))?;
     let n = recorder
         .finish()
         .with_context(|| format!("finishing {shown}"))?;
-    println!("recorded {n} messages into {shown}");
+    let per_topic: Vec<String> = topics::all()
+        .iter()
+        .filter(|t| t.recorded())
+        .map(|t| {
+            let count = counts.get(t.name).copied().unwrap_or(0);
+            format!("{} {count}", names.shown(t.name))
+        })
+        .collect();
+    println!(
+        "recorded {n} messages into {shown}: {}",
+        per_topic.join(", ")
+    );
     Ok(())
+}
+
+/// How many samples of each topic (relative name) a recording took.
+type Counts = HashMap<&'static str, u64>;
+
+/// Write `samples` into `recorder`, each at `now()`, until `shutdown`; then what the
+/// readers had already received (a target sent just before Ctrl-C is in the file).
+async fn record_until<W: std::io::Write + std::io::Seek>(
+    recorder: &mut McapRecorder<W>,
+    names: &TopicNames,
+    samples: impl futures::Stream<Item = RawSample>,
+    shutdown: impl Future<Output = ()>,
+    now: impl Fn() -> u64,
+) -> anyhow::Result<Counts> {
+    let targets: BTreeSet<&'static str> = topics::all()
+        .iter()
+        .filter(|t| t.target)
+        .map(|t| t.name)
+        .collect();
+    let mut counts = Counts::new();
+    let mut take = |(topic, cdr): RawSample| -> anyhow::Result<()> {
+        if !recorder.write(topic, &cdr, now())? {
+            return Ok(());
+        }
+        // reported once written: the file has it once the recording is finished
+        let n = counts.entry(topic).or_insert(0);
+        *n += 1;
+        if *n == 1 {
+            log::info!("{}: first sample recorded", names.shown(topic));
+        }
+        if targets.contains(topic) {
+            log::debug!("{}: sample {n} recorded", names.shown(topic));
+        }
+        Ok(())
+    };
+    tokio::pin!(samples, shutdown);
+    loop {
+        tokio::select! {
+            biased;
+            _ = &mut shutdown => break,
+            Some(sample) = samples.next() => take(sample)?,
+        }
+    }
+    // what arrived before the stop, not what comes while the file is being closed
+    while let Some(Some(sample)) = samples.next().now_or_never() {
+        take(sample)?;
+    }
+    Ok(counts)
 }
 
 /// `play FILE.mcap`: publish the recording's targets at their recorded times relative to
@@ -593,6 +648,50 @@ mod tests {
         ))
         .unwrap();
         log.into_inner()
+    }
+
+    #[test]
+    fn record_takes_the_samples_received_before_the_stop() {
+        // three targets already received when Ctrl-C comes, and a reader that goes on
+        // (nothing more arrives)
+        let targets: Vec<RawSample> = (0..3)
+            .map(|i| {
+                let target = PointStamped {
+                    point: eezybot_msgs::geometry_msgs::Point {
+                        x: f64::from(i),
+                        ..Default::default()
+                    },
+                    ..Default::default()
+                };
+                ("xyz_target", eezybot_msgs::cdr::encode(&target).unwrap())
+            })
+            .collect();
+        let samples = futures::stream::iter(targets).chain(futures::stream::pending());
+        let names = TopicNames::default();
+        let mut out = Cursor::new(Vec::new());
+        let mut rec = McapRecorder::new(&mut out, &names).unwrap();
+        let counts = futures::executor::block_on(record_until(
+            &mut rec,
+            &names,
+            samples,
+            std::future::ready(()),
+            || 1_795_000_000_000_000_000,
+        ))
+        .unwrap();
+        rec.finish().unwrap();
+        assert_eq!(counts.get("xyz_target"), Some(&3));
+        let xs: Vec<f64> = McapTargets::from_bytes(out.get_ref())
+            .unwrap()
+            .targets()
+            .iter()
+            .map(|t| {
+                eezybot_msgs::cdr::decode::<PointStamped>(&t.cdr)
+                    .unwrap()
+                    .point
+                    .x
+            })
+            .collect();
+        assert_eq!(xs, vec![0.0, 1.0, 2.0]);
     }
 
     #[test]
