@@ -25,6 +25,21 @@ where
     batch
 }
 
+/// Every input that is ready now, in order (none: empty). Never waits. A node handles
+/// these before a deadline that came due with them: on a busy host the deadline (e.g.
+/// "no sample for 50 ms") and the input that meets it can be ready at once, and
+/// `select!` picks among ready branches at random.
+pub fn ready_now<T, S>(inputs: &mut S) -> Vec<T>
+where
+    S: Stream<Item = T> + Unpin,
+{
+    let mut batch = vec![];
+    while let Some(Some(more)) = inputs.next().now_or_never() {
+        batch.push(more);
+    }
+    batch
+}
+
 /// Keep, in order, the inputs that no later input of the same `kind` supersedes
 /// (`kind` None: never superseded, e.g. an e-stop). Returns them and how many were
 /// dropped.
@@ -86,6 +101,19 @@ mod tests {
         assert_eq!(t.elapsed(), Duration::from_millis(1));
         let mut lone = stream::pending::<u32>();
         assert_eq!(take_burst(5, &mut lone), vec![5]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn ready_now_takes_what_is_ready_and_may_take_nothing() {
+        let later = stream::once(async {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+            3
+        });
+        let mut s = Box::pin(stream::iter(vec![1, 2]).chain(later).chain(stream::pending()));
+        assert_eq!(ready_now(&mut s), vec![1, 2]);
+        assert_eq!(ready_now(&mut s), Vec::<i32>::new());
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        assert_eq!(ready_now(&mut s), vec![3]);
     }
 
     #[test]

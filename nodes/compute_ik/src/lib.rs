@@ -340,7 +340,22 @@ where
         let effects = tokio::select! {
             _ = &mut shutdown => break,
             _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
-                driver.on_time(now(), Time::now())
+                // Inputs already waiting go first: on a busy host the deadline (the
+                // leader's timeout above all) and the samples that meet it can be
+                // ready together, and select! picks at random; a leader sample that
+                // had arrived must not be taken for a pulled cable.
+                let waiting = burst::ready_now(&mut inputs);
+                let mut effects = vec![];
+                if !waiting.is_empty() {
+                    if param_changes.has_changed().unwrap_or(false) {
+                        param_changes.borrow_and_update();
+                        ticker = tokio::time::interval(period(&h.params));
+                        effects = apply_params(&mut driver, &h.params);
+                    }
+                    effects.extend(driver.on_inputs(waiting, now(), Time::now()));
+                }
+                effects.extend(driver.on_time(now(), Time::now()));
+                effects
             }
             _ = ticker.tick() => vec![Effect::Report],
             _ = subscriber_poll.tick() => {
