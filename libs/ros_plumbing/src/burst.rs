@@ -109,7 +109,11 @@ mod tests {
             tokio::time::sleep(Duration::from_millis(1)).await;
             3
         });
-        let mut s = Box::pin(stream::iter(vec![1, 2]).chain(later).chain(stream::pending()));
+        let mut s = Box::pin(
+            stream::iter(vec![1, 2])
+                .chain(later)
+                .chain(stream::pending()),
+        );
         assert_eq!(ready_now(&mut s), vec![1, 2]);
         assert_eq!(ready_now(&mut s), Vec::<i32>::new());
         tokio::time::sleep(Duration::from_millis(1)).await;
