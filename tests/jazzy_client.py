@@ -160,7 +160,9 @@ def target(c, a):
     if not c.spin_until(lambda: final_steps() and step_js(final_steps()[-1]), a.timeout):
         return {"error": f"no servo_angles at {a.expect_deg}; the last: "
                          f"{[math.degrees(p) for p in got['servo_angles'][-1].position]}"}
-    if not c.spin_until(replied, a.timeout):
+    # (and the joint_states of the last final step: the planner's second final step may
+    # have come meanwhile, its joint_states not yet)
+    if not c.spin_until(lambda: replied() and step_js(final_steps()[-1]), a.timeout):
         last = got["servo_state"][-1] if got["servo_state"] else None
         return {"error": "no servo_state answering the last step within --device-tol-deg of it; the last: "
                          f"{last and (stamp_of(last), [math.degrees(p) for p in last.position])}"}
