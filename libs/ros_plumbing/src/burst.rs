@@ -19,9 +19,7 @@ where
     S: Stream<Item = T> + Unpin,
 {
     let mut batch = vec![first];
-    while let Some(Some(more)) = inputs.next().now_or_never() {
-        batch.push(more);
-    }
+    batch.extend(ready_now(inputs));
     batch
 }
 
