@@ -483,6 +483,35 @@ def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):
     assert r.returncode != 0 and "line 2" in r.stderr
 
 
+def test_ctrl_c_stops_a_delivery_that_waits_for_compute_ik(observer, domain, tmp_path):
+    """With no compute_ik, `--line` (and `calibrate`) wait for its parameter services,
+    up to `--timeout`; Ctrl-C stops them there as anywhere: once and play exit 0,
+    calibrate 1 (cancelled). Before, the signal waited out the whole timeout."""
+    script = tmp_path / "one.csv"
+    script.write_text("x,y,z,gripper,dwell\n0.2,0,0.15,0.5,0\n")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    for args, code in [(["play", str(script), "--line", "--timeout", "600"], 0),
+                       (["once", "0.2", "0", "0.15", "--line", "--timeout", "600"], 0),
+                       (["calibrate"], 1)]:
+        p = subprocess.Popen([bin_path("gui_bridge"), *args], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            # its node is on the graph: its signal handlers are installed (they come first)
+            assert observer.spin_until(lambda: "gui_bridge" in observer.node.get_node_names(), 30), args
+            p.send_signal(signal.SIGINT)
+            # it would wait out the 600 s (calibrate: 10 s) and then fail with exit 2 (1)
+            out, err = p.communicate(timeout=60)
+        finally:
+            p.kill()
+            p.wait()
+        assert p.returncode == code, (args, err)
+        assert "SIGINT: shutting down" in err, (args, err)
+        if args[0] == "calibrate":
+            assert "cancelled (signal)" in err, err
+        # gone from the graph before the next one starts
+        assert observer.spin_until(lambda: "gui_bridge" not in observer.node.get_node_names(), 30), args
+
+
 def tool_of(js):
     """tool0 of a joint_states message (ROBOT.md's FK)."""
     H, L2, L3, DX = 0.094, 0.135, 0.147, 0.0393

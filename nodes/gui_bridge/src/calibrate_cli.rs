@@ -177,16 +177,19 @@ pub async fn calibrate(
         if leader { "leader" } else { "follower" },
         control.path().display()
     );
+    tokio::pin!(shutdown);
     if !leader {
         // compute_ik must go silent before anything moves: its parameter services first
-        control
-            .wait_ready("compute_ik", Duration::from_secs(10))
-            .await
-            .map_err(|e| {
+        tokio::select! {
+            r = control.wait_ready("compute_ik", Duration::from_secs(10)) => r.map_err(|e| {
                 NotDelivered::NotCalibrated(format!(
                     "calibration not started: compute_ik's parameters do not answer ({e}): is compute_ik running?"
                 ))
-            })?;
+            })?,
+            _ = &mut shutdown => {
+                return Err(NotDelivered::NotCalibrated("calibration cancelled (signal) before it started: nothing saved".into()).into());
+            }
+        }
     }
     let mut heard: BTreeMap<String, (String, Instant)> = BTreeMap::new();
     let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
@@ -195,7 +198,6 @@ pub async fn calibrate(
     let mut estop = estop.async_stream().boxed_local();
     let mut joint_states = joint_states.async_stream().boxed_local();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
-    tokio::pin!(shutdown);
     let arm = if leader { Arm::Leader } else { Arm::Follower };
     let mut started = false;
     // servo_state first: a follower's wizard starts where the servos are

@@ -80,10 +80,17 @@ pub async fn once(
 ) -> anyhow::Result<()> {
     let xyz = args.xyz();
     check(arm, xyz)?;
-    let motion = MotionSwitch::engage(node, &args.delivery, false).await?;
+    tokio::pin!(shutdown);
+    let Some(mut motion) = MotionSwitch::engage(node, &args.delivery, false, &mut shutdown).await?
+    else {
+        return Ok(()); // Ctrl-C while compute_ik's parameters were awaited
+    };
     let mut d = Delivery::new(node, &args.delivery)?;
     let node = &*node;
     let work = async {
+        if let Some(m) = motion.as_mut() {
+            m.set(None).await?;
+        }
         d.connect(node).await?;
         d.send(xyz).await?;
         if args.delivery.line {
@@ -96,7 +103,7 @@ pub async fn once(
         println!("delivered {xyz:?}");
         Ok(())
     };
-    let result = until_shutdown(work, shutdown).await;
+    let result = until_shutdown(work, &mut shutdown).await;
     MotionSwitch::restore(motion).await;
     result
 }
@@ -117,7 +124,11 @@ pub async fn play(
         .map_err(|e| anyhow!("{path}: {e}"))?
         .points;
     let modes = waypoints.iter().any(|w| w.mode.is_some());
-    let mut motion = MotionSwitch::engage(node, &args.delivery, modes).await?;
+    tokio::pin!(shutdown);
+    let Some(mut motion) = MotionSwitch::engage(node, &args.delivery, modes, &mut shutdown).await?
+    else {
+        return Ok(()); // Ctrl-C while compute_ik's parameters were awaited
+    };
     let mut d = Delivery::new(node, &args.delivery)?;
     let node = &*node;
     let work = async {
@@ -146,7 +157,7 @@ pub async fn play(
         }
         Ok(())
     };
-    let result = until_shutdown(work, shutdown).await;
+    let result = until_shutdown(work, &mut shutdown).await;
     MotionSwitch::restore(motion).await;
     result
 }
@@ -283,44 +294,50 @@ struct MotionSwitch {
 
 impl MotionSwitch {
     /// With `--line` or `modes` (the program names a mode for some point): connect to
-    /// the `motion` of `--ik-node`, and with `--line` set it to `line` now.
+    /// the `motion` of `--ik-node` and read it; the first `set` changes it. `Some(None)`:
+    /// nothing to switch; `None`: `shutdown` came first (nothing was changed).
     async fn engage(
         node: &mut RosNode,
         args: &DeliveryArgs,
         modes: bool,
-    ) -> anyhow::Result<Option<MotionSwitch>> {
+        shutdown: impl Future<Output = ()>,
+    ) -> anyhow::Result<Option<Option<MotionSwitch>>> {
         if !args.line && !modes {
-            return Ok(None);
+            return Ok(Some(None));
         }
         let client = RemoteParameters::new(node, &args.ik_node)?;
-        client
-            .wait(node, args.timeout)
-            .await
-            .map_err(|e| anyhow!(e))?;
-        let original = client
-            .get("motion")
-            .await
-            .map_err(|e| anyhow!(e))?
-            .ok_or_else(|| {
-                anyhow!(
-                    "{} has no `motion` parameter (too old a compute_ik?)",
-                    client.node_name()
-                )
-            })?;
+        let read = async {
+            client
+                .wait(node, args.timeout)
+                .await
+                .map_err(|e| anyhow!(e))?;
+            client
+                .get("motion")
+                .await
+                .map_err(|e| anyhow!(e))?
+                .ok_or_else(|| {
+                    anyhow!(
+                        "{} has no `motion` parameter (too old a compute_ik?)",
+                        client.node_name()
+                    )
+                })
+        };
+        let original = tokio::select! {
+            r = read => r?,
+            _ = shutdown => return Ok(None),
+        };
         let default = if args.line {
             mode_value(MoveMode::Line)
         } else {
             original.clone()
         };
-        let mut switch = MotionSwitch {
+        Ok(Some(Some(MotionSwitch {
             client,
             current: original.clone(),
             original,
             default,
             touched: false,
-        };
-        switch.set(None).await?;
-        Ok(Some(switch))
+        })))
     }
 
     /// Set `motion` for the next move: `mode`, or the default for none; nothing if it
