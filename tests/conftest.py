@@ -5,6 +5,7 @@ import fcntl
 import importlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -408,6 +409,38 @@ def pytest_runtest_call(item):
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_teardown(item):
     yield from _timed_phase(item, "teardown")
+
+
+# A failed test's tmp_path (servo_sim's event file, node logs, recordings) is copied to
+# the test output directory after its fixtures are torn down (the simulations stopped and
+# their files closed): pytest keeps only the last three runs' temporary directories, and
+# every module of its own process is a run, so the evidence of a failure in a long test
+# command would otherwise be gone by its end. Files over KEEP_MAX_BYTES are left out.
+
+KEEP_MAX_BYTES = 64 << 20
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    if report.when in ("setup", "call") and report.failed:
+        item.eezybot_failed = True
+    if report.when == "teardown" and getattr(item, "eezybot_failed", False):
+        tmp = item.funcargs.get("tmp_path") if hasattr(item, "funcargs") else None
+        if tmp is not None and Path(tmp).is_dir():
+            _keep_failed_files(Path(tmp), OUTPUT / "failed" / re.sub(r"[^\w.-]+", "_", item.nodeid))
+
+
+def _keep_failed_files(src, dest):
+    for f in sorted(src.rglob("*")):
+        try:
+            if f.is_file() and not f.is_symlink() and f.stat().st_size <= KEEP_MAX_BYTES:
+                target = dest / f.relative_to(src)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(f, target)
+        except OSError:
+            pass  # a socket, a file gone meanwhile: keep the rest
 
 
 # ---------------------------------------------------------------------------------------
