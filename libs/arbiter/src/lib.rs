@@ -3,9 +3,9 @@
 //!
 //! | controller | claims (`<joint>/position`) | commands |
 //! |---|---|---|
-//! | `teleop` | the arm's joints and the claw | `xyz_target`, `pose_target`, `joint_target`, `gripper_target` |
+//! | `teleop` | the arm's joints | `xyz_target`, `pose_target`, `joint_target` |
 //! | `arm_controller` | the arm's joints | `arm_controller/follow_joint_trajectory`, `arm_controller/joint_trajectory` |
-//! | `gripper_controller` | the claw | `gripper_controller/gripper_cmd` |
+//! | `gripper_controller` | the claw | `gripper_controller/gripper_cmd`, `gripper_target` |
 //! | `leader_follower` | the arm's joints and the claw | `leader/joint_states` while `leader/deadman` is held |
 //! | `calibration` | the arm's joints and the claw | the calibration wizard's servo jogs |
 //!
@@ -19,11 +19,17 @@
 //! lease) all come through it, and it says what it decided and what changed. It keeps no
 //! clock of its own: every event comes with the time it happened at.
 //!
+//! `teleop` and `gripper_controller` are active at start: an operator's targets move the
+//! arm and the claw. As `arm_controller` takes trajectories both from its action and its
+//! topic, `gripper_controller` takes the claw's commands from its action and from
+//! `gripper_target`; a `joint_target` that names the claw's joint is teleop's and
+//! gripper_controller's at once.
+//!
 //! Beside explicit switches (`switch_controller`), the rules users know take the arm on
 //! demand: a command for an inactive `teleop`, `arm_controller`, `gripper_controller` or
 //! `leader_follower` activates it, deactivating whoever held its interfaces, if they may
 //! be preempted ([`Arbiter::preemptible`]): anyone but `calibration` and a
-//! `leader_follower` that follows (its deadman held). docs/nodes.md has the table.
+//! `leader_follower` that follows (its deadman held). README.md has the table.
 
 use std::fmt;
 use std::time::{Duration, Instant};
@@ -31,11 +37,11 @@ use std::time::{Duration, Instant};
 /// One of the five commanders.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Controller {
-    /// targets from the operator: `xyz_target`, `pose_target`, `joint_target`, `gripper_target`
+    /// the operator's targets for the arm: `xyz_target`, `pose_target`, `joint_target`
     Teleop,
     /// trajectories: FollowJointTrajectory goals and `arm_controller/joint_trajectory`
     ArmController,
-    /// GripperCommand goals
+    /// the claw: GripperCommand goals and `gripper_target`
     GripperController,
     /// a leader arm's joints, while its deadman is held
     LeaderFollower,
@@ -92,8 +98,8 @@ impl fmt::Display for Controller {
     }
 }
 
-/// The arm's joints: the arm's own (claimed by `arm_controller`) and the claw's, if it
-/// has one (claimed by `gripper_controller`). `teleop`, `leader_follower` and
+/// The arm's joints: the arm's own (claimed by `teleop` and `arm_controller`) and the
+/// claw's, if it has one (claimed by `gripper_controller`). `leader_follower` and
 /// `calibration` claim them all.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Layout {
@@ -142,10 +148,12 @@ pub struct Switch {
 /// A commander's command: it moves the arm if the arbiter lets it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Command {
-    /// `xyz_target`, `pose_target` or `joint_target`
-    TeleopArm,
+    /// `xyz_target`, `pose_target`, or a `joint_target` of the arm's joints only
+    ArmTarget,
+    /// a `joint_target` that names the claw's joint (and maybe the arm's)
+    ArmAndClawTarget,
     /// `gripper_target`
-    TeleopGripper,
+    ClawTarget,
     /// a FollowJointTrajectory goal or an `arm_controller/joint_trajectory` message
     Trajectory,
     /// a GripperCommand goal
@@ -238,6 +246,9 @@ impl Refusal {
 pub enum Why {
     /// another commander took its interfaces
     PreemptedBy(Controller),
+    /// a newer command of its own (a `gripper_target` or a `joint_target` naming the
+    /// claw, during a gripper goal)
+    Superseded,
     /// `switch_controller` deactivated it
     Switched,
     /// the e-stop was engaged
@@ -254,6 +265,7 @@ impl fmt::Display for Why {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Why::PreemptedBy(c) => write!(f, "preempted by {c}"),
+            Why::Superseded => f.write_str("preempted by a newer command"),
             Why::Switched => f.write_str("deactivated by switch_controller"),
             Why::Estop => f.write_str("emergency stop engaged"),
             Why::DeadmanReleased => f.write_str("deadman released"),
@@ -351,16 +363,20 @@ pub struct Arbiter {
 }
 
 impl Arbiter {
-    /// For this arm, with `teleop` active (the operator's targets move the arm as they
-    /// always did), the e-stop released and the deadman not held.
+    /// For this arm, with `teleop` and `gripper_controller` (if it has a claw) active
+    /// (the operator's targets move the arm and the claw as they always did), the
+    /// e-stop released and the deadman not held.
     pub fn new(layout: Layout) -> Arbiter {
         assert!(layout.count() <= 32, "at most 32 joints");
         let arm: u32 = (0..layout.arm.len()).map(|i| 1u32 << i).sum();
         let claw: u32 = layout.gripper.as_ref().map_or(0, |_| 1 << layout.arm.len());
         let mut active: [Option<Mode>; 5] = Default::default();
         active[Controller::Teleop.index()] = Some(Mode::Teleop);
+        if claw != 0 {
+            active[Controller::GripperController.index()] = Some(Mode::Gripper { running: false });
+        }
         Arbiter {
-            claims: [arm | claw, arm, claw, arm | claw, arm | claw],
+            claims: [arm, arm, claw, arm | claw, arm | claw],
             layout,
             active,
             estop: false,
@@ -639,6 +655,7 @@ impl Arbiter {
         Ok(())
     }
 
+    /// A command: all of it is carried, or none (a refusal changes nothing).
     fn command(
         &mut self,
         cmd: Command,
@@ -651,39 +668,33 @@ impl Arbiter {
         if self.is_active(Controller::Calibration) {
             return Err(Refusal::Calibrating);
         }
+        let mut next = self.clone();
+        let mut made = vec![];
+        let carrier = next.carry(cmd, now, &mut made)?;
+        *self = next;
+        changes.extend(made);
+        Ok(carrier)
+    }
+
+    fn carry(
+        &mut self,
+        cmd: Command,
+        now: Instant,
+        changes: &mut Vec<Change>,
+    ) -> Result<Controller, Refusal> {
         match cmd {
-            Command::TeleopArm => {
+            Command::ArmTarget => {
                 self.take(Controller::Teleop, now, changes)?;
                 Ok(Controller::Teleop)
             }
-            Command::TeleopGripper => {
-                if self.layout.gripper.is_none() {
-                    return Err(Refusal::NoInterfaces(Controller::GripperController));
-                }
-                // the claw goes with teleop if it is active; while arm_controller has
-                // the arm, the claw moves on its own, under gripper_controller (a
-                // running gripper goal is preempted)
-                if self.is_active(Controller::Teleop) {
-                    return Ok(Controller::Teleop);
-                }
-                if self.is_active(Controller::ArmController)
-                    || self.is_active(Controller::GripperController)
-                {
-                    self.take(Controller::GripperController, now, changes)?;
-                    if let Some(Mode::Gripper { running }) =
-                        &mut self.active[Controller::GripperController.index()]
-                    {
-                        if std::mem::replace(running, false) {
-                            changes.push(Change::Stopped(
-                                Controller::GripperController,
-                                Why::PreemptedBy(Controller::Teleop),
-                            ));
-                        }
-                    }
-                    return Ok(Controller::GripperController);
-                }
+            Command::ArmAndClawTarget => {
                 self.take(Controller::Teleop, now, changes)?;
+                self.claw_command(now, changes)?;
                 Ok(Controller::Teleop)
+            }
+            Command::ClawTarget => {
+                self.claw_command(now, changes)?;
+                Ok(Controller::GripperController)
             }
             Command::Trajectory => {
                 self.take(Controller::ArmController, now, changes)?;
@@ -708,6 +719,23 @@ impl Arbiter {
                 Ok(Controller::LeaderFollower)
             }
         }
+    }
+
+    /// A target for the claw (not a goal): gripper_controller's; a running goal of it
+    /// is superseded.
+    fn claw_command(&mut self, now: Instant, changes: &mut Vec<Change>) -> Result<(), Refusal> {
+        self.take(Controller::GripperController, now, changes)?;
+        if let Some(Mode::Gripper { running }) =
+            &mut self.active[Controller::GripperController.index()]
+        {
+            if std::mem::replace(running, false) {
+                changes.push(Change::Stopped(
+                    Controller::GripperController,
+                    Why::Superseded,
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// `switch_controller`, as ros2_control does it: the names must be known, a

@@ -25,8 +25,9 @@ fn names() -> impl Strategy<Value = Vec<String>> {
 fn event() -> impl Strategy<Value = Event> {
     let controller = (0..5usize).prop_map(|i| Controller::ALL[i]);
     let command = prop_oneof![
-        Just(Command::TeleopArm),
-        Just(Command::TeleopGripper),
+        Just(Command::ArmTarget),
+        Just(Command::ArmAndClawTarget),
+        Just(Command::ClawTarget),
         Just(Command::Trajectory),
         Just(Command::GripperGoal),
         Just(Command::LeaderSample),
@@ -56,7 +57,7 @@ fn layout(claw: bool) -> Layout {
             "shoulder_joint".into(),
             "elbow_joint".into(),
         ],
-        gripper: claw.then(|| "claw_joint".into()),
+        gripper: claw.then(|| "gripper_joint".into()),
     }
 }
 
