@@ -58,6 +58,9 @@ def msg_type(topic):
 # the two profiles of the contract, for topics that are not ours (`/rosout`) and old call sites
 COMMANDS = qos("xyz_target")  # reliable, volatile, keep last 10
 LATCHED = qos("estop")  # reliable, transient-local, keep last 1
+# rcl's /rosout: reliable, transient-local, keep last 1000. A reader of less depth loses
+# lines whenever the test does not spin for a while (a browser step on a busy host).
+ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def default_sigint():

@@ -12,7 +12,7 @@ from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 
-from conftest import Observer, bin_path, qos
+from conftest import ROSOUT, Observer, bin_path, qos
 
 # in a process of its own, beside the other modules (conftest: `background`): judged by
 # the steps compute_ik publishes, their stamps and sentinels, not by time
@@ -299,7 +299,7 @@ def test_bad_inputs_give_a_reason_and_no_servo_angles(launch, observer):
 
 
 def test_diagnostics_keep_coming_and_go_to_rosout_too(launch, observer):
-    rosout = observer.sub("/rosout", Log)
+    rosout = observer.sub("/rosout", Log, ROSOUT)
     rig = IkRig(launch, observer)
     n0 = len(rig.diagnostics)
     # with no input at all (about once a second: the bound only ends a failure)
@@ -627,7 +627,7 @@ def test_undesirable_configurations_are_in_diagnostics_with_a_way_out(launch, ob
 
 
 def test_a_target_just_outside_is_replaced_by_the_nearest_reachable_point_when_asked(launch, observer):
-    rosout = observer.sub("/rosout", Log)
+    rosout = observer.sub("/rosout", Log, ROSOUT)
     rig = IkRig(launch, observer)
     outside = (0.29, 0.0, 0.15)  # ROBOT.md: at z = 0.15 the tool reaches r 0.278 at most
     rejected = rig.rejected_count()

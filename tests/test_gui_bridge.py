@@ -24,7 +24,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from diagnostic_msgs.msg import DiagnosticArray
 
-from conftest import LATCHED, OUTPUT, REPO, bin_path, latest_status, status_values
+from conftest import LATCHED, OUTPUT, REPO, ROSOUT, bin_path, latest_status, status_values
 
 # A gamepad the page reads through navigator.getGamepads(); the test moves its sticks
 # and buttons through window.__pad. Each read is counted (window.__pad.reads), and each
@@ -830,7 +830,7 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
     from rcl_interfaces.msg import Log
     from rcl_interfaces.srv import GetParameters
     xyz = observer.sub("/xyz_target", PointStamped)
-    rosout = observer.sub("/rosout", Log, LATCHED)
+    rosout = observer.sub("/rosout", Log, ROSOUT)
     proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
     deadline = time.monotonic() + 5
     while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/#token=([0-9a-f]+)", proc.output())):
