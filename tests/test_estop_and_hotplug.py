@@ -10,7 +10,7 @@ from std_msgs.msg import Bool
 
 from conftest import OUTPUT
 from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, A, B, Rig, engaged_estop_frames, pulse_us,
-                        reconnect_ms, sent_ticks, step_allowed_us, velocity_limits_us_per_s,
+                        reconnect_ms, sent_frames, sent_ticks, step_allowed_us, velocity_limits_us_per_s,
                         velocity_violations)
 from interop.servo_link import ESTOP
 
@@ -25,6 +25,12 @@ def record(name, **figures):
 
 def rises(events):
     return [e for e in events.edges if e[2] == 1]
+
+
+def untraced(events):
+    """SET_PULSES the board got that serial_node's trace does not show (the velocity
+    check's own clock: none may be missing)."""
+    return [(c, seq) for c, seq, ticks in sent_frames(events) if events.decided_ns(c, seq, ticks) is None]
 
 
 @pytest.mark.parametrize("action", ["hold", "detach"])
@@ -69,6 +75,7 @@ def test_estop_stops_the_arm_mid_move_and_a_release_moves_nothing(launch, observ
         # the new command starts from there, within the velocity limit, and gets there
         assert abs(first_new[pin] - applied[pin]) / 2 <= step_allowed_us(LIMITS[pin], 0.0), (pin, applied, first_new)
         assert ev.pulses(pin)[-1][1] == pytest.approx(pulse_us(new[pin]), abs=1.0)
+    assert untraced(ev) == []
     assert velocity_violations(ev, LIMITS) == []
     record("estop", action=action, publish_to_firmware_ms=(ev.wall_ns(c_stop) - t_pub) / 1e6,
            stopped_at_us=[t / 2 for t in applied], was_going_to_us=[pulse_us(d) for d in B])
@@ -124,9 +131,11 @@ def test_hot_plug_while_streaming(launch, observer, tmp_path, kind):
         ev = rig.events()
         assert len([c for c, plugged in ev.cable if plugged]) == cycles
         # the pulses never step faster than the velocity limit: not across a reconnect either
+        assert untraced(ev) == []
         assert velocity_violations(ev, LIMITS) == []
     else:
         for boot in range(1, cycles + 1):
+            assert untraced(rig.events(boot)) == [], f"boot {boot}"
             assert velocity_violations(rig.events(boot), LIMITS, start_us=HOLD_US) == [], f"boot {boot}"
     record("hotplug", kind=kind, cycles=cycles, reconnect_ms=reconnect_ms(rig, kind, up_at),
            counters={k: d[k] for k in ("reconnects", "frames_sent", "frames_ramped_by_velocity_limit")})
@@ -146,9 +155,12 @@ def synthetic_board(tmp_path, frames, pulses):
         lines += [f"r {c} {b}" for b in set_pulses(seq, [round(us * 2), 2944, 2944, 2325])]
     for c, us in pulses:
         lines += [f"e {c} 0 1", f"e {c + round(us * 16)} 0 0"]
-    path = tmp_path / "events.txt"
-    path.write_text("\n".join(lines) + "\n")
-    return BoardEvents(path)
+    board_path(tmp_path).write_text("\n".join(lines) + "\n")
+    return BoardEvents(board_path(tmp_path))
+
+
+def board_path(tmp_path):
+    return tmp_path / "events.txt"
 
 
 def test_the_velocity_check_catches_a_fast_step_and_allows_a_late_frame(tmp_path):
@@ -180,3 +192,30 @@ def test_the_velocity_check_catches_a_fast_step_and_allows_a_late_frame(tmp_path
 
     assert ci_record(1821.5) == []
     assert [(pin, cycle) for pin, cycle, *_ in ci_record(1900.0)] == [(0, 5563443)]
+
+
+def test_the_velocity_check_judges_a_ramp_on_serial_nodes_clock_when_the_harness_read_late(tmp_path):
+    """A CI run's failure, rebuilt (boot 4 of the reset cycles): 133 us between two pulses
+    whose frames the harness read 20.6 ms apart, more than the limit allows in that time.
+    serial_node had decided them 42.9 ms apart, at the limit (three steps of 14.3 ms
+    each); the harness, starved, read the first one 22.3 ms late. With serial_node's trace
+    of when it decided each frame the ramp passes; a trace that says it decided them 20.6
+    ms apart fails it, and so does the record without a trace."""
+    from safety_rig import BoardEvents
+
+    ms = CYCLES_PER_S // 1000
+    step_us = LIMITS[0] * 0.0143
+    widths = [1366.0 - step_us * i for i in range(4)]
+    read_ms = [22.3, 22.3, 28.6, 42.9]  # f0 and f1 in one late read, f2 and f3 on time
+    frames = [(round(t * ms), round(t * 1e6), us) for t, us in zip(read_ms, widths)]
+    pulses = [(23 * ms, widths[0]), (43 * ms, widths[3])]
+    board = synthetic_board(tmp_path, frames, pulses)
+
+    def judged(decided_ms):
+        sent = [(round(t * 1e6), seq, (round(us * 2), 2944, 2944, 2325))
+                for seq, (t, us) in enumerate(zip(decided_ms, widths))]
+        return velocity_violations(BoardEvents(board_path(tmp_path), sent), [LIMITS[0]])
+
+    assert judged([0.0, 14.3, 28.6, 42.9]) == []
+    assert [(pin, cycle) for pin, cycle, *_ in judged([22.0, 22.1, 28.5, 42.6])] == [(0, 43 * ms)]
+    assert [(pin, cycle) for pin, cycle, *_ in velocity_violations(board, [LIMITS[0]])] == [(0, 43 * ms)]

@@ -316,10 +316,21 @@ fn link_loop(mut opener: PortOpener, shared: SharedLock) {
                     Some((p, _)) => p.write_all(&bytes),
                     None => Err(io::Error::new(io::ErrorKind::NotConnected, "no port")),
                 };
-                if let Err(e) = written {
-                    if let Some(mut s) = lock(&shared) {
-                        s.machine.lost(format!("write: {e}"), Instant::now());
-                        s.forward();
+                match written {
+                    // the wire's trace (`--log-level debug`): what went out, and when the
+                    // link decided it (the record's stamp less the lag), the clock the
+                    // velocity guard ramped on
+                    Ok(()) => log::debug!(
+                        "wrote seq {} {:?}, {} us after the link decided it",
+                        frame.seq,
+                        frame.msg,
+                        now.elapsed().as_micros()
+                    ),
+                    Err(e) => {
+                        if let Some(mut s) = lock(&shared) {
+                            s.machine.lost(format!("write: {e}"), Instant::now());
+                            s.forward();
+                        }
                     }
                 }
             }
