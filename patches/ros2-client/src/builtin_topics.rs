@@ -55,7 +55,9 @@ pub mod rosout {
       .deadline(Deadline(Duration::INFINITE))
       .ownership(Ownership::Shared)
       .reliable(Duration::ZERO)
-      .history(History::KeepLast { depth: 1 })
+      // rcl's rosout QoS (rcl_qos_profile_rosout_default): a reader that matches
+      // late (`ros2 topic echo /rosout`, rqt_console) gets the last 10 s of lines
+      .history(History::KeepLast { depth: 1000 })
       .lifespan(Lifespan {
         duration: Duration::from_secs(10)
       })

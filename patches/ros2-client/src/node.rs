@@ -2057,6 +2057,68 @@ mod tests {
     );
   }
 
+  // /rosout keeps rcl's depth (1000 lines, for 10 s): a reader that matches after a
+  // node logged several lines gets them all, as from an rclcpp node. With depth 1
+  // it got the last one only (a test reading /rosout after a browser step missed
+  // gui_bridge's earlier lines).
+  #[test]
+  fn a_late_rosout_reader_gets_every_recent_line() {
+    use std::time::{Duration, Instant};
+
+    use rustdds::*;
+
+    use crate::{builtin_topics::rosout, log::Log, RosoutRaw};
+
+    let node = Node::new(
+      NodeName::new("/", "rosout_depth").unwrap(),
+      NodeOptions::new().enable_rosout(true),
+      Context::new().unwrap(),
+    )
+    .unwrap();
+    for i in 0..5 {
+      node.rosout_raw(
+        crate::builtin_interfaces::Time::now(),
+        crate::log::LogLevel::Info,
+        "rosout_depth",
+        &format!("line {i}"),
+        "",
+        "",
+        0,
+      );
+    }
+
+    let reader_context = Context::new().unwrap();
+    let dp = reader_context.domain_participant();
+    let topic = dp
+      .create_topic(
+        rosout::TOPIC_NAME.to_string(),
+        rosout::TYPE_NAME.to_string(),
+        &rosout::QOS,
+        TopicKind::NoKey,
+      )
+      .unwrap();
+    let mut reader = dp
+      .create_subscriber(&rosout::QOS)
+      .unwrap()
+      .create_datareader_no_key_cdr::<Log>(&topic, None)
+      .unwrap();
+    let mut lines = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while lines.len() < 5 && Instant::now() < deadline {
+      match reader.take_next_sample().unwrap() {
+        Some(sample) => {
+          let log = sample.into_value();
+          if log.name == "rosout_depth" {
+            lines.push(log.msg);
+          }
+        }
+        None => std::thread::sleep(Duration::from_millis(10)),
+      }
+    }
+    let want: Vec<String> = (0..5).map(|i| format!("line {i}")).collect();
+    assert_eq!(lines, want);
+  }
+
   #[test]
   fn node_is_sync() {
     let node = Node::new(
