@@ -27,6 +27,16 @@ impl<M: RosMessage> TopicPublisher<M> {
         self.topic
     }
 
+    /// Wait until every matched reliable subscription has acknowledged everything
+    /// published so far, at most `max_wait`: false on timeout. A process that publishes
+    /// and exits at once can otherwise lose its last sample.
+    pub async fn delivered(&self, max_wait: std::time::Duration) -> bool {
+        matches!(
+            tokio::time::timeout(max_wait, self.publisher.async_wait_for_acknowledgments()).await,
+            Ok(Ok(true))
+        )
+    }
+
     /// The ros2-client publisher, for what this type does not wrap.
     pub fn inner(&self) -> &Publisher<M> {
         &self.publisher

@@ -70,6 +70,10 @@ pub enum NotDelivered {
     },
 }
 
+/// How long a command-line delivery waits at its end for its subscribers to acknowledge
+/// the last targets (a subscriber that died without leaving keeps it waiting this long).
+pub const DELIVERED_WAIT: Duration = Duration::from_secs(5);
+
 /// `once X Y Z [--gripper G]`: deliver one target (with `--line`, wait until the arm is
 /// there), then set the claw.
 pub async fn once(
@@ -100,6 +104,7 @@ pub async fn once(
         if let Some(g) = args.gripper {
             d.out.gripper_target(g); // at the target, as a waypoint's gripper
         }
+        d.delivered().await;
         println!("delivered {xyz:?}");
         Ok(())
     };
@@ -155,6 +160,7 @@ pub async fn play(
             );
             tokio::time::sleep(Duration::from_secs_f64(w.dwell_s)).await;
         }
+        d.delivered().await;
         Ok(())
     };
     let result = until_shutdown(work, &mut shutdown).await;
@@ -201,6 +207,17 @@ impl Delivery {
             topic: node.resolve(&topics::XYZ_TARGET)?,
             timeout: args.timeout,
         })
+    }
+
+    /// Wait until the subscribers have every target published (the last gripper
+    /// target of a `play` with no dwell was lost when the process exited at once), at
+    /// most [`DELIVERED_WAIT`].
+    async fn delivered(&self) {
+        if !self.out.delivered(DELIVERED_WAIT).await {
+            log::warn!(
+                "a subscriber did not acknowledge the last targets within {DELIVERED_WAIT:?}: it may have missed them"
+            );
+        }
     }
 
     /// Wait until someone subscribes `xyz_target` and our `joint_states` reader has its

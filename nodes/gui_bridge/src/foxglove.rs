@@ -240,6 +240,18 @@ impl TargetPublishers {
         })
     }
 
+    /// Wait until the subscribers of the four topics have acknowledged every target
+    /// published, at most `max_wait` (false on timeout).
+    pub async fn delivered(&self, max_wait: Duration) -> bool {
+        let (xyz, pose, gripper, joints) = tokio::join!(
+            self.xyz.delivered(max_wait),
+            self.pose.delivered(max_wait),
+            self.gripper.delivered(max_wait),
+            self.joints.delivered(max_wait)
+        );
+        xyz && pose && gripper && joints
+    }
+
     /// Publish the CDR sample `cdr` of the target topic `topic`; with `restamp`, its
     /// `header.stamp` becomes now (a replayed target is a new request, not an old one
     /// that compute_ik's `max_target_age` would refuse).
@@ -569,8 +581,13 @@ pub async fn play_mcap(
             |t| publishers.publish(t.topic, &t.cdr, true),
         )
         .await?;
-        // let the last samples leave before the node shuts down
-        tokio::time::sleep(Duration::from_millis(300)).await;
+        // the last samples reach their subscribers before the node shuts down
+        if !publishers.delivered(crate::delivery::DELIVERED_WAIT).await {
+            log::warn!(
+                "a subscriber did not acknowledge the last targets within {:?}: it may have missed them",
+                crate::delivery::DELIVERED_WAIT
+            );
+        }
         println!("played {n} targets from {shown}");
         anyhow::Ok(())
     };

@@ -38,6 +38,20 @@ impl RosOutputs {
     }
 }
 
+impl RosOutputs {
+    /// Wait until the subscribers of the three target topics have acknowledged every
+    /// target published, at most `max_wait` (false on timeout): before a command-line
+    /// delivery exits, so its last target is not lost with the process.
+    pub async fn delivered(&self, max_wait: std::time::Duration) -> bool {
+        let (xyz, gripper, joints) = tokio::join!(
+            self.xyz.delivered(max_wait),
+            self.gripper.delivered(max_wait),
+            self.joints.delivered(max_wait)
+        );
+        xyz && gripper && joints
+    }
+}
+
 impl Outputs for RosOutputs {
     fn xyz_target(&self, xyz: [f64; 3], stamp: Time) {
         let msg = PointStamped {

@@ -37,6 +37,27 @@ impl<M: Serialize> Publisher<M> {
       .map_err(Into::into)
   }
 
+  /// Waits until every matched reliable subscription has acknowledged everything
+  /// published so far, at most `max_wait`: `Ok(true)` when they have (at once for a
+  /// best-effort publisher, or with no reliable subscription), `Ok(false)` on
+  /// timeout. A process that exits right after `publish` can lose the sample
+  /// otherwise (rclcpp's `Publisher::wait_for_all_acked`).
+  pub fn wait_for_acknowledgments(&self, max_wait: std::time::Duration) -> WriteResult<bool, ()> {
+    self
+      .datawriter
+      .wait_for_acknowledgments(max_wait)
+      .map_err(Into::into)
+  }
+
+  /// [`Publisher::wait_for_acknowledgments`] without a timeout (bring your own).
+  pub async fn async_wait_for_acknowledgments(&self) -> WriteResult<bool, ()> {
+    self
+      .datawriter
+      .async_wait_for_acknowledgments()
+      .await
+      .map_err(Into::into)
+  }
+
   pub fn assert_liveliness(&self) -> WriteResult<(), ()> {
     self.datawriter.assert_liveliness().map_err(Into::into)
   }
@@ -243,5 +264,78 @@ where
 
   fn deregister(&mut self, registry: &mio1::Registry) -> io::Result<()> {
     mio1::event::Source::deregister(&mut self.datareader, registry)
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+
+  // A publisher waits until its subscriptions have what it published: then the
+  // sample is in the subscriber's cache (a command-line tool that publishes and
+  // exits at once lost its last sample: gui_bridge's `play`).
+  #[test]
+  fn a_publisher_waits_until_its_subscription_has_the_sample() {
+    use std::time::{Duration, Instant};
+
+    use crate::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions};
+
+    use rustdds::DomainParticipantStatusEvent;
+
+    let node = |name: &str, context: Context| {
+      Node::new(
+        NodeName::new("/", name).unwrap(),
+        NodeOptions::new().enable_rosout(false),
+        context,
+      )
+      .unwrap()
+    };
+    let topic = |node: &mut Node| {
+      node
+        .create_topic(
+          &Name::new("/", "acknowledged").unwrap(),
+          MessageTypeName::new("std_msgs", "String"),
+          &crate::DEFAULT_PUBLISHER_QOS,
+        )
+        .unwrap()
+    };
+    let sender_context = Context::new().unwrap();
+    let events = sender_context.domain_participant().status_listener();
+    let mut sender = node("ack_sender", sender_context);
+    let t = topic(&mut sender);
+    let publisher = sender.create_publisher::<String>(&t, None).unwrap();
+    // nobody subscribes: nothing to wait for
+    publisher.publish("to nobody".into()).unwrap();
+    assert!(publisher
+      .wait_for_acknowledgments(Duration::ZERO)
+      .unwrap());
+
+    let mut receiver = node("ack_receiver", Context::new().unwrap());
+    let t = topic(&mut receiver);
+    let subscription = receiver.create_subscription::<String>(&t, None).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+      match events.try_recv_status() {
+        Some(DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, .. })
+          if local_writer == publisher.guid() =>
+        {
+          break
+        }
+        Some(_) => {}
+        None => {
+          assert!(Instant::now() < deadline, "the subscription did not match");
+          std::thread::sleep(Duration::from_millis(10));
+        }
+      }
+    }
+    // (the default QoS keeps the last sample: one at a time)
+    for i in 0..3 {
+      publisher.publish(format!("sample {i}")).unwrap();
+      assert!(publisher
+        .wait_for_acknowledgments(Duration::from_secs(10))
+        .unwrap());
+      let taken = subscription.take().unwrap().map(|(m, _)| m);
+      assert_eq!(taken, Some(format!("sample {i}")));
+    }
   }
 }
