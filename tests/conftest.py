@@ -239,7 +239,8 @@ class NodeProcess:
         return self.proc.returncode
 
     def output(self):
-        self.log.flush()
+        if not self.log.closed:  # (stopped: flushed and closed already)
+            self.log.flush()
         return self.log_path.read_text()
 
     def dump_stacks(self):

@@ -24,7 +24,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
 from conftest import REPO, latest_status, status_values
-from interop.servo_link import ESTOP, SET_PULSES, Decoder, SimulatedUno
+from interop.servo_link import ESTOP, SET_PULSES, STATE, Decoder, SimulatedUno, parse_state
 
 FIRMWARE = REPO / "firmware" / "servo_control"
 SERVOS = ["base_servo", "shoulder_servo", "elbow_servo", "gripper_servo"]
@@ -81,13 +81,15 @@ class BoardEvents:
 
     def __init__(self, path, sent=None):
         self._sent = sent
-        self.edges, self.rx, self.walls, self.cable = [], [], [], []
+        self.edges, self.rx, self.tx, self.walls, self.cable = [], [], [], [], []
         for line in Path(path).read_text().splitlines():
             p = line.split()
             if p[0] == "e" and len(p) == 4:
                 self.edges.append((int(p[1]), int(p[2]), int(p[3])))
             elif p[0] == "r" and len(p) == 3:
                 self.rx.append((int(p[1]), int(p[2])))
+            elif p[0] == "t" and len(p) == 3:
+                self.tx.append((int(p[1]), int(p[2])))
             elif p[0] == "w" and len(p) == 3:
                 self.walls.append((int(p[1]), int(p[2])))
             elif p[0] == "u" and len(p) == 3:
@@ -95,9 +97,19 @@ class BoardEvents:
         self._wall_cycles = [c for c, _ in self.walls]
 
     def frames(self):
-        """Frames the AVR received: [(type, seq, payload, cycle of the last byte)]."""
+        """Frames the AVR received, in order: [(type, seq, payload, cycle of the last byte)].
+        The cycle is when the harness handed the byte to the UART: the bytes of one read
+        share it, and the firmware takes them in at the baud rate after."""
+        return self._decode(self.rx)
+
+    def replies(self):
+        """Frames the AVR sent: [(type, seq, payload, cycle of the last byte)]."""
+        return self._decode(self.tx)
+
+    @staticmethod
+    def _decode(stream):
         d, out = Decoder(), []
-        for cycle, b in self.rx:
+        for cycle, b in stream:
             out += [(*f, cycle) for f in d.feed(bytes([b]))]
         return out
 
@@ -202,10 +214,12 @@ def velocity_violations(events, limits_us_per_s, start_us=None):
     return bad
 
 
-def shown_frame(frames, rise_cycle, width_us, back=4, tolerance_us=1.0):
+def shown_frame(frames, rise_cycle, width_us, back=32, tolerance_us=1.0):
     """The index in `frames` ([(cycle, us)] of one pin) of the SET_PULSES frame a pulse
     shows: the latest of the last `back` frames before the pulse's rise whose width is
-    the pulse's, or None (a pulse before any frame, or one that shows none of them)."""
+    the pulse's, or None (a pulse before any frame, or one that shows none of them).
+    `back` spans a starved harness's burst: a soak run read five frames at once (580 ms
+    late), and the pulse before the last of them showed the first, five back."""
     i = bisect.bisect_left(frames, (rise_cycle, -1.0))
     for j in range(i - 1, max(i - back, 0) - 1, -1):
         if abs(frames[j][1] - width_us) <= tolerance_us:
@@ -342,9 +356,17 @@ class Rig(SerialNodeRig):
         return codes
 
 
+def estop_held(events, after_cycle, seq):
+    """The board's answer to the ESTOP frame `seq` it got at `after_cycle`: (the cycle of
+    the STATE's last byte, the ticks it says its next pulses start from). Sent once the
+    firmware has applied the e-stop: from that cycle on the pins show it."""
+    return next((c, tuple(parse_state(p)["ticks"])) for t, _, p, c in events.replies()
+                if t == STATE and c >= after_cycle and p[0] == seq)
+
+
 def engaged_estop_frames(events):
-    """ESTOP frames that engage (payload 1 hold, 2 detach): [(payload, cycle)]."""
-    return [(p[0], c) for t, _, p, c in events.frames() if t == ESTOP and p[0] in (1, 2)]
+    """ESTOP frames that engage (payload 1 hold, 2 detach): [(payload, seq, cycle)]."""
+    return [(p[0], seq, c) for t, seq, p, c in events.frames() if t == ESTOP and p[0] in (1, 2)]
 
 
 def set_pulses_cycles(events):

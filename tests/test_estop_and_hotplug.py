@@ -4,15 +4,16 @@ in simavr while rclpy streams servo_angles at 50 Hz.
 No timing is asserted: each test writes what it measured (e-stop latency, reconnect times)
 to test-output/; tests/bench/estop_hotplug.py repeats them for BENCHMARKS.md."""
 import json
+import struct
 
 import pytest
 from std_msgs.msg import Bool
 
 from conftest import OUTPUT
-from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, A, B, Rig, engaged_estop_frames, pulse_us,
+from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, A, B, Rig, estop_held, pulse_us,
                         reconnect_ms, sent_frames, sent_ticks, step_allowed_us, velocity_limits_us_per_s,
                         velocity_violations)
-from interop.servo_link import ESTOP
+from interop.servo_link import ESTOP, SET_PULSES
 
 LIMITS = velocity_limits_us_per_s()
 
@@ -53,32 +54,34 @@ def test_estop_stops_the_arm_mid_move_and_a_release_moves_nothing(launch, observ
     finally:
         rig.stop()
 
+    # judged in the order the board got the frames (the frames of one read of the
+    # harness share a cycle) and from the STATE it answered the e-stop with
     ev = rig.events()
-    engaged = engaged_estop_frames(ev)
+    frames = ev.frames()
+    engaged = [i for i, (t, _, p, _) in enumerate(frames) if t == ESTOP and p[0] in (1, 2)]
     # (sent again if a reply to a command sent before it still said "running")
-    assert engaged and {p for p, _ in engaged} == {1 if action == "hold" else 2}
-    c_stop = engaged[0][1]
-    c_release = next(c for t, _, p, c in ev.frames() if t == ESTOP and p[0] == 0 and c > c_stop)
-    sends = sent_ticks(ev)
-    applied = [t for c, t in sends if c < c_stop][-1]  # what the board reports it holds
-    first_new = next(t for c, t in sends if c > c_release)
-    c_new = next(c for c, _ in sends if c > c_release)
+    assert engaged and {frames[i][2][0] for i in engaged} == {1 if action == "hold" else 2}
+    _, seq_stop, _, c_stop = frames[engaged[0]]
+    c_held, held = estop_held(ev, c_stop, seq_stop)  # what the board reports it holds
+    i_release = next(i for i in range(engaged[0] + 1, len(frames)) if frames[i][0] == ESTOP and frames[i][2][0] == 0)
+    _, _, payload, c_new = next(f for f in frames[i_release + 1:] if f[0] == SET_PULSES)
+    first_new = struct.unpack("<4H", payload)
     one_period = SERVO_PERIOD_S * CYCLES_PER_S
     for pin in range(4):
-        after = [(c, w) for c, w in ev.pulses(pin) if c_stop < c <= c_new]
+        after = [(c, w) for c, w in ev.pulses(pin) if c_held < c <= c_new]
         if action == "hold":
             # from the e-stop to the new command every pulse is the command the board had
-            assert after and all(abs(w - applied[pin] / 2) <= 1.0 for _, w in after), (pin, applied, after[:3])
+            assert after and all(abs(w - held[pin] / 2) <= 1.0 for _, w in after), (pin, held, after[:3])
         else:
             # at most the pulse of the frame already latched, then none until the new command
-            assert all(c <= c_stop + one_period for c, _ in after), (pin, after)
+            assert all(c <= c_held + one_period for c, _ in after), (pin, after)
         # the new command starts from there, within the velocity limit, and gets there
-        assert abs(first_new[pin] - applied[pin]) / 2 <= step_allowed_us(LIMITS[pin], 0.0), (pin, applied, first_new)
+        assert abs(first_new[pin] - held[pin]) / 2 <= step_allowed_us(LIMITS[pin], 0.0), (pin, held, first_new)
         assert ev.pulses(pin)[-1][1] == pytest.approx(pulse_us(new[pin]), abs=1.0)
     assert untraced(ev) == []
     assert velocity_violations(ev, LIMITS) == []
     record("estop", action=action, publish_to_firmware_ms=(ev.wall_ns(c_stop) - t_pub) / 1e6,
-           stopped_at_us=[t / 2 for t in applied], was_going_to_us=[pulse_us(d) for d in B])
+           stopped_at_us=[t / 2 for t in held], was_going_to_us=[pulse_us(d) for d in B])
 
 
 def test_a_serial_node_started_during_an_estop_moves_nothing(launch, observer, tmp_path):
@@ -102,9 +105,10 @@ def test_a_serial_node_started_during_an_estop_moves_nothing(launch, observer, t
     # pulse before the first frame after it, and that frame on the way to A (from the
     # hold pose, the base down), not to B (the base up), which was dropped
     ev = rig.events()
-    c_release = next(c for t, _, p, c in ev.frames() if t == ESTOP and p[0] == 0)
+    frames = ev.frames()
+    i_release = next(i for i, (t, _, p, _) in enumerate(frames) if t == ESTOP and p[0] == 0)
     sends = sent_ticks(ev)
-    assert sends and sends[0][0] > c_release, "a servo frame during the e-stop"
+    assert sends and all(t != SET_PULSES for t, *_ in frames[:i_release]), "a servo frame during the e-stop"
     assert all(c > sends[0][0] for c, *_ in rises(ev)), "a pulse before the first command after the release"
     assert sends[0][1][0] / 2 <= HOLD_US[0] + 1.5, f"the first command after the release is not A's: {sends[0]}"
     # the first command ramps from the pose the board reported: its hold pose

@@ -34,7 +34,7 @@ os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "relea
 
 from benchkit import Launcher, stats  # noqa: E402
 from conftest import DomainLease, Observer  # noqa: E402
-from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, A, Rig, engaged_estop_frames, reconnect_ms, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
+from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, A, Rig, engaged_estop_frames, estop_held, reconnect_ms, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
 
 
 def estop_trials(domain, action, trials, tmp):
@@ -57,19 +57,20 @@ def estop_trials(domain, action, trials, tmp):
     ev = rig.events()
     # serial_node may resend an ESTOP frame (the device's STATE did not show it yet):
     # each trial's stop is the first one after its publish
-    stops = [c for _, c in engaged_estop_frames(ev)]
-    engaged = [next(c for c in stops if ev.wall_ns(c) >= t_pub) for t_pub in published]
+    stops = [(seq, c) for _, seq, c in engaged_estop_frames(ev)]
+    engaged = [next(s for s in stops if ev.wall_ns(s[1]) >= t_pub) for t_pub in published]
     assert len(set(engaged)) == trials, (len(stops), trials)
     sends = sent_ticks(ev)
     to_board, to_pins = [], []
-    for t_pub, c_stop in zip(published, engaged):
+    for t_pub, (seq, c_stop) in zip(published, engaged):
         to_board.append((ev.wall_ns(c_stop) - t_pub) / 1e6)
-        applied = [t for c, t in sends if c < c_stop][-1]
+        # what the board answered it holds, and from when the pins show it
+        c_held, held = estop_held(ev, c_stop, seq)
         if action == "hold":
             first = min(next(c for c, _ in ev.pulses(pin) if c > c_stop) for pin in range(4))
             for pin in range(4):
-                nxt = next(c for c, _ in sends if c > c_stop)
-                assert all(abs(w - applied[pin] / 2) <= 1.0 for c, w in ev.pulses(pin) if c_stop < c < nxt)
+                nxt = next(c for c, _ in sends if c > c_held)
+                assert all(abs(w - held[pin] / 2) <= 1.0 for c, w in ev.pulses(pin) if c_held < c < nxt)
             to_pins.append((ev.wall_ns(first) - t_pub) / 1e6)
         else:
             last = max([c for pin in range(4) for c, _ in ev.pulses(pin) if c < c_stop + SERVO_PERIOD_S * CYCLES_PER_S])
