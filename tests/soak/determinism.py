@@ -32,6 +32,8 @@ MODULES = ",".join([
     "test_keystore.py", "test_wan_files.py", "test_leader_firmware.py", "test_gui_bridge.py",
     "test_web_security.py", "test_fuzz.py", "test_two_hosts.py", "test_linkem.py", "test_mcap.py",
     "test_compute_ik.py", "test_jazzy.py", "test_launch_scripts.py",
+    # judged at simavr's pins against the host's clocks (a CI run failed on a starved harness)
+    "test_estop_and_hotplug.py",
 ])
 
 
