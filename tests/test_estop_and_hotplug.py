@@ -95,7 +95,7 @@ def test_a_serial_node_started_during_an_estop_moves_nothing(launch, observer, t
         assert rig.spin(until=lambda: int(rig.diag().get("inputs_dropped_in_estop", 0)) > 0, timeout=10), rig.diag()
         rig.target = None
         estop.publish(Bool(data=False))
-        assert rig.spin(until=lambda: rig.diag().get("device_state") == "idle", timeout=15)
+        assert rig.spin(until=rig.released, timeout=15), rig.diag()
         rig.spin(0.5)  # released, a while without commands
         rig.target = A
         assert rig.spin(until=lambda: rig.at(A), timeout=15)

@@ -14,7 +14,7 @@ use servo_protocol::{encode, FrameReader, LeaderState, SERVOS};
 use std::io::{self, Read, Write};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::mpsc::UnboundedSender;
 
 pub use servo_protocol::host::SendStats;
@@ -318,14 +318,24 @@ fn link_loop(mut opener: PortOpener, shared: SharedLock) {
                 };
                 match written {
                     // the wire's trace (`--log-level debug`): what went out, and when the
-                    // link decided it (the record's stamp less the lag), the clock the
-                    // velocity guard ramped on
-                    Ok(()) => log::debug!(
-                        "wrote seq {} {:?}, {} us after the link decided it",
-                        frame.seq,
-                        frame.msg,
-                        now.elapsed().as_micros()
-                    ),
+                    // link decided it (CLOCK_REALTIME), the clock the velocity guard
+                    // ramped on
+                    Ok(()) if log::log_enabled!(log::Level::Debug) => {
+                        let lag = now.elapsed();
+                        let decided = SystemTime::now()
+                            .checked_sub(lag)
+                            .and_then(|t| t.duration_since(UNIX_EPOCH).ok())
+                            .unwrap_or_default();
+                        log::debug!(
+                            "wrote seq {} {:?}, decided at {}.{:09} ({} us before)",
+                            frame.seq,
+                            frame.msg,
+                            decided.as_secs(),
+                            decided.subsec_nanos(),
+                            lag.as_micros()
+                        )
+                    }
+                    Ok(()) => {}
                     Err(e) => {
                         if let Some(mut s) = lock(&shared) {
                             s.machine.lost(format!("write: {e}"), Instant::now());
