@@ -177,6 +177,12 @@ def sent_frames(events):
     return [(c, seq, struct.unpack("<4H", p)) for t, seq, p, c in events.frames() if t == SET_PULSES]
 
 
+def untraced(events):
+    """SET_PULSES the board got that serial_node's trace does not show (the velocity
+    check's own clock: none may be missing)."""
+    return [(c, seq) for c, seq, ticks in sent_frames(events) if events.decided_ns(c, seq, ticks) is None]
+
+
 def velocity_violations(events, limits_us_per_s, start_us=None):
     """Pulse-width steps faster than the velocity limit, per pin, between consecutive
     pulses. The time between two pulses is the longest of four clocks:

@@ -173,7 +173,10 @@ class SplitGraph:
         env = {"EEZYBOT_BIN_DIR": str(Path(bin_path("serial_node")).parent), "GUI_BIND": "127.0.0.1:8080",
                **(env or {})}
         self.pc = NodeProcess(str(REPO / "launch_scripts" / "pc.sh"), self.ros_args, domain, env=env, netns=hosts.pc)
-        self.pi = NodeProcess(str(REPO / "launch_scripts" / "pi.sh"), self.ros_args, domain,
+        # on the firmware in simavr, serial_node's trace of the frames it writes
+        # (safety_rig.sent_clock: the clock the pins' velocity check reads)
+        trace = ["--log-level", "debug"] if device == "simavr" else []
+        self.pi = NodeProcess(str(REPO / "launch_scripts" / "pi.sh"), [*self.ros_args, *trace], domain,
                               env={**env, "SERIAL_PORT": port}, netns=hosts.pi)
         self.procs = [self.pc, self.pi]
         ns = self._namespace()

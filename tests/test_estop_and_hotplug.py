@@ -11,7 +11,7 @@ from std_msgs.msg import Bool
 
 from conftest import OUTPUT
 from safety_rig import (CYCLES_PER_S, HOLD_US, SERVO_PERIOD_S, A, B, Rig, estop_held, pulse_us,
-                        reconnect_ms, sent_frames, sent_ticks, step_allowed_us, velocity_limits_us_per_s,
+                        reconnect_ms, sent_ticks, step_allowed_us, untraced, velocity_limits_us_per_s,
                         velocity_violations)
 from interop.servo_link import ESTOP, SET_PULSES
 
@@ -26,12 +26,6 @@ def record(name, **figures):
 
 def rises(events):
     return [e for e in events.edges if e[2] == 1]
-
-
-def untraced(events):
-    """SET_PULSES the board got that serial_node's trace does not show (the velocity
-    check's own clock: none may be missing)."""
-    return [(c, seq) for c, seq, ticks in sent_frames(events) if events.decided_ns(c, seq, ticks) is None]
 
 
 @pytest.mark.parametrize("action", ["hold", "detach"])

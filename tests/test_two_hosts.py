@@ -207,7 +207,7 @@ def test_a_partition_while_streaming_holds_the_arm_then_resumes_ramped(hosts, do
     split_graph.hold_across_the_outage), and when the
     link heals it goes on with the newest target only, ramped within the velocity limit:
     judged at the pins."""
-    from safety_rig import BoardEvents, velocity_limits_us_per_s, velocity_violations
+    from safety_rig import BoardEvents, sent_clock, untraced, velocity_limits_us_per_s, velocity_violations
 
     g = SplitGraph(hosts, domain, tmp_path, device="simavr", target_hz=50)
     try:
@@ -217,8 +217,9 @@ def test_a_partition_while_streaming_holds_the_arm_then_resumes_ramped(hosts, do
         close_graph(g)
     print(f"\npartition 5 s: resumed after {r['resume_s']} s, stale {r['stale']}")
     assert r["resumed"] and r["settled"] and r["stale"] == 0 and r["out_of_order"] == 0, r
-    ev = BoardEvents(g.uno.events_path)
+    ev = BoardEvents(g.uno.events_path, lambda: sent_clock(g.pi.output()))
     assert hold_across_the_outage(ev, int(r["t_restore"] * 1e9)) == []
+    assert untraced(ev) == []
     assert velocity_violations(ev, velocity_limits_us_per_s()) == []
 
 
