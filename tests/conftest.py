@@ -61,6 +61,10 @@ LATCHED = qos("estop")  # reliable, transient-local, keep last 1
 # rcl's /rosout: reliable, transient-local, keep last 1000. A reader of less depth loses
 # lines whenever the test does not spin for a while (a browser step on a busy host).
 ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# a reader that must see every sample of a stream (the contract's depth is 10): a test
+# starved of CPU cannot take them as they come, and a reliable writer hands over what
+# the reader's history holds
+EVERY = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 def default_sigint():

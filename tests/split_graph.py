@@ -21,7 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
-from conftest import REPO, NodeProcess, Observer, bin_path, latest_status, status_values
+from conftest import EVERY, REPO, NodeProcess, Observer, bin_path, latest_status, status_values
 from interop.servo_link import SimulatedUno
 
 FIRMWARE = REPO / "firmware" / "servo_control"
@@ -181,7 +181,8 @@ class SplitGraph:
         self.procs = [self.pc, self.pi]
         ns = self._namespace()
         self.o = Observer(domain, name="operator", netns=hosts.pc)
-        self.states = self.o.sub(f"{ns}/servo_state", JointState)
+        # every reply counts (which targets were answered): read with depth 1000
+        self.states = self.o.sub(f"{ns}/servo_state", JointState, EVERY)
         self.diags = self.o.sub(f"{ns}/diagnostics", DiagnosticArray)
         self.xyz = self.o.pub(f"{ns}/xyz_target", PointStamped)
         self.sent = []  # (wall time, stamp seconds)
