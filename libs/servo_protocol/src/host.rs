@@ -256,6 +256,9 @@ pub struct SendStats {
     pub ramped: u64,
     /// The last (up to) 1000 delays from a command's arrival to its first frame, µs.
     pub latency_us: VecDeque<f64>,
+    /// Commands replaced by a newer one before any frame of theirs went out (latest
+    /// wins: a link that could not send meanwhile, a port being reopened).
+    pub superseded: u64,
 }
 
 #[derive(Clone, Debug)]
@@ -476,6 +479,9 @@ impl<T: Clone> HostLink<T> {
             return;
         }
         self.newest = Some((ticks, tag.clone()));
+        if self.command.as_ref().is_some_and(|c| !c.started) {
+            self.stats.superseded += 1;
+        }
         self.command = Some(Command {
             ticks,
             tag,
@@ -1200,6 +1206,23 @@ mod tests {
             pulses.len()
         );
         assert_eq!(pulses.last().unwrap().1, commands.last().unwrap().1);
+    }
+
+    #[test]
+    fn a_command_replaced_before_any_of_its_frames_went_out_is_counted_superseded() {
+        let mut r = Rig::new(HostConfig::default());
+        r.run_until(100); // connected
+        r.link.command([3000; 4], 1, r.now);
+        r.link.command([3010; 4], 2, r.now); // before the link sent 1
+        assert_eq!(r.link.stats().superseded, 1);
+        r.run_until(200);
+        assert_eq!(r.pulses_sent().last().unwrap().1, [3010; 4]);
+        // a command whose frame went out was answered: replacing it is no supersession
+        r.link.command([3020; 4], 3, r.now);
+        r.run_until(300);
+        r.link.command([3030; 4], 4, r.now);
+        assert_eq!(r.link.stats().superseded, 1);
+        assert!(!r.pulses_sent().iter().any(|(_, t)| *t == [3000; 4]));
     }
 
     #[test]

@@ -360,7 +360,7 @@ impl LinkStatus {
             ("inputs_rejected", self.rejected_inputs.to_string()),
             (
                 "inputs_superseded",
-                (self.superseded_inputs + link.gate.superseded).to_string(),
+                (self.superseded_inputs + link.gate.superseded + sent.superseded).to_string(),
             ),
             ("inputs_dropped_in_estop", self.dropped_in_estop.to_string()),
             ("frames_ramped_by_velocity_limit", sent.ramped.to_string()),
