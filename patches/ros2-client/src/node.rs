@@ -767,8 +767,12 @@ impl Node {
     let (stop_spin_sender, stop_spin_receiver) = async_channel::bounded(1);
     self.stop_spin_sender = Some(stop_spin_sender);
 
-    //TODO: Check QoS policies against ROS 2 specs or some reference.
-    let service_qos = QosProfile::publisher_default().history(History::KeepLast { depth: 1 });
+    // rcl's parameter services QoS (`rmw_qos_profile_parameters`): reliable,
+    // volatile, keep last 1000. With keep last 1, an answer written before the
+    // previous one had gone out replaced it in the response writer's history and
+    // was never sent, and a request that came before the previous one was taken
+    // replaced it in the request reader: requests that come together lost answers.
+    let service_qos = QosProfile::publisher_default().history(History::KeepLast { depth: 1000 });
 
     let node_name = self.node_name.fully_qualified_name();
 
@@ -2055,6 +2059,107 @@ mod tests {
       answer.result.names.contains(&"waiting".to_string()),
       "{answer:?}"
     );
+  }
+
+  // Parameter requests that come together are all answered. The parameter services
+  // kept 1 sample (KeepLast 1) in their request readers and response writers: an
+  // answer written before the previous one had gone out replaced it in the writer's
+  // history, so that one was never sent, and its client waited in vain (rclpy
+  // clients of compute_ik's get_parameters, a new one every 50 ms beside other
+  // callers: no answer in 10 s). Staged here: clients that have each had an answer
+  // ask at once, a few rounds. rcl's parameter services keep 1000.
+  #[test]
+  fn parameter_requests_that_come_together_are_all_answered() {
+    use std::time::{Duration, Instant};
+
+    use crate::{
+      Name, ServiceTypeName,
+      qos::{History, QosProfile},
+      rcl_interfaces::{ListParametersRequest, ListParametersResponse},
+      service::{Client, ServiceMapping},
+    };
+
+    let mut node = Node::new(
+      NodeName::new("/", "requests_together").unwrap(),
+      NodeOptions::new()
+        .enable_rosout(false)
+        .declare_parameter("together", ParameterValue::Integer(1)),
+      Context::new().unwrap(),
+    )
+    .unwrap();
+    let spinner = node.spinner().unwrap();
+    std::thread::spawn(move || futures::executor::block_on(spinner.spin()));
+
+    let mut caller = Node::new(
+      NodeName::new("/", "requests_together_caller").unwrap(),
+      NodeOptions::new().enable_rosout(false),
+      Context::new().unwrap(),
+    )
+    .unwrap();
+    // the clients keep every answer (rcl's services default keeps 10)
+    let qos = QosProfile::publisher_default().history(History::KeepLast { depth: 10 });
+    let clients: Vec<Client<ListParametersRequest, ListParametersResponse>> = (0..8)
+      .map(|_| {
+        caller
+          .create_client(
+            ServiceMapping::Enhanced,
+            &Name::new("/requests_together", "list_parameters").unwrap(),
+            &ServiceTypeName::new("rcl_interfaces", "ListParameters"),
+            qos.clone(),
+            qos.clone(),
+          )
+          .unwrap()
+      })
+      .collect();
+    let request = || ListParametersRequest {
+      prefixes: vec![],
+      depth: 0,
+    };
+    // Every client has had an answer (its endpoints and the server's matched), one
+    // at a time: a request sent before its writer matched is lost, so ask again.
+    for (i, client) in clients.iter().enumerate() {
+      let deadline = Instant::now() + Duration::from_secs(20);
+      'warm: loop {
+        client.send_request(request()).unwrap();
+        let next = Instant::now() + Duration::from_millis(500);
+        while Instant::now() < next {
+          if client.receive_response().unwrap().is_some() {
+            break 'warm;
+          }
+          std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(
+          Instant::now() < deadline,
+          "client {i} had no answer in 20 s"
+        );
+      }
+      while client.receive_response().unwrap().is_some() {}
+    }
+    for round in 0..5 {
+      let mut waiting: Vec<_> = clients
+        .iter()
+        .map(|client| client.send_request(request()).unwrap())
+        .collect();
+      let deadline = Instant::now() + Duration::from_secs(10);
+      while !waiting.is_empty() {
+        for client in &clients {
+          while let Some((id, answer)) = client.receive_response().unwrap() {
+            assert!(
+              answer.result.names.contains(&"together".to_string()),
+              "{answer:?}"
+            );
+            waiting.retain(|w| *w != id);
+          }
+        }
+        assert!(
+          Instant::now() < deadline,
+          "round {round}: {} of {} requests had no answer in 10 s",
+          waiting.len(),
+          clients.len()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+      }
+    }
   }
 
   // /rosout keeps rcl's depth (1000 lines, for 10 s): a reader that matches after a
