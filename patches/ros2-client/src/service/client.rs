@@ -444,4 +444,112 @@ mod tests {
     assert_eq!(ours.writer_gid, Gid::from(client.client_guid));
     assert_eq!((reply_id, reply.as_str()), (ours, "pong"));
   }
+
+  // An answer goes to the client that asked (the response reader its request
+  // names), not to every reader of the service's responses. Each client's response
+  // reader keeps a few samples (rcl's services default: 10), and answers to other
+  // clients that came while it did not read pushed its own out of that history: an
+  // rclpy client not spun for 1 s, beside two others asking, lost its answer 5 times
+  // in 20. Here a bystander reader in another participant must get none of the
+  // answers to a client.
+  #[test]
+  fn an_answer_goes_only_to_the_client_that_asked() {
+    use rustdds::{
+      QosPolicyBuilder, StatusEvented, TopicKind,
+      policy::{Durability, History, Reliability},
+    };
+
+    let context = Context::new().unwrap();
+    let options = NodeOptions::new().enable_rosout(false);
+    let node_name = NodeName::new("/", "single_reader_answer_test").unwrap();
+    let mut node = context.new_node(node_name, options).unwrap();
+    let name = Name::new("/", "single_reader_answer_test_service").unwrap();
+    let type_name = ServiceTypeName::new("test_msgs", "Echo");
+    let qos = crate::DEFAULT_PUBLISHER_QOS;
+    let server = node
+      .create_server::<String, String>(
+        ServiceMapping::Enhanced,
+        &name,
+        &type_name,
+        qos.clone(),
+        qos.clone(),
+      )
+      .unwrap();
+    let client = node
+      .create_client::<String, String>(
+        ServiceMapping::Enhanced,
+        &name,
+        &type_name,
+        qos.clone(),
+        qos,
+      )
+      .unwrap();
+
+    let other = Context::new().unwrap();
+    let dp = other.domain_participant();
+    let events = dp.status_listener();
+    let dds_qos = QosPolicyBuilder::new()
+      .reliability(Reliability::Reliable {
+        max_blocking_time: rustdds::Duration::from_millis(100),
+      })
+      .durability(Durability::Volatile)
+      .history(History::KeepLast { depth: 100 })
+      .build();
+    let topic = dp
+      .create_topic(
+        "rr/single_reader_answer_test_serviceReply".to_string(),
+        "test_msgs::srv::dds_::Echo_Response_".to_string(),
+        &dds_qos,
+        TopicKind::NoKey,
+      )
+      .unwrap();
+    let mut bystander = dp
+      .create_subscriber(&dds_qos)
+      .unwrap()
+      .create_datareader_no_key_cdr::<String>(&topic, None)
+      .unwrap();
+    poll("the bystander's match with the server", || {
+      match events.try_recv_status() {
+        Some(DomainParticipantStatusEvent::RemoteWriterMatched { local_reader, .. })
+          if local_reader == bystander.guid() =>
+        {
+          Some(())
+        }
+        _ => None,
+      }
+    });
+
+    // the client has had an answer (a request sent before the endpoints matched is
+    // lost: ask again), then asks 10 more times
+    let mut answered = 0;
+    poll("a first reply", || {
+      client.send_request("hello".to_string()).unwrap();
+      std::thread::sleep(Duration::from_millis(50));
+      while let Some((id, request)) = server.receive_request().unwrap() {
+        server.send_response(id, request).unwrap();
+        answered += 1;
+      }
+      client.receive_response().unwrap()
+    });
+    for i in 0..10 {
+      client.send_request(format!("again {i}")).unwrap();
+      poll("a reply", || {
+        while let Some((id, request)) = server.receive_request().unwrap() {
+          server.send_response(id, request).unwrap();
+          answered += 1;
+        }
+        client.receive_response().unwrap()
+      });
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    let mut seen = Vec::new();
+    while let Some(sample) = bystander.take_next_sample().unwrap() {
+      seen.push(sample.into_value());
+    }
+    assert!(
+      seen.is_empty(),
+      "the bystander got {} of the {answered} answers: {seen:?}",
+      seen.len()
+    );
+  }
 }

@@ -115,6 +115,21 @@ where
     }
   }
 
+  // A response goes only to the response reader the request names, when it
+  // names one: sent to every client's reader, the answers to others filled a
+  // reader's history (rcl's services default keeps 10) and pushed out the answer
+  // of a client that did not read for a while. The other readers get a GAP.
+  fn to_the_asker(
+    &self,
+    rmw_req_id: RmwRequestId,
+    options: WriteOptionsBuilder,
+  ) -> WriteOptionsBuilder {
+    match self.response_reader(rmw_req_id) {
+      Some(reader) => options.to_single_reader(reader),
+      None => options,
+    }
+  }
+
   /// Send response to request by Client.
   /// rmw_req_id identifies request being responded.
   pub fn send_response(&self, rmw_req_id: RmwRequestId, response: Resp) -> WriteResult<(), ()> {
@@ -126,12 +141,12 @@ where
     )?;
     let write_opts = WriteOptionsBuilder::new()
       .source_timestamp(Timestamp::now()) // always add source timestamp
-      .related_sample_identity(SampleIdentity::from(rmw_req_id))
-      // TODO: Check if this is right. Cyclone mapping does not send
-      // Related Sample Identity in
-      // WriteOptions (QoS ParameterList), but within data payload.
-      // But maybe it is not harmful to send it in both?
-      .build();
+      .related_sample_identity(SampleIdentity::from(rmw_req_id));
+    // TODO: Check if this is right. Cyclone mapping does not send
+    // Related Sample Identity in
+    // WriteOptions (QoS ParameterList), but within data payload.
+    // But maybe it is not harmful to send it in both?
+    let write_opts = self.to_the_asker(rmw_req_id, write_opts).build();
     self
       .response_sender
       .write_with_options(resp_wrapper, write_opts)
@@ -200,12 +215,12 @@ where
     );
     let write_opts = WriteOptionsBuilder::new()
       .source_timestamp(Timestamp::now()) // always add source timestamp
-      .related_sample_identity(SampleIdentity::from(rmw_req_id))
-      // TODO: Check if this is right. Cyclone mapping does not send
-      // Related Sample Identity in
-      // WriteOptions (QoS ParameterList), but within data payload.
-      // But maybe it is not harmful to send it in both?
-      .build();
+      .related_sample_identity(SampleIdentity::from(rmw_req_id));
+    // TODO: Check if this is right. Cyclone mapping does not send
+    // Related Sample Identity in
+    // WriteOptions (QoS ParameterList), but within data payload.
+    // But maybe it is not harmful to send it in both?
+    let write_opts = self.to_the_asker(rmw_req_id, write_opts).build();
     self
       .response_sender
       .async_write_with_options(resp_wrapper, write_opts)
