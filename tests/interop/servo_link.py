@@ -179,13 +179,31 @@ class SimulatedUno:
         return out
 
     def wait_for(self, predicate, seconds=5):
+        """The first frame from the board that `predicate` accepts, and the frames the pty
+        gave meanwhile. A frame the pty lost is found in the board's own record of the
+        bytes it sent (the events file's `t` lines written since the wait began): a test
+        starved of CPU does not read, the pty's buffer fills, and servo_sim's writes of
+        what the AVR sends then fail (a CI run: 150 LEADER_STATEs and the STATE waited for
+        gone between two reads)."""
         end = time.monotonic() + seconds
         seen = []
+        record, pos = Decoder(), self.events_path.stat().st_size if self.events_path.exists() else 0
         while time.monotonic() < end:
             for f in self.receive(0.05):
                 seen.append(f)
                 if predicate(f):
                     return f, seen
+            with open(self.events_path, "rb") as log:
+                log.seek(pos)
+                chunk = log.read()
+            cut = chunk.rfind(b"\n") + 1
+            pos += cut
+            for line in chunk[:cut].decode("ascii", "replace").splitlines():
+                p = line.split()
+                if len(p) == 3 and p[0] == "t":
+                    for f in record.feed(bytes([int(p[2])])):
+                        if predicate(f):
+                            return f, seen
         raise AssertionError(f"no matching frame in {seconds} s; got {seen}")
 
     def events(self):
