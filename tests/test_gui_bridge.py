@@ -416,6 +416,25 @@ def test_help_lists_the_commands_and_usage_errors_exit_2(domain):
         assert r.stderr.strip(), bad
 
 
+def test_once_sends_nothing_before_it_has_read_the_arms_state(observer, domain):
+    """`once` sends its target only after a first joint_states message has come: a matched
+    publisher alone is not a path (with SROS2 we may not yet hold its crypto tokens, and
+    the one step that carries the target's stamp could be pushed out of its history
+    before repair). A joint_states publisher that says nothing: no target, exit 1, and
+    the reason."""
+    observer.pub("/joint_states", JointState)
+    targets = observer.sub("/xyz_target", PointStamped)
+    cli = subprocess.Popen([bin_path("gui_bridge"), "once", "0.2", "0", "0.15", "--timeout", "3"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env={**os.environ, "ROS_DOMAIN_ID": str(domain)})
+    # spun while it runs: before this fix the target went out at the match, 3 s before the exit
+    assert observer.spin_until(lambda: cli.poll() is not None, 30)
+    err = cli.stderr.read()
+    assert cli.returncode == 1, (cli.returncode, err)
+    assert "1 node(s) publish joint_states, but none of their messages came within 3.0 s" in err, err
+    assert not targets, targets
+
+
 def test_once_knows_taken_and_refused_from_stamps_under_any_node_name(launch, observer, domain):
     """`once` knows its target was taken from the joint_states stamp and refused from
     diagnostics' last_rejection_stamp: neither depends on compute_ik's node name."""

@@ -55,8 +55,21 @@ pub enum NotDelivered {
         topic: String,
     },
     /// No answer in time.
-    #[error("no answer from compute_ik within {0:.1} s")]
-    NoAnswer(f64),
+    #[error("no answer from compute_ik within {timeout_s:.1} s ({joint_states} joint_states received meanwhile, none with the target's stamp)")]
+    NoAnswer {
+        /// how long we waited
+        timeout_s: f64,
+        /// the `joint_states` messages that came meanwhile
+        joint_states: usize,
+    },
+    /// No `joint_states` came from its publisher in time.
+    #[error("{publishers} node(s) publish joint_states, but none of their messages came within {timeout_s:.1} s")]
+    NoJointStates {
+        /// how long we waited
+        timeout_s: f64,
+        /// the publishers matched
+        publishers: usize,
+    },
     /// `calibrate` ended without saving (cancelled, failed, or not started).
     #[error("{0}")]
     NotCalibrated(String),
@@ -220,15 +233,17 @@ impl Delivery {
         }
     }
 
-    /// Wait until someone subscribes `xyz_target` and our `joint_states` reader has its
-    /// publisher (else compute_ik's answer can go out before it is matched: with SROS2
-    /// the two endpoints are matched after separate key exchanges, up to 0.5 s apart),
-    /// and a little more for their reader to see our writer too.
+    /// Wait until someone subscribes `xyz_target` and a first `joint_states` message has
+    /// come (compute_ik sends the pose to each new subscriber over its next polls).
+    ///
+    /// A matched publisher is not enough: with SROS2 our reader counts compute_ik's writer
+    /// before we hold its crypto tokens, and what it sends meanwhile waits in its history
+    /// (depth 10) for repair, so the first step of the answer, which alone carries the
+    /// target's stamp, can be pushed out by the steps after it. A message we could read
+    /// shows the whole path is up: its writer has our reader and we decrypt what it sends.
     async fn connect(&self, node: &RosNode) -> Result<(), NotDelivered> {
         let deadline = Instant::now() + self.timeout;
-        while self.out.xyz.get_subscription_count(node.node()) == 0
-            || self.joint_states.get_publisher_count(node.node()) == 0
-        {
+        while self.out.xyz.get_subscription_count(node.node()) == 0 {
             if Instant::now() > deadline {
                 return Err(NotDelivered::NobodyListens {
                     topic: self.topic.clone(),
@@ -236,8 +251,16 @@ impl Delivery {
             }
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
-        tokio::time::sleep(Duration::from_millis(200)).await;
-        Ok(())
+        let js = self.joint_states.async_stream();
+        tokio::pin!(js);
+        // any message will do, even one we could not decode: it came through
+        tokio::select! {
+            _ = tokio::time::sleep_until(deadline) => Err(NotDelivered::NoJointStates {
+                timeout_s: self.timeout.as_secs_f64(),
+                publishers: self.joint_states.get_publisher_count(node.node()),
+            }),
+            Some(_) = js.next() => Ok(()),
+        }
     }
 
     /// Publish `xyz` stamped now; wait until `joint_states` carries the stamp (taken)
@@ -249,10 +272,19 @@ impl Delivery {
         let js = self.joint_states.async_stream();
         let diags = self.diagnostics.async_stream();
         tokio::pin!(js, diags);
+        let mut joint_states = 0;
         loop {
             tokio::select! {
-                _ = tokio::time::sleep_until(deadline) => return Err(NotDelivered::NoAnswer(self.timeout.as_secs_f64())),
-                Some(Ok((m, _))) = js.next() => if m.header.stamp == stamp { return Ok(()) },
+                _ = tokio::time::sleep_until(deadline) => return Err(NotDelivered::NoAnswer {
+                    timeout_s: self.timeout.as_secs_f64(),
+                    joint_states,
+                }),
+                Some(Ok((m, _))) = js.next() => {
+                    if m.header.stamp == stamp {
+                        return Ok(());
+                    }
+                    joint_states += 1;
+                }
                 Some(Ok((d, _))) = diags.next() => {
                     let refused = feedback::decode(&d).into_iter().find_map(|f| {
                         let node = f.node_or_name().to_string();
