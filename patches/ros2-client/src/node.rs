@@ -1057,6 +1057,16 @@ impl Node {
     }
   }
 
+  pub(crate) fn get_subscriptions(&self, publisher_guid: GUID) -> Vec<GUID> {
+    self
+      .writers_to_remote_readers
+      .lock()
+      .unwrap()
+      .get(&publisher_guid)
+      .map(|readers| readers.iter().copied().collect())
+      .unwrap_or_default()
+  }
+
   pub(crate) fn get_publisher_count(&self, subscription_guid: GUID) -> usize {
     self
       .readers_to_remote_writers

@@ -78,6 +78,16 @@ impl<M: Serialize> Publisher<M> {
     my_node.get_subscription_count(self.guid())
   }
 
+  /// The GUIDs of the currently matched subscriptions, in order (DDS's
+  /// `get_matched_subscriptions`). A count cannot tell a subscription that
+  /// replaced another between two looks from no change at all; these can.
+  ///
+  /// `my_node` must be the Node that created this Publisher, or the result is
+  /// undefined.
+  pub fn get_subscriptions(&self, my_node: &Node) -> Vec<rustdds::GUID> {
+    my_node.get_subscriptions(self.guid())
+  }
+
   /// Waits until there is at least one matched subscription on this topic,
   /// possibly forever.
   ///
@@ -270,6 +280,69 @@ where
 #[cfg(test)]
 mod tests {
   use super::*;
+
+  // A subscription that replaces another between two looks has a GUID of its own:
+  // the count stays 1, the GUIDs tell (compute_ik greets a new joint_states
+  // subscriber with the pose; by the count it missed a `gui_bridge once` started
+  // while the previous one's reader was being removed, and that one waited 30 s).
+  #[test]
+  fn a_subscription_that_replaces_another_is_told_apart_by_its_guid() {
+    use std::time::{Duration, Instant};
+
+    use crate::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions};
+
+    let node = |name: &str| {
+      Node::new(
+        NodeName::new("/", name).unwrap(),
+        NodeOptions::new().enable_rosout(false),
+        Context::new().unwrap(),
+      )
+      .unwrap()
+    };
+    let topic = |node: &mut Node| {
+      node
+        .create_topic(
+          &Name::new("/", "replaced").unwrap(),
+          MessageTypeName::new("std_msgs", "String"),
+          &crate::DEFAULT_PUBLISHER_QOS,
+        )
+        .unwrap()
+    };
+    let mut sender = node("replaced_sender");
+    let t = topic(&mut sender);
+    let publisher = sender.create_publisher::<String>(&t, None).unwrap();
+    let spinner = sender.spinner().unwrap();
+    std::thread::spawn(move || futures::executor::block_on(spinner.spin()));
+    assert!(publisher.get_subscriptions(&sender).is_empty());
+
+    let wait_for = |what: &str, want: &dyn Fn(&[rustdds::GUID]) -> bool| {
+      let deadline = Instant::now() + Duration::from_secs(10);
+      loop {
+        let got = publisher.get_subscriptions(&sender);
+        if want(&got) {
+          return got;
+        }
+        assert!(Instant::now() < deadline, "{what}: {got:?}");
+        std::thread::sleep(Duration::from_millis(10));
+      }
+    };
+    let mut receiver = node("replaced_receiver");
+    let t = topic(&mut receiver);
+    let first = receiver.create_subscription::<String>(&t, None).unwrap();
+    let first_guid = first.guid();
+    let got = wait_for("the first match", &|g| !g.is_empty());
+    assert_eq!(got, vec![first_guid]);
+    assert_eq!(publisher.get_subscription_count(&sender), 1);
+
+    let mut other = node("replaced_receiver_2");
+    let t = topic(&mut other);
+    let second = other.create_subscription::<String>(&t, None).unwrap();
+    drop(first);
+    drop(receiver);
+    let got = wait_for("the replacement", &|g| g == [second.guid()]);
+    assert_eq!(got, vec![second.guid()]);
+    assert_ne!(second.guid(), first_guid);
+  }
 
   // A publisher waits until its subscriptions have what it published: then the
   // sample is in the subscriber's cache (a command-line tool that publishes and
