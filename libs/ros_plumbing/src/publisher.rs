@@ -22,6 +22,16 @@ impl<M: RosMessage> TopicPublisher<M> {
         self.publisher.get_subscription_count(node)
     }
 
+    /// The matched subscriptions now, each by its GUID's 16 bytes, in order. Unlike a
+    /// count, these tell a subscription that replaced another between two looks.
+    pub fn subscriptions(&self, node: &Node) -> Vec<[u8; 16]> {
+        self.publisher
+            .get_subscriptions(node)
+            .into_iter()
+            .map(|g| g.to_bytes())
+            .collect()
+    }
+
     /// The topic's name, as declared (before namespace and remapping).
     pub fn topic(&self) -> &'static str {
         self.topic

@@ -33,6 +33,9 @@ pub const MIN_IMMEDIATE_DIAG_GAP: Duration = Duration::from_millis(100);
 /// new reader may match our writer a little after we match it: over a second, not once).
 const GREET_POLLS: u8 = 4;
 
+/// A matched subscription, by its GUID's 16 bytes.
+pub type ReaderId = [u8; 16];
+
 /// What to do.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Effect {
@@ -121,7 +124,8 @@ pub struct Driver<M: ArmModel> {
     gate: CommandGate<Input>,
     complaints: Throttle,
     last_immediate: Option<Instant>,
-    subscribers: usize,
+    /// the `joint_states` subscriptions at the last poll
+    readers: std::collections::BTreeSet<ReaderId>,
     greet_polls: u8,
     map: Option<ControllerMap>,
     settings: ControllerSettings,
@@ -166,7 +170,7 @@ impl<M: ArmModel> Driver<M> {
             gate: CommandGate::new(),
             complaints: Throttle::default(),
             last_immediate: None,
-            subscribers: 0,
+            readers: Default::default(),
             greet_polls: 0,
             map: None,
             settings: ControllerSettings::default(),
@@ -314,9 +318,11 @@ impl<M: ArmModel> Driver<M> {
         effects
     }
 
-    /// The peers were looked at: `subscribers` read `joint_states`. A new one is sent
-    /// the pose, stamped `wall`, over the next polls.
-    pub fn on_poll(&mut self, subscribers: usize, wall: Time) -> Vec<Effect> {
+    /// The peers were looked at: `readers` read `joint_states`. A new one is sent the
+    /// pose, stamped `wall`, over the next polls: one not there at the last poll, even
+    /// if one that was has gone meanwhile (a count would not change: `gui_bridge once`
+    /// run again while the last one's reader was being removed waits for this pose).
+    pub fn on_poll(&mut self, readers: &[ReaderId], wall: Time) -> Vec<Effect> {
         let mut effects = vec![];
         // controller_state comes with every servo_state; without one lately (no
         // serial_node), it comes at the polls, with no feedback
@@ -328,10 +334,11 @@ impl<M: ArmModel> Driver<M> {
                 effects.push(Effect::ControllerState(Box::new(state)));
             }
         }
-        if subscribers > self.subscribers {
+        let readers: std::collections::BTreeSet<ReaderId> = readers.iter().copied().collect();
+        if !readers.is_subset(&self.readers) {
             self.greet_polls = GREET_POLLS;
         }
-        self.subscribers = subscribers;
+        self.readers = readers;
         if self.greet_polls == 0 {
             return effects;
         }

@@ -265,6 +265,8 @@ pub trait Outputs {
     /// The peer counts of the watched topics, in [`watched_topics`]' order:
     /// `servo_angles` subscribers, `joint_states` subscribers, `xyz_target` publishers.
     fn peer_counts(&self) -> [usize; 3];
+    /// The `joint_states` subscriptions matched now, by GUID (see [`Driver::on_poll`]).
+    fn joint_states_readers(&self) -> Vec<driver::ReaderId>;
 }
 
 /// The topics whose peers compute_ik watches (resolved names), in
@@ -363,7 +365,8 @@ where
                 let changes = h.peers.update(&counts, std::time::Instant::now());
                 changes.iter().for_each(|c| c.log());
                 let report = (!changes.is_empty()).then_some(Effect::Report);
-                report.into_iter().chain(driver.on_poll(counts[1], Time::now())).collect()
+                let readers = h.outputs.joint_states_readers();
+                report.into_iter().chain(driver.on_poll(&readers, Time::now())).collect()
             }
             Ok(()) = param_changes.changed() => {
                 ticker = tokio::time::interval(period(&h.params));

@@ -107,6 +107,9 @@ impl Outputs for RosOutputs<'_> {
             self.xyz.get_publisher_count(self.node),
         ]
     }
+    fn joint_states_readers(&self) -> Vec<compute_ik::driver::ReaderId> {
+        self.joint_states.subscriptions(self.node)
+    }
 }
 
 fn main() -> ExitCode {

@@ -183,13 +183,20 @@ fn a_new_joint_states_subscriber_gets_the_pose_over_four_polls() {
         [Effect::ControllerState(_)] => false,
         other => panic!("{other:?}"),
     };
-    assert!(greet(d.on_poll(1, wall)));
+    let (a, b, c) = ([1; 16], [2; 16], [3; 16]);
+    assert!(greet(d.on_poll(&[a], wall)));
     for _ in 0..3 {
-        assert!(greet(d.on_poll(1, wall)));
+        assert!(greet(d.on_poll(&[a], wall)));
     }
-    assert!(!greet(d.on_poll(1, wall)), "four polls, then quiet");
-    assert!(!greet(d.on_poll(0, wall)), "one leaving is not greeted");
-    assert!(greet(d.on_poll(1, wall)), "one more is");
+    assert!(!greet(d.on_poll(&[a], wall)), "four polls, then quiet");
+    assert!(!greet(d.on_poll(&[], wall)), "one leaving is not greeted");
+    assert!(greet(d.on_poll(&[b], wall)), "one more is");
+    for _ in 0..3 {
+        d.on_poll(&[b], wall);
+    }
+    assert!(!greet(d.on_poll(&[b], wall)));
+    // one left and another came between two polls: still one, and a new one
+    assert!(greet(d.on_poll(&[c], wall)), "a replacement is greeted");
 }
 
 #[test]
