@@ -154,8 +154,7 @@ def test_the_follower_tracks_the_leader_holds_on_release_and_when_the_cable_is_p
         assert observer.spin_until(lambda: leader.sim_cycle() >= CABLE_PULLED_MS * CYCLES_PER_S // 1000, 600), \
             f"the leader's simulation did not reach {CABLE_PULLED_MS} ms"
         pulled_ns = time.time_ns()
-        leader.proc.kill()  # the cable: the leader's board is gone
-        leader.proc.wait(10)
+        leader.pull_cable()  # the leader's board is gone
         # compute_ik holds (says so in a report after the pull; after the hold a late
         # deadman sample may still turn its words to "deadman held, waiting...")
         holds = lambda: first_after(reports, pulled_ns, lambda v: v != "following")  # noqa: E731
@@ -166,8 +165,7 @@ def test_the_follower_tracks_the_leader_holds_on_release_and_when_the_cable_is_p
     finally:
         # both boards' simavr go with the test (a harness left running takes a core's sixth)
         if leader is not None and leader.proc.poll() is None:
-            leader.proc.kill()
-            leader.proc.wait(10)
+            leader.pull_cable()
         follower.stop()
     events = BoardEvents(follower.board.events_path)
     base = events.pulses(0)  # the follower's base pulses (channel 0, pin 8): [(rise cycle, us)]

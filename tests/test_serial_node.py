@@ -263,7 +263,9 @@ def test_missing_port_then_unplug_and_replug(launch, observer, tmp_path):
         assert rig.wait_diag(lambda s, v: v.get("connection") == "connected", 15)
         rig.angles.publish(angles([70, 95, 85, 100], sec=7))
         assert observer.spin_until(lambda: any(m.header.stamp.sec == 7 for _, m in rig.state), 10)
-        # unplug
+        # unplug: the device node goes with the device (a killed virtual_arduino cannot
+        # remove its link, and a stale one may name another test's pty by then)
+        link.unlink()
         dev.kill()
         dev.wait(10)
         assert rig.wait_diag(lambda s, v: v.get("connection") == "disconnected")

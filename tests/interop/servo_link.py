@@ -233,6 +233,18 @@ class SimulatedUno:
             assert time.monotonic() < deadline, "servo_sim did not toggle its pty"
             time.sleep(0.002)
 
+    def pull_cable(self):
+        """The board is gone at once (SIGKILL: no goodbye), and its device node with it,
+        as a USB serial device's does. The node goes first: with a node left behind (a
+        killed servo_sim cannot remove its link), a serial_node retrying the port opened
+        the pty the kernel gave the next simulated board under the same /dev/pts number,
+        another test's (fresh-clone run Q: test_leader_firmware's board got a leader's
+        HELLO, CONFIG and ROLE from test_leader_arm's serial_node, and restarted its
+        windows)."""
+        self.tty_path.unlink(missing_ok=True)
+        self.proc.kill()
+        self.proc.wait(10)
+
     def stop(self):
         if self.fd is not None:
             os.close(self.fd)
