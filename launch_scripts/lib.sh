@@ -191,15 +191,23 @@ eezybot_start() {
 }
 
 eezybot_stop_all() {
-  local i p deadline
-  [ ${#EEZYBOT_PIDS[@]} -gt 0 ] || return 0
-  for p in "${EEZYBOT_PIDS[@]}"; do kill -INT "$p" 2>/dev/null || true; done
+  local i p deadline pids names
+  # every child, also one started just before a signal: the trap can run between a
+  # node's `&` and eezybot_start recording its pid, and that node was neither stopped
+  # nor killed, and the final `wait` waited for it forever
+  pids=("${EEZYBOT_PIDS[@]}")
+  names=("${EEZYBOT_NAMES[@]}")
+  for p in $(jobs -p); do
+    case " ${pids[*]} " in *" $p "*) ;; *) pids+=("$p"); names+=("a process just started") ;; esac
+  done
+  [ ${#pids[@]} -gt 0 ] || return 0
+  for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; done
   deadline=$((SECONDS + ${EEZYBOT_STOP_TIMEOUT:-5}))
-  for i in "${!EEZYBOT_PIDS[@]}"; do
-    p=${EEZYBOT_PIDS[$i]}
+  for i in "${!pids[@]}"; do
+    p=${pids[$i]}
     while kill -0 "$p" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.1; done
     if kill -0 "$p" 2>/dev/null; then
-      eezybot_say "${EEZYBOT_NAMES[$i]} (pid $p) did not stop within ${EEZYBOT_STOP_TIMEOUT:-5} s: killing it"
+      eezybot_say "${names[$i]} (pid $p) did not stop within ${EEZYBOT_STOP_TIMEOUT:-5} s: killing it"
       kill -KILL "$p" 2>/dev/null || true
     fi
   done

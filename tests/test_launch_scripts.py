@@ -213,6 +213,47 @@ def test_ctrl_c_while_starting_leaves_nothing_behind(script, domain, tmp_path):
     assert not group_alive(s.proc.pid), s.output()
 
 
+def test_a_signal_between_a_nodes_start_and_its_record_stops_it_too(tmp_path):
+    """The trap can run between a node's `&` and eezybot_start recording its pid (fresh-
+    clone run T: run_graph.sh, signalled as serial_node started, stopped the other three,
+    then waited for serial_node forever). lib.sh is driven to that point exactly: one node
+    recorded, one started and not yet recorded, then SIGINT. Both are stopped, the script
+    exits 0. (The fake nodes exit 0 on SIGINT, as ours do.)"""
+    import sys
+    node = tmp_path / "node"
+    node.write_text(f"#!{sys.executable}\nimport signal, sys, time\n"
+                    "signal.signal(signal.SIGINT, lambda *_: sys.exit(0))\ntime.sleep(300)\n")
+    node.chmod(0o755)
+    pids = tmp_path / "pids"
+    driver = tmp_path / "driver.sh"
+    driver.write_text(f"""#!/bin/bash
+EEZYBOT_SCRIPT=race
+source {SCRIPTS / "lib.sh"}
+EEZYBOT_BIN={tmp_path}
+eezybot_start node
+"$EEZYBOT_BIN/node" --ros-args &
+echo "${{EEZYBOT_PIDS[0]}} $!" > {pids}
+kill -INT $$
+EEZYBOT_PIDS+=($!)
+EEZYBOT_NAMES+=(node)
+eezybot_wait
+""")
+    driver.chmod(0o755)
+    proc = subprocess.Popen([str(driver)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=60)  # (the bound only ends a failure: it hung)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, out
+    recorded, unrecorded = map(int, pids.read_text().split())
+    assert not group_alive(proc.pid), out
+    assert "stopping node" in out, out
+    for pid in (recorded, unrecorded):
+        assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+
+
 def test_a_node_that_dies_stops_the_others(domain):
     """When one node exits (here serial_node: an unusable port argument), the script
     stops the rest and exits with that node's code."""
