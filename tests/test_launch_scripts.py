@@ -15,7 +15,7 @@ from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
 from conftest import bin_path, default_sigint, latest_status, status_values
-from launch_script import SCRIPTS, STARTED, Script, graph_ends, left_alive, node_processes, reap_scripts  # noqa: F401 (fixture)
+from launch_script import SCRIPTS, STARTED, Script, default_sigint, graph_ends, left_alive, node_processes, reap_scripts  # noqa: F401 (fixture)
 
 
 def now_stamp():
@@ -239,8 +239,10 @@ EEZYBOT_NAMES+=(node)
 eezybot_wait
 """)
     driver.chmod(0o755)
+    # (SIGINT as a user's shell has it: the test command's runner ignores it, and bash
+    # cannot trap a signal ignored when it started)
     proc = subprocess.Popen([str(driver)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=default_sigint)
     try:
         out, _ = proc.communicate(timeout=60)  # (the bound only ends a failure: it hung)
     finally:
