@@ -280,6 +280,28 @@ where
 #[cfg(test)]
 mod tests {
   use super::*;
+  use crate::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions};
+  use rustdds::Topic;
+
+  fn test_node(name: &str, context: Context) -> Node {
+    Node::new(
+      NodeName::new("/", name).unwrap(),
+      NodeOptions::new().enable_rosout(false),
+      context,
+    )
+    .unwrap()
+  }
+
+  /// A std_msgs/String topic named `/name`.
+  fn test_topic(node: &mut Node, name: &str) -> Topic {
+    node
+      .create_topic(
+        &Name::new("/", name).unwrap(),
+        MessageTypeName::new("std_msgs", "String"),
+        &crate::DEFAULT_PUBLISHER_QOS,
+      )
+      .unwrap()
+  }
 
   // A subscription that replaces another between two looks has a GUID of its own:
   // the count stays 1, the GUIDs tell (compute_ik greets a new joint_states
@@ -289,25 +311,8 @@ mod tests {
   fn a_subscription_that_replaces_another_is_told_apart_by_its_guid() {
     use std::time::{Duration, Instant};
 
-    use crate::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions};
-
-    let node = |name: &str| {
-      Node::new(
-        NodeName::new("/", name).unwrap(),
-        NodeOptions::new().enable_rosout(false),
-        Context::new().unwrap(),
-      )
-      .unwrap()
-    };
-    let topic = |node: &mut Node| {
-      node
-        .create_topic(
-          &Name::new("/", "replaced").unwrap(),
-          MessageTypeName::new("std_msgs", "String"),
-          &crate::DEFAULT_PUBLISHER_QOS,
-        )
-        .unwrap()
-    };
+    let node = |name: &str| test_node(name, Context::new().unwrap());
+    let topic = |node: &mut Node| test_topic(node, "replaced");
     let mut sender = node("replaced_sender");
     let t = topic(&mut sender);
     let publisher = sender.create_publisher::<String>(&t, None).unwrap();
@@ -351,27 +356,10 @@ mod tests {
   fn a_publisher_waits_until_its_subscription_has_the_sample() {
     use std::time::{Duration, Instant};
 
-    use crate::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions};
-
     use rustdds::DomainParticipantStatusEvent;
 
-    let node = |name: &str, context: Context| {
-      Node::new(
-        NodeName::new("/", name).unwrap(),
-        NodeOptions::new().enable_rosout(false),
-        context,
-      )
-      .unwrap()
-    };
-    let topic = |node: &mut Node| {
-      node
-        .create_topic(
-          &Name::new("/", "acknowledged").unwrap(),
-          MessageTypeName::new("std_msgs", "String"),
-          &crate::DEFAULT_PUBLISHER_QOS,
-        )
-        .unwrap()
-    };
+    let node = test_node;
+    let topic = |node: &mut Node| test_topic(node, "acknowledged");
     let sender_context = Context::new().unwrap();
     let events = sender_context.domain_participant().status_listener();
     let mut sender = node("ack_sender", sender_context);
