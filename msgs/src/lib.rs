@@ -655,3 +655,117 @@ pub mod control_msgs {
     ros2_client_message!(GripperCommandGoal);
     ros2_client_message!(GripperCommandResult);
 }
+
+/// `controller_manager_msgs`, the part ros2_control's controller manager interface needs:
+/// <https://github.com/ros-controls/ros2_control/tree/master/controller_manager_msgs>
+/// (the same in Jazzy's 4.x and Kilted's 5.x).
+pub mod controller_manager_msgs {
+    use super::builtin_interfaces::Duration;
+    use serde::{Deserialize, Serialize};
+
+    /// [controller_manager_msgs/msg/ChainConnection](https://github.com/ros-controls/ros2_control/blob/master/controller_manager_msgs/msg/ChainConnection.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct ChainConnection {
+        /// The controller exporting the references.
+        pub name: String,
+        /// Its references.
+        pub reference_interfaces: Vec<String>,
+    }
+
+    /// [controller_manager_msgs/msg/ControllerState](https://github.com/ros-controls/ros2_control/blob/master/controller_manager_msgs/msg/ControllerState.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct ControllerState {
+        /// The controller's name.
+        pub name: String,
+        /// `unconfigured`, `inactive`, `active` or `finalized`.
+        pub state: String,
+        /// Its class, e.g. `joint_trajectory_controller/JointTrajectoryController`.
+        pub r#type: String,
+        /// Runs asynchronously.
+        pub is_async: bool,
+        /// Hz.
+        pub update_rate: u16,
+        /// The command interfaces it holds now (active only).
+        pub claimed_interfaces: Vec<String>,
+        /// The command interfaces it needs.
+        pub required_command_interfaces: Vec<String>,
+        /// The state interfaces it needs.
+        pub required_state_interfaces: Vec<String>,
+        /// Exports references for a chain.
+        pub is_chainable: bool,
+        /// Its references are claimed by another controller.
+        pub is_chained: bool,
+        /// State interfaces it exports.
+        pub exported_state_interfaces: Vec<String>,
+        /// References it exports.
+        pub reference_interfaces: Vec<String>,
+        /// The controllers it is chained to.
+        pub chain_connections: Vec<ChainConnection>,
+    }
+
+    /// [ListControllers](https://github.com/ros-controls/ros2_control/blob/master/controller_manager_msgs/srv/ListControllers.srv)'
+    /// request: empty (the one-byte placeholder every empty ROS 2 structure has).
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct ListControllersRequest {
+        /// Always 0.
+        pub structure_needs_at_least_one_member: u8,
+    }
+
+    /// ListControllers' response.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct ListControllersResponse {
+        /// Every controller.
+        pub controller: Vec<ControllerState>,
+    }
+
+    /// [SwitchController](https://github.com/ros-controls/ros2_control/blob/master/controller_manager_msgs/srv/SwitchController.srv)'
+    /// request.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct SwitchControllerRequest {
+        /// Names to activate.
+        pub activate_controllers: Vec<String>,
+        /// Names to deactivate.
+        pub deactivate_controllers: Vec<String>,
+        /// [`Self::BEST_EFFORT`], [`Self::STRICT`], [`Self::AUTO`] or [`Self::FORCE_AUTO`].
+        pub strictness: i32,
+        /// Activate as soon as possible (every switch of ours is at once).
+        pub activate_asap: bool,
+        /// How long the switch may take (ours are at once).
+        pub timeout: Duration,
+    }
+
+    impl SwitchControllerRequest {
+        /// Do what can be done.
+        pub const BEST_EFFORT: i32 = 1;
+        /// All or nothing.
+        pub const STRICT: i32 = 2;
+        /// ros2_control: activate or deactivate the controllers a chain needs too.
+        pub const AUTO: i32 = 3;
+        /// ros2_control: as AUTO, deactivating what stands in the way.
+        pub const FORCE_AUTO: i32 = 4;
+    }
+
+    /// SwitchController's response.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct SwitchControllerResponse {
+        /// Done (in part, with BEST_EFFORT).
+        pub ok: bool,
+        /// Why not, or what was skipped.
+        pub message: String,
+    }
+
+    ros_message!(
+        ChainConnection,
+        "controller_manager_msgs",
+        "ChainConnection"
+    );
+    ros_message!(
+        ControllerState,
+        "controller_manager_msgs",
+        "ControllerState"
+    );
+    ros2_client_message!(ListControllersRequest);
+    ros2_client_message!(ListControllersResponse);
+    ros2_client_message!(SwitchControllerRequest);
+    ros2_client_message!(SwitchControllerResponse);
+}

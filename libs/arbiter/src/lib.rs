@@ -143,6 +143,9 @@ pub struct Switch {
     pub strictness: Strictness,
     /// who asked (the owner of a calibration it activates)
     pub owner: Owner,
+    /// a calibration it activates is given back when its owner is not heard from
+    /// within the lease ([`Arbiter::set_owner_lease`]); else it stays until switched off
+    pub lease: bool,
 }
 
 /// A commander's command: it moves the arm if the arbiter lets it.
@@ -325,8 +328,8 @@ pub enum Mode {
     Calibration {
         /// who activated it
         owner: Owner,
-        /// when it was last heard from
-        heard: Instant,
+        /// when it was last heard from (None: no lease, it stays until switched off)
+        heard: Option<Instant>,
     },
 }
 
@@ -453,7 +456,7 @@ impl Arbiter {
             .flatten()
             .filter_map(|m| match m {
                 Mode::Leader { until } => *until,
-                Mode::Calibration { heard, .. } => Some(*heard + self.owner_lease),
+                Mode::Calibration { heard, .. } => heard.map(|t| t + self.owner_lease),
                 _ => None,
             })
             .min()
@@ -507,11 +510,7 @@ impl Arbiter {
             Event::Switch(s) => self.switch(s, now, &mut changes).map(|()| None),
             Event::Command(c) => self.command(c, now, &mut changes).map(Some),
             Event::Finished(c) => {
-                if let Some(Mode::Trajectory { running } | Mode::Gripper { running }) =
-                    &mut self.active[c.index()]
-                {
-                    *running = false;
-                }
+                self.finished(c);
                 Ok(None)
             }
             Event::Deadman(held) => {
@@ -532,8 +531,8 @@ impl Arbiter {
                 if let Some(Mode::Calibration { owner, heard }) =
                     &mut self.active[Controller::Calibration.index()]
                 {
-                    if *owner == who {
-                        *heard = now;
+                    if *owner == who && heard.is_some() {
+                        *heard = Some(now);
                     }
                 }
                 Ok(None)
@@ -544,6 +543,16 @@ impl Arbiter {
             }
         };
         Outcome { result, changes }
+    }
+
+    /// [`Event::Finished`]: `c`'s trajectory or goal ended on its own (it needs no
+    /// time, and changes nothing else).
+    pub fn finished(&mut self, c: Controller) {
+        if let Some(Mode::Trajectory { running } | Mode::Gripper { running }) =
+            &mut self.active[c.index()]
+        {
+            *running = false;
+        }
     }
 
     /// The e-stop engaged: every running thing stops (the controllers stay active).
@@ -580,7 +589,9 @@ impl Arbiter {
                 self.hold_leader(Why::LeaderTimeout, changes);
             }
         }
-        if let Some(Mode::Calibration { heard, .. }) = &self.active[Controller::Calibration.index()]
+        if let Some(Mode::Calibration {
+            heard: Some(heard), ..
+        }) = &self.active[Controller::Calibration.index()]
         {
             if *heard + self.owner_lease <= now {
                 self.deactivate(Controller::Calibration, Why::OwnerGone, changes);
@@ -594,7 +605,13 @@ impl Arbiter {
         }
     }
 
-    fn activate(&mut self, c: Controller, owner: &str, now: Instant, changes: &mut Vec<Change>) {
+    fn activate(
+        &mut self,
+        c: Controller,
+        (owner, lease): (&str, bool),
+        now: Instant,
+        changes: &mut Vec<Change>,
+    ) {
         self.active[c.index()] = Some(match c {
             Controller::Teleop => Mode::Teleop,
             Controller::ArmController => Mode::Trajectory { running: false },
@@ -602,7 +619,7 @@ impl Arbiter {
             Controller::LeaderFollower => Mode::Leader { until: None },
             Controller::Calibration => Mode::Calibration {
                 owner: owner.to_string(),
-                heard: now,
+                heard: lease.then_some(now),
             },
         });
         changes.push(Change::Activated(c));
@@ -651,7 +668,7 @@ impl Arbiter {
         for d in holders {
             self.deactivate(d, Why::PreemptedBy(c), changes);
         }
-        self.activate(c, "", now, changes);
+        self.activate(c, ("", false), now, changes);
         Ok(())
     }
 
@@ -809,7 +826,7 @@ impl Arbiter {
             self.deactivate(c, Why::Switched, changes);
         }
         for c in admitted {
-            self.activate(c, &s.owner, now, changes);
+            self.activate(c, (&s.owner, s.lease), now, changes);
         }
         changes.extend(skipped);
         Ok(())

@@ -34,12 +34,13 @@ fn event() -> impl Strategy<Value = Event> {
     ];
     prop_oneof![
         4 => command.prop_map(Event::Command),
-        2 => (names(), names(), any::<bool>(), prop_oneof![Just("wizard"), Just("panel")]).prop_map(
-            |(activate, deactivate, strict, owner)| Event::Switch(Switch {
+        2 => (names(), names(), any::<bool>(), prop_oneof![Just("wizard"), Just("panel")], any::<bool>()).prop_map(
+            |(activate, deactivate, strict, owner, lease)| Event::Switch(Switch {
                 activate,
                 deactivate,
                 strictness: if strict { Strictness::Strict } else { Strictness::BestEffort },
                 owner: owner.into(),
+                lease,
             })
         ),
         1 => controller.prop_map(Event::Finished),

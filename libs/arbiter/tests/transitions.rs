@@ -33,6 +33,7 @@ fn switch(strictness: Strictness, activate: &[&str], deactivate: &[&str]) -> Eve
         deactivate: deactivate.iter().map(|s| s.to_string()).collect(),
         strictness,
         owner: "wizard".into(),
+        lease: true,
     })
 }
 

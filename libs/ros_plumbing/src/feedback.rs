@@ -71,13 +71,16 @@ pub enum ReasonCode {
     Unreadable,
     /// The solver failed for another reason (the arm's chain is unusable).
     SolverFailed,
+    /// Another commander holds the joints (the leader arm while its deadman is held):
+    /// compute_ik's arbiter, `controller_manager/list_controllers` says who.
+    Held,
     /// A code this reader does not know (a newer sender), or none given.
     Other,
 }
 
 impl ReasonCode {
     /// Every code, in a fixed order.
-    pub const ALL: [ReasonCode; 14] = [
+    pub const ALL: [ReasonCode; 15] = [
         ReasonCode::Unreachable,
         ReasonCode::OutOfLimits,
         ReasonCode::Stale,
@@ -91,6 +94,7 @@ impl ReasonCode {
         ReasonCode::NoGripper,
         ReasonCode::Unreadable,
         ReasonCode::SolverFailed,
+        ReasonCode::Held,
         ReasonCode::Other,
     ];
 
@@ -110,6 +114,7 @@ impl ReasonCode {
             ReasonCode::NoGripper => "no_gripper",
             ReasonCode::Unreadable => "unreadable",
             ReasonCode::SolverFailed => "solver_failed",
+            ReasonCode::Held => "held",
             ReasonCode::Other => "other",
         }
     }

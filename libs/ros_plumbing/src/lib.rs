@@ -18,6 +18,7 @@ pub mod qos;
 pub mod remote_params;
 pub mod samples;
 pub mod security;
+pub mod service;
 pub mod sros2;
 pub mod topics;
 mod value;

@@ -223,6 +223,12 @@ pub const LEADER_DEADMAN: Topic<Bool> =
 pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
 /// gripper_controller's GripperCommand action (control_msgs/action/GripperCommand).
 pub const GRIPPER_CMD: &str = "gripper_controller/gripper_cmd";
+/// ros2_control's controller manager: which controllers there are, active or not, and
+/// what they claim (controller_manager_msgs/srv/ListControllers; compute_ik serves it).
+pub const LIST_CONTROLLERS: &str = "controller_manager/list_controllers";
+/// ros2_control's controller manager: activate and deactivate controllers
+/// (controller_manager_msgs/srv/SwitchController; compute_ik serves it).
+pub const SWITCH_CONTROLLER: &str = "controller_manager/switch_controller";
 
 /// Something done with each typed topic of the contract ([`visit_all`]): for code that
 /// needs the message type, e.g. to subscribe a topic chosen by name.

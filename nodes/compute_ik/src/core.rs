@@ -116,6 +116,12 @@ pub enum Reason {
     },
     /// `gripper_target` for an arm without the EezyBot's claw.
     NoGripper,
+    /// Another commander holds the joints (the arbiter's refusal, e.g. the leader arm
+    /// while its deadman is held).
+    Held {
+        /// the arbiter's words
+        why: String,
+    },
     /// A joint of a URDF arm would leave its limits (or a linear constraint of them).
     JointLimit {
         /// the joint, or the constraint's name
@@ -143,6 +149,7 @@ impl Reason {
             Reason::NoJoints => "no_joints".into(),
             Reason::EmergencyStop => "estop".into(),
             Reason::Calibrating => "calibrating".into(),
+            Reason::Held { .. } => "held".into(),
             Reason::TooOld { .. } => "too_old".into(),
             Reason::Line { .. } => "line_leaves_workspace".into(),
             Reason::Unreadable { .. } => "unreadable".into(),
@@ -167,6 +174,7 @@ impl Reason {
             | Reason::NoJoints => ReasonCode::BadJoints,
             Reason::EmergencyStop => ReasonCode::Estop,
             Reason::Calibrating => ReasonCode::Calibrating,
+            Reason::Held { .. } => ReasonCode::Held,
             Reason::TooOld { .. } => ReasonCode::Stale,
             Reason::Line { .. } => ReasonCode::LineBlocked,
             Reason::Unreadable { .. } => ReasonCode::Unreadable,
@@ -237,6 +245,7 @@ impl fmt::Display for Reason {
                 "target stamped {age_s:.3} s ago, older than max_target_age {max_s:.3} s (delayed, or the publisher's clock differs)"
             ),
             Reason::Line { why } => write!(f, "{why}"),
+            Reason::Held { why } => write!(f, "{why}"),
             Reason::Unreadable { error } => write!(f, "unreadable sample: {error}"),
             Reason::BadOrientation { quaternion: [x, y, z, w] } => write!(
                 f,

@@ -6,13 +6,17 @@
 //! out; [`crate::run`] does the I/O.
 
 use crate::controller::{self, Actual, ControllerMap, ControllerSettings, Execution, Outcome};
-use crate::core::Reason;
+use crate::core::Rejection;
 use crate::pipeline::{ArmModel, GoalRequest, Input, Pipeline, Step};
+use arbiter::{Arbiter, Change, Command, Controller, Layout, Refusal, Strictness, Switch, Why};
 use command_gate::{CommandGate, Stamp, Verdict};
 use eezybot_motion::{track, AxisState};
 use eezybot_msgs::control_msgs::{
     FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal, FollowJointTrajectoryResult as Fjt,
     GripperCommandGoal, GripperCommandResult, JointTrajectoryControllerState,
+};
+use eezybot_msgs::controller_manager_msgs::{
+    ControllerState, ListControllersResponse, SwitchControllerRequest, SwitchControllerResponse,
 };
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
@@ -23,6 +27,7 @@ use ros2_client::service::request_id::RmwRequestId;
 use ros_plumbing::action::GoalEnd;
 use ros_plumbing::burst;
 use ros_plumbing::logging::Throttle;
+use ros_plumbing::service::{Caller, Ticket};
 use ros_plumbing::Params;
 use std::time::{Duration, Instant};
 
@@ -67,6 +72,10 @@ pub enum Effect {
     GripperResult(GoalId, GoalEnd, GripperCommandResult),
     /// Publish on `arm_controller/controller_state`.
     ControllerState(Box<JointTrajectoryControllerState>),
+    /// Answer a `controller_manager/list_controllers` request.
+    ListControllers(Ticket, ListControllersResponse),
+    /// Answer a `controller_manager/switch_controller` request.
+    SwitchController(Ticket, SwitchControllerResponse),
 }
 
 /// Who sent the running trajectory.
@@ -144,18 +153,21 @@ pub struct Driver<M: ArmModel> {
     /// calibrating (read through the calibration of that moment)
     last_servo_state: Option<JointState>,
     leader: Leader,
+    /// who moves the arm: the controllers, active or not, and the e-stop's lock
+    arbiter: Arbiter,
+    /// the `calibrating` parameter's value (followed once the e-stop allows)
+    calibrating_param: bool,
+    /// the last `switch_controller`'s outcome, for `diagnostics`
+    last_switch: Option<String>,
 }
 
-/// Following a leader arm (`leader/joint_states`, `leader/deadman`).
+/// Following a leader arm (`leader/joint_states`, `leader/deadman`); whether it
+/// follows is the arbiter's (`leader_follower` passing).
 #[derive(Debug, Default)]
 struct Leader {
     /// the deadman is held (its latest sample)
     deadman: bool,
-    /// the follower follows (deadman held, samples fresh)
-    following: bool,
-    /// when the follower holds if no further sample comes
-    deadline: Option<Instant>,
-    /// how long without a sample before holding
+    /// how long without a sample before holding (for messages; the arbiter times it)
     timeout: Duration,
     /// why the follower holds, for `diagnostics`
     state: String,
@@ -186,12 +198,31 @@ impl<M: ArmModel> Driver<M> {
                 state: "no leader".into(),
                 ..Leader::default()
             },
+            arbiter: Arbiter::new(Layout {
+                arm: vec![],
+                gripper: None,
+            }),
+            calibrating_param: false,
+            last_switch: None,
         }
         .with_map()
     }
 
+    /// The controller map (the EezyBot's), and the arbiter over the arm's joints.
     fn with_map(mut self) -> Self {
         self.map = self.core.model().controller_map();
+        let layout = match &self.map {
+            Some(m) => Layout {
+                arm: m.joints.clone(),
+                gripper: m.gripper.as_ref().map(|g| g.joint.clone()),
+            },
+            None => Layout {
+                arm: self.core.joint_states(Time::ZERO).name,
+                gripper: None,
+            },
+        };
+        self.arbiter = Arbiter::new(layout);
+        self.arbiter.set_leader_timeout(DEFAULT_LEADER_TIMEOUT);
         self
     }
 
@@ -213,12 +244,28 @@ impl<M: ArmModel> Driver<M> {
                 }
             ),
         };
+        let active: Vec<&str> = Controller::ALL
+            .into_iter()
+            .filter(|&c| self.arbiter.is_active(c))
+            .map(Controller::name)
+            .collect();
         let mut v = vec![
             ("arm_controller".to_string(), running),
             ("leader".to_string(), self.leader.state.clone()),
+            (
+                "active_controllers".to_string(),
+                if active.is_empty() {
+                    "none (the arm holds)".into()
+                } else {
+                    active.join(", ")
+                },
+            ),
         ];
         if let Some(t) = &self.last_trajectory {
             v.push(("last_trajectory".into(), t.clone()));
+        }
+        if let Some(t) = &self.last_switch {
+            v.push(("last_switch_controller".into(), t.clone()));
         }
         v
     }
@@ -228,17 +275,28 @@ impl<M: ArmModel> Driver<M> {
         &self.core
     }
 
-    /// When [`Driver::on_time`] is next due: the next motion step or the held target.
+    /// When [`Driver::on_time`] is next due: the next motion step, the held target, or
+    /// the arbiter's (the leader's timeout, a calibration owner's lease).
     pub fn deadline(&self) -> Option<Instant> {
-        [self.next_step, self.gate.deadline(), self.leader.deadline]
-            .into_iter()
-            .flatten()
-            .min()
+        [
+            self.next_step,
+            self.gate.deadline(),
+            self.arbiter.deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     /// How long without a leader sample before the follower holds.
     pub fn set_leader_timeout(&mut self, timeout: Duration) {
         self.leader.timeout = timeout;
+        self.arbiter.set_leader_timeout(timeout);
+    }
+
+    /// The arbiter (who moves the arm).
+    pub fn arbiter(&self) -> &Arbiter {
+        &self.arbiter
     }
 
     fn step_period(&self) -> Duration {
@@ -249,15 +307,9 @@ impl<M: ArmModel> Driver<M> {
     /// step, and the held late target when its time has come.
     pub fn on_time(&mut self, now: Instant, wall: Time) -> Vec<Effect> {
         let mut effects = vec![];
-        if self.leader.deadline.is_some_and(|t| t <= now) {
-            self.leader.deadline = None;
-            let ms = self.leader.timeout.as_millis();
-            self.hold_leader(
-                format!(
-                    "no leader sample for {ms} ms (cable pulled, or the leader's node stopped)"
-                ),
-                &mut effects,
-            );
+        if self.arbiter.deadline().is_some_and(|t| t <= now) {
+            let out = self.arbiter.handle(arbiter::Event::Tick, now);
+            self.apply_changes(out.changes, "", wall, &mut effects);
         }
         if let Some(t) = self.next_step.filter(|t| *t <= now) {
             if self.arm.is_some() {
@@ -347,10 +399,10 @@ impl<M: ArmModel> Driver<M> {
         effects
     }
 
-    /// The parameters changed at `wall`: applied (a new solver logged and reported;
-    /// `calibrating` started or ended, after `arm_config`, so that the arm is taken where
-    /// the new calibration says it is).
-    pub fn on_params(&mut self, params: &Params, wall: Time) -> Vec<Effect> {
+    /// The parameters changed at `now` (`wall`): applied (a new solver logged and
+    /// reported; `calibrating` asks the arbiter for `calibration` or gives it back,
+    /// after `arm_config`, so that the arm is taken where the new calibration says).
+    pub fn on_params(&mut self, params: &Params, now: Instant, wall: Time) -> Vec<Effect> {
         let solver = self.core.solver();
         self.core.apply_params(params);
         let mut effects = vec![];
@@ -358,24 +410,136 @@ impl<M: ArmModel> Driver<M> {
             log::info!("solver: {}", params.string("solver").unwrap_or_default());
             effects.push(Effect::Report);
         }
-        let calibrating = params.bool("calibrating").unwrap_or(false);
-        if calibrating != self.core.calibrating() {
-            self.set_calibrating(calibrating, wall, &mut effects);
-        }
+        self.calibrating_param = params.bool("calibrating").unwrap_or(false);
+        self.follow_calibrating_param(now, wall, &mut effects);
         effects
     }
 
-    /// Start calibrating: stop, end the running goals, hold the leader, publish nothing
-    /// until the end. End it: take the arm where `servo_state` says it is.
+    /// `calibrating` true: `calibration` active (every other controller deactivated),
+    /// with no lease (the parameter stays until set false); false: given back. Under
+    /// the e-stop the switch waits for its release.
+    fn follow_calibrating_param(&mut self, now: Instant, wall: Time, effects: &mut Vec<Effect>) {
+        let on = self.calibrating_param;
+        if on == self.arbiter.is_active(Controller::Calibration) {
+            return;
+        }
+        let others = || {
+            Controller::ALL
+                .into_iter()
+                .filter(|&c| c != Controller::Calibration && self.arbiter.is_active(c))
+                .map(|c| c.name().to_string())
+                .collect()
+        };
+        let (activate, deactivate) = if on {
+            (vec!["calibration".to_string()], others())
+        } else {
+            (vec![], vec!["calibration".to_string()])
+        };
+        let switch = Switch {
+            activate,
+            deactivate,
+            strictness: Strictness::Strict,
+            owner: "the `calibrating` parameter".into(),
+            lease: false,
+        };
+        let out = self.arbiter.handle(arbiter::Event::Switch(switch), now);
+        if let Err(why) = out.result {
+            log::warn!("calibrating:={on} waits: {why}");
+            effects.push(Effect::Report);
+        }
+        let by = "calibrating: the calibration wizard drives the servos";
+        self.apply_changes(out.changes, by, wall, effects);
+    }
+
+    /// Act on what the arbiter changed. `by`: what took the joints (a topic, "the
+    /// leader arm"), or why a switch deactivated a controller, for the messages.
+    fn apply_changes(
+        &mut self,
+        changes: Vec<Change>,
+        by: &str,
+        wall: Time,
+        effects: &mut Vec<Effect>,
+    ) {
+        let mut switched = false;
+        for change in changes {
+            match change {
+                Change::Activated(c) => {
+                    log::info!("{c} active");
+                    if c == Controller::Calibration {
+                        self.set_calibrating(true, wall, effects);
+                    }
+                    switched = true;
+                }
+                Change::Deactivated(c, why) => {
+                    log::info!("{c} inactive: {why}");
+                    self.end_commander(c, why, by, wall, effects);
+                    switched = true;
+                }
+                Change::Stopped(c, why) => self.end_commander(c, why, by, wall, effects),
+                Change::Skipped(name, why) => {
+                    log::warn!("switch_controller: {name} skipped: {why}")
+                }
+            }
+        }
+        if switched && !effects.contains(&Effect::Report) {
+            effects.push(Effect::Report);
+        }
+    }
+
+    /// What `c` ran ends (`why`): goals aborted, the leader held, the motion stopped
+    /// where it is, unless a target that took the joints planned its motion already.
+    fn end_commander(
+        &mut self,
+        c: Controller,
+        why: Why,
+        by: &str,
+        wall: Time,
+        effects: &mut Vec<Effect>,
+    ) {
+        let text = match why {
+            Why::PreemptedBy(_) | Why::Superseded => format!("preempted by {by}"),
+            Why::Switched if !by.is_empty() => by.to_string(),
+            Why::LeaderTimeout => format!(
+                "no leader sample for {} ms (cable pulled, or the leader's node stopped)",
+                self.leader.timeout.as_millis()
+            ),
+            why => why.to_string(),
+        };
+        let planned = matches!(
+            why,
+            Why::PreemptedBy(Controller::Teleop | Controller::GripperController) | Why::Superseded
+        );
+        match c {
+            Controller::ArmController => {
+                self.end_arm_then(GoalEnd::Aborted, Fjt::INVALID_GOAL, text, !planned, effects)
+            }
+            Controller::GripperController => {
+                self.end_gripper(GoalEnd::Aborted, false, &text, !planned, effects)
+            }
+            Controller::LeaderFollower => {
+                let text = if by.starts_with("calibrating") {
+                    "calibrating".into()
+                } else {
+                    text
+                };
+                self.hold_leader(text, effects)
+            }
+            Controller::Teleop => {
+                if !planned && self.arm.is_none() && self.gripper.is_none() {
+                    self.core.stop_motion();
+                }
+            }
+            Controller::Calibration => self.set_calibrating(false, wall, effects),
+        }
+    }
+
+    /// Start calibrating (the arbiter made `calibration` active, and ended the others):
+    /// publish nothing until the end. End it: take the arm where `servo_state` says.
     fn set_calibrating(&mut self, on: bool, wall: Time, effects: &mut Vec<Effect>) {
         self.core.set_calibrating(on);
         self.next_step = None;
         if on {
-            log::warn!("calibrating: the calibration wizard drives the servos; targets refused until `calibrating` is false");
-            let why = "calibrating: the calibration wizard drives the servos";
-            self.end_arm(GoalEnd::Aborted, Fjt::INVALID_GOAL, why.into(), effects);
-            self.end_gripper(GoalEnd::Aborted, false, why, true, effects);
-            self.hold_leader("calibrating".into(), effects);
+            log::warn!("calibrating: the calibration wizard drives the servos; targets refused until `calibration` is deactivated");
         } else {
             let reported = self
                 .last_servo_state
@@ -391,7 +555,148 @@ impl<M: ArmModel> Driver<M> {
                 ),
             }
         }
+    }
+
+    /// The controllers, as `list_controllers` answers.
+    fn list_controllers(&self) -> ListControllersResponse {
+        let controller = self
+            .arbiter
+            .controllers()
+            .into_iter()
+            .map(|c| ControllerState {
+                name: c.controller.name().into(),
+                state: if c.active { "active" } else { "inactive" }.into(),
+                r#type: c.controller.type_name().into(),
+                is_async: false,
+                update_rate: self.core.motion().period_s.recip().round() as u16,
+                claimed_interfaces: if c.active {
+                    c.interfaces.clone()
+                } else {
+                    vec![]
+                },
+                required_command_interfaces: c.interfaces,
+                required_state_interfaces: vec![],
+                ..ControllerState::default()
+            })
+            .collect();
+        ListControllersResponse { controller }
+    }
+
+    /// `switch_controller`: as ros2_control does it (strictness 0 is STRICT, its
+    /// default; AUTO and FORCE_AUTO are BEST_EFFORT, as ros2_control has no chains to
+    /// follow here either); a best-effort switch that did nothing of what it asked is
+    /// not ok.
+    fn switch_controller(
+        &mut self,
+        caller: Caller,
+        req: SwitchControllerRequest,
+        now: Instant,
+        wall: Time,
+        effects: &mut Vec<Effect>,
+    ) -> SwitchControllerResponse {
+        let strictness = match req.strictness {
+            0 | SwitchControllerRequest::STRICT => Strictness::Strict,
+            SwitchControllerRequest::BEST_EFFORT
+            | SwitchControllerRequest::AUTO
+            | SwitchControllerRequest::FORCE_AUTO => Strictness::BestEffort,
+            n => {
+                return SwitchControllerResponse {
+                    ok: false,
+                    message: format!(
+                        "unknown strictness {n} (BEST_EFFORT 1, STRICT 2, AUTO 3, FORCE_AUTO 4)"
+                    ),
+                }
+            }
+        };
+        let asked = req.activate_controllers.len() + req.deactivate_controllers.len();
+        let switch = Switch {
+            activate: req.activate_controllers,
+            deactivate: req.deactivate_controllers,
+            strictness,
+            owner: caller.to_string(),
+            lease: true,
+        };
+        let out = self.arbiter.handle(arbiter::Event::Switch(switch), now);
+        let skipped: Vec<String> = out
+            .changes
+            .iter()
+            .filter_map(|c| match c {
+                Change::Skipped(name, why) => Some(format!("{name}: {why}")),
+                _ => None,
+            })
+            .collect();
+        let done = out.changes.len() - skipped.len();
+        let response = match &out.result {
+            Err(why) => SwitchControllerResponse {
+                ok: false,
+                message: format!("refused ({}): {why}", why.code()),
+            },
+            Ok(_) if asked > 0 && done == 0 && !skipped.is_empty() => SwitchControllerResponse {
+                ok: false,
+                message: format!("nothing switched: {}", skipped.join("; ")),
+            },
+            Ok(_) if skipped.is_empty() => SwitchControllerResponse {
+                ok: true,
+                message: String::new(),
+            },
+            Ok(_) => SwitchControllerResponse {
+                ok: true,
+                message: format!("skipped: {}", skipped.join("; ")),
+            },
+        };
+        if response.ok {
+            log::info!(
+                "switch_controller: done{}",
+                if response.message.is_empty() {
+                    String::new()
+                } else {
+                    format!("; {}", response.message)
+                }
+            );
+        } else {
+            log::warn!("switch_controller: {}", response.message);
+        }
+        self.last_switch = Some(if response.ok {
+            "done".into()
+        } else {
+            response.message.clone()
+        });
+        self.apply_changes(out.changes, "", wall, effects);
         effects.push(Effect::Report);
+        response
+    }
+
+    /// The arbiter's decision on a teleop target, on a copy: `Ok` with the arbiter as
+    /// it would be and what would change, for when the target is taken; `Err` with why
+    /// not, when another commander holds its joints (the e-stop and calibrating are
+    /// the core's to refuse, with their own codes).
+    fn teleop_decision(
+        &self,
+        input: &Input,
+        now: Instant,
+    ) -> Option<Result<(Arbiter, Vec<Change>), Refusal>> {
+        let command = match input {
+            Input::XyzTarget(_) | Input::PoseTarget(_) => Command::ArmTarget,
+            Input::JointTarget(m) => {
+                let claw = self.arbiter.layout().gripper.as_ref();
+                if claw.is_some_and(|g| m.name.contains(g)) {
+                    Command::ArmAndClawTarget
+                } else {
+                    Command::ArmTarget
+                }
+            }
+            Input::GripperTarget(..) => Command::ClawTarget,
+            _ => return None,
+        };
+        let mut next = self.arbiter.clone();
+        let out = next.handle(arbiter::Event::Command(command), now);
+        Some(match out.result {
+            Ok(_) => Ok((next, out.changes)),
+            Err(Refusal::Estop | Refusal::Calibrating | Refusal::NoInterfaces(_)) => {
+                Ok((self.arbiter.clone(), vec![]))
+            }
+            Err(why) => Err(why),
+        })
     }
 
     fn apply(&mut self, batch: Vec<Input>, now: Instant, wall: Time, effects: &mut Vec<Effect>) {
@@ -404,23 +709,14 @@ impl<M: ArmModel> Driver<M> {
                         log::info!("emergency stop released")
                     }
                     self.core.set_estop(engaged);
-                    if engaged {
-                        self.end_arm(
-                            GoalEnd::Aborted,
-                            Fjt::INVALID_GOAL,
-                            "emergency stop engaged".into(),
-                            effects,
-                        );
-                        self.end_gripper(
-                            GoalEnd::Aborted,
-                            false,
-                            "emergency stop engaged",
-                            true,
-                            effects,
-                        );
-                    }
+                    let out = self.arbiter.handle(arbiter::Event::Estop(engaged), now);
+                    self.apply_changes(out.changes, "", wall, effects);
                     self.next_step = None;
                     effects.push(Effect::Report);
+                    if !engaged {
+                        // a `calibrating` set under the e-stop takes effect now
+                        self.follow_calibrating_param(now, wall, effects);
+                    }
                 }
                 continue;
             }
@@ -447,9 +743,11 @@ impl<M: ArmModel> Driver<M> {
                 }
                 Input::LeaderDeadman(held) => {
                     self.leader.deadman = held;
+                    let out = self.arbiter.handle(arbiter::Event::Deadman(held), now);
+                    self.apply_changes(out.changes, "", wall, effects);
                     if !held {
-                        self.hold_leader("deadman released".into(), effects);
-                    } else if !self.leader.following {
+                        self.leader.state = "holding: deadman released".into();
+                    } else if !self.arbiter.passes(Controller::LeaderFollower) {
                         self.leader.state = "deadman held, waiting for a leader sample".into();
                     }
                     continue;
@@ -458,8 +756,31 @@ impl<M: ArmModel> Driver<M> {
                     self.on_leader_joints(msg, now, wall, effects);
                     continue;
                 }
+                Input::ListControllers(ticket, caller) => {
+                    self.arbiter
+                        .handle(arbiter::Event::OwnerAlive(caller.to_string()), now);
+                    effects.push(Effect::ListControllers(ticket, self.list_controllers()));
+                    continue;
+                }
+                Input::SwitchController(ticket, caller, req) => {
+                    let answer = self.switch_controller(caller, req, now, wall, effects);
+                    effects.push(Effect::SwitchController(ticket, answer));
+                    continue;
+                }
                 _ => {}
             }
+            let decision = self.teleop_decision(&input, now);
+            let (next, changes) = match decision {
+                Some(Err(why)) => {
+                    let why = why.to_string();
+                    if let Some(rejection) = self.core.reject_held(&input, why, wall) {
+                        self.report_rejection(rejection, now, effects);
+                    }
+                    continue;
+                }
+                Some(Ok((next, changes))) => (Some(next), changes),
+                None => (None, vec![]),
+            };
             let Some(result) = self.core.handle(&input, wall) else {
                 continue;
             };
@@ -470,17 +791,12 @@ impl<M: ArmModel> Driver<M> {
             }
             match result {
                 Ok(step) => {
-                    // another command takes the arm (or the claw) from a running goal
-                    let topic = input_topic(&input);
-                    if !matches!(input, Input::GripperTarget(..)) {
-                        self.end_arm_then(
-                            GoalEnd::Aborted,
-                            Fjt::INVALID_GOAL,
-                            format!("preempted by {topic}"),
-                            false,
-                            effects,
-                        );
+                    // the target takes its joints (from a running goal, or a holding
+                    // leader): the arbiter's changes, with the topic for the messages
+                    if let Some(next) = next {
+                        self.arbiter = next;
                     }
+                    self.apply_changes(changes, input_topic(&input), wall, effects);
                     if let (Input::GripperTarget(..), Some(_), Some(gm)) = (
                         &input,
                         &self.arm,
@@ -497,15 +813,6 @@ impl<M: ArmModel> Driver<M> {
                             },
                         ));
                     }
-                    if matches!(input, Input::GripperTarget(..) | Input::JointTarget(_)) {
-                        self.end_gripper(
-                            GoalEnd::Aborted,
-                            false,
-                            &format!("preempted by {topic}"),
-                            false,
-                            effects,
-                        );
-                    }
                     effects.push(Effect::Publish(step));
                     // The next step one and a half periods after this first one: a
                     // target stream at the motion rate (a 50 Hz teleop) steps the
@@ -521,20 +828,24 @@ impl<M: ArmModel> Driver<M> {
                         .is_moving()
                         .then(|| now + self.step_period().mul_f64(1.5));
                 }
-                Err(rejection) => {
-                    let kind = format!("{}/{}", rejection.source.topic(), rejection.reason.code());
-                    if let Some(quiet) = self.complaints.allow(&kind, now) {
-                        log::warn!("{rejection}{}", Throttle::suffix(quiet));
-                    }
-                    if self
-                        .last_immediate
-                        .is_none_or(|t| now.duration_since(t) >= MIN_IMMEDIATE_DIAG_GAP)
-                    {
-                        self.last_immediate = Some(now);
-                        effects.push(Effect::Report);
-                    }
-                }
+                Err(rejection) => self.report_rejection(rejection, now, effects),
             }
+        }
+    }
+
+    /// A refused target: logged (throttled per topic and reason) and reported at once
+    /// (at most every [`MIN_IMMEDIATE_DIAG_GAP`]).
+    fn report_rejection(&mut self, rejection: Rejection, now: Instant, effects: &mut Vec<Effect>) {
+        let kind = format!("{}/{}", rejection.source.topic(), rejection.reason.code());
+        if let Some(quiet) = self.complaints.allow(&kind, now) {
+            log::warn!("{rejection}{}", Throttle::suffix(quiet));
+        }
+        if self
+            .last_immediate
+            .is_none_or(|t| now.duration_since(t) >= MIN_IMMEDIATE_DIAG_GAP)
+        {
+            self.last_immediate = Some(now);
+            effects.push(Effect::Report);
         }
     }
 }
@@ -564,6 +875,32 @@ fn difference(a: &[f64], b: &[f64]) -> Vec<f64> {
 }
 
 impl<M: ArmModel> Driver<M> {
+    /// Whether the arbiter would let `command` have its joints now (nothing changes).
+    fn may(&self, command: Command, now: Instant) -> Result<(), Refusal> {
+        let mut probe = self.arbiter.clone();
+        probe
+            .handle(arbiter::Event::Command(command), now)
+            .result
+            .map(|_| ())
+    }
+
+    /// `command` takes its joints (the arbiter said it may): whoever held them ends
+    /// what it ran (`by` names the taker in the messages).
+    fn take(
+        &mut self,
+        command: Command,
+        by: &str,
+        now: Instant,
+        wall: Time,
+        effects: &mut Vec<Effect>,
+    ) {
+        let out = self.arbiter.handle(arbiter::Event::Command(command), now);
+        match out.result {
+            Ok(_) => self.apply_changes(out.changes, by, wall, effects),
+            Err(why) => log::warn!("{by}: not given the joints after all: {why}"),
+        }
+    }
+
     fn busy(&self) -> bool {
         self.core.is_moving() || self.arm.is_some() || self.gripper.is_some()
     }
@@ -575,12 +912,13 @@ impl<M: ArmModel> Driver<M> {
         effects.push(Effect::Report);
     }
 
-    /// Check a trajectory against the arm as it is now.
+    /// Check a trajectory against the arm as it is now, and against who holds it.
     fn plan(
         &self,
         msg: &JointTrajectory,
         goal: Option<&FollowJointTrajectoryGoal>,
         wall: Time,
+        now: Instant,
     ) -> Result<controller::Plan, controller::Refusal> {
         let Some(map) = &self.map else {
             return Err(controller::Refusal {
@@ -589,6 +927,12 @@ impl<M: ArmModel> Driver<M> {
             });
         };
         if let Some(why) = self.core.halted() {
+            return Err(controller::Refusal {
+                code: Fjt::INVALID_GOAL,
+                text: why.to_string(),
+            });
+        }
+        if let Err(why) = self.may(Command::Trajectory, now) {
             return Err(controller::Refusal {
                 code: Fjt::INVALID_GOAL,
                 text: why.to_string(),
@@ -660,6 +1004,7 @@ impl<M: ArmModel> Driver<M> {
             "preempted by a newer trajectory".into(),
             effects,
         );
+        self.take(Command::Trajectory, "arm_controller", now, wall, effects);
         self.core.stop_motion();
         self.last_trajectory = Some(format!(
             "executing: {} points over {:.3} s",
@@ -696,7 +1041,7 @@ impl<M: ArmModel> Driver<M> {
             }
             return;
         }
-        match self.plan(&msg, None, wall) {
+        match self.plan(&msg, None, wall, now) {
             Ok(plan) => self.start_arm(plan, Owner::Topic, wall, now, effects),
             Err(r) => self.refuse("arm_controller/joint_trajectory", r.code, &r.text, effects),
         }
@@ -709,7 +1054,7 @@ impl<M: ArmModel> Driver<M> {
         now: Instant,
         effects: &mut Vec<Effect>,
     ) {
-        match self.plan(&g.goal.trajectory, Some(&g.goal), wall) {
+        match self.plan(&g.goal.trajectory, Some(&g.goal), wall, now) {
             Ok(plan) => {
                 effects.push(Effect::AnswerGoal {
                     request: g.request,
@@ -747,6 +1092,7 @@ impl<M: ArmModel> Driver<M> {
         effects: &mut Vec<Effect>,
     ) {
         let Some(run) = self.arm.take() else { return };
+        self.arbiter.finished(Controller::ArmController);
         let claw = self.claw.take();
         if stop {
             self.core.stop_motion();
@@ -959,6 +1305,8 @@ impl<M: ArmModel> Driver<M> {
         let opening = position / gm.rad_per_unit;
         let refusal = if let Some(why) = self.core.halted() {
             Some(why.to_string())
+        } else if let Err(why) = self.may(Command::GripperGoal, now) {
+            Some(why.to_string())
         } else if !(position.is_finite() && (-1e-9..=1.0 + 1e-9).contains(&opening)) {
             Some(format!(
                 "position {position} rad is outside {}'s range 0 … {:.4} rad (closed … open)",
@@ -991,6 +1339,7 @@ impl<M: ArmModel> Driver<M> {
             true,
             effects,
         );
+        self.take(Command::GripperGoal, "gripper_cmd goal", now, wall, effects);
         let axes = self.core.axes();
         self.gripper = Some(GripperRun {
             id: g.id,
@@ -1041,6 +1390,7 @@ impl<M: ArmModel> Driver<M> {
         let (id, commanded_at) = (g.id, g.commanded_at);
         if reached {
             self.gripper = None;
+            self.arbiter.finished(Controller::GripperController);
             effects.push(Effect::GripperResult(id, GoalEnd::Succeeded, state));
             return;
         }
@@ -1055,6 +1405,7 @@ impl<M: ArmModel> Driver<M> {
             log::warn!("gripper_cmd goal aborted: stalled: {why}");
             self.last_trajectory = Some(format!("gripper_cmd aborted: stalled: {why}"));
             self.gripper = None;
+            self.arbiter.finished(Controller::GripperController);
             effects.push(Effect::GripperResult(
                 id,
                 GoalEnd::Aborted,
@@ -1081,6 +1432,7 @@ impl<M: ArmModel> Driver<M> {
         effects: &mut Vec<Effect>,
     ) {
         let Some(g) = self.gripper.take() else { return };
+        self.arbiter.finished(Controller::GripperController);
         log::info!("gripper_cmd goal ended: {why}");
         let gm = self.map.as_ref().and_then(|m| m.gripper.as_ref());
         let position = self
@@ -1133,11 +1485,9 @@ fn commanded_at_target(at: Option<f64>) -> bool {
 }
 
 impl<M: ArmModel> Driver<M> {
-    /// Stop following: the arm holds where it is.
+    /// The follower holds where it is (the arbiter stopped `leader_follower`).
     fn hold_leader(&mut self, why: String, effects: &mut Vec<Effect>) {
-        self.leader.deadline = None;
-        if self.leader.following {
-            self.leader.following = false;
+        if self.leader.state == "following" || self.leader.state.starts_with("following,") {
             self.core.stop_motion();
             log::info!("leader: {why}: the follower holds");
             effects.push(Effect::Report);
@@ -1146,7 +1496,8 @@ impl<M: ArmModel> Driver<M> {
     }
 
     /// A leader sample: followed (a joint target for its joints, within the motion
-    /// limits) while the deadman is held.
+    /// limits) while the deadman is held and the arbiter lets `leader_follower` have
+    /// the arm.
     fn on_leader_joints(
         &mut self,
         msg: JointState,
@@ -1154,33 +1505,40 @@ impl<M: ArmModel> Driver<M> {
         wall: Time,
         effects: &mut Vec<Effect>,
     ) {
-        if !self.leader.deadman {
-            if self.leader.state == "no leader" {
-                self.leader.state = "holding: deadman released".into();
+        let out = self
+            .arbiter
+            .handle(arbiter::Event::Command(Command::LeaderSample), now);
+        match out.result {
+            Ok(_) => {}
+            Err(Refusal::DeadmanReleased) => {
+                if self.leader.state == "no leader" {
+                    self.leader.state = "holding: deadman released".into();
+                }
+                return;
             }
-            return;
+            Err(why) => {
+                let why = match why {
+                    Refusal::Calibrating => "calibrating".to_string(),
+                    Refusal::Estop => "emergency stop engaged".to_string(),
+                    why => why.to_string(),
+                };
+                if !self.leader.state.ends_with(&why) {
+                    log::info!("leader sample not followed: {why}");
+                    effects.push(Effect::Report);
+                }
+                self.leader.state = format!("holding: {why}");
+                return;
+            }
         }
-        if let Some(why) = self.core.halted() {
-            let why = match why {
-                Reason::Calibrating => "calibrating".to_string(),
-                _ => "emergency stop engaged".to_string(),
-            };
-            self.hold_leader(why, effects);
-            return;
-        }
-        if !self.leader.following {
-            self.leader.following = true;
-            self.end_arm_then(
-                GoalEnd::Aborted,
-                Fjt::INVALID_GOAL,
-                "preempted by the leader arm".into(),
-                true,
-                effects,
-            );
+        let starts = out
+            .changes
+            .contains(&Change::Activated(Controller::LeaderFollower))
+            || !self.leader.state.starts_with("following");
+        self.apply_changes(out.changes, "the leader arm", wall, effects);
+        if starts {
             log::info!("leader: deadman held: the follower follows");
             effects.push(Effect::Report);
         }
-        self.leader.deadline = Some(now + self.leader.timeout);
         let target = JointState {
             header: Header {
                 stamp: Time::ZERO,

@@ -309,7 +309,7 @@ pub struct Handles<I, O, S> {
 fn apply_params<M: ArmModel>(driver: &mut Driver<M>, params: &Params) -> Vec<Effect> {
     driver.set_controller_settings(controller_settings(params));
     driver.set_leader_timeout(leader_timeout(params));
-    driver.on_params(params, Time::now())
+    driver.on_params(params, std::time::Instant::now(), Time::now())
 }
 
 /// The event loop: routes each event to the [`Driver`] and applies what it returns,
@@ -404,7 +404,9 @@ where
                 | Effect::TrajectoryResult(..)
                 | Effect::GripperFeedback(..)
                 | Effect::GripperResult(..)
-                | Effect::ControllerState(_)) => h.outputs.controllers(e),
+                | Effect::ControllerState(_)
+                | Effect::ListControllers(..)
+                | Effect::SwitchController(..)) => h.outputs.controllers(e),
                 Effect::Report => {
                     let mut s = driver.core().diagnostic_status(&h.diag_name);
                     s.values

@@ -9,6 +9,10 @@ use eezybot_msgs::control_msgs::{
     FollowJointTrajectoryResult, GripperCommandGoal, GripperCommandResult,
     JointTrajectoryControllerState,
 };
+use eezybot_msgs::controller_manager_msgs::{
+    ListControllersRequest, ListControllersResponse, SwitchControllerRequest,
+    SwitchControllerResponse,
+};
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -17,6 +21,7 @@ use futures::StreamExt;
 use ros_plumbing::action::{ActionRequest, ActionServer};
 use ros_plumbing::diagnostics::DiagnosticsPublisher;
 use ros_plumbing::peers::PeerWatch;
+use ros_plumbing::service::ServiceServer;
 use ros_plumbing::Subscription;
 use ros_plumbing::{samples, topics, RosNode, Shutdown, TopicPublisher};
 use std::process::ExitCode;
@@ -35,6 +40,12 @@ type TrajectoryServer =
     ActionServer<FollowJointTrajectoryGoal, FollowJointTrajectoryResult, FeedbackWire>;
 type GripperServer = ActionServer<GripperCommandGoal, GripperCommandResult, GripperCommandResult>;
 
+/// The controller manager's services (ros2_control's interface).
+struct Manager {
+    list: ServiceServer<ListControllersRequest, ListControllersResponse>,
+    switch: ServiceServer<SwitchControllerRequest, SwitchControllerResponse>,
+}
+
 /// arm_controller's and gripper_controller's endpoints (the EezyBot's).
 struct Controllers {
     trajectory: TrajectoryServer,
@@ -51,6 +62,7 @@ struct RosOutputs<'a> {
     servo_angles: Option<TopicPublisher<JointState>>,
     diagnostics: DiagnosticsPublisher,
     controllers: Option<&'a Controllers>,
+    manager: &'a Manager,
 }
 
 impl Outputs for RosOutputs<'_> {
@@ -66,6 +78,11 @@ impl Outputs for RosOutputs<'_> {
         self.diagnostics.publish(vec![status]);
     }
     fn controllers(&self, effect: Effect) {
+        match effect {
+            Effect::ListControllers(ticket, r) => return self.manager.list.answer(ticket, r),
+            Effect::SwitchController(ticket, r) => return self.manager.switch.answer(ticket, r),
+            _ => {}
+        }
         let Some(c) = self.controllers else { return };
         match effect {
             Effect::AnswerGoal {
@@ -190,6 +207,25 @@ async fn serve<M: ArmModel>(
         Some(_) => Some(node.subscribe_to(&topics::SERVO_STATE)?),
         None => None,
     };
+    let manager = {
+        let resolver = node.resolver().clone();
+        Manager {
+            list: ServiceServer::new(
+                node.node_mut(),
+                &resolver,
+                topics::LIST_CONTROLLERS,
+                "controller_manager_msgs",
+                "ListControllers",
+            )?,
+            switch: ServiceServer::new(
+                node.node_mut(),
+                &resolver,
+                topics::SWITCH_CONTROLLER,
+                "controller_manager_msgs",
+                "SwitchController",
+            )?,
+        }
+    };
     let peers = PeerWatch::new(&compute_ik::watched_topics(
         &node.resolve(&topics::SERVO_ANGLES)?,
         &node.resolve(&topics::JOINT_STATES)?,
@@ -202,6 +238,7 @@ async fn serve<M: ArmModel>(
         servo_angles,
         diagnostics,
         controllers: controllers.as_ref(),
+        manager: &manager,
     };
 
     let inputs = futures::stream::select_all([
@@ -244,6 +281,10 @@ async fn serve<M: ArmModel>(
             .boxed_local(),
         );
     }
+    controller_inputs.push(service_inputs(&manager.list, |t, c, _| {
+        Input::ListControllers(t, c)
+    }));
+    controller_inputs.push(service_inputs(&manager.switch, Input::SwitchController));
     if let Some(c) = &controllers {
         controller_inputs.push(action_inputs(&c.trajectory, Input::TrajectoryGoal));
         controller_inputs.push(action_inputs(&c.gripper, Input::GripperGoal));
@@ -306,6 +347,28 @@ where
                 }
             };
             return Some((input, server));
+        }
+    })
+    .boxed_local()
+}
+
+/// A service's requests as inputs; a request that cannot be read is logged and left out.
+fn service_inputs<'a, Req, Resp>(
+    server: &'a ServiceServer<Req, Resp>,
+    input: fn(ros_plumbing::service::Ticket, ros_plumbing::service::Caller, Req) -> Input,
+) -> futures::stream::LocalBoxStream<'a, Input>
+where
+    Req: ros2_client::Message + Clone + 'static,
+    Resp: ros2_client::Message + 'static,
+{
+    futures::stream::unfold(server, move |server| async move {
+        loop {
+            match server.next().await {
+                Ok((ticket, caller, request)) => {
+                    return Some((input(ticket, caller, request), server))
+                }
+                Err(e) => log::warn!("unreadable request ignored: {e}"),
+            }
         }
     })
     .boxed_local()

@@ -13,6 +13,7 @@ use crate::numeric::{NumericIk, Solver};
 use eezybot_kinematics::ik::Target;
 use eezybot_motion::{straight_line, AxisLimits, JointPath, LineError, Planner};
 use eezybot_msgs::control_msgs::{FollowJointTrajectoryGoal, GripperCommandGoal};
+use eezybot_msgs::controller_manager_msgs::SwitchControllerRequest;
 use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
 use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
 use eezybot_msgs::sensor_msgs::JointState;
@@ -23,6 +24,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use ros2_client::action::GoalId;
 use ros2_client::service::request_id::RmwRequestId;
 use ros_plumbing::feedback::{self, Refusal};
+use ros_plumbing::service::{Caller, Ticket};
 use ros_plumbing::Params;
 
 /// Largest change of any joint (rad or m) between two points of a straight line checked
@@ -62,6 +64,10 @@ pub enum Input {
     LeaderJoints(JointState),
     /// A `leader/deadman` sample: the leader's deadman button is held.
     LeaderDeadman(bool),
+    /// A `controller_manager/list_controllers` request, to answer.
+    ListControllers(Ticket, Caller),
+    /// A `controller_manager/switch_controller` request, to answer.
+    SwitchController(Ticket, Caller, SwitchControllerRequest),
 }
 
 /// A goal request of an action: the request to answer, the goal's id, the goal.
@@ -438,7 +444,9 @@ impl<M: ArmModel> Pipeline<M> {
             | Input::Cancel(_)
             | Input::ServoState(_)
             | Input::LeaderJoints(_)
-            | Input::LeaderDeadman(_) => return None,
+            | Input::LeaderDeadman(_)
+            | Input::ListControllers(..)
+            | Input::SwitchController(..) => return None,
         })
     }
 
@@ -533,6 +541,21 @@ impl<M: ArmModel> Pipeline<M> {
             .map_err(|e| Reason::Line { why: e.to_string() })?;
         self.goal = goal;
         Ok(())
+    }
+
+    /// Record a target refused before it was judged: another commander holds the
+    /// joints it names (the arbiter's `why`). `None` for an input that is no target.
+    pub fn reject_held(&mut self, input: &Input, why: String, now: Time) -> Option<Rejection> {
+        let (source, stamp) = match input {
+            Input::XyzTarget(m) => (Source::XyzTarget, m.header.stamp),
+            Input::PoseTarget(m) => (Source::PoseTarget, m.header.stamp),
+            Input::JointTarget(m) => (Source::JointTarget, m.header.stamp),
+            Input::GripperTarget(_, stamp) => (Source::GripperTarget, *stamp),
+            _ => return None,
+        };
+        self.counters.received += 1;
+        let stamp = if stamp == Time::ZERO { now } else { stamp };
+        Some(self.reject(source, stamp, Reason::Held { why }))
     }
 
     /// Record a sample on `source` that could not be read at all.

@@ -132,8 +132,8 @@ fn calibrating_stops_a_running_motion_and_publishes_nothing_more() {
     assert!(!published(&before).is_empty());
     assert!(d.core().is_moving());
     let pose = d.core().joint_states(Time::ZERO);
-    let (_, wall) = clock.at(ms(105));
-    let e = d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(105));
+    let e = d.on_params(&params(true, ""), now, wall);
     assert!(published(&e).is_empty(), "{e:?}");
     assert!(e.contains(&Effect::Report), "{e:?}");
     assert!(d.core().calibrating());
@@ -147,16 +147,16 @@ fn calibrating_stops_a_running_motion_and_publishes_nothing_more() {
         "held where it was"
     );
     // the same value again: nothing
-    let (_, wall) = clock.at(ms(200));
-    assert!(d.on_params(&params(true, ""), wall).is_empty());
+    let (now, wall) = clock.at(ms(200));
+    assert!(d.on_params(&params(true, ""), now, wall).is_empty());
 }
 
 #[test]
 fn while_calibrating_targets_are_refused_with_reason_calibrating() {
     let clock = Clock::new();
     let mut d = driver();
-    let (_, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(0));
+    d.on_params(&params(true, ""), now, wall);
     let cases: Vec<(Input, Source)> = vec![
         (xyz(0.2, 0.0, 0.15, wall), Source::XyzTarget),
         (
@@ -202,8 +202,8 @@ fn while_calibrating_trajectories_are_rejected_and_a_running_goal_is_aborted() {
         "{e:?}"
     );
     run_until(&mut d, &clock, ms(200));
-    let (_, wall) = clock.at(ms(205));
-    let e = d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(205));
+    let e = d.on_params(&params(true, ""), now, wall);
     assert!(
         e.iter()
             .any(|e| matches!(e, Effect::TrajectoryResult(id, GoalEnd::Aborted, _) if *id == GoalId::ZERO)),
@@ -258,8 +258,8 @@ fn while_calibrating_a_leader_arm_is_not_followed() {
             ..Default::default()
         })
     };
-    let (_, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(0));
+    d.on_params(&params(true, ""), now, wall);
     for k in 1..10 {
         let (now, wall) = clock.at(ms(10 * k));
         let e = d.on_inputs(
@@ -282,8 +282,8 @@ fn diagnostics_report_calibrating() {
     let clock = Clock::new();
     let mut d = driver();
     assert_eq!(diag_value(&d, "calibrating"), "false");
-    let (_, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(0));
+    d.on_params(&params(true, ""), now, wall);
     assert_eq!(diag_value(&d, "calibrating"), "true");
     let status = d.core().diagnostic_status("compute_ik");
     assert!(status.message.contains("calibrating"), "{}", status.message);
@@ -291,8 +291,8 @@ fn diagnostics_report_calibrating() {
         status.level,
         eezybot_msgs::diagnostic_msgs::DiagnosticStatus::WARN
     );
-    let (_, wall) = clock.at(ms(100));
-    d.on_params(&params(false, ""), wall);
+    let (now, wall) = clock.at(ms(100));
+    d.on_params(&params(false, ""), now, wall);
     assert_eq!(diag_value(&d, "calibrating"), "false");
     assert!(!d.core().calibrating());
 }
@@ -332,8 +332,8 @@ impl Drop for TempConfig {
 fn ending_calibrating_takes_the_arm_where_servo_state_says_through_the_new_calibration() {
     let clock = Clock::new();
     let mut d = driver();
-    let (_, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(0));
+    d.on_params(&params(true, ""), now, wall);
     // the wizard leaves the arm at base 10°, main arm 80°, forearm φ −20°, claw half
     // open, as the new calibration (the base's horn 7° off) reads it
     let mut servos = ServoCalibrations::default();
@@ -349,8 +349,8 @@ fn ending_calibrating_takes_the_arm_where_servo_state_says_through_the_new_calib
     let e = d.on_inputs(vec![servo_state(deg)], now, wall);
     assert!(published(&e).is_empty(), "nothing while calibrating: {e:?}");
     // arm_config and calibrating set together (the wizard's save)
-    let (_, wall) = clock.at(ms(200));
-    let e = d.on_params(&params(false, &config.path()), wall);
+    let (now, wall) = clock.at(ms(200));
+    let e = d.on_params(&params(false, &config.path()), now, wall);
     let steps: Vec<_> = e
         .iter()
         .filter_map(|e| match e {
@@ -401,14 +401,14 @@ fn ending_calibrating_takes_the_arm_where_servo_state_says_through_the_new_calib
 fn ending_calibrating_clamps_a_reported_pose_outside_the_limits() {
     let clock = Clock::new();
     let mut d = driver();
-    let (_, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(0));
+    d.on_params(&params(true, ""), now, wall);
     // the main arm at 130° (servo 50°), past its 125° limit; the forearm horizontal
     let deg = [90.0, 180.0 - 130.0, 90.0 + 0.0, 60.0];
     let (now, wall) = clock.at(ms(100));
     d.on_inputs(vec![servo_state(deg)], now, wall);
-    let (_, wall) = clock.at(ms(200));
-    let e = d.on_params(&params(false, ""), wall);
+    let (now, wall) = clock.at(ms(200));
+    let e = d.on_params(&params(false, ""), now, wall);
     let js = published(&e);
     assert_eq!(js.len(), 1, "{e:?}");
     let shoulder = position(js[0], "shoulder_joint").to_degrees();
@@ -419,8 +419,8 @@ fn ending_calibrating_clamps_a_reported_pose_outside_the_limits() {
 fn ending_calibrating_without_servo_state_publishes_nothing_and_takes_targets_again() {
     let clock = Clock::new();
     let mut d = driver();
-    let (_, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), wall);
+    let (now, wall) = clock.at(ms(0));
+    d.on_params(&params(true, ""), now, wall);
     // a servo_state without every servo is not a pose
     let (now, wall) = clock.at(ms(50));
     d.on_inputs(
@@ -432,8 +432,8 @@ fn ending_calibrating_without_servo_state_publishes_nothing_and_takes_targets_ag
         now,
         wall,
     );
-    let (_, wall) = clock.at(ms(100));
-    let e = d.on_params(&params(false, ""), wall);
+    let (now, wall) = clock.at(ms(100));
+    let e = d.on_params(&params(false, ""), now, wall);
     assert!(published(&e).is_empty(), "{e:?}");
     assert_eq!(e, vec![Effect::Report]);
     assert!(!d.core().calibrating());
