@@ -64,8 +64,8 @@ _venv_hash() { { cat "$1"; bash "$_here/launch_scripts/gen_control_msgs.sh" --in
 _cache="${XDG_CACHE_HOME:-$HOME/.cache}/eezybot"
 _req="$_here/tests/requirements.txt"
 _ros_venv EEZYBOT_PYTHON "$_req" kilted "${EEZYBOT_VENV:-$_cache/venv-$(_venv_hash "$_req")}" \
-  'rclpy, rclpy.action, cyclonedds, pytest, playwright, trajectory_msgs.msg, control_msgs.action'
+  'rclpy, rclpy.action, cyclonedds, pytest, playwright, trajectory_msgs.msg, control_msgs.action, controller_manager_msgs.srv'
 _req="$_here/tests/requirements-jazzy.txt"
 _ros_venv EEZYBOT_JAZZY_PYTHON "$_req" jazzy "${EEZYBOT_JAZZY_VENV:-$_cache/venv-jazzy-$(_venv_hash "$_req")}" \
-  'rclpy, rclpy.action, trajectory_msgs.msg, control_msgs.action'
+  'rclpy, rclpy.action, trajectory_msgs.msg, control_msgs.action, controller_manager_msgs.srv'
 export EEZYBOT_PYTHON EEZYBOT_JAZZY_PYTHON

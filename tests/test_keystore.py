@@ -275,6 +275,12 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
     assert "rq/serial_node/set_parametersRequest" in grants["/eezybot/pi"]["subscribe"]
     assert "rq/arm_controller/follow_joint_trajectory/_action/send_goalRequest" in pc["subscribe"]
     assert "rr/gripper_controller/gripper_cmd/_action/get_resultReply" in pc["publish"]
+    # ros2_control's controller manager interface, served by compute_ik (issue 33)
+    for s in ("list_controllers", "switch_controller"):
+        assert f"rq/controller_manager/{s}Request" in pc["subscribe"]
+        assert f"rr/controller_manager/{s}Reply" in pc["publish"]
+        assert not {f"rq/controller_manager/{s}Request", f"rr/controller_manager/{s}Reply"} & (
+            grants["/eezybot/pi"]["publish"] | grants["/eezybot/pi"]["subscribe"])
 
 
 def test_a_rerun_keeps_the_ca_the_governance_and_the_enclaves(fresh):

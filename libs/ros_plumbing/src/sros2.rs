@@ -531,9 +531,10 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
 /// The services of a ROS 2 action (`<action>/_action/<service>`).
 const ACTION_SERVICES: [&str; 3] = ["send_goal", "cancel_goal", "get_result"];
 
-/// compute_ik's controllers (arm_controller, gripper_controller: not in the topic
-/// table): what their server side publishes (`publish`) and subscribes (`subscribe`); a
-/// client (a tools enclave: MoveIt) is the other way round.
+/// compute_ik's controllers (arm_controller, gripper_controller and the controller
+/// manager's services: not in the topic table): what their server side publishes
+/// (`publish`) and subscribes (`subscribe`); a client (a tools enclave: MoveIt,
+/// `ros2 control`) is the other way round.
 fn controller_rules(
     namespace: &str,
     publish: &mut BTreeSet<String>,
@@ -553,6 +554,12 @@ fn controller_rules(
         for t in ["feedback", "status"] {
             publish.insert(format!("rt/{a}/_action/{t}"));
         }
+    }
+    // ros2_control's controller manager interface (compute_ik's arbiter)
+    for service in [topics::LIST_CONTROLLERS, topics::SWITCH_CONTROLLER] {
+        let s = ns(service);
+        subscribe.insert(format!("rq/{s}Request"));
+        publish.insert(format!("rr/{s}Reply"));
     }
 }
 

@@ -294,6 +294,11 @@ impl<M: ArmModel> Driver<M> {
         self.arbiter.set_leader_timeout(timeout);
     }
 
+    /// How long a calibration's caller may stay silent before the arm is given back.
+    pub fn set_calibration_lease(&mut self, lease: Duration) {
+        self.arbiter.set_owner_lease(lease);
+    }
+
     /// The arbiter (who moves the arm).
     pub fn arbiter(&self) -> &Arbiter {
         &self.arbiter
@@ -621,7 +626,7 @@ impl<M: ArmModel> Driver<M> {
             .changes
             .iter()
             .filter_map(|c| match c {
-                Change::Skipped(name, why) => Some(format!("{name}: {why}")),
+                Change::Skipped(name, why) => Some(format!("{name} ({}): {why}", why.code())),
                 _ => None,
             })
             .collect();

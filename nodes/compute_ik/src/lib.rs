@@ -135,6 +135,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .range(ParamRange::Double { min: 0.01, max: 5.0 }),
             ParamSpec::new(
+                "calibration_lease",
+                ParameterValue::Double(arbiter::DEFAULT_OWNER_LEASE.as_secs_f64()),
+                "a `calibration` made active by controller_manager/switch_controller is given back (deactivated, the arm taken where servo_state says) when its caller has made no list_controllers or switch_controller request for this long (s)",
+            )
+            .range(ParamRange::Double { min: 0.5, max: 3600.0 }),
+            ParamSpec::new(
                 "feedback_layout",
                 ParameterValue::String("any".into()),
                 "FollowJointTrajectory feedback as control_msgs lays it out: `any` (Kilted's, with index left 0, which Jazzy's clients read too), `kilted` (control_msgs 6.3 and later, index filled in) or `jazzy` (control_msgs 5)",
@@ -304,11 +310,20 @@ pub struct Handles<I, O, S> {
     pub shutdown: S,
 }
 
-/// The parameters changed: the controller's settings, the leader's timeout, then the
-/// driver's own ([`Driver::on_params`]).
+/// How long a calibration's caller may stay silent before the arm is given back.
+pub fn calibration_lease(params: &Params) -> Duration {
+    let s = params
+        .f64("calibration_lease")
+        .unwrap_or(arbiter::DEFAULT_OWNER_LEASE.as_secs_f64());
+    Duration::from_secs_f64(s.clamp(0.5, 3600.0))
+}
+
+/// The parameters changed: the controller's settings, the leader's timeout, the
+/// calibration lease, then the driver's own ([`Driver::on_params`]).
 fn apply_params<M: ArmModel>(driver: &mut Driver<M>, params: &Params) -> Vec<Effect> {
     driver.set_controller_settings(controller_settings(params));
     driver.set_leader_timeout(leader_timeout(params));
+    driver.set_calibration_lease(calibration_lease(params));
     driver.on_params(params, std::time::Instant::now(), Time::now())
 }
 
@@ -333,6 +348,7 @@ where
     let mut driver = Driver::new(core);
     driver.set_controller_settings(controller_settings(&h.params));
     driver.set_leader_timeout(leader_timeout(&h.params));
+    driver.set_calibration_lease(calibration_lease(&h.params));
     let (inputs, shutdown) = (h.inputs, h.shutdown);
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
