@@ -175,3 +175,25 @@ def test_calibration_by_switch_excludes_targets_and_is_given_back_when_its_calle
     assert cm.o.spin_until(lambda: cm.values().get("active_controllers") == "none (the arm holds)", 30), cm.values()
     assert cm.active() == []
     assert cm.moves(), "a target takes the arm again"
+
+
+def test_the_list_gives_moveit_the_types_and_joints_it_executes_with(cm):
+    """MoveIt's Ros2ControlManager (moveit_config: moveit_manage_controllers) makes a handle
+    for each listed controller whose type it knows, on the joints of its required
+    interfaces, and switches by the claimed ones: arm_controller must be a
+    JointTrajectoryController on the arm group's joints, gripper_controller a
+    GripperActionController on the gripper group's."""
+    cs = cm.controllers()
+    known = {"joint_trajectory_controller/JointTrajectoryController", "position_controllers/GripperActionController"}
+    handled = {n: c for n, c in cs.items() if c.type in known}
+    assert set(handled) == {"arm_controller", "gripper_controller"}
+    joints = {n: [i.split("/")[0] for i in c.required_command_interfaces] for n, c in handled.items()}
+    assert joints == {"arm_controller": ["base_joint", "shoulder_joint", "elbow_joint"],
+                      "gripper_controller": ["gripper_joint"]}
+    # MoveIt's switch before an execution: activate what it needs, deactivate whoever
+    # claims those joints (found from claimed_interfaces), STRICT
+    needed = set(cs["arm_controller"].required_command_interfaces)
+    holders = [n for n, c in cs.items() if c.state == "active" and needed & set(c.claimed_interfaces)]
+    assert holders == ["teleop"]
+    r = cm.switch(activate=["arm_controller"], deactivate=holders)
+    assert r.ok, r.message

@@ -34,9 +34,11 @@ GRIPPER_JOINT = "gripper_joint"
 # arm.yaml's keys for each joint: (limits_deg, servos/motion)
 ARM_KEYS = {"base_joint": "base", "shoulder_joint": "shoulder", "elbow_joint": "elbow"}
 # what compute_ik serves (issue 21): controller -> (type, action_ns, joints)
+# the controllers MoveIt executes with: name -> (the type compute_ik's list_controllers
+# gives, for which moveit_ros_control_interface has a handle, and the joints)
 CONTROLLERS = {
-    "arm_controller": ("FollowJointTrajectory", "follow_joint_trajectory", ARM_JOINTS),
-    "gripper_controller": ("GripperCommand", "gripper_cmd", [GRIPPER_JOINT]),
+    "arm_controller": ("joint_trajectory_controller/JointTrajectoryController", ARM_JOINTS),
+    "gripper_controller": ("position_controllers/GripperActionController", [GRIPPER_JOINT]),
 }
 # compute_ik's start pose: ArmState::default() = ArmJoints::HOME, claw closed
 HOME = {"base_joint": 0.0, "shoulder_joint": math.pi / 2, "elbow_joint": -math.pi / 2}
@@ -308,7 +310,7 @@ def test_launch_declares_use_rviz_and_namespace_and_uses_them():
     assert declared <= used, f"declared but never used: {declared - used}"
 
 
-def test_launch_builds_the_config_from_this_package_with_unmanaged_controllers():
+def test_launch_builds_the_config_from_this_package_with_managed_controllers():
     tree = launch_tree()
     consts = constants(tree)
     builder = calls(tree, "MoveItConfigsBuilder")
@@ -319,7 +321,9 @@ def test_launch_builds_the_config_from_this_package_with_unmanaged_controllers()
     traj = calls(tree, "trajectory_execution")
     assert len(traj) == 1
     manage = kwarg(traj[0], "moveit_manage_controllers")
-    assert isinstance(manage, ast.Constant) and manage.value is False
+    assert isinstance(manage, ast.Constant) and manage.value is True
+    # move_group finds the controller manager in the graph's namespace
+    assert '"ros_control_namespace": "/" + (namespace or "")' in (PKG / "launch" / "move_group.launch.py").read_text()
     # every file the builder is given is in the package and installed where it is looked up
     files = installed_paths()
     for method in ("robot_description_semantic", "robot_description_kinematics", "joint_limits",
@@ -840,32 +844,27 @@ def test_coupled_option_never_lets_the_forearm_servo_exceed_its_limit(tmp_path):
 # ---------------------------------------------------------------------------------------
 # moveit_controllers.yaml
 
-def test_controllers_are_exactly_the_graphs_trajectory_interfaces():
+def test_moveit_manages_the_graphs_controllers_through_its_controller_manager():
     cfg = yaml.safe_load((PKG / "config" / "moveit_controllers.yaml").read_text())
-    assert cfg["moveit_controller_manager"] == "moveit_simple_controller_manager/MoveItSimpleControllerManager"
-    assert cfg["moveit_manage_controllers"] is False
-    scm = cfg["moveit_simple_controller_manager"]
-    assert scm["controller_names"] == list(CONTROLLERS)
-    for name, (kind, action_ns, joints) in CONTROLLERS.items():
-        c = scm[name]
-        assert c["type"] == kind and c["action_ns"] == action_ns, name
-        assert c["joints"] == joints, name
-        for j in c["joints"]:
-            assert j in JOINTS
-    assert scm["arm_controller"]["default"] is True
-    # the arm controller drives exactly the arm group
-    assert sorted(scm["arm_controller"]["joints"]) == sorted(active_joints(srdf(), "arm"))
+    assert cfg["moveit_controller_manager"] == "moveit_ros_control_interface/Ros2ControlManager"
+    assert cfg["moveit_manage_controllers"] is True
+    # no static controller list: the plugin lists compute_ik's (test_controller_manager.py
+    # checks that list: the types below, and these joints' interfaces)
+    assert "moveit_simple_controller_manager" not in cfg
     te = cfg["trajectory_execution"]
     assert te["allowed_execution_duration_scaling"] >= 1.0
     assert te["allowed_goal_duration_margin"] >= 0.0
     assert 0.0 < te["allowed_start_tolerance"] <= 0.1
 
 
-def test_every_actuated_joint_has_a_controller_and_no_passive_one_has():
-    cfg = yaml.safe_load((PKG / "config" / "moveit_controllers.yaml").read_text())
-    scm = cfg["moveit_simple_controller_manager"]
-    driven = [j for name in scm["controller_names"] for j in scm[name]["joints"]]
+def test_the_controllers_drive_exactly_the_groups_and_every_actuated_joint():
+    # the arm controller drives exactly the arm group, the gripper controller the gripper's
+    assert sorted(CONTROLLERS["arm_controller"][1]) == sorted(active_joints(srdf(), "arm"))
+    assert sorted(CONTROLLERS["gripper_controller"][1]) == sorted(active_joints(srdf(), "gripper"))
+    driven = [j for _, joints in CONTROLLERS.values() for j in joints]
     assert sorted(driven) == sorted(ACTUATED)
+    for j in driven:
+        assert j in JOINTS
 
 
 # ---------------------------------------------------------------------------------------

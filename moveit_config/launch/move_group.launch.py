@@ -3,7 +3,8 @@
 Starts ONLY move_group and, with use_rviz:=true, RViz. It starts no ros2_control, no
 robot_state_publisher and no fake controllers: our graph publishes robot_description,
 tf/tf_static (state_publisher) and joint_states, and serves
-arm_controller/follow_joint_trajectory and gripper_controller/gripper_cmd (compute_ik).
+arm_controller/follow_joint_trajectory, gripper_controller/gripper_cmd and the controller
+manager's services that MoveIt switches them with (compute_ik).
 
     ros2 launch eezybot_moveit_config move_group.launch.py
     ros2 launch eezybot_moveit_config move_group.launch.py namespace:=arm2 use_rviz:=false
@@ -44,7 +45,7 @@ def moveit_config(urdf_path):
         .robot_description_semantic(file_path=SRDF)
         .robot_description_kinematics(file_path=KINEMATICS)
         .joint_limits(file_path=JOINT_LIMITS)
-        .trajectory_execution(file_path=CONTROLLERS, moveit_manage_controllers=False)
+        .trajectory_execution(file_path=CONTROLLERS, moveit_manage_controllers=True)
         .planning_scene_monitor(
             publish_planning_scene=True,
             publish_geometry_updates=True,
@@ -76,6 +77,8 @@ def nodes(context):
                 "allow_trajectory_execution": True,
                 # joint_states has no efforts; nothing here needs them
                 "monitor_dynamics": False,
+                # where the graph's controller manager services are (compute_ik's)
+                "ros_control_namespace": "/" + (namespace or ""),
             },
         ],
         remappings=TF_REMAPS,
