@@ -265,6 +265,41 @@ def trajectory(c, a):
     return out
 
 
+def controllers(c, a):
+    """ros2_control's controller manager services (compute_ik's), from Jazzy's rclpy with
+    Jazzy's controller_manager_msgs 4.x: the list, a STRICT switch refused (it would claim
+    the arm's joints twice), one taken, and the list after it."""
+    from controller_manager_msgs.srv import ListControllers, SwitchController
+
+    lister = c.node.create_client(ListControllers, "controller_manager/list_controllers")
+    switcher = c.node.create_client(SwitchController, "controller_manager/switch_controller")
+    for client in (lister, switcher):
+        if not client.wait_for_service(timeout_sec=a.timeout):
+            return {"error": f"{client.srv_name} is not offered"}
+
+    def listed():
+        r = c.wait(lister.call_async(ListControllers.Request()), a.timeout)
+        return [{"name": x.name, "state": x.state, "type": x.type, "claimed": list(x.claimed_interfaces),
+                 "required": list(x.required_command_interfaces)} for x in r.controller]
+
+    def switch(activate, deactivate):
+        req = SwitchController.Request(activate_controllers=activate, deactivate_controllers=deactivate,
+                                       strictness=SwitchController.Request.STRICT)
+        r = c.wait(switcher.call_async(req), a.timeout)
+        return {"ok": r.ok, "message": r.message}
+
+    out = {"before": listed()}
+    active = [x["name"] for x in out["before"] if x["state"] == "active"]
+    out["refused"] = switch(["leader_follower"], [])
+    # whichever of teleop and arm_controller holds the arm (a trajectory may have run)
+    # gives it to the other
+    holder = "arm_controller" if "arm_controller" in active else "teleop"
+    out["to"] = "teleop" if holder == "arm_controller" else "arm_controller"
+    out["switched"] = switch([out["to"]], [holder])
+    out["after"] = listed()
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--domain", type=int, required=True)
@@ -281,12 +316,14 @@ def main():
     p.add_argument("--get", nargs="+", default=["diagnostics_period"])
     j = sub.add_parser("trajectory")
     j.add_argument("--move", type=float, default=0.2)
-    for s in (g, t, p, j):
+    m = sub.add_parser("controllers")
+    for s in (g, t, p, j, m):
         s.add_argument("--timeout", type=float, default=15.0)
     a = ap.parse_args()
     c = Client(a.domain)
     try:
-        result = {"graph": graph, "target": target, "params": params, "trajectory": trajectory}[a.command](c, a)
+        result = {"graph": graph, "target": target, "params": params, "trajectory": trajectory,
+                  "controllers": controllers}[a.command](c, a)
     finally:
         c.close()
     result["rclpy"] = importlib.metadata.version("ros-rclpy")

@@ -138,3 +138,22 @@ def test_a_trajectory_goal_from_jazzys_action_client(graph):
     assert len(r["feedback_desired"]) == len(r["feedback_actual"]) == 3, r
     assert all(abs(e - (d - q)) < 1e-9 for e, d, q in zip(r["feedback_error"], r["feedback_desired"], r["feedback_actual"]))
     assert not r["too_fast_accepted"], r
+
+
+def test_the_controller_manager_from_jazzys_rclpy(graph):
+    """controller_manager/list_controllers and switch_controller (compute_ik's arbiter) from
+    Jazzy's rclpy, with Jazzy's controller_manager_msgs: the five controllers, a refused
+    switch with its reason, a switch taken and seen in the list."""
+    r = jazzy(graph, "controllers")
+    names = [x["name"] for x in r["before"]]
+    assert names == ["teleop", "arm_controller", "gripper_controller", "leader_follower", "calibration"], r
+    by = {x["name"]: x for x in r["before"]}
+    assert by["gripper_controller"]["state"] == "active" and by["leader_follower"]["state"] == "inactive", r
+    assert by["gripper_controller"]["claimed"] == ["gripper_joint/position"], r
+    assert by["arm_controller"]["required"] == ["base_joint/position", "shoulder_joint/position",
+                                                "elbow_joint/position"], r
+    assert not r["refused"]["ok"] and "double_claim" in r["refused"]["message"], r
+    assert r["switched"]["ok"], r
+    after = {x["name"]: x["state"] for x in r["after"]}
+    other = {"teleop": "arm_controller", "arm_controller": "teleop"}[r["to"]]
+    assert after[r["to"]] == "active" and after[other] == "inactive", r

@@ -25,7 +25,7 @@ const ANSWER_RECHECK: Duration = Duration::from_millis(5);
 
 /// A request to answer (with [`ServiceServer::answer`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Ticket(u64);
+pub struct Ticket(pub u64);
 
 /// Who sent a request: its client's participant (the first 12 bytes of its GUID), the
 /// same for every request of one client node.

@@ -530,7 +530,10 @@ impl<M: ArmModel> Driver<M> {
                 self.hold_leader(text, effects)
             }
             Controller::Teleop => {
-                if !planned && self.arm.is_none() && self.gripper.is_none() {
+                // a commander that takes the arm replans from where it is at once (a
+                // trajectory stops the motion itself); switched off, the arm holds
+                let preempted = matches!(why, Why::PreemptedBy(_) | Why::Superseded);
+                if !preempted && self.arm.is_none() && self.gripper.is_none() {
                     self.core.stop_motion();
                 }
             }

@@ -508,3 +508,119 @@ fn without_leader_samples_the_follower_holds_after_the_timeout() {
     let q = arm_joints(&d.core().joint_states(Time::ZERO));
     assert!(q[0] > far[0] && q[0] < h[0], "{q:?}: held on its way");
 }
+
+// ---- who moves the arm: the arbiter, and the controller manager's services ----
+
+fn caller() -> ros_plumbing::service::Caller {
+    ros_plumbing::service::Caller([7; 12])
+}
+
+fn switch(n: u64, activate: &[&str], deactivate: &[&str]) -> Input {
+    use eezybot_msgs::controller_manager_msgs::SwitchControllerRequest;
+    Input::SwitchController(
+        ros_plumbing::service::Ticket(n),
+        caller(),
+        SwitchControllerRequest {
+            activate_controllers: activate.iter().map(|s| s.to_string()).collect(),
+            deactivate_controllers: deactivate.iter().map(|s| s.to_string()).collect(),
+            strictness: SwitchControllerRequest::STRICT,
+            ..Default::default()
+        },
+    )
+}
+
+fn switched(effects: &[Effect]) -> Option<(bool, String)> {
+    effects.iter().find_map(|e| match e {
+        Effect::SwitchController(_, r) => Some((r.ok, r.message.clone())),
+        _ => None,
+    })
+}
+
+fn active(d: &mut Driver<EezyBot>, now: std::time::Instant, wall: Time) -> Vec<String> {
+    let e = d.on_inputs(
+        vec![Input::ListControllers(
+            ros_plumbing::service::Ticket(99),
+            caller(),
+        )],
+        now,
+        wall,
+    );
+    let list = e
+        .iter()
+        .find_map(|e| match e {
+            Effect::ListControllers(_, r) => Some(r.clone()),
+            _ => None,
+        })
+        .expect("answered");
+    list.controller
+        .into_iter()
+        .filter(|c| c.state == "active")
+        .map(|c| c.name)
+        .collect()
+}
+
+#[test]
+fn while_the_leader_is_followed_a_target_is_refused_as_held_and_moves_nothing() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let far = [h[0] + 0.4, h[1], h[2]];
+    let (t0, w0) = clock.at(ms(0));
+    d.on_inputs(vec![Input::LeaderDeadman(true), leader(far)], t0, w0);
+    assert_eq!(leader_value(&d), "following");
+    let (t1, w1) = clock.at(ms(10));
+    let e = d.on_inputs(vec![xyz(0.2, -0.1, 0.15, w1), leader(far)], t1, w1);
+    let r = d.core().last_rejection().expect("refused");
+    assert_eq!(r.reason.code(), "held");
+    assert!(
+        r.reason.to_string().contains("leader_follower"),
+        "{}",
+        r.reason
+    );
+    assert!(reports(&e) >= 1);
+    // the leader's motion goes on toward its pose, untouched by the target
+    let steps = steps_until(&mut d, &clock, ms(40));
+    assert!(steps.iter().all(|(_, q)| q[0] > h[0] - 1e-9), "{steps:?}");
+    assert_eq!(active(&mut d, t1, w1), ["leader_follower"]);
+    // released: the next target takes the arm
+    let (t2, w2) = clock.at(ms(50));
+    d.on_inputs(vec![Input::LeaderDeadman(false)], t2, w2);
+    let (t3, w3) = clock.at(ms(60));
+    let e = d.on_inputs(vec![xyz(0.2, -0.1, 0.15, w3)], t3, w3);
+    assert_eq!(published(&e).len(), 1, "taken: {e:?}");
+    assert_eq!(active(&mut d, t3, w3), ["teleop"]);
+}
+
+#[test]
+fn a_switch_that_deactivates_arm_controller_stops_its_trajectory_where_it_is() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let (t0, w0) = clock.at(ms(0));
+    d.on_inputs(vec![trajectory(&[([h[0] + 0.5, h[1], h[2]], 2.0)])], t0, w0);
+    assert_eq!(
+        active(&mut d, t0, w0),
+        ["arm_controller", "gripper_controller"]
+    );
+    steps_until(&mut d, &clock, ms(300));
+    let (t1, w1) = clock.at(ms(305));
+    // a strict switch that would claim the arm twice: refused, the trajectory goes on
+    let e = d.on_inputs(vec![switch(1, &["teleop"], &[])], t1, w1);
+    let (ok, message) = switched(&e).expect("answered");
+    assert!(!ok && message.contains("double_claim"), "{message}");
+    assert!(
+        !steps_until(&mut d, &clock, ms(400)).is_empty(),
+        "still running"
+    );
+    let (t2, w2) = clock.at(ms(405));
+    let e = d.on_inputs(vec![switch(2, &["teleop"], &["arm_controller"])], t2, w2);
+    assert_eq!(switched(&e), Some((true, String::new())));
+    let held = arm_joints(&d.core().joint_states(Time::ZERO));
+    assert!(
+        steps_until(&mut d, &clock, ms(3000)).is_empty(),
+        "no step after the switch"
+    );
+    assert_eq!(arm_joints(&d.core().joint_states(Time::ZERO)), held);
+    assert_eq!(active(&mut d, t2, w2), ["teleop", "gripper_controller"]);
+    assert!(controller_value(&d, "last_switch_controller") == "done");
+}
