@@ -114,10 +114,6 @@ impl Layout {
     pub fn joints(&self) -> impl Iterator<Item = &str> {
         self.arm.iter().chain(&self.gripper).map(String::as_str)
     }
-
-    fn count(&self) -> usize {
-        self.arm.len() + usize::from(self.gripper.is_some())
-    }
 }
 
 /// ros2_control's `strictness` of a switch.
@@ -346,6 +342,16 @@ pub struct ControllerInfo {
     pub detail: String,
 }
 
+/// Joint `i`'s bit in a claim; the arbiter tracks the first 128 joints of an arm (a
+/// serial arm has far fewer; any beyond are claimed by nobody).
+fn bit(i: usize) -> u128 {
+    if i < 128 {
+        1 << i
+    } else {
+        0
+    }
+}
+
 /// Without a leader sample for this long, the follower holds (5 samples at 100 Hz).
 pub const DEFAULT_LEADER_TIMEOUT: Duration = Duration::from_millis(50);
 
@@ -357,7 +363,7 @@ pub const DEFAULT_OWNER_LEASE: Duration = Duration::from_secs(10);
 pub struct Arbiter {
     layout: Layout,
     /// each controller's claims, a bit per joint (of [`Layout::joints`])
-    claims: [u32; 5],
+    claims: [u128; 5],
     active: [Option<Mode>; 5],
     estop: bool,
     deadman: bool,
@@ -370,9 +376,8 @@ impl Arbiter {
     /// (the operator's targets move the arm and the claw as they always did), the
     /// e-stop released and the deadman not held.
     pub fn new(layout: Layout) -> Arbiter {
-        assert!(layout.count() <= 32, "at most 32 joints");
-        let arm: u32 = (0..layout.arm.len()).map(|i| 1u32 << i).sum();
-        let claw: u32 = layout.gripper.as_ref().map_or(0, |_| 1 << layout.arm.len());
+        let arm: u128 = (0..layout.arm.len()).map(bit).fold(0, |a, b| a | b);
+        let claw: u128 = layout.gripper.as_ref().map_or(0, |_| bit(layout.arm.len()));
         let mut active: [Option<Mode>; 5] = Default::default();
         active[Controller::Teleop.index()] = Some(Mode::Teleop);
         if claw != 0 {
@@ -435,7 +440,7 @@ impl Arbiter {
     pub fn commander_of(&self, i: usize) -> Option<Controller> {
         Controller::ALL
             .into_iter()
-            .find(|&c| self.passes(c) && self.claims[c.index()] & (1 << i) != 0)
+            .find(|&c| self.passes(c) && self.claims[c.index()] & bit(i) != 0)
     }
 
     /// Whether an active `c` may be preempted by a command of another: anyone but
@@ -480,7 +485,7 @@ impl Arbiter {
         self.layout
             .joints()
             .enumerate()
-            .filter(|(i, _)| self.claims[c.index()] & (1 << i) != 0)
+            .filter(|(i, _)| self.claims[c.index()] & bit(*i) != 0)
             .map(|(_, j)| format!("{j}/position"))
             .collect()
     }
@@ -635,11 +640,11 @@ impl Arbiter {
             .collect()
     }
 
-    fn first_joint(&self, mask: u32) -> String {
+    fn first_joint(&self, mask: u128) -> String {
         self.layout
             .joints()
             .enumerate()
-            .find(|(i, _)| mask & (1 << i) != 0)
+            .find(|(i, _)| mask & bit(*i) != 0)
             .map_or_else(String::new, |(_, j)| j.to_string())
     }
 

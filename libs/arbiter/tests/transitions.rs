@@ -860,3 +860,28 @@ fn every_refusal_has_its_own_code() {
     codes.dedup();
     assert_eq!(codes.len(), all.len());
 }
+
+#[test]
+fn an_arm_of_many_joints_is_arbitrated_without_a_limit_of_its_own() {
+    // a serial arm has few joints; one of 200 (a generated URDF) must not crash the node
+    let t0 = Instant::now();
+    let arm: Vec<String> = (0..200).map(|i| format!("j{i}")).collect();
+    let mut a = Arbiter::new(Layout {
+        arm,
+        gripper: Some("claw".into()),
+    });
+    assert_eq!(
+        a.handle(cmd(Command::ArmTarget), t0).result,
+        Ok(Some(Teleop))
+    );
+    assert_eq!(
+        a.interfaces(Arm).len(),
+        128,
+        "the first 128 joints are claimed"
+    );
+    assert_eq!(
+        a.handle(strict(&["arm_controller"], &["teleop"]), t0)
+            .result,
+        Ok(None)
+    );
+}
