@@ -53,6 +53,7 @@ _ros_venv() {
         "$py" -m venv "$venv"
         "$venv/bin/pip" install -q --disable-pip-version-check -r "$req"
         bash "$_here/launch_scripts/gen_control_msgs.sh" "$venv" "$distro"
+        if [ "$distro" = kilted ]; then bash "$_here/launch_scripts/install_ros2cli.sh" "$venv"; fi
         "$venv/bin/python" -c "import $imports"
         touch "$venv/.complete"
       fi
@@ -60,11 +61,15 @@ _ros_venv() {
   fi
   printf -v "$var" %s "$venv/bin/python"
 }
-_venv_hash() { { cat "$1"; bash "$_here/launch_scripts/gen_control_msgs.sh" --inputs; } | sha256sum | cut -c1-12; }
+_venv_hash() {
+  { cat "$1"; bash "$_here/launch_scripts/gen_control_msgs.sh" --inputs
+    if [ "${2:-}" = kilted ]; then bash "$_here/launch_scripts/install_ros2cli.sh" --inputs; fi
+  } | sha256sum | cut -c1-12
+}
 _cache="${XDG_CACHE_HOME:-$HOME/.cache}/eezybot"
 _req="$_here/tests/requirements.txt"
-_ros_venv EEZYBOT_PYTHON "$_req" kilted "${EEZYBOT_VENV:-$_cache/venv-$(_venv_hash "$_req")}" \
-  'rclpy, rclpy.action, cyclonedds, pytest, playwright, trajectory_msgs.msg, control_msgs.action, controller_manager_msgs.srv'
+_ros_venv EEZYBOT_PYTHON "$_req" kilted "${EEZYBOT_VENV:-$_cache/venv-$(_venv_hash "$_req" kilted)}" \
+  'rclpy, rclpy.action, cyclonedds, pytest, playwright, trajectory_msgs.msg, control_msgs.action, controller_manager_msgs.srv, ros2cli.cli, ros2controlcli.verb.switch_controllers'
 _req="$_here/tests/requirements-jazzy.txt"
 _ros_venv EEZYBOT_JAZZY_PYTHON "$_req" jazzy "${EEZYBOT_JAZZY_VENV:-$_cache/venv-jazzy-$(_venv_hash "$_req")}" \
   'rclpy, rclpy.action, trajectory_msgs.msg, control_msgs.action, controller_manager_msgs.srv'
