@@ -315,6 +315,22 @@ class CalibrationGraph:
         finally:
             self.o.node.destroy_client(cli)
 
+    def calibrating(self, timeout=10.0):
+        """Whether compute_ik's `calibration` controller is active (the wizard holds the
+        arm), through controller_manager/list_controllers; None: no answer."""
+        from controller_manager_msgs.srv import ListControllers
+
+        cli = self.o.node.create_client(ListControllers, "/controller_manager/list_controllers")
+        try:
+            if not cli.wait_for_service(timeout_sec=timeout):
+                return None
+            fut = cli.call_async(ListControllers.Request())
+            if not self.o.spin_until(fut.done, timeout):
+                return None
+            return any(c.name == "calibration" and c.state == "active" for c in fut.result().controller)
+        finally:
+            self.o.node.destroy_client(cli)
+
 
 # ------------------------------------------------------------------------------------
 # Driving the wizard: its requests ({"t":"calibrate","op":...} on the panel's WebSocket)
@@ -327,9 +343,11 @@ class WizardFailed(AssertionError):
 
 
 class WizardDriver:
-    """The common part: the latest `calibration` message, refusals, and waiting."""
+    """The common part: the latest `calibration` and `status` messages, refusals, and
+    waiting."""
 
     def __init__(self):
+        self.status = None  # the latest {"t":"status",...}: the nodes, compute_ik's controllers
         self.cal = None  # the latest {"t":"calibration",...}
         self.cal_count = 0
         self.refusals = []
@@ -346,6 +364,8 @@ class WizardDriver:
         if m.get("t") == "calibration":
             self.cal = m
             self.cal_count += 1
+        elif m.get("t") == "status":
+            self.status = m
         elif m.get("t") == "refused":
             self.refusals.append(m.get("reason"))
 

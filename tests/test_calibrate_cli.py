@@ -183,6 +183,9 @@ class Graph:
         # CalibrationGraph.param needs only the observer (as tests/test_leader_calibration.py)
         return CalibrationGraph.param(types.SimpleNamespace(o=self.o), node, name)
 
+    def calibrating(self):
+        return CalibrationGraph.calibrating(types.SimpleNamespace(o=self.o))
+
     # (the bounds of this file's waits only end a failure: debug builds on a busy host)
     def wait_servo(self, servo, deg, timeout=20.0, tolerance=0.05):
         """servo_state shows `servo` at `deg` (what a person waits for before marking)."""
@@ -288,10 +291,10 @@ def test_the_cli_calibrates_the_mock_arm_to_the_shipped_calibration(graph, cli, 
     assert backup.exists(), sorted(p.name for p in tmp_path.iterdir())
     assert servo_lines(backup) == shipped  # the file did not exist: made from the shipped one first
     assert not (tmp_path / "xdg" / "eezybot" / "arm.yaml").exists()  # calibration_file, not the default
-    # applied live: arm_config on compute_ik and serial_node, compute_ik no longer calibrating
+    # applied live: arm_config on compute_ik and serial_node, the arm given back (calibration inactive)
     for node in ("compute_ik", "serial_node"):
         assert graph.param(node, "arm_config") == str(calibration_file), node
-    assert graph.param("compute_ik", "calibrating") is False
+    assert graph.calibrating() is False
 
 
 def test_a_refused_mark_says_why_and_changes_nothing(graph, cli, observer, tmp_path):
@@ -319,13 +322,13 @@ def test_a_refused_mark_says_why_and_changes_nothing(graph, cli, observer, tmp_p
 def test_quit_before_saving_cancels_and_gives_the_arm_back(graph, cli, observer, tmp_path):
     c = cli("--ros-args", "-r", "__node:=calibrate")
     wait_reference(c, observer, "Base", 0)
-    assert graph.param("compute_ik", "calibrating") is True
+    assert graph.calibrating() is True
     jog_to(c, observer, 85.0)
     graph.wait_servo("base", 85.0)
     assert c.quit() == 1, c.text()
     assert "cancelled" in c.log(), c.log()
     assert not (tmp_path / "xdg" / "eezybot").exists(), list((tmp_path / "xdg").rglob("*"))
-    assert graph.param("compute_ik", "calibrating") is False
+    assert graph.calibrating() is False
     # compute_ik takes targets again: joint_states move to one
     target = {"base_joint": 20.0, "shoulder_joint": 70.0, "elbow_joint": -100.0, "gripper_joint": 10.0}
     msg = JointState(name=list(target), position=[math.radians(v) for v in target.values()])
@@ -347,7 +350,7 @@ def test_leader_calibration_without_a_leader_starts_moves_nothing_and_quits(grap
     c.wait_text("calibrating the leader arm", 10, observer)
     st = wait_reference(c, observer, "Base", 0)
     assert st.cmd is None and "Move the leader by hand" in st.instruction, st
-    assert graph.param("compute_ik", "calibrating") is False
+    assert graph.calibrating() is False
     assert c.quit() == 1, c.text()
     # nothing moved while the wizard ran: a sentinel follows it, a joint target where the
     # arm is, stamped; every servo_state from the start up to the device's answer to it

@@ -132,8 +132,7 @@ def test_the_wizard_calibrates_a_miscalibrated_arm_to_within_half_a_degree(launc
         for node in ("compute_ik", "serial_node"):
             value = graph.param(node, "arm_config")
             assert value and Path(value).resolve() == path.resolve(), (node, value)
-        assert observer.spin_until(lambda: graph.param("compute_ik", "calibrating") is False, 10), \
-            graph.param("compute_ik", "calibrating")
+        assert observer.spin_until(lambda: graph.calibrating() is False, 10), graph.calibrating()
         calibrated = servo_lines(path)
         result = graph.errors_over(TARGETS, calibrated, ISSUE_ARM)
         print("calibrated:", describe(result))

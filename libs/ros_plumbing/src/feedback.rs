@@ -38,6 +38,14 @@ pub const REASON_CODE_KEY: &str = "reason_code";
 /// The `diagnostics` key of the topic the refused target came on (`xyz_target`).
 pub const REJECTED_TOPIC_KEY: &str = "last_rejection_topic";
 
+/// The `diagnostics` key of the controllers active now (compute_ik's arbiter:
+/// `teleop, gripper_controller`).
+pub const ACTIVE_CONTROLLERS_KEY: &str = "active_controllers";
+
+/// The `diagnostics` key of the last `switch_controller`'s outcome (`done`, or why not),
+/// or of a controller the arbiter deactivated by itself (a calibration's lease ran out).
+pub const LAST_SWITCH_KEY: &str = "last_switch_controller";
+
 /// Why a target was refused, as a stable code: what a reader may act on. The human
 /// reason ([`Refusal::reason`]) says more, and may change wording; the code does not.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -55,7 +63,7 @@ pub enum ReasonCode {
     NotFinite,
     /// The emergency stop is engaged.
     Estop,
-    /// The arm is being calibrated (compute_ik's `calibrating`): the wizard drives the
+    /// The arm is being calibrated (compute_ik's `calibration` controller is active): the wizard drives the
     /// servos, no target is taken.
     Calibrating,
     /// A straight-line move would leave the workspace (or jump at a singularity).
@@ -234,6 +242,10 @@ pub struct Feedback {
     pub message: String,
     /// The target the node refused last, if it reports one.
     pub refusal: Option<Refusal>,
+    /// The controllers active now ([`ACTIVE_CONTROLLERS_KEY`]), if it reports them.
+    pub controllers: Option<String>,
+    /// The last switch of controllers ([`LAST_SWITCH_KEY`]), if it reports one.
+    pub last_switch: Option<String>,
 }
 
 impl Feedback {
@@ -270,6 +282,8 @@ impl Feedback {
             health: Health::from_level(s.level),
             message: s.message.clone(),
             refusal,
+            controllers: value(ACTIVE_CONTROLLERS_KEY).map(str::to_string),
+            last_switch: value(LAST_SWITCH_KEY).map(str::to_string),
         }
     }
 }

@@ -4,6 +4,7 @@
 pub mod action;
 pub mod args;
 pub mod burst;
+pub mod controller_manager;
 pub mod diagnostics;
 pub mod docs;
 mod error;

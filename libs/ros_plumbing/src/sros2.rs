@@ -117,7 +117,7 @@ pub const PARAMETER_SERVICES: &[&str] = &[
 /// Which node calls which other node's parameter services
 /// ([`crate::remote_params::RemoteParameters`]): gui_bridge switches compute_ik's
 /// `motion` for `play --line` and reads and sets its parameters from the web panel; its
-/// calibration wizard sets compute_ik's `calibrating` and, on saving, `arm_config` on
+/// calibration wizard sets, on saving, `arm_config` on
 /// compute_ik and serial_node.
 pub const REMOTE_PARAMETER_CALLS: &[(&str, &str, &[&str])] = &[
     (
@@ -511,6 +511,14 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
     if nodes.contains("compute_ik") {
         controller_rules(namespace, &mut r.publish, &mut r.subscribe);
     }
+    if nodes.contains("gui_bridge") {
+        // the calibration wizard takes the arm through the controller manager
+        for service in [topics::LIST_CONTROLLERS, topics::SWITCH_CONTROLLER] {
+            let s = in_namespace(namespace, service);
+            r.publish.insert(format!("rq/{s}Request"));
+            r.subscribe.insert(format!("rr/{s}Reply"));
+        }
+    }
     if nodes.contains("serial_node") || nodes.contains("compute_ik") {
         // serial_node in the leader role reads a leader arm next to the PC or the Pi
         for t in [
@@ -710,6 +718,24 @@ mod tests {
         assert!(publish.contains(&"rr/serial_node/set_parametersReply".to_string()));
         assert!(!publish.iter().any(|t| t.contains("compute_ik")));
         assert!(!subscribe.iter().any(|t| t.contains("compute_ik")));
+    }
+
+    #[test]
+    fn the_calibration_wizard_may_call_the_controller_manager() {
+        let r = rules(PC_NODES, "/arm2").unwrap();
+        for s in ["list_controllers", "switch_controller"] {
+            let request = format!("rq/arm2/controller_manager/{s}Request");
+            let reply = format!("rr/arm2/controller_manager/{s}Reply");
+            // gui_bridge's client and compute_ik's server, in one enclave
+            assert!(
+                r.publish.contains(&request) && r.subscribe.contains(&reply),
+                "{s}"
+            );
+            assert!(
+                r.subscribe.contains(&request) && r.publish.contains(&reply),
+                "{s}"
+            );
+        }
     }
 
     #[test]

@@ -155,8 +155,8 @@ const RECORD: &str = "gui_bridge (record)";
 /// a Foxglove client watches it, to forward it to Foxglove (`robot_description` and
 /// `tf_static` as long as it runs).
 const FOXGLOVE: &str = "gui_bridge (Foxglove)";
-/// gui_bridge's calibration wizard (it drives the servos while compute_ik's
-/// `calibrating` is true, and shows a leader arm beside the follower).
+/// gui_bridge's calibration wizard (it drives the servos while compute_ik's `calibration`
+/// controller is active, and shows a leader arm beside the follower).
 const CALIBRATION: &str = "gui_bridge (calibration)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.

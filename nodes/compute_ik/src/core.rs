@@ -238,7 +238,7 @@ impl fmt::Display for Reason {
             ),
             Reason::Calibrating => write!(
                 f,
-                "the arm is being calibrated: no target is taken until `calibrating` is false"
+                "the arm is being calibrated: no target is taken until `calibration` is deactivated (controller_manager/switch_controller)"
             ),
             Reason::TooOld { age_s, max_s } => write!(
                 f,

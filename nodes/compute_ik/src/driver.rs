@@ -26,6 +26,7 @@ use ros2_client::action::GoalId;
 use ros2_client::service::request_id::RmwRequestId;
 use ros_plumbing::action::GoalEnd;
 use ros_plumbing::burst;
+use ros_plumbing::feedback;
 use ros_plumbing::logging::Throttle;
 use ros_plumbing::service::{Caller, Ticket};
 use ros_plumbing::Params;
@@ -77,6 +78,9 @@ pub enum Effect {
     /// Answer a `controller_manager/switch_controller` request.
     SwitchController(Ticket, SwitchControllerResponse),
 }
+
+/// What ends the other commanders when `calibration` becomes active.
+const CALIBRATING: &str = "calibrating: the calibration wizard drives the servos";
 
 /// Who sent the running trajectory.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -155,8 +159,6 @@ pub struct Driver<M: ArmModel> {
     leader: Leader,
     /// who moves the arm: the controllers, active or not, and the e-stop's lock
     arbiter: Arbiter,
-    /// the `calibrating` parameter's value (followed once the e-stop allows)
-    calibrating_param: bool,
     /// the last `switch_controller`'s outcome, for `diagnostics`
     last_switch: Option<String>,
 }
@@ -202,7 +204,6 @@ impl<M: ArmModel> Driver<M> {
                 arm: vec![],
                 gripper: None,
             }),
-            calibrating_param: false,
             last_switch: None,
         }
         .with_map()
@@ -253,7 +254,7 @@ impl<M: ArmModel> Driver<M> {
             ("arm_controller".to_string(), running),
             ("leader".to_string(), self.leader.state.clone()),
             (
-                "active_controllers".to_string(),
+                feedback::ACTIVE_CONTROLLERS_KEY.to_string(),
                 if active.is_empty() {
                     "none (the arm holds)".into()
                 } else {
@@ -265,7 +266,7 @@ impl<M: ArmModel> Driver<M> {
             v.push(("last_trajectory".into(), t.clone()));
         }
         if let Some(t) = &self.last_switch {
-            v.push(("last_switch_controller".into(), t.clone()));
+            v.push((feedback::LAST_SWITCH_KEY.into(), t.clone()));
         }
         v
     }
@@ -405,9 +406,8 @@ impl<M: ArmModel> Driver<M> {
     }
 
     /// The parameters changed at `now` (`wall`): applied (a new solver logged and
-    /// reported; `calibrating` asks the arbiter for `calibration` or gives it back,
-    /// after `arm_config`, so that the arm is taken where the new calibration says).
-    pub fn on_params(&mut self, params: &Params, now: Instant, wall: Time) -> Vec<Effect> {
+    /// reported).
+    pub fn on_params(&mut self, params: &Params, _now: Instant, _wall: Time) -> Vec<Effect> {
         let solver = self.core.solver();
         self.core.apply_params(params);
         let mut effects = vec![];
@@ -415,45 +415,7 @@ impl<M: ArmModel> Driver<M> {
             log::info!("solver: {}", params.string("solver").unwrap_or_default());
             effects.push(Effect::Report);
         }
-        self.calibrating_param = params.bool("calibrating").unwrap_or(false);
-        self.follow_calibrating_param(now, wall, &mut effects);
         effects
-    }
-
-    /// `calibrating` true: `calibration` active (every other controller deactivated),
-    /// with no lease (the parameter stays until set false); false: given back. Under
-    /// the e-stop the switch waits for its release.
-    fn follow_calibrating_param(&mut self, now: Instant, wall: Time, effects: &mut Vec<Effect>) {
-        let on = self.calibrating_param;
-        if on == self.arbiter.is_active(Controller::Calibration) {
-            return;
-        }
-        let others = || {
-            Controller::ALL
-                .into_iter()
-                .filter(|&c| c != Controller::Calibration && self.arbiter.is_active(c))
-                .map(|c| c.name().to_string())
-                .collect()
-        };
-        let (activate, deactivate) = if on {
-            (vec!["calibration".to_string()], others())
-        } else {
-            (vec![], vec!["calibration".to_string()])
-        };
-        let switch = Switch {
-            activate,
-            deactivate,
-            strictness: Strictness::Strict,
-            owner: "the `calibrating` parameter".into(),
-            lease: false,
-        };
-        let out = self.arbiter.handle(arbiter::Event::Switch(switch), now);
-        if let Err(why) = out.result {
-            log::warn!("calibrating:={on} waits: {why}");
-            effects.push(Effect::Report);
-        }
-        let by = "calibrating: the calibration wizard drives the servos";
-        self.apply_changes(out.changes, by, wall, effects);
     }
 
     /// Act on what the arbiter changed. `by`: what took the joints (a topic, "the
@@ -476,7 +438,13 @@ impl<M: ArmModel> Driver<M> {
                     switched = true;
                 }
                 Change::Deactivated(c, why) => {
-                    log::info!("{c} inactive: {why}");
+                    if why == Why::OwnerGone {
+                        // nobody asked for this one: say why in diagnostics too
+                        log::warn!("{c} inactive: {why}");
+                        self.last_switch = Some(format!("{c} deactivated: {why}"));
+                    } else {
+                        log::info!("{c} inactive: {why}");
+                    }
                     self.end_commander(c, why, by, wall, effects);
                     switched = true;
                 }
@@ -522,7 +490,7 @@ impl<M: ArmModel> Driver<M> {
                 self.end_gripper(GoalEnd::Aborted, false, &text, !planned, effects)
             }
             Controller::LeaderFollower => {
-                let text = if by.starts_with("calibrating") {
+                let text = if by == CALIBRATING {
                     "calibrating".into()
                 } else {
                     text
@@ -669,7 +637,16 @@ impl<M: ArmModel> Driver<M> {
         } else {
             response.message.clone()
         });
-        self.apply_changes(out.changes, "", wall, effects);
+        // what a deactivated commander reports it ended by
+        let by = if out
+            .changes
+            .contains(&Change::Activated(Controller::Calibration))
+        {
+            CALIBRATING
+        } else {
+            ""
+        };
+        self.apply_changes(out.changes, by, wall, effects);
         effects.push(Effect::Report);
         response
     }
@@ -721,10 +698,6 @@ impl<M: ArmModel> Driver<M> {
                     self.apply_changes(out.changes, "", wall, effects);
                     self.next_step = None;
                     effects.push(Effect::Report);
-                    if !engaged {
-                        // a `calibrating` set under the e-stop takes effect now
-                        self.follow_calibrating_param(now, wall, effects);
-                    }
                 }
                 continue;
             }

@@ -95,11 +95,6 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             )
             .read_only(),
             ParamSpec::new(
-                "calibrating",
-                ParameterValue::Boolean(false),
-                "true while the calibration wizard (gui_bridge) drives the servos: no servo_angles are published, every target is refused (`calibrating`), trajectory goals are rejected and a leader arm is not followed; set false, the arm is taken where servo_state says it is, through the current arm_config",
-            ),
-            ParamSpec::new(
                 "substitute_nearest",
                 ParameterValue::Boolean(false),
                 "a position target at most substitute_max_distance out of reach is replaced by the nearest reachable point (logged, in diagnostics) instead of refused",

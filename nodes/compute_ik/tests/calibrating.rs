@@ -1,6 +1,8 @@
-//! The parameter `calibrating` on the node's loop policy ([`Driver`]), on a fixed clock
-//! as in `tests/driver.rs`: while true nothing is published and every target is
-//! refused; set false, the arm is taken where `servo_state` says it is.
+//! Calibrating on the node's loop policy ([`Driver`]), on a fixed clock as in
+//! `tests/driver.rs`: the calibration wizard takes the arm by activating `calibration`
+//! through `controller_manager/switch_controller` (deactivating whoever held it), as
+//! gui_bridge does; meanwhile nothing is published and every target is refused;
+//! deactivated, the arm is taken where `servo_state` says it is.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 mod common;
 use common::*;
@@ -24,19 +26,54 @@ use ros_plumbing::{ParameterValue, Params};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-/// The node's parameters at their defaults, with `calibrating` (and `arm_config`).
-fn params(calibrating: bool, arm_config: &str) -> Params {
+/// The node's parameters at their defaults, with `arm_config`.
+fn params(arm_config: &str) -> Params {
     let mut values: BTreeMap<String, ParameterValue> = compute_ik::spec()
         .params
         .iter()
         .map(|s| (s.name.to_string(), s.default.clone()))
         .collect();
-    values.insert("calibrating".into(), ParameterValue::Boolean(calibrating));
     values.insert(
         "arm_config".into(),
         ParameterValue::String(arm_config.to_string()),
     );
     Params::new(values)
+}
+
+/// Nothing is due but the end of the calibration's lease, taken at `taken_ms` (no step
+/// planned: the wizard's caller renews the lease, this test does not).
+fn only_the_lease_is_due(d: &Driver<EezyBot>, clock: &Clock, taken_ms: u64) {
+    let (taken, _) = clock.at(ms(taken_ms));
+    assert_eq!(d.deadline(), Some(taken + arbiter::DEFAULT_OWNER_LEASE));
+}
+
+/// The calibration wizard takes the arm (`calibration` activated, whoever is active
+/// deactivated, in one strict switch) or gives it back, as gui_bridge does; with
+/// `arm_config`, the new calibration is set first (the wizard's save).
+fn calibrate(
+    d: &mut Driver<EezyBot>,
+    on: bool,
+    arm_config: Option<&str>,
+    now: std::time::Instant,
+    wall: Time,
+) -> Vec<Effect> {
+    let mut e = vec![];
+    if let Some(config) = arm_config {
+        e.extend(d.on_params(&params(config), now, wall));
+    }
+    let input = if on {
+        let holders = active(d, now, wall);
+        let others: Vec<&str> = holders
+            .iter()
+            .map(String::as_str)
+            .filter(|n| *n != "calibration")
+            .collect();
+        switch(1, &["calibration"], &others)
+    } else {
+        switch(2, &[], &["calibration"])
+    };
+    e.extend(d.on_inputs(vec![input], now, wall));
+    e
 }
 
 fn joint_target(stamp: Time, joints: &[(&str, f64)]) -> Input {
@@ -133,12 +170,12 @@ fn calibrating_stops_a_running_motion_and_publishes_nothing_more() {
     assert!(d.core().is_moving());
     let pose = d.core().joint_states(Time::ZERO);
     let (now, wall) = clock.at(ms(105));
-    let e = d.on_params(&params(true, ""), now, wall);
+    let e = calibrate(&mut d, true, None, now, wall);
     assert!(published(&e).is_empty(), "{e:?}");
     assert!(e.contains(&Effect::Report), "{e:?}");
     assert!(d.core().calibrating());
     assert!(!d.core().is_moving());
-    assert_eq!(d.deadline(), None, "no step planned");
+    only_the_lease_is_due(&d, &clock, 105);
     let after = run_until(&mut d, &clock, ms(5000));
     assert!(published(&after).is_empty(), "{after:?}");
     assert_eq!(
@@ -146,9 +183,11 @@ fn calibrating_stops_a_running_motion_and_publishes_nothing_more() {
         pose.position,
         "held where it was"
     );
-    // the same value again: nothing
+    // asked again: refused (active already), nothing published
     let (now, wall) = clock.at(ms(200));
-    assert!(d.on_params(&params(true, ""), now, wall).is_empty());
+    let e = calibrate(&mut d, true, None, now, wall);
+    assert!(published(&e).is_empty(), "{e:?}");
+    assert_eq!(switched(&e).map(|(ok, _)| ok), Some(false), "{e:?}");
 }
 
 #[test]
@@ -156,7 +195,7 @@ fn while_calibrating_targets_are_refused_with_reason_calibrating() {
     let clock = Clock::new();
     let mut d = driver();
     let (now, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), now, wall);
+    calibrate(&mut d, true, None, now, wall);
     let cases: Vec<(Input, Source)> = vec![
         (xyz(0.2, 0.0, 0.15, wall), Source::XyzTarget),
         (
@@ -179,7 +218,7 @@ fn while_calibrating_targets_are_refused_with_reason_calibrating() {
         );
         assert!(r.reason.to_string().contains("calibrat"), "{}", r.reason);
     }
-    assert_eq!(d.deadline(), None);
+    only_the_lease_is_due(&d, &clock, 0);
     // the e-stop's reason comes first when both hold
     let (now, wall) = clock.at(ms(1000));
     d.on_inputs(vec![Input::Estop(true)], now, wall);
@@ -203,7 +242,7 @@ fn while_calibrating_trajectories_are_rejected_and_a_running_goal_is_aborted() {
     );
     run_until(&mut d, &clock, ms(200));
     let (now, wall) = clock.at(ms(205));
-    let e = d.on_params(&params(true, ""), now, wall);
+    let e = calibrate(&mut d, true, None, now, wall);
     assert!(
         e.iter()
             .any(|e| matches!(e, Effect::TrajectoryResult(id, GoalEnd::Aborted, _) if *id == GoalId::ZERO)),
@@ -243,7 +282,7 @@ fn while_calibrating_trajectories_are_rejected_and_a_running_goal_is_aborted() {
         wall,
     );
     assert!(published(&e).is_empty());
-    assert_eq!(d.deadline(), None);
+    only_the_lease_is_due(&d, &clock, 205);
 }
 
 #[test]
@@ -259,7 +298,7 @@ fn while_calibrating_a_leader_arm_is_not_followed() {
         })
     };
     let (now, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), now, wall);
+    calibrate(&mut d, true, None, now, wall);
     for k in 1..10 {
         let (now, wall) = clock.at(ms(10 * k));
         let e = d.on_inputs(
@@ -283,7 +322,7 @@ fn diagnostics_report_calibrating() {
     let mut d = driver();
     assert_eq!(diag_value(&d, "calibrating"), "false");
     let (now, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), now, wall);
+    calibrate(&mut d, true, None, now, wall);
     assert_eq!(diag_value(&d, "calibrating"), "true");
     let status = d.core().diagnostic_status("compute_ik");
     assert!(status.message.contains("calibrating"), "{}", status.message);
@@ -292,7 +331,7 @@ fn diagnostics_report_calibrating() {
         eezybot_msgs::diagnostic_msgs::DiagnosticStatus::WARN
     );
     let (now, wall) = clock.at(ms(100));
-    d.on_params(&params(false, ""), now, wall);
+    calibrate(&mut d, false, None, now, wall);
     assert_eq!(diag_value(&d, "calibrating"), "false");
     assert!(!d.core().calibrating());
 }
@@ -333,7 +372,7 @@ fn ending_calibrating_takes_the_arm_where_servo_state_says_through_the_new_calib
     let clock = Clock::new();
     let mut d = driver();
     let (now, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), now, wall);
+    calibrate(&mut d, true, None, now, wall);
     // the wizard leaves the arm at base 10°, main arm 80°, forearm φ −20°, claw half
     // open, as the new calibration (the base's horn 7° off) reads it
     let mut servos = ServoCalibrations::default();
@@ -348,9 +387,9 @@ fn ending_calibrating_takes_the_arm_where_servo_state_says_through_the_new_calib
     let (now, wall) = clock.at(ms(100));
     let e = d.on_inputs(vec![servo_state(deg)], now, wall);
     assert!(published(&e).is_empty(), "nothing while calibrating: {e:?}");
-    // arm_config and calibrating set together (the wizard's save)
+    // arm_config set, then calibration given back (the wizard's save)
     let (now, wall) = clock.at(ms(200));
-    let e = d.on_params(&params(false, &config.path()), now, wall);
+    let e = calibrate(&mut d, false, Some(&config.path()), now, wall);
     let steps: Vec<_> = e
         .iter()
         .filter_map(|e| match e {
@@ -402,13 +441,13 @@ fn ending_calibrating_clamps_a_reported_pose_outside_the_limits() {
     let clock = Clock::new();
     let mut d = driver();
     let (now, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), now, wall);
+    calibrate(&mut d, true, None, now, wall);
     // the main arm at 130° (servo 50°), past its 125° limit; the forearm horizontal
     let deg = [90.0, 180.0 - 130.0, 90.0 + 0.0, 60.0];
     let (now, wall) = clock.at(ms(100));
     d.on_inputs(vec![servo_state(deg)], now, wall);
     let (now, wall) = clock.at(ms(200));
-    let e = d.on_params(&params(false, ""), now, wall);
+    let e = calibrate(&mut d, false, None, now, wall);
     let js = published(&e);
     assert_eq!(js.len(), 1, "{e:?}");
     let shoulder = position(js[0], "shoulder_joint").to_degrees();
@@ -420,7 +459,7 @@ fn ending_calibrating_without_servo_state_publishes_nothing_and_takes_targets_ag
     let clock = Clock::new();
     let mut d = driver();
     let (now, wall) = clock.at(ms(0));
-    d.on_params(&params(true, ""), now, wall);
+    calibrate(&mut d, true, None, now, wall);
     // a servo_state without every servo is not a pose
     let (now, wall) = clock.at(ms(50));
     d.on_inputs(
@@ -433,11 +472,44 @@ fn ending_calibrating_without_servo_state_publishes_nothing_and_takes_targets_ag
         wall,
     );
     let (now, wall) = clock.at(ms(100));
-    let e = d.on_params(&params(false, ""), now, wall);
+    let e = calibrate(&mut d, false, None, now, wall);
     assert!(published(&e).is_empty(), "{e:?}");
-    assert_eq!(e, vec![Effect::Report]);
+    assert_eq!(switched(&e), Some((true, String::new())), "{e:?}");
     assert!(!d.core().calibrating());
     let (now, wall) = clock.at(ms(200));
+    let e = d.on_inputs(vec![xyz(0.2, 0.0, 0.15, wall)], now, wall);
+    assert_eq!(published(&e).len(), 1, "{e:?}");
+}
+
+#[test]
+fn a_calibration_whose_caller_went_silent_is_given_back_after_the_lease_and_diagnostics_say_so() {
+    let clock = Clock::new();
+    let mut d = driver();
+    let (now, wall) = clock.at(ms(0));
+    calibrate(&mut d, true, None, now, wall);
+    // the wizard lists the controllers every 2 s: it keeps the arm past the lease
+    for t in (2000..=14_000).step_by(2000) {
+        run_until(&mut d, &clock, ms(t));
+        let (now, wall) = clock.at(ms(t));
+        active(&mut d, now, wall);
+    }
+    assert!(d.core().calibrating());
+    // then nothing from it (gui_bridge killed): the arm is given back at the lease's end
+    run_until(
+        &mut d,
+        &clock,
+        ms(14_000) + arbiter::DEFAULT_OWNER_LEASE - ms(1),
+    );
+    assert!(d.core().calibrating());
+    run_until(&mut d, &clock, ms(14_000) + arbiter::DEFAULT_OWNER_LEASE);
+    assert!(!d.core().calibrating());
+    let why = controller_value(&d, "last_switch_controller");
+    assert!(
+        why.contains("calibration deactivated") && why.contains("within the lease"),
+        "{why}"
+    );
+    // and compute_ik takes targets again
+    let (now, wall) = clock.at(ms(30_000));
     let e = d.on_inputs(vec![xyz(0.2, 0.0, 0.15, wall)], now, wall);
     assert_eq!(published(&e).len(), 1, "{e:?}");
 }

@@ -511,54 +511,6 @@ fn without_leader_samples_the_follower_holds_after_the_timeout() {
 
 // ---- who moves the arm: the arbiter, and the controller manager's services ----
 
-fn caller() -> ros_plumbing::service::Caller {
-    ros_plumbing::service::Caller([7; 12])
-}
-
-fn switch(n: u64, activate: &[&str], deactivate: &[&str]) -> Input {
-    use eezybot_msgs::controller_manager_msgs::SwitchControllerRequest;
-    Input::SwitchController(
-        ros_plumbing::service::Ticket(n),
-        caller(),
-        SwitchControllerRequest {
-            activate_controllers: activate.iter().map(|s| s.to_string()).collect(),
-            deactivate_controllers: deactivate.iter().map(|s| s.to_string()).collect(),
-            strictness: SwitchControllerRequest::STRICT,
-            ..Default::default()
-        },
-    )
-}
-
-fn switched(effects: &[Effect]) -> Option<(bool, String)> {
-    effects.iter().find_map(|e| match e {
-        Effect::SwitchController(_, r) => Some((r.ok, r.message.clone())),
-        _ => None,
-    })
-}
-
-fn active(d: &mut Driver<EezyBot>, now: std::time::Instant, wall: Time) -> Vec<String> {
-    let e = d.on_inputs(
-        vec![Input::ListControllers(
-            ros_plumbing::service::Ticket(99),
-            caller(),
-        )],
-        now,
-        wall,
-    );
-    let list = e
-        .iter()
-        .find_map(|e| match e {
-            Effect::ListControllers(_, r) => Some(r.clone()),
-            _ => None,
-        })
-        .expect("answered");
-    list.controller
-        .into_iter()
-        .filter(|c| c.state == "active")
-        .map(|c| c.name)
-        .collect()
-}
-
 #[test]
 fn while_the_leader_is_followed_a_target_is_refused_as_held_and_moves_nothing() {
     let clock = Clock::new();

@@ -102,14 +102,14 @@ pub enum Op {
 /// What the caller must do.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Effect {
-    /// Set compute_ik's `calibrating`, then call [`Wizard::on_calibrating_set`].
+    /// Take the arm from compute_ik (or give it back), then call [`Wizard::on_calibrating_set`].
     SetCalibrating(bool),
     /// Publish `servo_angles` at these horn angles (deg, `servo_angles` order).
     ServoAngles([f64; 4]),
     /// Write this calibration (the servos and the leader section) atomically, set
     /// `arm_config` to the file on compute_ik and every serial_node (the caller fills
     /// in [`crate::SaveJob::nodes`]), and for the follower set compute_ik's
-    /// `calibrating` false after that; then call [`Wizard::on_saved`].
+    /// the arm back after that; then call [`Wizard::on_saved`].
     Save(Box<crate::SaveJob>),
     /// Publish `joint_target` with these joints (rad).
     JointTarget(Vec<(String, f64)>),
@@ -133,7 +133,7 @@ pub struct SaveOutcome {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
     Idle,
-    /// waiting for compute_ik's `calibrating`
+    /// waiting for compute_ik to hand over the arm
     Starting,
     /// moving servos one at a time (the queue)
     Moving,
@@ -301,8 +301,13 @@ impl Wizard {
         !matches!(self.phase, Phase::Idle)
     }
 
-    /// Whether compute_ik was told to send nothing and not yet told to go on: the caller
-    /// must set `calibrating` false when it shuts down now.
+    /// Saving: the file being written and applied (it gives the arm back itself).
+    pub fn saving(&self) -> bool {
+        self.phase == Phase::Saving
+    }
+
+    /// Whether the wizard holds the arm (taken from compute_ik, not yet given back): the
+    /// caller must give it back when it shuts down now.
     pub fn holds_compute_ik(&self) -> bool {
         self.arm == Arm::Follower
             && matches!(
@@ -551,7 +556,7 @@ impl Wizard {
         self.commanded = None;
     }
 
-    /// compute_ik's `calibrating` was set (or not).
+    /// compute_ik handed over the arm, or took it back (or refused).
     pub fn on_calibrating_set(
         &mut self,
         on: bool,
@@ -576,7 +581,7 @@ impl Wizard {
             }
             (false, Err(e)) => fx.push(Effect::Log(
                 log::Level::Error,
-                format!("compute_ik's calibrating could not be set false ({e}): set it by hand, `ros2 param set /compute_ik calibrating false`"),
+                format!("the arm could not be given back to compute_ik ({e}): give it back by hand, `ros2 control switch_controllers --deactivate calibration`"),
             )),
             _ => {}
         }

@@ -356,7 +356,7 @@ fn wizard_has_state(w: &Wizard) -> bool {
 async fn cancel(wizard: &mut Wizard, control: &RosCalibration<'_, '_>) {
     if wizard.holds_compute_ik() {
         if let Err(e) = control.set_calibrating(false).await {
-            eprintln!("compute_ik's calibrating could not be set false ({e}): `ros2 param set /compute_ik calibrating false`");
+            eprintln!("the arm could not be given back to compute_ik ({e}): `ros2 control switch_controllers --deactivate calibration`");
         }
     }
     let _ = wizard.request(Op::Cancel, Instant::now());

@@ -1,9 +1,10 @@
-//! The calibration wizard's ROS side ([`crate::CalibrationControl`]): compute_ik's
-//! `calibrating` through its parameter services, `servo_angles` while calibrating (the
-//! publisher exists only then, so that serial_node and `ros2 topic info` see one
-//! commander the rest of the time), and saving: the file written atomically
-//! ([`calibration::write_calibration`], off the event loop), then `arm_config` set on
-//! compute_ik and every serial_node heard.
+//! The calibration wizard's ROS side ([`crate::CalibrationControl`]): the arm taken
+//! from compute_ik's controllers and given back through its controller manager
+//! (`calibration` activated by a strict `switch_controller`, the lease renewed while
+//! calibrating), `servo_angles` while calibrating (the publisher exists only then, so
+//! that serial_node and `ros2 topic info` see one commander the rest of the time), and
+//! saving: the file written atomically ([`calibration::write_calibration`], off the
+//! event loop), then `arm_config` set on compute_ik and every serial_node heard.
 
 use crate::calibrate::SaveOutcome;
 use crate::{CalibrationControl, SaveJob};
@@ -12,6 +13,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use futures::future::LocalBoxFuture;
+use ros_plumbing::controller_manager::ControllerManager;
 use ros_plumbing::remote_params::RemoteParameters;
 use ros_plumbing::{topics, ParameterValue, RosNode, TopicPublisher};
 use std::cell::RefCell;
@@ -25,6 +27,11 @@ pub const PARAM_TIMEOUT: Duration = Duration::from_secs(3);
 pub const MATCH_TIMEOUT: Duration = Duration::from_secs(2);
 /// How long writing the file may take.
 pub const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
+/// The controller that drives the servos while calibrating.
+pub const CALIBRATION: &str = "calibration";
+/// How often the lease on `calibration` is renewed (compute_ik gives the arm back after
+/// its `calibration_lease`, 10 s, without a word from us).
+pub const LEASE_RENEWAL: Duration = Duration::from_secs(2);
 
 /// Where the wizard saves: `calibration_file`, else `arm_config`, else
 /// `$XDG_CONFIG_HOME/eezybot/arm.yaml` (`~/.config/eezybot/arm.yaml`).
@@ -74,18 +81,38 @@ pub struct RosCalibration<'n, 'r> {
     servo_angles: RefCell<Option<TopicPublisher<JointState>>>,
     /// the name compute_ik runs under
     compute_ik: String,
+    /// compute_ik's controller manager (made now, so that it is matched before use)
+    manager: Result<std::sync::Arc<ControllerManager>, String>,
+    /// renews the lease on `calibration` while we hold it
+    lease: RefCell<Option<tokio::task::JoinHandle<()>>>,
+}
+
+impl Drop for RosCalibration<'_, '_> {
+    fn drop(&mut self) {
+        if let Some(renewal) = self.lease.borrow_mut().take() {
+            renewal.abort();
+        }
+    }
 }
 
 impl<'n, 'r> RosCalibration<'n, 'r> {
     /// On `node`, saving to `path`; compute_ik is the node named `compute_ik` (its
     /// parameter client is made now, so that it is matched before the wizard starts).
     pub fn new(node: &'n RefCell<&'r mut RosNode>, path: PathBuf, compute_ik: &str) -> Self {
+        let manager = ControllerManager::new(&mut node.borrow_mut(), compute_ik)
+            .map(std::sync::Arc::new)
+            .map_err(|e| format!("no client of {compute_ik}'s controller manager: {e}"));
+        if let Err(e) = &manager {
+            log::warn!("calibration: {e}");
+        }
         let c = RosCalibration {
             node,
             path,
             clients: RefCell::new(BTreeMap::new()),
             servo_angles: RefCell::new(None),
             compute_ik: compute_ik.to_string(),
+            manager,
+            lease: RefCell::new(None),
         };
         if let Err(e) = c.client(compute_ik) {
             log::warn!("calibration: {e}");
@@ -120,6 +147,49 @@ impl<'n, 'r> RosCalibration<'n, 'r> {
         let client = self.client(name)?;
         let ros = self.node.borrow();
         client.wait(&ros, timeout).await.map_err(|e| e.to_string())
+    }
+
+    /// Take the arm: `calibration` activated, whoever held the joints deactivated, in
+    /// one strict switch; then the lease renewed every [`LEASE_RENEWAL`] until
+    /// [`Self::give_back`].
+    async fn take_arm(&self) -> Result<(), String> {
+        let manager = self.manager.clone()?;
+        let active = within(manager.active(), &manager).await?;
+        if !active.iter().any(|n| n == CALIBRATION) {
+            let holders: Vec<&str> = active.iter().map(String::as_str).collect();
+            within(manager.switch(&[CALIBRATION], &holders), &manager)
+                .await
+                .map_err(|why| {
+                    format!("{} refused to switch to calibration: {why}", manager.name())
+                })?;
+        }
+        let renewing = manager.clone();
+        let renewal = tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(LEASE_RENEWAL).await;
+                if let Err(e) = renewing.list().await {
+                    log::warn!("calibration: the lease was not renewed: {e}");
+                }
+            }
+        });
+        if let Some(old) = self.lease.borrow_mut().replace(renewal) {
+            old.abort();
+        }
+        Ok(())
+    }
+
+    /// Give the arm back: `calibration` deactivated (compute_ik takes the arm where
+    /// `servo_state` says it is). Done already when the lease ran out.
+    async fn give_back(&self) -> Result<(), String> {
+        if let Some(renewal) = self.lease.borrow_mut().take() {
+            renewal.abort();
+        }
+        let manager = self.manager.clone()?;
+        let active = within(manager.active(), &manager).await?;
+        if !active.iter().any(|n| n == CALIBRATION) {
+            return Ok(());
+        }
+        within(manager.switch(&[], &[CALIBRATION]), &manager).await
     }
 
     async fn set(&self, name: &str, param: &str, value: ParameterValue) -> Result<(), String> {
@@ -169,15 +239,31 @@ impl<'n, 'r> RosCalibration<'n, 'r> {
     }
 }
 
+/// `call`, or its failure when `manager` does not answer within [`PARAM_TIMEOUT`].
+async fn within<T>(
+    call: impl std::future::Future<Output = Result<T, String>>,
+    manager: &ControllerManager,
+) -> Result<T, String> {
+    tokio::time::timeout(PARAM_TIMEOUT, call)
+        .await
+        .unwrap_or_else(|_| {
+            Err(format!(
+                "{} did not answer within {:.0} s",
+                manager.name(),
+                PARAM_TIMEOUT.as_secs_f64()
+            ))
+        })
+}
+
 impl CalibrationControl for RosCalibration<'_, '_> {
     fn set_calibrating(&self, on: bool) -> LocalBoxFuture<'_, Result<(), String>> {
         Box::pin(async move {
-            if on {
+            let r = if on {
                 self.open_servo_angles().await?;
-            }
-            let r = self
-                .set(&self.compute_ik, "calibrating", ParameterValue::Boolean(on))
-                .await;
+                self.take_arm().await
+            } else {
+                self.give_back().await
+            };
             if !on || r.is_err() {
                 // compute_ik commands again (or never stopped): one commander only
                 *self.servo_angles.borrow_mut() = None;

@@ -169,16 +169,18 @@ pub struct SaveJob {
     pub servos: eezybot_kinematics::ServoCalibrations,
     /// the leader section
     pub leader: Option<eezybot_kinematics::LeaderCalibration>,
-    /// set compute_ik's `calibrating` false once `arm_config` is applied
+    /// give the arm back to compute_ik (`calibration` deactivated) once `arm_config` is applied
     pub end_calibrating: bool,
     /// the nodes to set `arm_config` on (compute_ik and the serial_nodes heard)
     pub nodes: Vec<String>,
 }
 
-/// The calibration wizard's ROS side: compute_ik's `calibrating`, and saving and
+/// The calibration wizard's ROS side: taking the arm from compute_ik (its `calibration`
+/// controller) and giving it back, and saving and
 /// applying a calibration (`arm_config` on the other nodes).
 pub trait CalibrationControl {
-    /// Set compute_ik's `calibrating`.
+    /// Take the arm from compute_ik (`calibration` activated, its lease renewed) or give
+    /// it back.
     fn set_calibrating(&self, on: bool) -> LocalBoxFuture<'_, Result<(), String>>;
     /// Write the calibration, set `arm_config` on the job's nodes, then end calibrating
     /// if asked.
@@ -337,10 +339,10 @@ where
             biased;
             _ = &mut shutdown => {
                 if panel.calibrating() {
-                    // compute_ik was told to send nothing: let it take the arm back
-                    log::warn!("stopping while calibrating: setting compute_ik's calibrating false");
+                    // the wizard holds the arm: give it back to compute_ik
+                    log::warn!("stopping while calibrating: giving the arm back to compute_ik");
                     if let Err(e) = tokio::time::timeout(Duration::from_secs(3), calibration.set_calibrating(false)).await.unwrap_or_else(|_| Err("no answer".into())) {
-                        log::error!("compute_ik's calibrating is still true ({e}): `ros2 param set /compute_ik calibrating false`");
+                        log::error!("the arm is still held for calibration ({e}): `ros2 control switch_controllers --deactivate calibration`, or compute_ik gives it back after its calibration_lease");
                     }
                 }
                 break;
@@ -382,7 +384,14 @@ where
                 let Some(input) = input else { break };
                 sink.apply(panel.on_input(input, Clock::read()), None, &mut jobs);
             }
-            Some(event) = requests.events.recv() => sink.web_event(event),
+            Some(event) = requests.events.recv() => {
+                let ended = matches!(event, WebEvent::Ended { .. });
+                sink.web_event(event);
+                if ended && sink.web.clients() == 0 {
+                    // nobody is left to finish a calibration: the arm goes back
+                    sink.apply(panel.on_every_client_gone(Clock::read()), None, &mut jobs);
+                }
+            }
             Some(from) = requests.others.recv() => {
                 sink.apply(panel.on_request(from.request, Clock::read()), Some(&from.reply), &mut jobs);
                 // one request at a time, then let the other tasks run (on this node's
@@ -400,7 +409,7 @@ where
 struct Jobs<'m> {
     file: Option<BoxFuture<'static, FileDone>>,
     motion: Option<LocalBoxFuture<'m, Option<Result<(), String>>>>,
-    /// compute_ik's `calibrating` being set, or a calibration saved and applied
+    /// the arm taken from compute_ik or given back, or a calibration saved and applied
     calibration: Option<LocalBoxFuture<'m, panel::CalibrationDone>>,
 }
 

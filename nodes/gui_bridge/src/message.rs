@@ -61,6 +61,10 @@ pub enum ToClient {
         nodes: Vec<NodeEntry>,
         /// compute_ik's last refusal of a target
         last_rejection: Option<String>,
+        /// who moves the arm: compute_ik's active controllers
+        controllers: Option<String>,
+        /// compute_ik's last switch of controllers (`done`, or why not)
+        last_switch: Option<String>,
     },
     /// Arrival time − stamp of a `servo_state` reply to one of our targets.
     Latency {
@@ -585,10 +589,13 @@ mod tests {
                         age_s: None,
                     }],
                     last_rejection: None,
+                    controllers: Some("teleop, gripper_controller".into()),
+                    last_switch: None,
                 },
                 json!({"t": "status", "nodes": [{"name": "compute_ik", "task": "inverse kinematics",
                        "hardware_id": "", "up": false, "level": 3, "message": "not seen", "age_s": null}],
-                       "last_rejection": null}),
+                       "last_rejection": null, "controllers": "teleop, gripper_controller",
+                       "last_switch": null}),
             ),
             (
                 ToClient::Latency {

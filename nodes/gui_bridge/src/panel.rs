@@ -83,7 +83,7 @@ pub enum Effect {
     Snapshot(Snapshot),
     /// Log this.
     Log(log::Level, String),
-    /// The calibration wizard's work on ROS: set compute_ik's `calibrating`, publish
+    /// The calibration wizard's work on ROS: take the arm from compute_ik, publish
     /// `servo_angles`, save and apply (then call [`Panel::on_calibration_done`]).
     Calibration(CalibrationWork),
 }
@@ -92,7 +92,7 @@ pub enum Effect {
 /// panel does not do itself).
 #[derive(Clone, Debug, PartialEq)]
 pub enum CalibrationWork {
-    /// Set compute_ik's `calibrating`.
+    /// Take the arm from compute_ik, or give it back.
     SetCalibrating(bool),
     /// Publish `servo_angles` at these horn angles (deg).
     ServoAngles([f64; 4]),
@@ -103,7 +103,7 @@ pub enum CalibrationWork {
 /// The outcome of a [`CalibrationWork`] job.
 #[derive(Clone, Debug, PartialEq)]
 pub enum CalibrationDone {
-    /// compute_ik's `calibrating` was set to this (or not).
+    /// The arm was taken (true) or given back (false), or not.
     Calibrating(bool, Result<(), String>),
     /// The save.
     Saved(crate::calibrate::SaveOutcome),
@@ -179,6 +179,9 @@ struct NodeHealth {
     own: String,
     seen: BTreeMap<String, Heard>,
     last_rejection: Option<String>,
+    /// who moves the arm (compute_ik's active controllers), and its last switch
+    controllers: Option<String>,
+    last_switch: Option<String>,
 }
 
 impl NodeHealth {
@@ -187,6 +190,8 @@ impl NodeHealth {
             own: own.to_string(),
             seen: BTreeMap::new(),
             last_rejection: None,
+            controllers: None,
+            last_switch: None,
         }
     }
 
@@ -207,6 +212,12 @@ impl NodeHealth {
         for s in heard {
             if let Some(refusal) = &s.refusal {
                 self.last_rejection = Some(shorten(&refusal.reason, web::REASON_MAX).into_owned());
+            }
+            if let Some(c) = &s.controllers {
+                self.controllers = Some(shorten(c, web::REASON_MAX).into_owned());
+            }
+            if let Some(w) = &s.last_switch {
+                self.last_switch = Some(shorten(w, web::REASON_MAX).into_owned());
             }
             let Some(node) = s.node.as_deref() else {
                 continue;
@@ -290,6 +301,8 @@ impl NodeHealth {
         ToClient::Status {
             nodes,
             last_rejection: self.last_rejection.clone(),
+            controllers: self.controllers.clone(),
+            last_switch: self.last_switch.clone(),
         }
     }
 }
@@ -430,6 +443,24 @@ impl Panel {
     pub fn calibration_nodes(&self) -> Vec<String> {
         self.health
             .nodes_doing(&["inverse kinematics", "servo link"], Instant::now())
+    }
+
+    /// The last panel client left: a calibration it was running is cancelled, so the
+    /// arm goes back to compute_ik (nobody is left to finish it; a calibration being
+    /// saved finishes and gives the arm back itself).
+    pub fn on_every_client_gone(&mut self, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        let running = self
+            .wizard
+            .as_ref()
+            .is_some_and(|w| w.holds_compute_ik() && !w.saving());
+        if running {
+            log::warn!(
+                "calibration cancelled: the last browser left; the arm goes back to compute_ik"
+            );
+            self.calibrate(Ok(cal::Op::Cancel), clock, &mut effects);
+        }
+        self.finish(effects)
     }
 
     /// A wizard request, or its ROS work done.

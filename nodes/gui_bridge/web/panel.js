@@ -250,6 +250,9 @@ function showStatus(m) {
   }
   for (const el of [...box.children]) if (!keep.has(el.id)) el.remove();
   $("last_rejection").textContent = m.last_rejection || "";
+  $("controllers").textContent = m.controllers || "";
+  // a refused switch, or the arm given back by itself (a calibration's lease ran out)
+  $("last_switch").textContent = m.last_switch && m.last_switch !== "done" ? m.last_switch : "";
 }
 
 function showPose(m) {

@@ -78,3 +78,54 @@ pub fn leader_value(d: &Driver<EezyBot>) -> String {
 }
 
 pub const ARM: [&str; 3] = ["base_joint", "shoulder_joint", "elbow_joint"];
+
+// ---- the controller manager's services, as a client calls them ----
+
+/// The client that sends [`switch`] and [`active`]'s requests.
+pub fn caller() -> ros_plumbing::service::Caller {
+    ros_plumbing::service::Caller([7; 12])
+}
+
+pub fn switch(n: u64, activate: &[&str], deactivate: &[&str]) -> Input {
+    use eezybot_msgs::controller_manager_msgs::SwitchControllerRequest;
+    Input::SwitchController(
+        ros_plumbing::service::Ticket(n),
+        caller(),
+        SwitchControllerRequest {
+            activate_controllers: activate.iter().map(|s| s.to_string()).collect(),
+            deactivate_controllers: deactivate.iter().map(|s| s.to_string()).collect(),
+            strictness: SwitchControllerRequest::STRICT,
+            ..Default::default()
+        },
+    )
+}
+
+pub fn switched(effects: &[Effect]) -> Option<(bool, String)> {
+    effects.iter().find_map(|e| match e {
+        Effect::SwitchController(_, r) => Some((r.ok, r.message.clone())),
+        _ => None,
+    })
+}
+
+pub fn active(d: &mut Driver<EezyBot>, now: std::time::Instant, wall: Time) -> Vec<String> {
+    let e = d.on_inputs(
+        vec![Input::ListControllers(
+            ros_plumbing::service::Ticket(99),
+            caller(),
+        )],
+        now,
+        wall,
+    );
+    let list = e
+        .iter()
+        .find_map(|e| match e {
+            Effect::ListControllers(_, r) => Some(r.clone()),
+            _ => None,
+        })
+        .expect("answered");
+    list.controller
+        .into_iter()
+        .filter(|c| c.state == "active")
+        .map(|c| c.name)
+        .collect()
+}

@@ -105,6 +105,11 @@ impl WebStats {
         self
     }
 
+    /// How many panel clients (WebSockets) are connected.
+    pub fn clients(&self) -> u64 {
+        self.clients
+    }
+
     /// Apply what a connection task reported at `now`; the line to log, if any.
     ///
     /// # Examples
