@@ -494,8 +494,11 @@ def match_reference(driver, graph, model, sensitivity, timeout=60.0):
                             f"{jog['min_deg']}..{jog['max_deg']}: the alternative B")
                 driver.set_alternative(True)
                 driver.wait(lambda c: c["steps"][step_i].get("use_alternative"), 5, "the alternative B taken")
+                # the wizard moves the servo to where the alternative is expected
+                driver.wait(lambda c: c.get("phase") == "jog", 10, "the servo at the alternative B's expected angle")
                 _, _, _, ref = active_reference(driver.cal)
                 want = ref["input"]
+                x, cmd = measure()
                 continue
             raise WizardFailed(f"{servo}: reference {ref_i} ({want}) needs {goal:.2f}°, outside the jog range "
                                f"{jog['min_deg']}..{jog['max_deg']}; log: {driver.log[-20:]}")

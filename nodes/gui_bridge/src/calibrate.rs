@@ -18,7 +18,7 @@
 //! ADC counts of the next `leader_counts` report ([`calibration::derive_leader`]).
 //! Nothing moves and compute_ik is not involved.
 
-use crate::message::{CalibrationView, SavedView, StepView, TestView};
+use crate::message::{CalibrationView, DerivedView, DirectionView, SavedView, StepView, TestView};
 use eezybot_kinematics::calibration::{
     self, derive, derive_leader, CalibrationError, CalibrationPlan, Direction, JogRange,
     LeaderReading, Mark, Reference, ServoPlan, Tolerances, CALIBRATION_ORDER, COARSE_STEP_DEG,
@@ -469,7 +469,14 @@ impl Wizard {
                         title(self.servo())
                     ));
                 }
+                let changed = self.use_alternative[self.step] != on;
                 self.use_alternative[self.step] = on;
+                if let (true, Arm::Follower, 1, Some(a)) =
+                    (changed, self.arm, self.reference, self.marks[self.step][0])
+                {
+                    // B moved: so does the servo, to where the new B is expected
+                    self.move_to_expected_b(a, now, &mut fx);
+                }
             }
             Op::Save => {
                 if self.phase != Phase::Review {
@@ -734,6 +741,9 @@ impl Wizard {
         if self.reference == 0 {
             self.reference = 1;
             self.phase = Phase::Jog;
+            if self.arm == Arm::Follower {
+                self.move_to_expected_b(value, now, fx);
+            }
             return;
         }
         let servo = self.servo();
@@ -794,6 +804,27 @@ impl Wizard {
                 self.step_error[step] = Some(why);
             }
         }
+    }
+
+    /// After mark A (`mark_a_deg`): the servo moves to where reference B is expected,
+    /// mark A plus the shipped gain times the inputs' difference (in the shipped
+    /// direction; within the jog range), so B takes a few fine jogs.
+    fn move_to_expected_b(&mut self, mark_a_deg: f64, now: Instant, fx: &mut Vec<Effect>) {
+        let servo = self.servo();
+        let (a, b) = (
+            self.reference_of(self.step, 0),
+            self.reference_of(self.step, 1),
+        );
+        let expected = mark_a_deg + calibration::expected_gain(servo) * (b.input - a.input);
+        let Some(range) = self.jog_range() else {
+            return;
+        };
+        self.queue.push_back(Move {
+            servo,
+            deg: range.clamp(expected),
+        });
+        self.phase = Phase::Moving;
+        self.next_move(now, fx);
     }
 
     fn adc_max(&self) -> u16 {
@@ -1075,21 +1106,23 @@ impl Wizard {
                         .collect(),
                     marks: self.marks[i],
                     derived: self.derived[i].as_ref().map(|d| match d {
-                        Derivation::Servo(d) => serde_json::json!({
-                            "offset_deg": d.calibration.offset_deg,
-                            "gain": d.calibration.gain,
-                            "direction": match d.direction {
-                                Direction::AsShipped => "as shipped",
-                                Direction::Reversed => "reversed",
+                        Derivation::Servo(d) => DerivedView::Servo {
+                            offset_deg: d.calibration.offset_deg,
+                            gain: d.calibration.gain,
+                            direction: match d.direction {
+                                Direction::AsShipped => DirectionView::AsShipped,
+                                Direction::Reversed => DirectionView::Reversed,
                             },
-                            "gain_ratio": d.gain_ratio,
-                            "min_deg": d.calibration.min_deg,
-                            "max_deg": d.calibration.max_deg,
-                        }),
-                        Derivation::Leader(c) => serde_json::json!({
-                            "counts_a": c.counts_a, "input_a": c.input_a,
-                            "counts_b": c.counts_b, "input_b": c.input_b,
-                        }),
+                            gain_ratio: d.gain_ratio,
+                            min_deg: d.calibration.min_deg,
+                            max_deg: d.calibration.max_deg,
+                        },
+                        Derivation::Leader(c) => DerivedView::Leader {
+                            counts_a: c.counts_a,
+                            input_a: c.input_a,
+                            counts_b: c.counts_b,
+                            input_b: c.input_b,
+                        },
                     }),
                     error: self.step_error[i].clone(),
                 }

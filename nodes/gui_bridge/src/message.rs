@@ -154,9 +154,42 @@ pub struct StepView {
     /// the marks: servo deg (follower) or ADC counts (leader)
     pub marks: [Option<f64>; 2],
     /// what the marks gave
-    pub derived: Option<serde_json::Value>,
+    pub derived: Option<DerivedView>,
     /// why the marks were refused
     pub error: Option<String>,
+}
+
+/// What a step's two marks gave (the JSON has no tag: the follower's fields or the
+/// leader's).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum DerivedView {
+    /// A follower servo's line: servo deg = `offset_deg` + `gain` · input.
+    Servo {
+        offset_deg: f64,
+        gain: f64,
+        direction: DirectionView,
+        /// the gain over the shipped one
+        gain_ratio: f64,
+        min_deg: f64,
+        max_deg: f64,
+    },
+    /// A leader potentiometer's two readings.
+    Leader {
+        counts_a: f64,
+        input_a: f64,
+        counts_b: f64,
+        input_b: f64,
+    },
+}
+
+/// Which way a servo turns its joint, against the shipped calibration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum DirectionView {
+    #[serde(rename = "as shipped")]
+    AsShipped,
+    #[serde(rename = "reversed")]
+    Reversed,
 }
 
 /// A reference pose.

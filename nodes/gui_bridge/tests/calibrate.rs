@@ -2,7 +2,9 @@
 //! a clock the test hands in (nothing waits) and a simulated arm that echoes every
 //! `servo_angles` as `servo_state`.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
-use eezybot_kinematics::calibration::{CALIBRATION_ORDER, COARSE_STEP_DEG, FINE_STEP_DEG};
+use eezybot_kinematics::calibration::{
+    expected_gain, CALIBRATION_ORDER, COARSE_STEP_DEG, FINE_STEP_DEG,
+};
 use eezybot_kinematics::{ArmConfig, ServoCalibrations, ServoId};
 use gui_bridge::calibrate::{Arm, Effect, Op, SaveOutcome, Wizard, TEST_POSE};
 use gui_bridge::message::CalibrationView;
@@ -320,9 +322,11 @@ fn a_follower_run_on_a_miscalibrated_arm_derives_it_saves_and_tests() {
     );
     // derived as modelled, shown in the view
     let v = sim.view();
-    let base = v.steps[0].derived.as_ref().unwrap();
+    // (the panel reads the fields by name)
+    let derived = |i: usize| serde_json::to_value(v.steps[i].derived.as_ref().unwrap()).unwrap();
+    let base = derived(0);
     assert_eq!(base["direction"], "as shipped");
-    let elbow = v.steps[1].derived.as_ref().unwrap();
+    let elbow = derived(1);
     assert_eq!(v.steps[1].servo, "elbow");
     assert_eq!(elbow["direction"], "reversed");
 
@@ -390,6 +394,65 @@ fn a_follower_run_on_a_miscalibrated_arm_derives_it_saves_and_tests() {
     sim.req(Op::Finish).unwrap();
     assert!(!sim.w.is_active());
     assert_eq!(sim.phase(), "idle");
+}
+
+/// After mark A, the wizard moves the servo to where B is expected with the shipped
+/// gain: on an arm that matches the shipped calibration, B is where the servo went, and
+/// on the modelled one (a 2° horn error, a mirrored forearm servo) B needs fewer jogs
+/// than from mark A.
+#[test]
+fn after_mark_a_the_servo_moves_to_where_b_is_expected() {
+    let shipped_lines = ServoId::ALL.map(|s| {
+        let c = ServoCalibrations::default();
+        let c = c.get(s);
+        Line {
+            offset: c.offset_deg,
+            gain: c.gain,
+        }
+    });
+    let mut sim = Sim::new(shipped(), home_state());
+    sim.start_follower();
+    for step in 0..4 {
+        let servo = CALIBRATION_ORDER[step];
+        let a = shipped_lines[idx(servo)].at(sim.reference_input(0));
+        sim.mark_model(&shipped_lines, 0).unwrap();
+        let expected = a + expected_gain(servo) * (sim.reference_input(1) - sim.reference_input(0));
+        assert_eq!(sim.phase(), "jog", "step {step}: in place for B");
+        assert!(
+            (sim.view().commanded_deg.unwrap() - expected).abs() < 1e-9,
+            "step {step} ({servo:?}): B expected at {expected}, servo at {:?}",
+            sim.view().commanded_deg
+        );
+        sim.mark_model(&shipped_lines, 1).unwrap();
+    }
+    assert_eq!(sim.phase(), "review");
+
+    let jogs_to_b = |first_move: bool| {
+        let mut sim = Sim::new(shipped(), home_state());
+        sim.start_follower();
+        let mut jogs = 0;
+        for _ in 0..4 {
+            let servo = CALIBRATION_ORDER[sim.view().step];
+            let a = MODEL[idx(servo)].at(sim.reference_input(0));
+            sim.mark_model(&MODEL, 0).unwrap();
+            let from = if first_move {
+                sim.view().commanded_deg.unwrap()
+            } else {
+                a
+            };
+            let target = MODEL[idx(servo)].at(sim.reference_input(1));
+            let d = (target - from).abs();
+            jogs += (d / COARSE_STEP_DEG).floor() as usize
+                + ((d % COARSE_STEP_DEG) / FINE_STEP_DEG).round() as usize;
+            sim.mark_model(&MODEL, 1).unwrap();
+        }
+        jogs
+    };
+    let (now, before) = (jogs_to_b(true), jogs_to_b(false));
+    assert!(
+        now < before,
+        "jogs to B: {now} from the expected B, {before} from mark A"
+    );
 }
 
 #[test]
@@ -574,7 +637,7 @@ fn implausible_marks_are_refused_with_the_reason_and_mark_a_is_kept() {
     let v = sim.view();
     assert_eq!(v.steps[0].error, None);
     assert_eq!(v.steps[0].marks, [Some(90.0), Some(0.0)]);
-    let d = v.steps[0].derived.as_ref().unwrap();
+    let d = serde_json::to_value(v.steps[0].derived.as_ref().unwrap()).unwrap();
     assert_eq!(
         (d["offset_deg"].as_f64(), d["gain"].as_f64()),
         (Some(90.0), Some(-2.0))
@@ -672,6 +735,11 @@ fn the_base_may_be_marked_at_its_alternative_b() {
     sim.req(Op::Alternative(true)).unwrap();
     let v = sim.view();
     assert!(v.steps[0].use_alternative);
+    // the servo went to where the alternative is expected: mark A, 90° of base further
+    // at the shipped gain (−2), inside the jog range
+    let expected =
+        (83.0 + expected_gain(ServoId::Base) * -45.0).min(v.jog.as_ref().unwrap().max_deg);
+    assert_eq!(v.commanded_deg, Some(expected));
     assert!(v.instruction.contains("right"), "{}", v.instruction);
     let jog = v.jog.unwrap();
     assert!(
@@ -681,7 +749,7 @@ fn the_base_may_be_marked_at_its_alternative_b() {
     sim.mark_model(&model, 1).unwrap();
     let v = sim.view();
     assert_eq!(v.steps[0].marks, [Some(83.0), Some(173.0)]);
-    let d = v.steps[0].derived.as_ref().unwrap();
+    let d = serde_json::to_value(v.steps[0].derived.as_ref().unwrap()).unwrap();
     assert_eq!(d["offset_deg"].as_f64(), Some(83.0));
     assert_eq!(d["gain"].as_f64(), Some(-2.0));
     // the forearm has no alternative
