@@ -161,6 +161,9 @@ const CALIBRATION: &str = "gui_bridge (calibration)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.
 pub const XYZ_TARGET: Topic<PointStamped> = Topic::new_target("xyz_target", &[GUI]);
+/// Desired position of the tool, reached along a straight line (refused if any point
+/// of the line is out of reach), whatever compute_ik's `motion`.
+pub const XYZ_LINE_TARGET: Topic<PointStamped> = Topic::new_target("xyz_line_target", &[GUI]);
 /// Desired pose of the tip link (arms with orientation, `ros2 topic pub`).
 pub const POSE_TARGET: Topic<PoseStamped> = Topic::new_target("pose_target", &[]);
 /// Claw opening, 0.0 closed … 1.0 open.
@@ -244,6 +247,7 @@ pub fn visit_all(v: &mut impl TopicVisitor) {
     }
     each!(
         XYZ_TARGET,
+        XYZ_LINE_TARGET,
         POSE_TARGET,
         GRIPPER_TARGET,
         JOINT_TARGET,

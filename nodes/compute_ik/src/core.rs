@@ -19,6 +19,8 @@ use std::fmt;
 pub enum Source {
     /// `xyz_target`
     XyzTarget,
+    /// `xyz_line_target`
+    XyzLineTarget,
     /// `gripper_target`
     GripperTarget,
     /// `joint_target`
@@ -32,6 +34,7 @@ impl Source {
     pub fn topic(self) -> &'static str {
         match self {
             Source::XyzTarget => topics::XYZ_TARGET.name,
+            Source::XyzLineTarget => topics::XYZ_LINE_TARGET.name,
             Source::GripperTarget => topics::GRIPPER_TARGET.name,
             Source::JointTarget => topics::JOINT_TARGET.name,
             Source::PoseTarget => topics::POSE_TARGET.name,

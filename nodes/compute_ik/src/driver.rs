@@ -661,7 +661,9 @@ impl<M: ArmModel> Driver<M> {
         now: Instant,
     ) -> Option<Result<(Arbiter, Vec<Change>), Refusal>> {
         let command = match input {
-            Input::XyzTarget(_) | Input::PoseTarget(_) => Command::ArmTarget,
+            Input::XyzTarget(_) | Input::XyzLineTarget(_) | Input::PoseTarget(_) => {
+                Command::ArmTarget
+            }
             Input::JointTarget(m) => {
                 let claw = self.arbiter.layout().gripper.as_ref();
                 if claw.is_some_and(|g| m.name.contains(g)) {
@@ -835,6 +837,7 @@ impl<M: ArmModel> Driver<M> {
 fn input_topic(input: &Input) -> &'static str {
     match input {
         Input::XyzTarget(_) => "xyz_target",
+        Input::XyzLineTarget(_) => "xyz_line_target",
         Input::PoseTarget(_) => "pose_target",
         Input::GripperTarget(..) => "gripper_target",
         Input::JointTarget(_) => "joint_target",
@@ -1582,7 +1585,8 @@ pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
         _ => None,
     });
     burst::latest_wins(batch, |i| match i {
-        Input::XyzTarget(_) => Some(0),
+        // the newest xyz target wins, either kind
+        Input::XyzTarget(_) | Input::XyzLineTarget(_) => Some(0),
         Input::GripperTarget(..) => Some(1),
         Input::PoseTarget(_) => Some(2),
         _ => None,
@@ -1596,7 +1600,7 @@ fn seconds(t: Time) -> f64 {
 /// A Cartesian target's stamp (s), for the lateness check.
 fn cartesian_stamp(input: &Input) -> Option<f64> {
     match input {
-        Input::XyzTarget(m) => Some(seconds(m.header.stamp)),
+        Input::XyzTarget(m) | Input::XyzLineTarget(m) => Some(seconds(m.header.stamp)),
         Input::PoseTarget(m) => Some(seconds(m.header.stamp)),
         _ => None,
     }

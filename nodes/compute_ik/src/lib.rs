@@ -49,9 +49,10 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new(
                 "motion",
                 ParameterValue::String("joint".into()),
-                "how xyz targets are moved to: `joint` (every servo within its limits, together) or `line` (the tool on a straight line, refused if any point of it is unreachable)",
+                "how xyz_target's and pose_target's targets are moved to: `joint` (every servo within its limits, together) or `line` (the tool on a straight line, refused if any point of it is unreachable); set at start, read-only after (a line move at any time: xyz_line_target)",
             )
             .constraints("one of: joint, line")
+            .read_only()
             .text_check(|s| MotionMode::parse(s).map(|_| ()).ok_or_else(|| "must be `joint` or `line`".into())),
             ParamSpec::new(
                 "motion_rate",

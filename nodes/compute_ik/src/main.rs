@@ -152,6 +152,7 @@ async fn serve<M: ArmModel>(
     let arm = core.model();
 
     let xyz = node.subscribe_to(&topics::XYZ_TARGET)?;
+    let xyz_line = node.subscribe_to(&topics::XYZ_LINE_TARGET)?;
     let gripper = node.subscribe_to(&topics::GRIPPER_TARGET)?;
     let joints = node.subscribe_to(&topics::JOINT_TARGET)?;
     let pose = node.subscribe_to(&topics::POSE_TARGET)?;
@@ -244,6 +245,9 @@ async fn serve<M: ArmModel>(
     let inputs = futures::stream::select_all([
         samples::inputs(&xyz, Input::XyzTarget, |e| {
             Input::Unreadable(Source::XyzTarget, e)
+        }),
+        samples::inputs(&xyz_line, Input::XyzLineTarget, |e| {
+            Input::Unreadable(Source::XyzLineTarget, e)
         }),
         samples::inputs(
             &gripper,

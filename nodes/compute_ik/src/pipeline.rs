@@ -40,6 +40,8 @@ const ORIENTATION_NOTICE_DEG: f64 = 1.0;
 pub enum Input {
     /// An `xyz_target` sample.
     XyzTarget(PointStamped),
+    /// An `xyz_line_target` sample: the tool along a straight line.
+    XyzLineTarget(PointStamped),
     /// A `pose_target` sample.
     PoseTarget(PoseStamped),
     /// A `gripper_target` sample and when it arrived.
@@ -432,7 +434,8 @@ impl<M: ArmModel> Pipeline<M> {
     /// [`Pipeline::set_estop`]'s).
     pub fn handle(&mut self, input: &Input, now: Time) -> Option<Result<Step, Rejection>> {
         Some(match input {
-            Input::XyzTarget(m) => self.handle_xyz_target(m, now),
+            Input::XyzTarget(m) => self.handle_xyz(Source::XyzTarget, m, now),
+            Input::XyzLineTarget(m) => self.handle_xyz(Source::XyzLineTarget, m, now),
             Input::PoseTarget(m) => self.handle_pose_target(m, now),
             Input::GripperTarget(v, stamp) => self.handle_gripper_target(*v, *stamp),
             Input::JointTarget(m) => self.handle_joint_target(m, now),
@@ -452,6 +455,16 @@ impl<M: ArmModel> Pipeline<M> {
 
     /// Handle an `xyz_target` arriving at `now`: the first step of the move toward it.
     pub fn handle_xyz_target(&mut self, msg: &PointStamped, now: Time) -> Result<Step, Rejection> {
+        self.handle_xyz(Source::XyzTarget, msg, now)
+    }
+
+    /// Handle an `xyz_target` or `xyz_line_target` (`source`) arriving at `now`.
+    fn handle_xyz(
+        &mut self,
+        source: Source,
+        msg: &PointStamped,
+        now: Time,
+    ) -> Result<Step, Rejection> {
         let stamp = msg.header.stamp;
         let result = (|| {
             self.check_target(stamp, now, &msg.header.frame_id)?;
@@ -461,9 +474,19 @@ impl<M: ArmModel> Pipeline<M> {
                 position,
                 orientation: None,
             };
-            self.move_to(Source::XyzTarget, &target)
+            self.move_to(source, &target)
         })();
-        self.finish(Source::XyzTarget, stamp, now, result)
+        self.finish(source, stamp, now, result)
+    }
+
+    /// How a target from `source` is moved to: `xyz_line_target`'s along a line,
+    /// `xyz_target`'s and `pose_target`'s as `motion` says, the others' in joint space.
+    fn mode_of(&self, source: Source) -> MotionMode {
+        match source {
+            Source::XyzLineTarget => MotionMode::Line,
+            Source::XyzTarget | Source::PoseTarget => self.motion.mode,
+            Source::GripperTarget | Source::JointTarget => MotionMode::Joint,
+        }
     }
 
     /// Handle a `pose_target` arriving at `now`: as far as the arm can take the
@@ -548,6 +571,7 @@ impl<M: ArmModel> Pipeline<M> {
     pub fn reject_held(&mut self, input: &Input, why: String, now: Time) -> Option<Rejection> {
         let (source, stamp) = match input {
             Input::XyzTarget(m) => (Source::XyzTarget, m.header.stamp),
+            Input::XyzLineTarget(m) => (Source::XyzLineTarget, m.header.stamp),
             Input::PoseTarget(m) => (Source::PoseTarget, m.header.stamp),
             Input::JointTarget(m) => (Source::JointTarget, m.header.stamp),
             Input::GripperTarget(_, stamp) => (Source::GripperTarget, *stamp),
@@ -630,7 +654,7 @@ impl<M: ArmModel> Pipeline<M> {
         };
         self.model.check_goal(&solved.state)?;
         let mut goal = solved.state;
-        if self.motion.mode == MotionMode::Line {
+        if self.mode_of(source) == MotionMode::Line {
             let record = self.model.numeric().and_then(|n| n.last_solve().cloned());
             let planned = self.plan_line(&solved.target, goal);
             if let Some(n) = self.model.numeric_mut() {
@@ -730,8 +754,7 @@ impl<M: ArmModel> Pipeline<M> {
     ) -> Result<Step, Rejection> {
         self.counters.received += 1;
         let stamp = if stamp == Time::ZERO { now } else { stamp };
-        let line = matches!(source, Source::XyzTarget | Source::PoseTarget)
-            && self.motion.mode == MotionMode::Line;
+        let line = self.mode_of(source) == MotionMode::Line;
         let accepted = candidate.and_then(|goal| {
             self.model.check_goal(&goal)?;
             if !line {

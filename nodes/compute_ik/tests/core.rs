@@ -419,6 +419,61 @@ fn a_straight_line_is_followed_or_refused_before_the_move() {
     assert_eq!(*c.state(), before);
 }
 
+/// `xyz_line_target` moves along a straight line whatever `motion` (here `joint`, the
+/// default, under which `xyz_target` leaves the line); its refusal names its topic.
+#[test]
+fn xyz_line_target_follows_a_line_under_joint_motion() {
+    use compute_ik::pipeline::Input;
+    let arm = Arm::default();
+    let off_line = |outs: &[Output]| {
+        outs.iter()
+            .map(|o| {
+                let q = &o.joint_states.position;
+                let p = arm.forward(&ArmJoints {
+                    base_rad: q[0],
+                    shoulder_rad: q[1],
+                    elbow_rad: q[2],
+                });
+                (p.x - 0.2).abs().max((p.z - 0.15).abs())
+            })
+            .fold(0.0, f64::max)
+    };
+    let mut moves = vec![];
+    for line in [false, true] {
+        let mut c = core();
+        assert_eq!(c.motion().mode, MotionMode::Joint);
+        aim(&mut c, 0.2, -0.1, 0.15, "").unwrap();
+        settle(&mut c);
+        let msg = target(0.2, 0.1, 0.15, "");
+        let input = if line {
+            Input::XyzLineTarget(msg)
+        } else {
+            Input::XyzTarget(msg)
+        };
+        let mut outs = vec![c.handle(&input, now()).unwrap().unwrap()];
+        outs.extend(settle(&mut c));
+        moves.push(off_line(&outs));
+    }
+    let (joint, line) = (moves[0], moves[1]);
+    assert!(line < 2e-4, "the tool left the line by {line} m");
+    assert!(
+        joint > 1e-2,
+        "xyz_target moved in joint space, {joint} m off the line"
+    );
+
+    // a line across the unreachable region around the base's axis: refused, named
+    let mut c = core();
+    aim(&mut c, 0.08, 0.075, 0.15, "").unwrap();
+    settle(&mut c);
+    let err = c
+        .handle(&Input::XyzLineTarget(target(0.08, -0.075, 0.15, "")), now())
+        .unwrap()
+        .unwrap_err();
+    assert_eq!(err.reason.code(), "line_leaves_workspace", "{err}");
+    assert_eq!(err.source, Source::XyzLineTarget);
+    assert!(!c.is_moving());
+}
+
 #[test]
 fn a_refusal_reads_back_through_ros_plumbing_feedback_with_its_code_and_stamp() {
     use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
