@@ -455,6 +455,18 @@ pub struct Handles<'a, I, O, S> {
     pub shutdown: S,
 }
 
+/// What woke the loop.
+enum Event {
+    Report,
+    PeerPoll,
+    /// a parameter was set (applied before every event, this one included)
+    Params,
+    Link(LinkEvent),
+    Leader(LeaderState),
+    /// the first of the inputs waiting
+    Input(Input),
+}
+
 /// The loop: runs until `shutdown` resolves or `inputs` ends. Each input, link event
 /// and timer goes to one handler of [`Node`].
 pub async fn run<O: Outputs>(
@@ -481,25 +493,33 @@ pub async fn run<O: Outputs>(
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        tokio::select! {
+        let event = tokio::select! {
             _ = &mut shutdown => break,
-            _ = ticker.tick() => node.report(),
-            _ = peer_poll.tick() => node.on_peer_poll(),
-            Ok(()) = param_changes.changed() => {
-                node.on_params();
-                ticker = tokio::time::interval(period(&params));
-            }
-            Some(event) = events.recv() => node.on_event(event),
-            Some(sample) = leader.recv(), if has_leader => node.on_leader_state(&sample),
-            input = inputs.next() => {
-                let Some(first) = input else { break };
-                // a parameter set before this command was sent (the calibration wizard's
-                // arm_config) applies before it, though select! picks at random
-                if param_changes.has_changed().unwrap_or(false) {
-                    param_changes.borrow_and_update();
-                    node.on_params();
-                    ticker = tokio::time::interval(period(&params));
-                }
+            _ = ticker.tick() => Event::Report,
+            _ = peer_poll.tick() => Event::PeerPoll,
+            Ok(()) = param_changes.changed() => Event::Params,
+            Some(event) = events.recv() => Event::Link(event),
+            Some(sample) = leader.recv(), if has_leader => Event::Leader(sample),
+            input = inputs.next() => match input {
+                Some(first) => Event::Input(first),
+                None => break,
+            },
+        };
+        // The parameters as they are now, before the event: a set answered before the
+        // event's cause was sent (the calibration wizard's arm_config, then its test
+        // move) is in the store already, whichever branch select! picked.
+        if param_changes.has_changed().unwrap_or(false) || matches!(event, Event::Params) {
+            param_changes.borrow_and_update();
+            node.on_params();
+            ticker = tokio::time::interval(period(&params));
+        }
+        match event {
+            Event::Report => node.report(),
+            Event::PeerPoll => node.on_peer_poll(),
+            Event::Params => {}
+            Event::Link(event) => node.on_event(event),
+            Event::Leader(sample) => node.on_leader_state(&sample),
+            Event::Input(first) => {
                 // a burst (DDS repairing what a network outage held back) moves the
                 // arm to its newest command only; a lone command goes at once
                 for input in node.coalesce(burst::take_burst(first, &mut inputs)) {

@@ -390,3 +390,105 @@ async fn the_leader_role_publishes_the_leaders_joints_and_deadman_and_no_servo_s
     link.shutdown();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A parameter set before a command was sent applies before it, whichever the loop
+/// wakes to first: the calibration wizard sets `arm_config` and then moves the arm
+/// through the new calibration. Each round makes both ready before the loop runs
+/// again (no await between them), then checks the command was judged by the config
+/// set just before it: refused beyond a narrowed base range, taken within the shipped
+/// one.
+#[tokio::test]
+async fn a_command_sent_after_arm_config_was_set_is_judged_by_the_new_config() {
+    let dir = std::env::temp_dir().join(format!("arm-config-order-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let shipped = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/arm.yaml"
+    ))
+    .unwrap();
+    let narrowed = shipped.replacen(
+        "min_deg: 0.0,  max_deg: 180.0",
+        "min_deg: 0.0,  max_deg: 100.0",
+        1,
+    );
+    assert_ne!(narrowed, shipped, "the base's range line");
+    let narrow = dir.join("narrow.yaml");
+    std::fs::write(&narrow, narrowed).unwrap();
+    let narrow = narrow.display().to_string();
+
+    let (tx, events) = tokio::sync::mpsc::unbounded_channel();
+    let link = Link::start(
+        link::mock_opener(link::virtual_arduino()),
+        HostConfig::default(),
+        tx,
+        None,
+    )
+    .unwrap();
+    let fake = Fake::default();
+    let (inputs, samples) = mpsc::unbounded::<Input>();
+    let (stop, stopped) = futures::channel::oneshot::channel::<()>();
+    let params = Params::new(BTreeMap::new());
+    let io = io_of(
+        &link,
+        &fake,
+        params.clone(),
+        "serial_node: servo link",
+        None,
+    );
+    let handles = Handles {
+        io,
+        inputs: samples,
+        events,
+        leader: None,
+        shutdown: async move {
+            let _ = stopped.await;
+        },
+    };
+    // the base at 110° (beyond the narrowed 100°), the others where they rest
+    let command = |k: i64| JointState {
+        header: Header {
+            stamp: Time::from_nanos(1_000 + k),
+            frame_id: String::new(),
+        },
+        name: ServoId::ALL.iter().map(|s| s.name().to_string()).collect(),
+        position: [110.0f64, 90.0, 90.0, 90.0].map(f64::to_radians).to_vec(),
+        velocity: vec![],
+        effort: vec![],
+    };
+    let counter = |key: &str| {
+        fake.value(key)
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    let script = async {
+        until("connected", || {
+            fake.value("connection").as_deref() == Some("connected")
+        })
+        .await;
+        for round in 0..20 {
+            let (rejected, sent) = (counter("inputs_rejected"), link.snapshot().sent.sent);
+            params.set("arm_config", ParameterValue::String(narrow.clone()));
+            inputs
+                .unbounded_send(Input::ServoAngles(command(2 * round), Instant::now()))
+                .unwrap();
+            until("the command refused by the narrowed range", || {
+                counter("inputs_rejected") == rejected + 1
+            })
+            .await;
+            assert_eq!(link.snapshot().sent.sent, sent, "round {round}: sent");
+            params.set("arm_config", ParameterValue::String(String::new()));
+            inputs
+                .unbounded_send(Input::ServoAngles(command(2 * round + 1), Instant::now()))
+                .unwrap();
+            until("the command taken within the shipped range", || {
+                link.snapshot().sent.sent > sent
+            })
+            .await;
+            assert_eq!(counter("inputs_rejected"), rejected + 1, "round {round}");
+        }
+        stop.send(()).unwrap();
+    };
+    let ((), ()) = futures::join!(serial_node::run(handles), script);
+    link.shutdown();
+    let _ = std::fs::remove_dir_all(&dir);
+}
