@@ -465,6 +465,19 @@ mod tests {
     }
 
     #[test]
+    fn a_broken_leader_section_is_refused_naming_it() {
+        assert_eq!(ArmConfig::shipped().unwrap().leader, None);
+        let err = ArmConfig::from_yaml(
+            "leader: { base: { counts_a: 5, input_a: 0, counts_b: 5, input_b: 45 } }",
+            "t",
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("leader.base"), "{err}");
+        let err = ArmConfig::from_yaml("leader: { bsae: {} }", "t").unwrap_err();
+        assert!(err.to_string().contains("bsae"), "{err}");
+    }
+
+    #[test]
     fn reversed_limits_are_rejected() {
         let err = ArmConfig::from_yaml("limits_deg: { base: [45, -45] }", "t").unwrap_err();
         assert!(err.to_string().contains("limits_deg.base"), "{err}");

@@ -5,13 +5,13 @@
 //! deactivated, the arm is taken where `servo_state` says it is.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 mod common;
+use arm_config_file::calibration_text;
 use common::*;
 use compute_ik::core::Source;
 use compute_ik::driver::{Driver, Effect};
 use compute_ik::eezybot::EezyBot;
 use compute_ik::pipeline::GoalRequest;
 use compute_ik::Input;
-use eezybot_kinematics::calibration::calibration_text;
 use eezybot_kinematics::ServoCalibrations;
 use eezybot_msgs::builtin_interfaces::Duration as RosDuration;
 use eezybot_msgs::control_msgs::FollowJointTrajectoryGoal;

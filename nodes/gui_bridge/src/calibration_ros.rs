@@ -3,12 +3,11 @@
 //! (`calibration` activated by a strict `switch_controller`, the lease renewed while
 //! calibrating), `servo_angles` while calibrating (the publisher exists only then, so
 //! that serial_node and `ros2 topic info` see one commander the rest of the time), and
-//! saving: the file written atomically ([`calibration::write_calibration`], off the
+//! saving: the file written atomically ([`arm_config_file::write_calibration`], off the
 //! event loop), then `arm_config` set on compute_ik and every serial_node heard.
 
 use crate::calibrate::SaveOutcome;
 use crate::{CalibrationControl, SaveJob};
-use eezybot_kinematics::calibration;
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
@@ -65,7 +64,7 @@ pub fn write(path: &Path, job: &SaveJob) -> Result<(String, Option<String>), Str
             path.display()
         );
     }
-    let saved = calibration::write_calibration(path, &job.servos, job.leader.as_ref())
+    let saved = arm_config_file::write_calibration(path, &job.servos, job.leader.as_ref())
         .map_err(|e| e.to_string())?;
     Ok((
         saved.path.display().to_string(),
