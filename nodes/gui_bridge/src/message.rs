@@ -166,19 +166,28 @@ pub struct StepView {
 pub enum DerivedView {
     /// A follower servo's line: servo deg = `offset_deg` + `gain` · input.
     Servo {
+        /// the servo's angle at input 0
         offset_deg: f64,
+        /// servo degrees per unit of input (its sign: the direction)
         gain: f64,
+        /// against the shipped gain's sign
         direction: DirectionView,
         /// the gain over the shipped one
         gain_ratio: f64,
+        /// the servo's range kept from the config
         min_deg: f64,
+        /// the servo's range kept from the config
         max_deg: f64,
     },
     /// A leader potentiometer's two readings.
     Leader {
+        /// ADC counts at reference A
         counts_a: f64,
+        /// the joint's input at reference A
         input_a: f64,
+        /// ADC counts at reference B
         counts_b: f64,
+        /// the joint's input at reference B
         input_b: f64,
     },
 }
@@ -186,8 +195,10 @@ pub enum DerivedView {
 /// Which way a servo turns its joint, against the shipped calibration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum DirectionView {
+    /// the shipped gain's sign
     #[serde(rename = "as shipped")]
     AsShipped,
+    /// the opposite sign: the servo is mounted mirrored
     #[serde(rename = "reversed")]
     Reversed,
 }
