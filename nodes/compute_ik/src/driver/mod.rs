@@ -32,6 +32,11 @@ use ros_plumbing::service::{Caller, Ticket};
 use ros_plumbing::Params;
 use std::time::{Duration, Instant};
 
+mod leader;
+
+use leader::Leader;
+pub use leader::DEFAULT_LEADER_TIMEOUT;
+
 /// Most frequent diagnostics sent at once on a rejection; the periodic report covers the rest.
 pub const MIN_IMMEDIATE_DIAG_GAP: Duration = Duration::from_millis(100);
 
@@ -98,9 +103,6 @@ struct ArmRun {
     last: Option<controller::Tick>,
 }
 
-/// Without a leader sample for this long, the follower holds (5 samples at 100 Hz).
-pub const DEFAULT_LEADER_TIMEOUT: Duration = Duration::from_millis(50);
-
 /// How far ahead of its time (in motion periods) each trajectory step is sampled.
 pub const TRAJECTORY_LEAD_PERIODS: f64 = 0.5;
 
@@ -161,18 +163,6 @@ pub struct Driver<M: ArmModel> {
     arbiter: Arbiter,
     /// the last `switch_controller`'s outcome, for `diagnostics`
     last_switch: Option<String>,
-}
-
-/// Following a leader arm (`leader/joint_states`, `leader/deadman`); whether it
-/// follows is the arbiter's (`leader_follower` passing).
-#[derive(Debug, Default)]
-struct Leader {
-    /// the deadman is held (its latest sample)
-    deadman: bool,
-    /// how long without a sample before holding (for messages; the arbiter times it)
-    timeout: Duration,
-    /// why the follower holds, for `diagnostics`
-    state: String,
 }
 
 impl<M: ArmModel> Driver<M> {
@@ -723,14 +713,7 @@ impl<M: ArmModel> Driver<M> {
                     continue;
                 }
                 Input::LeaderDeadman(held) => {
-                    self.leader.deadman = held;
-                    let out = self.arbiter.handle(arbiter::Event::Deadman(held), now);
-                    self.apply_changes(out.changes, "", wall, effects);
-                    if !held {
-                        self.leader.state = "holding: deadman released".into();
-                    } else if !self.arbiter.passes(Controller::LeaderFollower) {
-                        self.leader.state = "deadman held, waiting for a leader sample".into();
-                    }
+                    self.on_deadman(held, now, wall, effects);
                     continue;
                 }
                 Input::LeaderJoints(msg) => {
@@ -1463,95 +1446,6 @@ impl<M: ArmModel> Driver<M> {
 /// Whether the claw's command got to the goal (then the report is judged).
 fn commanded_at_target(at: Option<f64>) -> bool {
     at.is_some()
-}
-
-impl<M: ArmModel> Driver<M> {
-    /// The follower holds where it is (the arbiter stopped `leader_follower`).
-    fn hold_leader(&mut self, why: String, effects: &mut Vec<Effect>) {
-        if self.leader.state == "following" || self.leader.state.starts_with("following,") {
-            self.core.stop_motion();
-            log::info!("leader: {why}: the follower holds");
-            effects.push(Effect::Report);
-        }
-        self.leader.state = format!("holding: {why}");
-    }
-
-    /// A leader sample: followed (a joint target for its joints, within the motion
-    /// limits) while the deadman is held and the arbiter lets `leader_follower` have
-    /// the arm.
-    fn on_leader_joints(
-        &mut self,
-        msg: JointState,
-        now: Instant,
-        wall: Time,
-        effects: &mut Vec<Effect>,
-    ) {
-        let out = self
-            .arbiter
-            .handle(arbiter::Event::Command(Command::LeaderSample), now);
-        match out.result {
-            Ok(_) => {}
-            Err(Refusal::DeadmanReleased) => {
-                if self.leader.state == "no leader" {
-                    self.leader.state = "holding: deadman released".into();
-                }
-                return;
-            }
-            Err(why) => {
-                let why = match why {
-                    Refusal::Calibrating => "calibrating".to_string(),
-                    Refusal::Estop => "emergency stop engaged".to_string(),
-                    why => why.to_string(),
-                };
-                if !self.leader.state.ends_with(&why) {
-                    log::info!("leader sample not followed: {why}");
-                    effects.push(Effect::Report);
-                }
-                self.leader.state = format!("holding: {why}");
-                return;
-            }
-        }
-        let starts = out
-            .changes
-            .contains(&Change::Activated(Controller::LeaderFollower))
-            || !self.leader.state.starts_with("following");
-        self.apply_changes(out.changes, "the leader arm", wall, effects);
-        if starts {
-            log::info!("leader: deadman held: the follower follows");
-            effects.push(Effect::Report);
-        }
-        let target = JointState {
-            header: Header {
-                stamp: Time::ZERO,
-                frame_id: String::new(),
-            },
-            ..msg
-        };
-        match self.core.retarget_joints(&target, wall) {
-            Ok(()) => {
-                self.leader.state = "following".into();
-                // stepped at the motion rate, whatever the leader's rate; the first
-                // step of a new motion at once
-                if self.next_step.is_none() {
-                    if let Some(step) = self.core.step(wall) {
-                        effects.push(Effect::Publish(step));
-                    }
-                    self.next_step = Some(now + self.step_period());
-                }
-            }
-            Err(reason) => {
-                // outside the follower's limits (or malformed): not followed, the
-                // follower goes on to the last pose it could take
-                self.leader.state = format!("following, this pose refused: {reason}");
-                if let Some(quiet) = self.complaints.allow("leader/refused", now) {
-                    log::warn!(
-                        "leader sample not followed: {reason}{}",
-                        Throttle::suffix(quiet)
-                    );
-                }
-            }
-        }
-    }
 }
 
 /// The name of a FollowJointTrajectory error code.
