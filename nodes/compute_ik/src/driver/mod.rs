@@ -13,7 +13,7 @@ use command_gate::{CommandGate, Stamp, Verdict};
 use eezybot_motion::{track, AxisState};
 use eezybot_msgs::control_msgs::{
     FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal, FollowJointTrajectoryResult as Fjt,
-    GripperCommandGoal, GripperCommandResult, JointTrajectoryControllerState,
+    GripperCommandResult, JointTrajectoryControllerState,
 };
 use eezybot_msgs::controller_manager_msgs::{
     ControllerState, ListControllersResponse, SwitchControllerRequest, SwitchControllerResponse,
@@ -32,8 +32,11 @@ use ros_plumbing::service::{Caller, Ticket};
 use ros_plumbing::Params;
 use std::time::{Duration, Instant};
 
+mod gripper;
 mod leader;
 
+use gripper::GripperRun;
+pub use gripper::{GRIPPER_STALL_S, GRIPPER_TOLERANCE_RAD};
 use leader::Leader;
 pub use leader::DEFAULT_LEADER_TIMEOUT;
 
@@ -108,24 +111,6 @@ pub const TRAJECTORY_LEAD_PERIODS: f64 = 0.5;
 
 /// Without a `servo_state` for this long (s), controller_state comes at the peer polls.
 pub const CONTROLLER_STATE_QUIET_S: f64 = 0.5;
-
-/// How close (rad) the claw's reported angle must come to a GripperCommand's position.
-pub const GRIPPER_TOLERANCE_RAD: f64 = 0.02;
-
-/// How long (s) the claw may stay short of a GripperCommand's position after its
-/// command got there before the goal ends as stalled.
-pub const GRIPPER_STALL_S: f64 = 1.0;
-
-#[derive(Debug)]
-struct GripperRun {
-    id: GoalId,
-    /// the opening asked for (axis units)
-    target: f64,
-    /// the claw's axis, moved here while a trajectory runs the arm
-    motion: AxisState,
-    /// when the command reached the target (s)
-    commanded_at: Option<f64>,
-}
 
 /// The loop's state around the pipeline.
 #[derive(Debug)]
@@ -1243,183 +1228,6 @@ impl<M: ArmModel> Driver<M> {
         self.gripper_progress(wall, false, effects);
     }
 
-    fn on_gripper_goal(
-        &mut self,
-        g: GoalRequest<GripperCommandGoal>,
-        wall: Time,
-        now: Instant,
-        effects: &mut Vec<Effect>,
-    ) {
-        let Some(gm) = self.map.as_ref().and_then(|m| m.gripper.clone()) else {
-            effects.push(Effect::AnswerGoal {
-                request: g.request,
-                id: g.id,
-                accepted: false,
-                gripper: true,
-            });
-            self.refuse(
-                "gripper_cmd goal",
-                Fjt::INVALID_JOINTS,
-                "this arm has no gripper controller",
-                effects,
-            );
-            return;
-        };
-        let position = g.goal.command.position;
-        let opening = position / gm.rad_per_unit;
-        let refusal = if let Some(why) = self.core.halted() {
-            Some(why.to_string())
-        } else if let Err(why) = self.may(Command::GripperGoal, now) {
-            Some(why.to_string())
-        } else if !(position.is_finite() && (-1e-9..=1.0 + 1e-9).contains(&opening)) {
-            Some(format!(
-                "position {position} rad is outside {}'s range 0 … {:.4} rad (closed … open)",
-                gm.joint, gm.rad_per_unit
-            ))
-        } else {
-            None
-        };
-        if let Some(why) = refusal {
-            effects.push(Effect::AnswerGoal {
-                request: g.request,
-                id: g.id,
-                accepted: false,
-                gripper: true,
-            });
-            self.refuse("gripper_cmd goal", Fjt::INVALID_GOAL, &why, effects);
-            return;
-        }
-        let opening = opening.clamp(0.0, 1.0);
-        effects.push(Effect::AnswerGoal {
-            request: g.request,
-            id: g.id,
-            accepted: true,
-            gripper: true,
-        });
-        self.end_gripper(
-            GoalEnd::Canceled,
-            false,
-            "preempted by a newer goal",
-            true,
-            effects,
-        );
-        self.take(Command::GripperGoal, "gripper_cmd goal", now, wall, effects);
-        let axes = self.core.axes();
-        self.gripper = Some(GripperRun {
-            id: g.id,
-            target: opening,
-            motion: AxisState {
-                position: axes[gm.axis],
-                velocity: 0.0,
-            },
-            commanded_at: None,
-        });
-        if self.arm.is_none() {
-            match self.core.handle_gripper_target(opening, wall) {
-                Ok(step) => effects.push(Effect::Publish(step)),
-                Err(r) => {
-                    self.end_gripper(GoalEnd::Aborted, false, &r.to_string(), true, effects);
-                    return;
-                }
-            }
-        }
-        if self.next_step.is_none() {
-            self.next_step = Some(now + self.step_period());
-        }
-    }
-
-    /// Judge the running gripper goal (on a step, with feedback; or on a report).
-    fn gripper_progress(&mut self, wall: Time, step: bool, effects: &mut Vec<Effect>) {
-        let (Some(g), Some(gm)) = (
-            &mut self.gripper,
-            self.map.as_ref().and_then(|m| m.gripper.as_ref()),
-        ) else {
-            return;
-        };
-        let now_s = seconds(wall);
-        let commanded = self.core.axes()[gm.axis];
-        if (commanded - g.target).abs() < 1e-9 && g.commanded_at.is_none() {
-            g.commanded_at = Some(now_s);
-        }
-        let actual = self.actual.as_ref().and_then(|(_, c)| *c);
-        let target_rad = g.target * gm.rad_per_unit;
-        let reached = commanded_at_target(g.commanded_at)
-            && actual.is_some_and(|a| (a - target_rad).abs() <= GRIPPER_TOLERANCE_RAD);
-        let state = GripperCommandResult {
-            position: actual.unwrap_or(commanded * gm.rad_per_unit),
-            effort: 0.0,
-            stalled: false,
-            reached_goal: reached,
-        };
-        let (id, commanded_at) = (g.id, g.commanded_at);
-        if reached {
-            self.gripper = None;
-            self.arbiter.finished(Controller::GripperController);
-            effects.push(Effect::GripperResult(id, GoalEnd::Succeeded, state));
-            return;
-        }
-        if commanded_at.is_some_and(|t| now_s - t > GRIPPER_STALL_S) {
-            let why = match actual {
-                Some(a) => format!(
-                    "{} stopped at {a:.3} rad, short of {target_rad:.3} rad",
-                    gm.joint
-                ),
-                None => "no servo_state came: is serial_node running?".into(),
-            };
-            log::warn!("gripper_cmd goal aborted: stalled: {why}");
-            self.last_trajectory = Some(format!("gripper_cmd aborted: stalled: {why}"));
-            self.gripper = None;
-            self.arbiter.finished(Controller::GripperController);
-            effects.push(Effect::GripperResult(
-                id,
-                GoalEnd::Aborted,
-                GripperCommandResult {
-                    stalled: true,
-                    ..state
-                },
-            ));
-            return;
-        }
-        if step {
-            effects.push(Effect::GripperFeedback(id, state));
-        }
-    }
-
-    /// End the running gripper goal, if any; `stop`: the claw stops where it is (else a
-    /// target that took it has planned its motion already).
-    fn end_gripper(
-        &mut self,
-        end: GoalEnd,
-        reached: bool,
-        why: &str,
-        stop: bool,
-        effects: &mut Vec<Effect>,
-    ) {
-        let Some(g) = self.gripper.take() else { return };
-        self.arbiter.finished(Controller::GripperController);
-        log::info!("gripper_cmd goal ended: {why}");
-        let gm = self.map.as_ref().and_then(|m| m.gripper.as_ref());
-        let position = self
-            .actual
-            .as_ref()
-            .and_then(|(_, c)| *c)
-            .or_else(|| gm.map(|gm| self.core.axes()[gm.axis] * gm.rad_per_unit))
-            .unwrap_or_default();
-        if stop && end != GoalEnd::Succeeded && self.arm.is_none() {
-            self.core.stop_motion();
-        }
-        effects.push(Effect::GripperResult(
-            g.id,
-            end,
-            GripperCommandResult {
-                position,
-                effort: 0.0,
-                stalled: false,
-                reached_goal: reached,
-            },
-        ));
-    }
-
     fn on_cancel(&mut self, ids: &[GoalId], _wall: Time, effects: &mut Vec<Effect>) {
         for id in ids {
             if matches!(self.arm.as_ref().map(|r| r.owner), Some(Owner::Action(a)) if a == *id) {
@@ -1441,11 +1249,6 @@ impl<M: ArmModel> Driver<M> {
             }
         }
     }
-}
-
-/// Whether the claw's command got to the goal (then the report is judged).
-fn commanded_at_target(at: Option<f64>) -> bool {
-    at.is_some()
 }
 
 /// The name of a FollowJointTrajectory error code.
