@@ -4,20 +4,25 @@
 //! motion steps, when a refusal is reported at
 //! once, and the pose sent to a new `joint_states` subscriber. Events in, [`Effect`]s
 //! out; [`crate::run`] does the I/O.
+//!
+//! Who moves the arm is the arbiter's (`libs/arbiter`); the driver wires it. Here the
+//! driver's state, its entry points ([`Driver::on_inputs`] routes each input to its
+//! handler, [`Driver::on_time`], [`Driver::on_poll`], [`Driver::on_params`]) and
+//! `diagnostics`; by commander: `teleop` (the targets), `trajectory`
+//! (arm_controller), `gripper` (gripper_controller), `leader` (leader_follower),
+//! and `arbitration` (the arbiter's changes acted on, the e-stop, calibration,
+//! `list_controllers` and `switch_controller`).
 
 use crate::controller::{Actual, ControllerMap, ControllerSettings};
-use crate::core::Rejection;
 use crate::pipeline::{ArmModel, Input, Pipeline, Step};
-use arbiter::{Arbiter, Change, Command, Controller, Layout, Refusal, Strictness, Switch, Why};
+use arbiter::{Arbiter, Controller, Layout};
 use command_gate::{CommandGate, Stamp, Verdict};
 use eezybot_motion::AxisState;
 use eezybot_msgs::control_msgs::{
     FollowJointTrajectoryFeedback, FollowJointTrajectoryResult as Fjt, GripperCommandResult,
     JointTrajectoryControllerState,
 };
-use eezybot_msgs::controller_manager_msgs::{
-    ControllerState, ListControllersResponse, SwitchControllerRequest, SwitchControllerResponse,
-};
+use eezybot_msgs::controller_manager_msgs::{ListControllersResponse, SwitchControllerResponse};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use ros2_client::action::GoalId;
@@ -26,12 +31,14 @@ use ros_plumbing::action::GoalEnd;
 use ros_plumbing::burst;
 use ros_plumbing::feedback;
 use ros_plumbing::logging::Throttle;
-use ros_plumbing::service::{Caller, Ticket};
+use ros_plumbing::service::Ticket;
 use ros_plumbing::Params;
 use std::time::{Duration, Instant};
 
+mod arbitration;
 mod gripper;
 mod leader;
+mod teleop;
 mod trajectory;
 
 use gripper::GripperRun;
@@ -87,9 +94,6 @@ pub enum Effect {
     /// Answer a `controller_manager/switch_controller` request.
     SwitchController(Ticket, SwitchControllerResponse),
 }
-
-/// What ends the other commanders when `calibration` becomes active.
-const CALIBRATING: &str = "calibrating: the calibration wizard drives the servos";
 
 /// The loop's state around the pipeline.
 #[derive(Debug)]
@@ -249,6 +253,7 @@ impl<M: ArmModel> Driver<M> {
         &self.arbiter
     }
 
+    /// One motion step's period.
     fn step_period(&self) -> Duration {
         Duration::from_secs_f64(self.core.motion().period_s)
     }
@@ -275,14 +280,49 @@ impl<M: ArmModel> Driver<M> {
         }
         if let Some(m) = self.gate.take_due(now) {
             log::debug!("applying the newest late target");
-            self.apply(vec![m], now, wall, &mut effects);
+            // the gate holds Cartesian targets only (xyz_target, pose_target)
+            self.on_target(m, now, wall, &mut effects);
         }
         effects
     }
 
     /// Inputs that arrived together at `now`: of a kind where the latest wins, the
-    /// newest only; a late Cartesian target held back for a newer one.
+    /// newest only; a late Cartesian target held back for a newer one. Each input
+    /// goes to its handler from here (an `xyz_target` to [`Driver::on_target`]:
+    /// two calls from [`crate::run`]).
     pub fn on_inputs(&mut self, arrived: Vec<Input>, now: Instant, wall: Time) -> Vec<Effect> {
+        let mut effects = vec![];
+        let fx = &mut effects;
+        for input in self.admit(arrived, now, wall) {
+            match input {
+                Input::Estop(engaged) => self.on_estop(engaged, now, wall, fx),
+                Input::Trajectory(msg) => self.on_trajectory(msg, wall, now, fx),
+                Input::TrajectoryGoal(goal) => self.on_trajectory_goal(goal, wall, now, fx),
+                Input::GripperGoal(goal) => self.on_gripper_goal(goal, wall, now, fx),
+                Input::Cancel(ids) => self.on_cancel(&ids, wall, fx),
+                Input::ServoState(msg) => self.on_servo_state(&msg, wall, fx),
+                Input::LeaderDeadman(held) => self.on_deadman(held, now, wall, fx),
+                Input::LeaderJoints(msg) => self.on_leader_joints(msg, now, wall, fx),
+                Input::ListControllers(ticket, caller) => {
+                    self.on_list_controllers(ticket, caller, now, fx)
+                }
+                Input::SwitchController(ticket, caller, req) => {
+                    self.on_switch_controller(ticket, caller, req, now, wall, fx)
+                }
+                target @ (Input::XyzTarget(_)
+                | Input::PoseTarget(_)
+                | Input::JointTarget(_)
+                | Input::GripperTarget(..)
+                | Input::Unreadable(..)) => self.on_target(target, now, wall, fx),
+            }
+        }
+        effects
+    }
+
+    /// Of inputs that arrived together, the ones to apply now, in order: of a kind
+    /// where the latest wins, the newest only ([`coalesce`]); a late Cartesian target
+    /// held back by the gate for a newer one (its due time is [`Driver::deadline`]'s).
+    fn admit(&mut self, arrived: Vec<Input>, now: Instant, wall: Time) -> Vec<Input> {
         let (arrived, superseded) = coalesce(arrived);
         if superseded > 0 {
             log::debug!("{superseded} targets superseded by newer ones that arrived with them");
@@ -315,9 +355,7 @@ impl<M: ArmModel> Driver<M> {
                 self.core.count_superseded(1);
             }
         }
-        let mut effects = vec![];
-        self.apply(batch, now, wall, &mut effects);
-        effects
+        batch
     }
 
     /// The peers were looked at: `readers` read `joint_states`. A new one is sent the
@@ -362,454 +400,14 @@ impl<M: ArmModel> Driver<M> {
         effects
     }
 
-    /// Act on what the arbiter changed. `by`: what took the joints (a topic, "the
-    /// leader arm"), or why a switch deactivated a controller, for the messages.
-    fn apply_changes(
-        &mut self,
-        changes: Vec<Change>,
-        by: &str,
-        wall: Time,
-        effects: &mut Vec<Effect>,
-    ) {
-        let mut switched = false;
-        for change in changes {
-            match change {
-                Change::Activated(c) => {
-                    log::info!("{c} active");
-                    if c == Controller::Calibration {
-                        self.set_calibrating(true, wall, effects);
-                    }
-                    switched = true;
-                }
-                Change::Deactivated(c, why) => {
-                    if why == Why::OwnerGone {
-                        // nobody asked for this one: say why in diagnostics too
-                        log::warn!("{c} inactive: {why}");
-                        self.last_switch = Some(format!("{c} deactivated: {why}"));
-                    } else {
-                        log::info!("{c} inactive: {why}");
-                    }
-                    self.end_commander(c, why, by, wall, effects);
-                    switched = true;
-                }
-                Change::Stopped(c, why) => self.end_commander(c, why, by, wall, effects),
-                Change::Skipped(name, why) => {
-                    log::warn!("switch_controller: {name} skipped: {why}")
-                }
-            }
-        }
-        if switched && !effects.contains(&Effect::Report) {
-            effects.push(Effect::Report);
-        }
-    }
-
-    /// What `c` ran ends (`why`): goals aborted, the leader held, the motion stopped
-    /// where it is, unless a target that took the joints planned its motion already.
-    fn end_commander(
-        &mut self,
-        c: Controller,
-        why: Why,
-        by: &str,
-        wall: Time,
-        effects: &mut Vec<Effect>,
-    ) {
-        let text = match why {
-            Why::PreemptedBy(_) | Why::Superseded => format!("preempted by {by}"),
-            Why::Switched if !by.is_empty() => by.to_string(),
-            Why::LeaderTimeout => format!(
-                "no leader sample for {} ms (cable pulled, or the leader's node stopped)",
-                self.leader.timeout.as_millis()
-            ),
-            why => why.to_string(),
-        };
-        let planned = matches!(
-            why,
-            Why::PreemptedBy(Controller::Teleop | Controller::GripperController) | Why::Superseded
-        );
-        match c {
-            Controller::ArmController => {
-                self.end_arm_then(GoalEnd::Aborted, Fjt::INVALID_GOAL, text, !planned, effects)
-            }
-            Controller::GripperController => {
-                self.end_gripper(GoalEnd::Aborted, false, &text, !planned, effects)
-            }
-            Controller::LeaderFollower => {
-                let text = if by == CALIBRATING {
-                    "calibrating".into()
-                } else {
-                    text
-                };
-                self.hold_leader(text, effects)
-            }
-            Controller::Teleop => {
-                // a commander that takes the arm replans from where it is at once (a
-                // trajectory stops the motion itself); switched off, the arm holds
-                let preempted = matches!(why, Why::PreemptedBy(_) | Why::Superseded);
-                if !preempted && self.arm.is_none() && self.gripper.is_none() {
-                    self.core.stop_motion();
-                }
-            }
-            Controller::Calibration => self.set_calibrating(false, wall, effects),
-        }
-    }
-
-    /// Start calibrating (the arbiter made `calibration` active, and ended the others):
-    /// publish nothing until the end. End it: take the arm where `servo_state` says.
-    fn set_calibrating(&mut self, on: bool, wall: Time, effects: &mut Vec<Effect>) {
-        self.core.set_calibrating(on);
-        self.next_step = None;
-        if on {
-            log::warn!("calibrating: the calibration wizard drives the servos; targets refused until `calibration` is deactivated");
-        } else {
-            let reported = self
-                .last_servo_state
-                .as_ref()
-                .and_then(|msg| self.core.model().reported_axes(msg));
-            match reported {
-                Some(axes) => {
-                    log::info!("calibrating ended: taking the arm where servo_state says it is");
-                    effects.push(Effect::Publish(self.core.take_reported(&axes, wall)));
-                }
-                None => log::info!(
-                    "calibrating ended; no servo_state heard, the arm is taken where it was commanded before"
-                ),
-            }
-        }
-    }
-
-    /// The controllers, as `list_controllers` answers.
-    fn list_controllers(&self) -> ListControllersResponse {
-        let controller = self
-            .arbiter
-            .controllers()
-            .into_iter()
-            .map(|c| ControllerState {
-                name: c.controller.name().into(),
-                state: if c.active { "active" } else { "inactive" }.into(),
-                r#type: c.controller.type_name().into(),
-                is_async: false,
-                update_rate: self.core.motion().period_s.recip().round() as u16,
-                claimed_interfaces: if c.active {
-                    c.interfaces.clone()
-                } else {
-                    vec![]
-                },
-                required_command_interfaces: c.interfaces,
-                required_state_interfaces: vec![],
-                ..ControllerState::default()
-            })
-            .collect();
-        ListControllersResponse { controller }
-    }
-
-    /// `switch_controller`: as ros2_control does it (strictness 0 is STRICT, its
-    /// default; AUTO and FORCE_AUTO are BEST_EFFORT, as ros2_control has no chains to
-    /// follow here either); a best-effort switch that did nothing of what it asked is
-    /// not ok.
-    fn switch_controller(
-        &mut self,
-        caller: Caller,
-        req: SwitchControllerRequest,
-        now: Instant,
-        wall: Time,
-        effects: &mut Vec<Effect>,
-    ) -> SwitchControllerResponse {
-        let strictness = match req.strictness {
-            0 | SwitchControllerRequest::STRICT => Strictness::Strict,
-            SwitchControllerRequest::BEST_EFFORT
-            | SwitchControllerRequest::AUTO
-            | SwitchControllerRequest::FORCE_AUTO => Strictness::BestEffort,
-            n => {
-                return SwitchControllerResponse {
-                    ok: false,
-                    message: format!(
-                        "unknown strictness {n} (BEST_EFFORT 1, STRICT 2, AUTO 3, FORCE_AUTO 4)"
-                    ),
-                }
-            }
-        };
-        let asked = req.activate_controllers.len() + req.deactivate_controllers.len();
-        let switch = Switch {
-            activate: req.activate_controllers,
-            deactivate: req.deactivate_controllers,
-            strictness,
-            owner: caller.to_string(),
-            lease: true,
-        };
-        let out = self.arbiter.handle(arbiter::Event::Switch(switch), now);
-        let skipped: Vec<String> = out
-            .changes
-            .iter()
-            .filter_map(|c| match c {
-                Change::Skipped(name, why) => Some(format!("{name} ({}): {why}", why.code())),
-                _ => None,
-            })
-            .collect();
-        let done = out.changes.len() - skipped.len();
-        let response = match &out.result {
-            Err(why) => SwitchControllerResponse {
-                ok: false,
-                message: format!("refused ({}): {why}", why.code()),
-            },
-            Ok(_) if asked > 0 && done == 0 && !skipped.is_empty() => SwitchControllerResponse {
-                ok: false,
-                message: format!("nothing switched: {}", skipped.join("; ")),
-            },
-            Ok(_) if skipped.is_empty() => SwitchControllerResponse {
-                ok: true,
-                message: String::new(),
-            },
-            Ok(_) => SwitchControllerResponse {
-                ok: true,
-                message: format!("skipped: {}", skipped.join("; ")),
-            },
-        };
-        if response.ok {
-            log::info!(
-                "switch_controller: done{}",
-                if response.message.is_empty() {
-                    String::new()
-                } else {
-                    format!("; {}", response.message)
-                }
-            );
-        } else {
-            log::warn!("switch_controller: {}", response.message);
-        }
-        self.last_switch = Some(if response.ok {
-            "done".into()
-        } else {
-            response.message.clone()
-        });
-        // what a deactivated commander reports it ended by
-        let by = if out
-            .changes
-            .contains(&Change::Activated(Controller::Calibration))
-        {
-            CALIBRATING
-        } else {
-            ""
-        };
-        self.apply_changes(out.changes, by, wall, effects);
-        effects.push(Effect::Report);
-        response
-    }
-
-    /// The arbiter's decision on a teleop target, on a copy: `Ok` with the arbiter as
-    /// it would be and what would change, for when the target is taken; `Err` with why
-    /// not, when another commander holds its joints (the e-stop and calibrating are
-    /// the core's to refuse, with their own codes).
-    fn teleop_decision(
-        &self,
-        input: &Input,
-        now: Instant,
-    ) -> Option<Result<(Arbiter, Vec<Change>), Refusal>> {
-        let command = match input {
-            Input::XyzTarget(_) | Input::PoseTarget(_) => Command::ArmTarget,
-            Input::JointTarget(m) => {
-                let claw = self.arbiter.layout().gripper.as_ref();
-                if claw.is_some_and(|g| m.name.contains(g)) {
-                    Command::ArmAndClawTarget
-                } else {
-                    Command::ArmTarget
-                }
-            }
-            Input::GripperTarget(..) => Command::ClawTarget,
-            _ => return None,
-        };
-        let mut next = self.arbiter.clone();
-        let out = next.handle(arbiter::Event::Command(command), now);
-        Some(match out.result {
-            Ok(_) => Ok((next, out.changes)),
-            Err(Refusal::Estop | Refusal::Calibrating | Refusal::NoInterfaces(_)) => {
-                Ok((self.arbiter.clone(), vec![]))
-            }
-            Err(why) => Err(why),
-        })
-    }
-
-    fn apply(&mut self, batch: Vec<Input>, now: Instant, wall: Time, effects: &mut Vec<Effect>) {
-        for input in batch {
-            if let Input::Estop(engaged) = input {
-                if engaged != self.core.estop() {
-                    if engaged {
-                        log::warn!("emergency stop engaged: targets refused until estop is false")
-                    } else {
-                        log::info!("emergency stop released")
-                    }
-                    self.core.set_estop(engaged);
-                    let out = self.arbiter.handle(arbiter::Event::Estop(engaged), now);
-                    self.apply_changes(out.changes, "", wall, effects);
-                    self.next_step = None;
-                    effects.push(Effect::Report);
-                }
-                continue;
-            }
-            match input {
-                Input::Trajectory(msg) => {
-                    self.on_trajectory(msg, wall, now, effects);
-                    continue;
-                }
-                Input::TrajectoryGoal(goal) => {
-                    self.on_trajectory_goal(goal, wall, now, effects);
-                    continue;
-                }
-                Input::GripperGoal(goal) => {
-                    self.on_gripper_goal(goal, wall, now, effects);
-                    continue;
-                }
-                Input::Cancel(ids) => {
-                    self.on_cancel(&ids, wall, effects);
-                    continue;
-                }
-                Input::ServoState(msg) => {
-                    self.on_servo_state(&msg, wall, effects);
-                    continue;
-                }
-                Input::LeaderDeadman(held) => {
-                    self.on_deadman(held, now, wall, effects);
-                    continue;
-                }
-                Input::LeaderJoints(msg) => {
-                    self.on_leader_joints(msg, now, wall, effects);
-                    continue;
-                }
-                Input::ListControllers(ticket, caller) => {
-                    self.arbiter
-                        .handle(arbiter::Event::OwnerAlive(caller.to_string()), now);
-                    effects.push(Effect::ListControllers(ticket, self.list_controllers()));
-                    continue;
-                }
-                Input::SwitchController(ticket, caller, req) => {
-                    let answer = self.switch_controller(caller, req, now, wall, effects);
-                    effects.push(Effect::SwitchController(ticket, answer));
-                    continue;
-                }
-                _ => {}
-            }
-            let decision = self.teleop_decision(&input, now);
-            let (next, changes) = match decision {
-                Some(Err(why)) => {
-                    let why = why.to_string();
-                    if let Some(rejection) = self.core.reject_held(&input, why, wall) {
-                        self.report_rejection(rejection, now, effects);
-                    }
-                    continue;
-                }
-                Some(Ok((next, changes))) => (Some(next), changes),
-                None => (None, vec![]),
-            };
-            let Some(result) = self.core.handle(&input, wall) else {
-                continue;
-            };
-            for notice in self.core.take_notices() {
-                if let Some(quiet) = self.complaints.allow(&notice.kind, now) {
-                    log::info!("{}{}", notice.text, Throttle::suffix(quiet));
-                }
-            }
-            match result {
-                Ok(step) => {
-                    // the target takes its joints (from a running goal, or a holding
-                    // leader): the arbiter's changes, with the topic for the messages
-                    if let Some(next) = next {
-                        self.arbiter = next;
-                    }
-                    self.apply_changes(changes, input_topic(&input), wall, effects);
-                    if let (Input::GripperTarget(..), Some(_), Some(gm)) = (
-                        &input,
-                        &self.arm,
-                        self.map.as_ref().and_then(|m| m.gripper.as_ref()),
-                    ) {
-                        // the trajectory keeps the arm; the claw moves on its own
-                        let here = self.core.axes()[gm.axis];
-                        let target = self.core.model().axes(self.core.goal())[gm.axis];
-                        self.claw = Some((
-                            target,
-                            AxisState {
-                                position: here,
-                                velocity: 0.0,
-                            },
-                        ));
-                    }
-                    effects.push(Effect::Publish(step));
-                    // The next step one and a half periods after this first one: a
-                    // target stream at the motion rate (a 50 Hz teleop) steps the
-                    // motion itself, and a fill-in step comes only when targets pause.
-                    // With one period, a target a little late behind the timer made two
-                    // steps back to back: 52 steps a second for a 50 Hz stream, more than
-                    // serial_node's 50 frames a second, so every command waited for a
-                    // frame slot (xyz_target -> first byte p50 7.5 ms). Each step is one
-                    // planner period of motion whenever it is published, so a later
-                    // fill-in never makes a step larger.
-                    self.next_step = self
-                        .core
-                        .is_moving()
-                        .then(|| now + self.step_period().mul_f64(1.5));
-                }
-                Err(rejection) => self.report_rejection(rejection, now, effects),
-            }
-        }
-    }
-
-    /// A refused target: logged (throttled per topic and reason) and reported at once
-    /// (at most every [`MIN_IMMEDIATE_DIAG_GAP`]).
-    fn report_rejection(&mut self, rejection: Rejection, now: Instant, effects: &mut Vec<Effect>) {
-        let kind = format!("{}/{}", rejection.source.topic(), rejection.reason.code());
-        if let Some(quiet) = self.complaints.allow(&kind, now) {
-            log::warn!("{rejection}{}", Throttle::suffix(quiet));
-        }
-        if self
-            .last_immediate
-            .is_none_or(|t| now.duration_since(t) >= MIN_IMMEDIATE_DIAG_GAP)
-        {
-            self.last_immediate = Some(now);
-            effects.push(Effect::Report);
-        }
-    }
-}
-
-/// The topic an input came on, for messages.
-fn input_topic(input: &Input) -> &'static str {
-    match input {
-        Input::XyzTarget(_) => "xyz_target",
-        Input::PoseTarget(_) => "pose_target",
-        Input::GripperTarget(..) => "gripper_target",
-        Input::JointTarget(_) => "joint_target",
-        _ => "another command",
-    }
-}
-
-impl<M: ArmModel> Driver<M> {
-    /// Whether the arbiter would let `command` have its joints now (nothing changes).
-    fn may(&self, command: Command, now: Instant) -> Result<(), Refusal> {
-        let mut probe = self.arbiter.clone();
-        probe
-            .handle(arbiter::Event::Command(command), now)
-            .result
-            .map(|_| ())
-    }
-
-    /// `command` takes its joints (the arbiter said it may): whoever held them ends
-    /// what it ran (`by` names the taker in the messages).
-    fn take(
-        &mut self,
-        command: Command,
-        by: &str,
-        now: Instant,
-        wall: Time,
-        effects: &mut Vec<Effect>,
-    ) {
-        let out = self.arbiter.handle(arbiter::Event::Command(command), now);
-        match out.result {
-            Ok(_) => self.apply_changes(out.changes, by, wall, effects),
-            Err(why) => log::warn!("{by}: not given the joints after all: {why}"),
-        }
-    }
-
+    /// Whether the motion steps on: the pipeline moving, a trajectory or a gripper
+    /// goal running.
     fn busy(&self) -> bool {
         self.core.is_moving() || self.arm.is_some() || self.gripper.is_some()
     }
 
+    /// A trajectory or a gripper goal refused (`what`, with a FollowJointTrajectory
+    /// `code`): logged, kept for `diagnostics` (`last_trajectory`), reported.
     fn refuse(&mut self, what: &str, code: i32, text: &str, effects: &mut Vec<Effect>) {
         let line = format!("{what} refused ({}): {text}", code_name(code));
         log::warn!("{line}");
@@ -853,6 +451,7 @@ pub fn coalesce(batch: Vec<Input>) -> (Vec<Input>, usize) {
     })
 }
 
+/// A stamp in seconds.
 fn seconds(t: Time) -> f64 {
     t.to_nanos() as f64 * 1e-9
 }
