@@ -288,7 +288,7 @@ impl<M: ArmModel> Driver<M> {
 
     /// Inputs that arrived together at `now`: of a kind where the latest wins, the
     /// newest only; a late Cartesian target held back for a newer one. Each input
-    /// goes to its handler from here (an `xyz_target` to [`Driver::on_target`]:
+    /// goes to its handler from here (an `xyz_target` to `Driver::on_target`:
     /// two calls from [`crate::run`]).
     pub fn on_inputs(&mut self, arrived: Vec<Input>, now: Instant, wall: Time) -> Vec<Effect> {
         let mut effects = vec![];
