@@ -26,7 +26,7 @@ use ros_plumbing::burst;
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::future::Future;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The node's description and parameters.
 pub fn spec() -> ros_plumbing::NodeSpec {
@@ -324,93 +324,151 @@ fn apply_params<M: ArmModel>(driver: &mut Driver<M>, params: &Params) -> Vec<Eff
 }
 
 /// The event loop: routes each event to the [`Driver`] and applies what it returns,
-/// until `shutdown` resolves or the inputs end.
-pub async fn run<M, I, O, S>(mut core: Pipeline<M>, mut h: Handles<I, O, S>)
+/// until `shutdown` resolves or the inputs end. Each arm hands its event on: inputs
+/// go to [`Driver::on_inputs`] (after a parameter change that came before them,
+/// `EventLoop::params_set_before_inputs`), which hands each to its handler
+/// (`xyz_target`'s is two calls from here: `run` → [`Driver::on_inputs`] →
+/// `Driver::on_target`).
+pub async fn run<M, I, O, S>(core: Pipeline<M>, h: Handles<I, O, S>)
 where
     M: ArmModel,
     I: Stream<Item = Input>,
     O: Outputs,
     S: Future<Output = ()>,
 {
-    let period = ros_plumbing::diagnostics::diagnostics_period;
-    let mut ticker = tokio::time::interval(period(&h.params));
-    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let mut param_changes = h.params.subscribe();
+    let (mut node, inputs, shutdown) = EventLoop::new(core, h);
     let mut subscriber_poll = tokio::time::interval_at(
         tokio::time::Instant::now() + SUBSCRIBER_POLL,
         SUBSCRIBER_POLL,
     );
-    core.apply_params(&h.params);
-    let mut driver = Driver::new(core);
-    driver.set_controller_settings(controller_settings(&h.params));
-    driver.set_leader_timeout(leader_timeout(&h.params));
-    driver.set_calibration_lease(calibration_lease(&h.params));
-    let (inputs, shutdown) = (h.inputs, h.shutdown);
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
     loop {
-        let deadline = driver.deadline().map(tokio::time::Instant::from_std);
-        let now = std::time::Instant::now;
+        let deadline = node.driver.deadline().map(tokio::time::Instant::from_std);
         let effects = tokio::select! {
             _ = &mut shutdown => break,
-            _ = async { if let Some(t) = deadline { tokio::time::sleep_until(t).await } }, if deadline.is_some() => {
-                // Inputs already waiting go first: on a busy host the deadline (the
-                // leader's timeout above all) and the samples that meet it can be
-                // ready together, and select! picks at random; a leader sample that
-                // had arrived must not be taken for a pulled cable.
-                let waiting = burst::ready_now(&mut inputs);
-                let mut effects = vec![];
-                if !waiting.is_empty() {
-                    if param_changes.has_changed().unwrap_or(false) {
-                        param_changes.borrow_and_update();
-                        ticker = tokio::time::interval(period(&h.params));
-                        effects = apply_params(&mut driver, &h.params);
-                    }
-                    effects.extend(driver.on_inputs(waiting, now(), Time::now()));
-                }
-                effects.extend(driver.on_time(now(), Time::now()));
-                effects
+            _ = sleep_until(deadline), if deadline.is_some() => {
+                node.on_deadline(burst::ready_now(&mut inputs))
             }
-            _ = ticker.tick() => vec![Effect::Report],
-            _ = subscriber_poll.tick() => {
-                let counts = h.outputs.peer_counts();
-                let changes = h.peers.update(&counts, std::time::Instant::now());
-                changes.iter().for_each(|c| c.log());
-                let report = (!changes.is_empty()).then_some(Effect::Report);
-                let readers = h.outputs.joint_states_readers();
-                report.into_iter().chain(driver.on_poll(&readers, Time::now())).collect()
-            }
-            Ok(()) = param_changes.changed() => {
-                ticker = tokio::time::interval(period(&h.params));
-                apply_params(&mut driver, &h.params)
-            }
+            _ = node.ticker.tick() => vec![Effect::Report],
+            _ = subscriber_poll.tick() => node.on_poll(),
+            Ok(()) = node.param_changes.changed() => node.on_params(),
             input = inputs.next() => {
                 let Some(first) = input else { break };
-                // A parameter set before this input was sent applies before it (the
-                // calibration wizard's `calibrating` false, then its test move): the
-                // store notified before the set was answered, but both may be ready
-                // now and select! picks at random.
-                let mut effects = vec![];
-                if param_changes.has_changed().unwrap_or(false) {
-                    param_changes.borrow_and_update();
-                    ticker = tokio::time::interval(period(&h.params));
-                    effects = apply_params(&mut driver, &h.params);
-                }
+                let mut effects = node.params_set_before_inputs();
                 // a burst (DDS repairing what a network outage held back) is applied
                 // as its newest target; a lone target goes at once
-                effects.extend(driver.on_inputs(burst::take_burst(first, &mut inputs), now(), Time::now()));
+                let arrived = burst::take_burst(first, &mut inputs);
+                effects.extend(node.driver.on_inputs(arrived, Instant::now(), Time::now()));
                 effects
             }
         };
+        node.apply(effects);
+    }
+}
+
+/// Sleeps until `deadline` (at once without one: its arm is disabled then).
+async fn sleep_until(deadline: Option<tokio::time::Instant>) {
+    if let Some(t) = deadline {
+        tokio::time::sleep_until(t).await
+    }
+}
+
+/// What [`run`] holds besides its inputs and shutdown: the driver, the outputs, the
+/// parameters and the watch on their changes, the `diagnostics` ticker, the peers.
+struct EventLoop<M: ArmModel, O> {
+    driver: Driver<M>,
+    outputs: O,
+    params: Params,
+    param_changes: tokio::sync::watch::Receiver<u64>,
+    /// the periodic `diagnostics` report (`diagnostics_period`)
+    ticker: tokio::time::Interval,
+    peers: PeerWatch,
+    diag_name: String,
+}
+
+impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
+    /// Around a driver of `core` (the parameters applied to both), with what `h`
+    /// hands in; the inputs and the shutdown signal returned for the loop to poll.
+    fn new<I, S>(mut core: Pipeline<M>, h: Handles<I, O, S>) -> (Self, I, S) {
+        let mut ticker = diagnostics_ticker(&h.params);
+        // (only the first: one made anew by a parameter change keeps tokio's default)
+        ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let param_changes = h.params.subscribe();
+        core.apply_params(&h.params);
+        let mut driver = Driver::new(core);
+        driver.set_controller_settings(controller_settings(&h.params));
+        driver.set_leader_timeout(leader_timeout(&h.params));
+        driver.set_calibration_lease(calibration_lease(&h.params));
+        let node = EventLoop {
+            driver,
+            outputs: h.outputs,
+            params: h.params,
+            param_changes,
+            ticker,
+            peers: h.peers,
+            diag_name: h.diag_name,
+        };
+        (node, h.inputs, h.shutdown)
+    }
+
+    /// The driver's deadline came (`waiting`: the inputs already there). Inputs
+    /// already waiting go first: on a busy host the deadline (the leader's timeout
+    /// above all) and the samples that meet it can be ready together, and select!
+    /// picks at random; a leader sample that had arrived must not be taken for a
+    /// pulled cable.
+    fn on_deadline(&mut self, waiting: Vec<Input>) -> Vec<Effect> {
+        let mut effects = vec![];
+        if !waiting.is_empty() {
+            effects = self.params_set_before_inputs();
+            effects.extend(self.driver.on_inputs(waiting, Instant::now(), Time::now()));
+        }
+        effects.extend(self.driver.on_time(Instant::now(), Time::now()));
+        effects
+    }
+
+    /// The peers' poll: their changes logged (and reported), a new `joint_states`
+    /// reader greeted ([`Driver::on_poll`]).
+    fn on_poll(&mut self) -> Vec<Effect> {
+        let counts = self.outputs.peer_counts();
+        let changes = self.peers.update(&counts, Instant::now());
+        changes.iter().for_each(|c| c.log());
+        let report = (!changes.is_empty()).then_some(Effect::Report);
+        let readers = self.outputs.joint_states_readers();
+        let greeting = self.driver.on_poll(&readers, Time::now());
+        report.into_iter().chain(greeting).collect()
+    }
+
+    /// The parameters changed: the `diagnostics` period anew, then [`apply_params`].
+    fn on_params(&mut self) -> Vec<Effect> {
+        self.ticker = diagnostics_ticker(&self.params);
+        apply_params(&mut self.driver, &self.params)
+    }
+
+    /// Ordering workaround (to go with issue 33's typed switches): a parameter set
+    /// before this input was sent applies before it (the calibration wizard's
+    /// `calibrating` false, then its test move): the store notified before the set
+    /// was answered, but both may be ready now and select! picks at random. Applies
+    /// a pending parameter change, if any, before the inputs that arrived with it.
+    fn params_set_before_inputs(&mut self) -> Vec<Effect> {
+        if !self.param_changes.has_changed().unwrap_or(false) {
+            return vec![];
+        }
+        self.param_changes.borrow_and_update();
+        self.on_params()
+    }
+
+    /// What the driver returned, done: published, answered, reported.
+    fn apply(&self, effects: Vec<Effect>) {
         for effect in effects {
             match effect {
                 Effect::Publish(step) => {
                     if let Some(servo_angles) = step.servo_angles {
-                        h.outputs.servo_angles(servo_angles);
+                        self.outputs.servo_angles(servo_angles);
                     }
-                    h.outputs.joint_states(step.joint_states);
+                    self.outputs.joint_states(step.joint_states);
                 }
-                Effect::JointStates(msg) => h.outputs.joint_states(msg),
+                Effect::JointStates(msg) => self.outputs.joint_states(msg),
                 e @ (Effect::AnswerGoal { .. }
                 | Effect::TrajectoryFeedback(..)
                 | Effect::TrajectoryResult(..)
@@ -418,18 +476,29 @@ where
                 | Effect::GripperResult(..)
                 | Effect::ControllerState(_)
                 | Effect::ListControllers(..)
-                | Effect::SwitchController(..)) => h.outputs.controllers(e),
-                Effect::Report => {
-                    let mut s = driver.core().diagnostic_status(&h.diag_name);
-                    s.values
-                        .extend(driver.controller_values().into_iter().map(|(key, value)| {
-                            eezybot_msgs::diagnostic_msgs::KeyValue { key, value }
-                        }));
-                    h.peers.annotate(&mut s, std::time::Instant::now());
-                    h.params.annotate(&mut s);
-                    h.outputs.diagnostics(s);
-                }
+                | Effect::SwitchController(..)) => self.outputs.controllers(e),
+                Effect::Report => self.report(),
             }
         }
     }
+
+    /// A `diagnostics` report: the pipeline's, the controllers', the peers', the
+    /// parameters'.
+    fn report(&self) {
+        let mut s = self.driver.core().diagnostic_status(&self.diag_name);
+        s.values.extend(
+            self.driver
+                .controller_values()
+                .into_iter()
+                .map(|(key, value)| eezybot_msgs::diagnostic_msgs::KeyValue { key, value }),
+        );
+        self.peers.annotate(&mut s, Instant::now());
+        self.params.annotate(&mut s);
+        self.outputs.diagnostics(s);
+    }
+}
+
+/// The periodic `diagnostics` report's ticker, at `diagnostics_period`.
+fn diagnostics_ticker(params: &Params) -> tokio::time::Interval {
+    tokio::time::interval(ros_plumbing::diagnostics::diagnostics_period(params))
 }
