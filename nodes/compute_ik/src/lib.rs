@@ -345,26 +345,38 @@ where
     tokio::pin!(shutdown);
     loop {
         let deadline = node.driver.deadline().map(tokio::time::Instant::from_std);
-        let effects = tokio::select! {
+        let event = tokio::select! {
             _ = &mut shutdown => break,
             _ = sleep_until(deadline), if deadline.is_some() => {
-                node.on_deadline(burst::ready_now(&mut inputs))
+                Event::Deadline(burst::ready_now(&mut inputs))
             }
-            _ = node.ticker.tick() => vec![Effect::Report],
-            _ = subscriber_poll.tick() => node.on_poll(),
-            Ok(()) = node.param_changes.changed() => node.on_params(),
-            input = inputs.next() => {
-                let Some(first) = input else { break };
-                let mut effects = node.params_set_before_inputs();
-                // a burst (DDS repairing what a network outage held back) is applied
-                // as its newest target; a lone target goes at once
-                let arrived = burst::take_burst(first, &mut inputs);
-                effects.extend(node.driver.on_inputs(arrived, Instant::now(), Time::now()));
-                effects
-            }
+            _ = node.ticker.tick() => Event::Report,
+            _ = subscriber_poll.tick() => Event::Poll,
+            Ok(()) = node.param_changes.changed() => Event::Params,
+            // a burst (DDS repairing what a network outage held back) is applied as
+            // its newest target; a lone target goes at once
+            input = inputs.next() => match input {
+                Some(first) => Event::Inputs(burst::take_burst(first, &mut inputs)),
+                None => break,
+            },
         };
+        let mut effects = node.sync_params(matches!(event, Event::Params));
+        effects.extend(node.on_event(event));
         node.apply(effects);
     }
+}
+
+/// What woke [`run`]'s loop.
+enum Event {
+    /// the driver's deadline, with the inputs already waiting
+    Deadline(Vec<Input>),
+    Report,
+    /// the peers' poll
+    Poll,
+    /// a parameter was set (applied before every event, this one included)
+    Params,
+    /// inputs arrived: the first and those right behind it
+    Inputs(Vec<Input>),
 }
 
 /// Sleeps until `deadline` (at once without one: its arm is disabled then).
@@ -420,11 +432,21 @@ impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
     fn on_deadline(&mut self, waiting: Vec<Input>) -> Vec<Effect> {
         let mut effects = vec![];
         if !waiting.is_empty() {
-            effects = self.params_set_before_inputs();
-            effects.extend(self.driver.on_inputs(waiting, Instant::now(), Time::now()));
+            effects = self.driver.on_inputs(waiting, Instant::now(), Time::now());
         }
         effects.extend(self.driver.on_time(Instant::now(), Time::now()));
         effects
+    }
+
+    /// The event, to the driver (the parameters are synced already).
+    fn on_event(&mut self, event: Event) -> Vec<Effect> {
+        match event {
+            Event::Deadline(waiting) => self.on_deadline(waiting),
+            Event::Report => vec![Effect::Report],
+            Event::Poll => self.on_poll(),
+            Event::Params => vec![],
+            Event::Inputs(arrived) => self.driver.on_inputs(arrived, Instant::now(), Time::now()),
+        }
     }
 
     /// The peers' poll: their changes logged (and reported), a new `joint_states`
@@ -445,13 +467,12 @@ impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
         apply_params(&mut self.driver, &self.params)
     }
 
-    /// Ordering workaround (to go with issue 33's typed switches): a parameter set
-    /// before this input was sent applies before it (the calibration wizard's
-    /// `calibrating` false, then its test move): the store notified before the set
-    /// was answered, but both may be ready now and select! picks at random. Applies
-    /// a pending parameter change, if any, before the inputs that arrived with it.
-    fn params_set_before_inputs(&mut self) -> Vec<Effect> {
-        if !self.param_changes.has_changed().unwrap_or(false) {
+    /// The parameters as they are now, before any event is handled (`woken`: the
+    /// loop woke to a set): a set answered before an event's cause was sent (the
+    /// calibration wizard's `arm_config`, then its switch back to the arm's
+    /// controllers) is in the store already, whichever branch select! picked.
+    fn sync_params(&mut self, woken: bool) -> Vec<Effect> {
+        if !woken && !self.param_changes.has_changed().unwrap_or(false) {
             return vec![];
         }
         self.param_changes.borrow_and_update();
