@@ -526,9 +526,9 @@ def test_targets_older_than_max_target_age_are_refused(launch, observer):
     rig = IkRig(launch, observer, "--ros-args", "-p", "max_target_age:=0.5")
     n = len(rig.servo_angles)
     rig.xyz.publish(target(0.2, 0.0, 0.15, sec=now_stamp(-2.0)[0], nanosec=now_stamp(-2.0)[1]))
-    assert observer.spin_until(lambda: rig.diagnostics and rig.last_diag()[1].get("last_rejection_code") == "too_old", 10)
+    assert observer.spin_until(lambda: rig.diagnostics and rig.last_diag()[1].get("last_rejection_code") == "stale", 10)
     assert "older than max_target_age" in rig.last_diag()[1]["last_rejection"]
-    assert rig.last_diag()[1]["too_old"] == "1"
+    assert rig.last_diag()[1]["stale"] == "1"
     # it moved nothing: the first step after it is the next (fresh) target's
     sentinel = target(0.2, 0.0, 0.15)
     rig.first_step_after(n, rig.xyz, sentinel)

@@ -153,7 +153,7 @@ impl Reason {
             Reason::EmergencyStop => "estop".into(),
             Reason::Calibrating => "calibrating".into(),
             Reason::Held { .. } => "held".into(),
-            Reason::TooOld { .. } => "too_old".into(),
+            Reason::TooOld { .. } => "stale".into(),
             Reason::Line { .. } => "line_leaves_workspace".into(),
             Reason::Unreadable { .. } => "unreadable".into(),
             Reason::BadOrientation { .. } => "bad_orientation".into(),
@@ -367,7 +367,7 @@ pub struct Counters {
     /// Inputs refused.
     pub rejected: u64,
     /// Of those, refused for being older than `max_target_age`.
-    pub too_old: u64,
+    pub stale: u64,
     /// Targets dropped unused because a newer one of the same kind arrived with them
     /// (latest wins).
     pub superseded: u64,

@@ -608,7 +608,7 @@ impl<M: ArmModel> Pipeline<M> {
     fn reject(&mut self, source: Source, stamp: Time, reason: Reason) -> Rejection {
         self.counters.rejected += 1;
         if matches!(reason, Reason::TooOld { .. }) {
-            self.counters.too_old += 1;
+            self.counters.stale += 1;
         }
         self.last_event_rejected = true;
         let rejection = Rejection {
@@ -878,7 +878,7 @@ impl<M: ArmModel> Pipeline<M> {
             ("received".into(), c.received.to_string()),
             ("accepted".into(), c.accepted.to_string()),
             ("rejected".into(), c.rejected.to_string()),
-            ("too_old".into(), c.too_old.to_string()),
+            ("stale".into(), c.stale.to_string()),
             ("superseded".into(), c.superseded.to_string()),
             ("estop".into(), self.estop.to_string()),
             ("calibrating".into(), self.calibrating.to_string()),

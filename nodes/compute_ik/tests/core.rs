@@ -208,7 +208,7 @@ fn every_bad_input_is_refused_and_keeps_the_state() {
             received: 16,
             accepted: 2,
             rejected: 14,
-            too_old: 0,
+            stale: 0,
             superseded: 0,
             steps: c.counters().steps,
         }
@@ -364,9 +364,9 @@ fn old_targets_are_refused_and_a_zero_stamp_means_now() {
     let mut old = target(0.2, 0.0, 0.15, "");
     old.header.stamp = Time::from_nanos(now().to_nanos() - 700_000_000);
     let r = c.handle_xyz_target(&old, now()).unwrap_err();
-    assert_eq!(r.reason.code(), "too_old");
+    assert_eq!(r.reason.code(), "stale");
     assert!(r.to_string().contains("0.700 s ago"), "{r}");
-    assert_eq!(c.counters().too_old, 1);
+    assert_eq!(c.counters().stale, 1);
     assert!(!c.is_moving());
     let mut zero = target(0.2, 0.0, 0.15, "");
     zero.header.stamp = Time::ZERO;
