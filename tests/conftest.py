@@ -229,6 +229,15 @@ class NodeProcess:
         self.env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), **(env or {})}
         self.proc = subprocess.Popen(self.argv, stdout=self.log, stderr=subprocess.STDOUT, env=self.env,
                                      preexec_fn=default_sigint)
+        # the exit status the launch fixture expects at the end (SIGKILLed by the test: -9)
+        self.expect_exit = 0
+
+    def kill_hard(self, timeout=10):
+        """SIGKILL, as a crash or a pulled plug would end it; the launch fixture then
+        expects -9 of it instead of a clean exit."""
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout)
+        self.expect_exit = -signal.SIGKILL
 
     def stop(self, sig=signal.SIGINT, timeout=10):
         if self.proc.poll() is None:
@@ -289,8 +298,8 @@ def launch(domain, observer):
         return p
 
     yield start
-    codes = [(p.log_path.name, p.stop()) for p in procs]
-    bad = [(n, c) for n, c in codes if c != 0]
+    codes = [(p.log_path.name, p.stop(), p.expect_exit) for p in procs]
+    bad = [(n, c) for n, c, expected in codes if c != expected]
     assert not bad, f"nodes did not exit cleanly: {bad}"
 
 

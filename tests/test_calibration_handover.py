@@ -6,7 +6,6 @@ lease on `calibration` runs out).
 The wizard is driven over the panel's WebSocket (calibration_rig.WsWizard); the arm is
 serial_node on the real firmware in simavr. Who holds the arm is read from
 controller_manager/list_controllers, as `ros2 control list_controllers` shows it."""
-import signal
 
 import pytest
 from sensor_msgs.msg import JointState
@@ -74,8 +73,7 @@ def test_the_arm_comes_back_after_the_lease_when_gui_bridge_is_gone(launch, obse
         wizard = WsWizard(port)
         wizard_holds_the_arm(graph, wizard)
         # gui_bridge killed: nobody renews the lease, nobody gives the arm back
-        graph.gui.proc.send_signal(signal.SIGKILL)
-        graph.gui.proc.wait(10)
+        graph.gui.kill_hard()
         wizard.close()
         # compute_ik's calibration_lease is 10 s: the bound only ends a failure
         assert observer.spin_until(lambda: graph.calibrating() is False, 40), graph.calibrating()
