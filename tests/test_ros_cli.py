@@ -40,7 +40,7 @@ RANGES = {
     "compute_ik": {"diagnostics_period": (0.05, 60.0), "motion_rate": (1.0, 500.0), "max_target_age": (0.0, 3600.0),
                    "substitute_max_distance": (1e-6, 1.0), "gripper_up_angle": (0.0, 180.0),
                    "goal_tolerance": (0.0, 3.2), "path_tolerance": (0.0, 3.2), "goal_time_tolerance": (0.0, 60.0),
-                   "leader_timeout": (0.01, 5.0)},
+                   "leader_timeout": (0.01, 5.0), "calibration_lease": (0.5, 3600.0)},
     "serial_node": {"baud": (1200, 4_000_000), "send_rate": (1.0, 500.0), "watchdog_ms": (20, 60_000),
                     "heartbeat_period": (0.01, 10.0), "diagnostics_period": (0.05, 60.0)},
     "state_publisher": {"publish_frequency": (0.0, 10_000.0), "diagnostics_period": (0.05, 60.0)},
