@@ -397,6 +397,9 @@ struct EventLoop<M: ArmModel, O> {
     ticker: tokio::time::Interval,
     peers: PeerWatch,
     diag_name: String,
+    /// `servo_angles` messages published since the start (in `diagnostics`: with
+    /// `calibrating` and `estop`, it shows from outside that nothing was sent meanwhile)
+    servo_angles_sent: std::cell::Cell<u64>,
 }
 
 impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
@@ -420,6 +423,7 @@ impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
             ticker,
             peers: h.peers,
             diag_name: h.diag_name,
+            servo_angles_sent: Default::default(),
         };
         (node, h.inputs, h.shutdown)
     }
@@ -486,6 +490,7 @@ impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
                 Effect::Publish(step) => {
                     if let Some(servo_angles) = step.servo_angles {
                         self.outputs.servo_angles(servo_angles);
+                        self.servo_angles_sent.set(self.servo_angles_sent.get() + 1);
                     }
                     self.outputs.joint_states(step.joint_states);
                 }
@@ -513,6 +518,10 @@ impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
                 .into_iter()
                 .map(|(key, value)| eezybot_msgs::diagnostic_msgs::KeyValue { key, value }),
         );
+        s.values.push(eezybot_msgs::diagnostic_msgs::KeyValue {
+            key: "servo_angles_sent".into(),
+            value: self.servo_angles_sent.get().to_string(),
+        });
         self.peers.annotate(&mut s, Instant::now());
         self.params.annotate(&mut s);
         self.outputs.diagnostics(s);
