@@ -27,6 +27,7 @@ TOPIC_TYPES = {
     "/servo_state": "sensor_msgs/msg/JointState",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     "/xyz_target": "geometry_msgs/msg/PointStamped",
+    "/xyz_line_target": "geometry_msgs/msg/PointStamped",
     "/pose_target": "geometry_msgs/msg/PoseStamped",
     "/gripper_target": "std_msgs/msg/Float64",
     "/joint_target": "sensor_msgs/msg/JointState",
@@ -118,24 +119,29 @@ def test_a_foxglove_client_sees_every_topic_and_decodes_tf_and_joint_states(laun
 def test_foxglove_panels_publish_targets_only_with_foxglove_publish(launch, observer):
     gui, port = start_graph(launch, observer, "-p", "foxglove_publish:=true")
     got = observer.sub("/xyz_target", PointStamped)
+    got_line = observer.sub("/xyz_line_target", PointStamped)
     fox = FoxgloveClient(port)
     try:
         assert fox.pump_until(lambda: fox.info and len(fox.channels) == len(TOPIC_TYPES))
         assert "clientPublish" in fox.info["capabilities"]
         fox.advertise(1, "/xyz_target", "geometry_msgs/msg/PointStamped")
         fox.advertise(2, "/cmd_vel", "geometry_msgs/msg/Twist")
+        fox.advertise(3, "/xyz_line_target", "geometry_msgs/msg/PointStamped")
         assert fox.pump_until(lambda: fox.statuses)
         assert "/cmd_vel" in fox.statuses[0]["message"]
-        target = PointStamped()
-        target.header.frame_id = "base_link"
-        target.point.x, target.point.y, target.point.z = 0.2, 0.0, 0.15
-        deadline = time.monotonic() + 10
-        while not got and time.monotonic() < deadline:  # until gui_bridge's publisher is matched
-            fox.publish(1, serialize_message(target))
-            observer.spin_for(0.2)
-        assert got, "the target published from Foxglove never reached ROS"
-        m = got[0][1]
-        assert (m.point.x, m.point.y, m.point.z, m.header.frame_id) == (0.2, 0.0, 0.15, "base_link")
+        # each on its own topic: a line move is a target like the others
+        for channel, xyz, received in ((1, (0.2, 0.0, 0.15), got), (3, (0.2, 0.03, 0.15), got_line)):
+            target = PointStamped()
+            target.header.frame_id = "base_link"
+            target.point.x, target.point.y, target.point.z = xyz
+            deadline = time.monotonic() + 10
+            while not received and time.monotonic() < deadline:  # until gui_bridge's publisher is matched
+                fox.publish(channel, serialize_message(target))
+                observer.spin_for(0.2)
+            assert received, f"the target published from Foxglove on channel {channel} never reached ROS"
+            m = received[0][1]
+            assert (m.point.x, m.point.y, m.point.z, m.header.frame_id) == (*xyz, "base_link")
+        assert all(m.point.y == 0.0 for _, m in got), "the line target went to xyz_target as well"
     finally:
         fox.close()
 

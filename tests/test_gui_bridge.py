@@ -470,14 +470,15 @@ def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     rec = subprocess.Popen([bin_path("gui_bridge"), "--record", str(recording)], stdout=subprocess.PIPE, text=True, env=env)
     script = tmp_path / "waypoints.csv"
-    script.write_text("x,y,z,gripper,dwell\n0.2,0,0.15,0.5,0.2\n# a comment\n0.18,0.05,0.12,,0.1\n0.22,-0.04,0.18,1,0\n")
-    # the recorder's readers of both topics are up and announced (a sleep stood for this)
+    # the second in a straight line: on xyz_line_target, recorded with its mode
+    script.write_text("x,y,z,gripper,dwell\n0.2,0,0.15,0.5,0.2\n# a comment\n0.18,0.05,0.12,,0.1,line\n0.22,-0.04,0.18,1,0\n")
+    # the recorder's readers of the three topics are up and announced (a sleep stood for this)
     assert "recording" in rec.stdout.readline()
-    assert observer.spin_until(lambda: observer.node.count_subscribers("/xyz_target") >= 2
-                               and observer.node.count_subscribers("/gripper_target") >= 2, 30)
+    assert observer.spin_until(lambda: all(observer.node.count_subscribers(t) >= 2 for t in
+                                           ("/xyz_target", "/xyz_line_target", "/gripper_target")), 30)
     r = run_cli(domain, "--play", str(script), "--timeout", "20", timeout=60)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.count("waypoint ") == 3
+    assert r.stdout.count("waypoint ") == 3 and r.stdout.count("(line)") == 1, r.stdout
     # the recorder writes a row when the next target comes: targets of ours (a sentinel,
     # again until it comes) close the last waypoint's row (a sleep stood for this)
     sentinel = (0.21, 0.0, 0.16)
@@ -498,6 +499,7 @@ def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):
     rows = [row for row, p in zip(rows, xyz) if p != sentinel]
     assert [p for p in xyz if p != sentinel] == [(0.2, 0.0, 0.15), (0.18, 0.05, 0.12), (0.22, -0.04, 0.18)]
     assert [row[3] for row in rows] == ["0.500", "0.500", "1.000"]
+    assert [row[5] for row in rows] == ["", "line", ""]
     assert float(rows[0][4]) >= 0.2
     # a bad script names the line
     bad = tmp_path / "bad.csv"
@@ -507,9 +509,10 @@ def test_play_and_record_teach_and_replay(launch, observer, domain, tmp_path):
 
 
 def test_ctrl_c_stops_a_delivery_that_waits_for_compute_ik(observer, domain, tmp_path):
-    """With no compute_ik, `--line` (and `calibrate`) wait for its parameter services,
-    up to `--timeout`; Ctrl-C stops them there as anywhere: once and play exit 0,
-    calibrate 1 (cancelled). Before, the signal waited out the whole timeout."""
+    """With no compute_ik, `--line` waits for a subscriber of xyz_line_target (and
+    `calibrate` for compute_ik's controller manager), up to `--timeout`; Ctrl-C stops them
+    there as anywhere: once and play exit 0, calibrate 1 (cancelled). Before, the signal
+    waited out the whole timeout."""
     script = tmp_path / "one.csv"
     script.write_text("x,y,z,gripper,dwell\n0.2,0,0.15,0.5,0\n")
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
@@ -545,39 +548,64 @@ def tool_of(js):
 
 
 def motion_param(observer):
+    """compute_ik's `motion`, read through its get_parameters service (one client per
+    observer: the tests read it over and over while a program plays)."""
     from rcl_interfaces.srv import GetParameters
 
-    client = observer.node.create_client(GetParameters, "/compute_ik/get_parameters")
+    client = getattr(observer, "motion_client", None)
+    if client is None:
+        client = observer.motion_client = observer.node.create_client(GetParameters, "/compute_ik/get_parameters")
     assert client.wait_for_service(timeout_sec=10)
     future = client.call_async(GetParameters.Request(names=["motion"]))
     assert observer.spin_until(future.done, 10)
     return future.result().values[0].string_value
 
 
-def test_play_line_draws_straight_lines_then_puts_compute_ik_back(launch, observer, domain, tmp_path):
-    """--play --line: compute_ik's `motion` is `line` for the playback and `joint` again
-    after it; tool0 goes from waypoint to waypoint on the straight segment between them;
-    a line that leaves the workspace stops the playback with compute_ik's reason, before
-    the arm moves, and the motion is put back all the same."""
+def set_motion(observer, value):
+    """compute_ik's `motion` set through its set_parameters service, as `ros2 param set`
+    does: the SetParametersResult."""
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    client = observer.node.create_client(SetParameters, "/compute_ik/set_parameters")
+    assert client.wait_for_service(timeout_sec=10)
+    value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+    future = client.call_async(SetParameters.Request(parameters=[Parameter(name="motion", value=value)]))
+    assert observer.spin_until(future.done, 10)
+    return future.result().results[0]
+
+
+def test_play_line_draws_straight_lines_on_xyz_line_target_and_never_sets_motion(launch, observer, domain, tmp_path):
+    """--play --line: the targets go on xyz_line_target and tool0 goes from waypoint to
+    waypoint on the straight segment between them, while compute_ik's `motion` stays
+    `joint` throughout (it is read-only once running: a `ros2 param set` of it is
+    refused); a line that leaves the workspace stops the playback with compute_ik's
+    reason, which names xyz_line_target, before the arm moves."""
     launch("compute_ik")
     states = observer.sub("/joint_states", JointState)
+    lines = observer.sub("/xyz_line_target", PointStamped)
+    plain = observer.sub("/xyz_target", PointStamped)
     observer.wait_publisher("/joint_states")
     assert motion_param(observer) == "joint"
+    refused = set_motion(observer, "line")
+    assert not refused.successful and "read-only" in refused.reason, refused
     a, b = (0.2, -0.06, 0.12), (0.17, 0.07, 0.2)
     script = tmp_path / "line.csv"
     script.write_text(f"x,y,z,gripper,dwell\n{','.join(map(str, a))},,0.2\n{','.join(map(str, b))},,0\n")
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     cli = subprocess.Popen([bin_path("gui_bridge"), "--play", str(script), "--line", "--timeout", "20"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    seen_line = False
+    motions = set()
     while cli.poll() is None:
         observer.spin_for(0.05)
-        seen_line = seen_line or (not states or motion_param(observer) == "line")
+        motions.add(motion_param(observer))
     out, err = cli.communicate(timeout=10)
     assert cli.returncode == 0, err
-    assert out.count("waypoint ") == 2
-    assert seen_line
-    assert motion_param(observer) == "joint"
+    assert out.count("waypoint ") == 2 and out.count("(line)") == 2, out
+    assert motions == {"joint"}, motions
+    observer.spin_for(0.2)
+    assert [(m.point.x, m.point.y, m.point.z) for _, m in lines] == [a, b]
+    assert not plain, plain
     # from the moment tool0 is at a, every point is on the segment a-b (within 0.1 mm: the
     # line is sampled every 2 mm and joint-interpolated between, a chord error of
     # micrometres; a servo step is about 0.3 mm), and it ends at b
@@ -591,11 +619,14 @@ def test_play_line_draws_straight_lines_then_puts_compute_ik_back(launch, observ
         s_ = sum((ti - ai) * c for ti, ai, c in zip(t, a, ab)) / n
         off = math.dist(t, [ai + s_ * c / n for ai, c in zip(a, ab)])
         assert off < 1e-4 and -1e-9 <= s_ <= n + 1e-9, (t, off, s_)
-    # through the base axis: refused before any move, with the reason; motion put back
+    # through the base axis: refused before any move, with compute_ik's reason naming the
+    # line's topic
     bad = tmp_path / "through_the_base.csv"
     bad.write_text("0.08,0.075,0.15,,0\n0.08,-0.075,0.15,,0\n")
     r = run_cli(domain, "--play", str(bad), "--line", "--timeout", "20", timeout=60)
-    assert r.returncode != 0 and "waypoint 2" in r.stderr and "along the line" in r.stderr, r.stderr
+    assert r.returncode == 1 and "waypoint 2" in r.stderr, r.stderr
+    assert "compute_ik refused [0.08, -0.075, 0.15] on xyz_line_target: " in r.stderr, r.stderr
+    assert "along the line" in r.stderr, r.stderr
     assert motion_param(observer) == "joint"
 
 
@@ -1312,10 +1343,12 @@ def test_phone_layout_touch_joystick_moves_only_while_move_is_held(launch, obser
 
 def test_teach_three_points_edit_play_save_and_load_a_program(launch, observer, browser, tmp_path):
     """The panel's waypoint program: teach three poses, rename, set a dwell and a move
-    mode, play (the targets published are the taught ones, in order), save the file on the
-    node's host (which `gui_bridge play` reads), and load it back."""
+    mode, play (the targets published are the taught ones, in order, the line point's on
+    xyz_line_target, with compute_ik's `motion` never set), save the file on the node's
+    host (which `gui_bridge play` reads), and load it back."""
     programs = tmp_path / "programs"
     p = Panel(launch, observer, browser, with_arm=True, args=("-p", f"program_dir:={programs}"))
+    lines = observer.sub("/xyz_line_target", PointStamped)
     page = p.page
     poses = [(0.20, 0.0, 0.15), (0.18, 0.06, 0.12), (0.22, -0.05, 0.17)]
     try:
@@ -1347,25 +1380,34 @@ def test_teach_three_points_edit_play_save_and_load_a_program(launch, observer, 
         page.click("#prog-list li:nth-child(2) button[title=later]")
         page.wait_for_function("() => document.querySelectorAll('#prog-list input.name')[2].value === 'P3'", timeout=30000)
 
-        # play: the taught points go out on xyz_target, in order (after the sliders' last
-        # target, the third pose: gui_bridge publishes in order, so nothing earlier follows)
+        # play: the taught points go out in order, the first two on xyz_target, the third
+        # (line) on xyz_line_target (after the sliders' last target, the third pose:
+        # gui_bridge publishes in order, so nothing earlier follows)
         assert p.spin_until(lambda: p.xyz and [round(v, 4) for v in (p.xyz[-1][1].point.x, p.xyz[-1][1].point.y,
                                                                      p.xyz[-1][1].point.z)] == list(poses[-1]), 30), \
             p.xyz[-3:]
         n = len(p.xyz)
+        assert not lines, lines
         page.click("#prog-play")
-        page.wait_for_function("() => /finished|failed|stopped/.test(document.getElementById('prog-state').textContent)",
-                               timeout=60000)
+        motions, deadline = set(), time.monotonic() + 60
+        while not page.evaluate("() => /finished|failed|stopped/.test(document.getElementById('prog-state').textContent)"):
+            assert time.monotonic() < deadline, "the program did not end"
+            motions.add(motion_param(p.o))
+            p.o.spin_for(0.1)
         state = page.evaluate("() => [document.getElementById('prog-state').textContent, document.getElementById('prog-msg').textContent]")
         assert "finished" in state[0], state
-        assert p.spin_until(lambda: len(p.xyz) - n >= len(poses), 30), p.xyz[n:]
-        played = [(round(m.point.x, 4), round(m.point.y, 4), round(m.point.z, 4)) for _, m in p.xyz[n:]]
-        assert played == [tuple(round(v, 4) for v in xyz) for xyz in poses], played
-        # compute_ik's motion was set to line for the third point, then put back
-        deadline = time.monotonic() + 30
-        while motion_param(p.o) != "joint" and time.monotonic() < deadline:
-            p.o.spin_for(0.2)
-        assert motion_param(p.o) == "joint", "compute_ik's motion was not put back after the line move"
+        assert motions == {"joint"}, motions
+
+        def rounded(got):
+            return [(round(m.point.x, 4), round(m.point.y, 4), round(m.point.z, 4)) for _, m in got]
+
+        def stamp(m):
+            return m.header.stamp.sec, m.header.stamp.nanosec
+        expect = [tuple(round(v, 4) for v in xyz) for xyz in poses]
+        assert p.spin_until(lambda: len(p.xyz) - n >= 2 and lines, 30), (p.xyz[n:], lines)
+        assert rounded(p.xyz[n:]) == expect[:2] and rounded(lines) == expect[2:], (p.xyz[n:], lines)
+        # stamped when published: the line point went out after the others
+        assert stamp(p.xyz[-1][1]) < stamp(lines[0][1])
 
         # save on the node's host, as a file `gui_bridge play` runs
         page.fill("#prog-name", "three")

@@ -218,15 +218,17 @@ def test_the_pi_may_publish_servo_state_and_not_xyz_target(keystore):
     assert validity == cert_dates(enclave(keystore, "/eezybot/pi") / "cert.pem")
     assert domains.find("id_range/min").text == "0" and domains.find("id_range/max").text == "232"
     assert {"rt/servo_state", "rt/diagnostics"} <= pi["publish"]
-    for t in ("rt/xyz_target", "rt/gripper_target", "rt/joint_target", "rt/estop", "rt/servo_angles",
-              "rt/joint_states", "rt/tf", "rt/robot_description"):
+    for t in ("rt/xyz_target", "rt/xyz_line_target", "rt/gripper_target", "rt/joint_target", "rt/estop",
+              "rt/servo_angles", "rt/joint_states", "rt/tf", "rt/robot_description"):
         assert t not in pi["publish"], t
     assert {"rt/servo_angles", "rt/estop"} <= pi["subscribe"]
-    assert "rt/xyz_target" not in pi["subscribe"]
+    assert not {"rt/xyz_target", "rt/xyz_line_target"} & pi["subscribe"]
     assert not any("compute_ik" in t for t in pi["publish"] | pi["subscribe"])
     _, subject, _, _, pc = grant_topics(enclave(keystore, "/eezybot/pc") / "permissions.xml")
     assert subject == "CN=/eezybot/pc"
-    assert {"rt/xyz_target", "rt/gripper_target", "rt/joint_target", "rt/estop", "rt/servo_angles"} <= pc["publish"]
+    assert {"rt/xyz_target", "rt/xyz_line_target", "rt/gripper_target", "rt/joint_target", "rt/estop",
+            "rt/servo_angles"} <= pc["publish"]
+    assert {"rt/xyz_target", "rt/xyz_line_target"} <= pc["subscribe"]
     assert "rt/servo_state" not in pc["publish"] and "rt/servo_state" in pc["subscribe"]
 
 

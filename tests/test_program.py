@@ -1,10 +1,12 @@
 """`gui_bridge play` of a waypoint program (nodes/gui_bridge/src/program.rs: rows of
-x,y,z,gripper,dwell,mode,name): compute_ik's `motion` set for each point that names a
-mode, as it was for those that do not, and put back at the end."""
+x,y,z,gripper,dwell,mode,name): a point of mode `line` goes on xyz_line_target (a
+straight line), the others on xyz_target (as compute_ik's `motion` says: joint), and
+compute_ik's `motion` is never set."""
 import math
 import os
 import subprocess
 
+from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import JointState
 
 from conftest import bin_path
@@ -15,9 +17,11 @@ def row(xyz, rest):
     return ",".join(map(str, xyz)) + "," + rest
 
 
-def test_play_sets_each_points_mode_then_puts_compute_ik_back(launch, observer, domain, tmp_path):
+def test_play_sends_each_point_on_its_modes_topic_and_never_sets_motion(launch, observer, domain, tmp_path):
     launch("compute_ik")
     states = observer.sub("/joint_states", JointState)
+    lines = observer.sub("/xyz_line_target", PointStamped)
+    plain = observer.sub("/xyz_target", PointStamped)
     observer.wait_publisher("/joint_states")
     assert motion_param(observer) == "joint"
     a, b, c = (0.2, -0.06, 0.12), (0.17, 0.07, 0.2), (0.2, 0.0, 0.15)
@@ -29,14 +33,18 @@ def test_play_sets_each_points_mode_then_puts_compute_ik_back(launch, observer, 
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     cli = subprocess.Popen([bin_path("gui_bridge"), "play", str(script), "--timeout", "20"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    motions = set()
     while cli.poll() is None:
         observer.spin_for(0.05)
+        motions.add(motion_param(observer))
     out, err = cli.communicate(timeout=10)
     assert cli.returncode == 0, err
     assert out.count("waypoint ") == 3, out
-    # `line` was set for the a-to-b move (the straight segment below proves it; sampling the
-    # parameter while it plays can miss a short move), and put back after
-    assert motion_param(observer) == "joint"
+    assert motions == {"joint"}, motions
+    # b on xyz_line_target, a and c on xyz_target
+    observer.spin_for(0.2)
+    assert [(m.point.x, m.point.y, m.point.z) for _, m in lines] == [b]
+    assert [(m.point.x, m.point.y, m.point.z) for _, m in plain] == [a, c]
     # a to b (mode line): on the straight segment; b to c (no mode: joint, as compute_ik
     # was): off it
     tools = [tool_of(m) for _, m in states]
@@ -55,11 +63,12 @@ def test_play_sets_each_points_mode_then_puts_compute_ik_back(launch, observer, 
     assert math.dist(tools[-1], c) < 1e-9
     assert max(off_segment(t, b, c) for t in tools[last_b:]) > 5e-4
     # a line through the base axis named by the program (no --line): refused before the
-    # move, with the reason and the waypoint's number; motion put back all the same
+    # move, with compute_ik's reason naming the line's topic and the waypoint's number
     bad = tmp_path / "through_the_base.csv"
     bad.write_text("x,y,z,gripper,dwell,mode,name\n0.08,0.075,0.15,,0,,\n0.08,-0.075,0.15,,0,line,across\n")
     r = run_cli(domain, "play", str(bad), "--timeout", "20", timeout=60)
     assert r.returncode == 1 and "waypoint 2" in r.stderr and "along the line" in r.stderr, r.stderr
+    assert "on xyz_line_target" in r.stderr, r.stderr
     assert motion_param(observer) == "joint"
 
 

@@ -182,7 +182,7 @@ def rclpy_target(publisher, xyz):
 # /servo_state and /xyz_target are in it anyway: whether anyone else has them is what the
 # counts say)
 OUR_TOPICS = {"/servo_angles", "/joint_states", "/diagnostics", "/estop", "/gripper_target", "/joint_target",
-              "/pose_target"}
+              "/pose_target", "/xyz_line_target"}
 
 
 @two_hosts

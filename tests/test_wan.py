@@ -31,7 +31,7 @@ pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=120)]
 # checks need none
 needs_hosts = pytest.mark.skipif(wanhost.available() is not None, reason=f"WAN hosts: {wanhost.available()}")
 
-PC_LAN_ONLY = {"/xyz_target", "/pose_target", "/joint_target", "/gripper_target", "/joint_states", "/tf", "/tf_static",
+PC_LAN_ONLY = {"/xyz_target", "/xyz_line_target", "/pose_target", "/joint_target", "/gripper_target", "/joint_states", "/tf", "/tf_static",
                "/robot_description"}
 
 

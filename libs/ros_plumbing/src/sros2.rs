@@ -703,6 +703,7 @@ mod tests {
         assert!(publish.contains(&"rt/diagnostics".to_string()));
         for t in [
             "rt/xyz_target",
+            "rt/xyz_line_target",
             "rt/servo_angles",
             "rt/estop",
             "rt/joint_states",
@@ -713,6 +714,7 @@ mod tests {
         assert!(subscribe.contains(&"rt/servo_angles".to_string()));
         assert!(subscribe.contains(&"rt/estop".to_string()));
         assert!(!subscribe.contains(&"rt/xyz_target".to_string()));
+        assert!(!subscribe.contains(&"rt/xyz_line_target".to_string()));
         // its own parameter services, not compute_ik's
         assert!(subscribe.contains(&"rq/serial_node/set_parametersRequest".to_string()));
         assert!(publish.contains(&"rr/serial_node/set_parametersReply".to_string()));
@@ -743,6 +745,7 @@ mod tests {
         let r = rules(PC_NODES, "/").unwrap();
         for t in [
             "rt/xyz_target",
+            "rt/xyz_line_target",
             "rt/gripper_target",
             "rt/joint_target",
             "rt/estop",

@@ -118,6 +118,8 @@ fn every_topic_of_the_contract_is_written_in_the_docs_with_its_type_and_qos() {
 /// changed in topics.rs fails here even when the generated table and topics.json are
 /// regenerated with it. `None`: the contract leaves it open (volatile is DDS' default
 /// durability; the contract gives no depth for `tf`, `tf_static` and `diagnostics`).
+/// `xyz_line_target` is this project's addition (issue 33: a line move without a
+/// parameter switched first), with `xyz_target`'s type and QoS.
 /// (topic, type, reliability, durability, depth)
 type Written = (
     &'static str,
@@ -129,6 +131,13 @@ type Written = (
 const WRITTEN: &[Written] = &[
     (
         "xyz_target",
+        "geometry_msgs/msg/PointStamped",
+        "reliable",
+        Some("volatile"),
+        Some(10),
+    ),
+    (
+        "xyz_line_target",
         "geometry_msgs/msg/PointStamped",
         "reliable",
         Some("volatile"),
@@ -266,7 +275,7 @@ fn foxglove_channels_are_the_contract() {
             t.name
         );
     }
-    // the roles as the docs describe them: the four operator targets
+    // the roles as the docs describe them: the five operator targets
     let targets: Vec<&str> = foxglove_bridge::TOPICS
         .iter()
         .filter(|s| s.target)
@@ -276,6 +285,7 @@ fn foxglove_channels_are_the_contract() {
         targets,
         [
             "xyz_target",
+            "xyz_line_target",
             "pose_target",
             "gripper_target",
             "joint_target"

@@ -22,7 +22,7 @@ pub const EXIT_USAGE: u8 = 2;
 #[derive(Debug, Parser)]
 #[command(
     name = "gui_bridge",
-    about = "gui_bridge: operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
+    about = "gui_bridge: operator input (web page, keyboard, gamepad, command line) -> xyz_target / xyz_line_target / gripper_target / joint_target / estop",
     override_usage = "gui_bridge [serve]                                  [--ros-args ...]\n       \
                       gui_bridge once X Y Z [--gripper G] [--line] [--timeout S] [--ros-args ...]\n       \
                       gui_bridge play FILE.csv|FILE.mcap [--line] [--timeout S] [--ros-args ...]\n       \
@@ -96,8 +96,10 @@ impl OnceArgs {
 #[derive(Debug, Args)]
 pub struct PlayArgs {
     /// CSV file of x,y,z,gripper,dwell rows (as `record` writes), optionally with
-    /// mode (joint/line: compute_ik's `motion` for that move) and name columns; or an MCAP
-    /// recording (`.mcap`: its targets are published again at their recorded times)
+    /// mode and name columns (mode `line`: a straight line, on xyz_line_target; `joint`:
+    /// on xyz_target, moved as compute_ik's `motion` says, joint unless started
+    /// otherwise; empty: as --line says); or an MCAP recording (`.mcap`: its targets are
+    /// published again at their recorded times, each on its own topic)
     #[arg(value_name = "FILE.csv|FILE.mcap")]
     pub file: PathBuf,
     /// How to deliver
@@ -117,16 +119,14 @@ pub struct RecordArgs {
 /// How `once` and `play` deliver targets.
 #[derive(Debug, Args, Clone)]
 pub struct DeliveryArgs {
-    /// Straight Cartesian lines: compute_ik's `motion` set to `line` meanwhile (for the
-    /// points of a program that name no mode), then put back
+    /// Straight Cartesian lines: the targets (of a program, those whose row names no
+    /// mode) go on xyz_line_target instead of xyz_target; compute_ik's parameters are
+    /// left alone
     #[arg(long)]
     pub line: bool,
     /// Seconds to wait for each answer (compute_ik listening, taking, arriving)
     #[arg(long, value_name = "S", default_value = "15", value_parser = seconds)]
     pub timeout: Duration,
-    /// The inverse kinematics node whose `motion` --line sets (in our namespace)
-    #[arg(long, value_name = "NAME", default_value = "compute_ik")]
-    pub ik_node: String,
 }
 
 fn finite(s: &str) -> Result<f64, String> {

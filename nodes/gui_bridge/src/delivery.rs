@@ -4,12 +4,14 @@
 //! **refused** when a `diagnostics` status reports a refusal of that stamp (read by
 //! [`feedback`]); it **arrived** when `joint_states` has the arm at its joints.
 //!
-//! compute_ik's `motion` parameter (`joint` / `line`) is set for `--line` and for the
-//! program points that name a mode, and put back as it was at the end.
+//! A line move (`--line`, a program point of mode `line`: [`ProgramPoint::line`]) goes
+//! on `xyz_line_target`, any other on `xyz_target`: the move's kind travels with each
+//! target, and compute_ik's parameters are left alone.
 
 use crate::cli::{DeliveryArgs, OnceArgs, PlayArgs};
-use crate::program::{MoveMode, Program};
+use crate::program::{MoveMode, Program, ProgramPoint};
 use crate::ros_outputs::RosOutputs;
+use crate::teleop::xyz_topic;
 use crate::Outputs;
 use anyhow::{anyhow, Context as _};
 use eezybot_kinematics::Arm;
@@ -18,9 +20,8 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::StreamExt;
 use ros_plumbing::feedback;
-use ros_plumbing::remote_params::RemoteParameters;
 use ros_plumbing::Subscription;
-use ros_plumbing::{topics, ParameterValue, RosNode};
+use ros_plumbing::{topics, RosNode};
 use std::future::Future;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -39,16 +40,18 @@ pub enum NotDelivered {
         reason: String,
     },
     /// A node refused it (its diagnostics carried the target's stamp).
-    #[error("{node} refused {xyz:?}: {reason}")]
+    #[error("{node} refused {xyz:?}{}: {reason}", on_topic(.topic))]
     Refused {
         /// the node that refused it, as it names itself
         node: String,
         /// the target
         xyz: [f64; 3],
+        /// the topic it says the target came on (`xyz_line_target`); empty if not said
+        topic: String,
         /// its `last_rejection`, or its status message
         reason: String,
     },
-    /// Nobody subscribes `xyz_target`.
+    /// Nobody subscribes the target topic (`xyz_target` or `xyz_line_target`).
     #[error("nobody subscribes {topic} (is compute_ik running in this ROS domain?)")]
     NobodyListens {
         /// the resolved topic
@@ -83,12 +86,21 @@ pub enum NotDelivered {
     },
 }
 
+/// ` on TOPIC`, or nothing for a topic not said.
+fn on_topic(topic: &str) -> String {
+    if topic.is_empty() {
+        String::new()
+    } else {
+        format!(" on {topic}")
+    }
+}
+
 /// How long a command-line delivery waits at its end for its subscribers to acknowledge
 /// the last targets (a subscriber that died without leaving keeps it waiting this long).
 pub const DELIVERED_WAIT: Duration = Duration::from_secs(5);
 
-/// `once X Y Z [--gripper G]`: deliver one target (with `--line`, wait until the arm is
-/// there), then set the claw.
+/// `once X Y Z [--gripper G]`: deliver one target (with `--line`, on `xyz_line_target`,
+/// and wait until the arm is there), then set the claw.
 pub async fn once(
     node: &mut RosNode,
     arm: &Arm,
@@ -97,20 +109,13 @@ pub async fn once(
 ) -> anyhow::Result<()> {
     let xyz = args.xyz();
     check(arm, xyz)?;
-    tokio::pin!(shutdown);
-    let Some(mut motion) = MotionSwitch::engage(node, &args.delivery, false, &mut shutdown).await?
-    else {
-        return Ok(()); // Ctrl-C while compute_ik's parameters were awaited
-    };
+    let line = ProgramPoint::at(xyz).line(base_mode(&args.delivery));
     let mut d = Delivery::new(node, &args.delivery)?;
     let node = &*node;
     let work = async {
-        if let Some(m) = motion.as_mut() {
-            m.set(None).await?;
-        }
-        d.connect(node).await?;
-        d.send(xyz).await?;
-        if args.delivery.line {
+        d.connect(node, &[line]).await?;
+        d.send(xyz, line).await?;
+        if line {
             // the line is the point: stay until it is drawn
             d.arrival(arm, xyz).await?;
         }
@@ -121,14 +126,13 @@ pub async fn once(
         println!("delivered {xyz:?}");
         Ok(())
     };
-    let result = until_shutdown(work, &mut shutdown).await;
-    MotionSwitch::restore(motion).await;
-    result
+    until_shutdown(work, shutdown).await
 }
 
-/// `play FILE`: each point of the program in turn: set compute_ik's `motion` if the
-/// point names a mode (else `line` with `--line`, or as it was), move, arrive, set the
-/// claw, dwell; the first refusal stops with its waypoint's number.
+/// `play FILE`: each point of the program in turn: move (on `xyz_line_target` if the
+/// point's mode is `line`, or it names none and `--line` is given; else on
+/// `xyz_target`), arrive, set the claw, dwell; the first refusal stops with its
+/// waypoint's number.
 pub async fn play(
     node: &mut RosNode,
     arm: &Arm,
@@ -141,33 +145,27 @@ pub async fn play(
     let waypoints = Program::parse(&text)
         .map_err(|e| anyhow!("{path}: {e}"))?
         .points;
-    let modes = waypoints.iter().any(|w| w.mode.is_some());
-    tokio::pin!(shutdown);
-    let Some(mut motion) = MotionSwitch::engage(node, &args.delivery, modes, &mut shutdown).await?
-    else {
-        return Ok(()); // Ctrl-C while compute_ik's parameters were awaited
-    };
+    let base = base_mode(&args.delivery);
+    let lines: Vec<bool> = waypoints.iter().map(|w| w.line(base)).collect();
     let mut d = Delivery::new(node, &args.delivery)?;
     let node = &*node;
     let work = async {
-        d.connect(node).await?;
-        for (i, w) in waypoints.iter().enumerate() {
+        d.connect(node, &lines).await?;
+        for (i, (w, &line)) in waypoints.iter().zip(&lines).enumerate() {
             // move, arrive, then set the claw there: the order `record` writes rows in
             let at = || format!("waypoint {}", i + 1);
             check(arm, w.xyz).with_context(at)?;
-            if let Some(m) = motion.as_mut() {
-                m.set(w.mode).await.with_context(at)?;
-            }
-            d.send(w.xyz).await.with_context(at)?;
+            d.send(w.xyz, line).await.with_context(at)?;
             d.arrival(arm, w.xyz).await.with_context(at)?;
             if let Some(g) = w.gripper {
                 d.out.gripper_target(g);
             }
             println!(
-                "waypoint {}/{}: {:?} gripper {:?}, dwell {:.2} s",
+                "waypoint {}/{}: {:?}{} gripper {:?}, dwell {:.2} s",
                 i + 1,
                 waypoints.len(),
                 w.xyz,
+                if line { " (line)" } else { "" },
                 w.gripper,
                 w.dwell_s
             );
@@ -176,9 +174,12 @@ pub async fn play(
         d.delivered().await;
         Ok(())
     };
-    let result = until_shutdown(work, &mut shutdown).await;
-    MotionSwitch::restore(motion).await;
-    result
+    until_shutdown(work, shutdown).await
+}
+
+/// How the points without a mode are moved to: `line` with `--line`.
+fn base_mode(args: &DeliveryArgs) -> Option<MoveMode> {
+    args.line.then_some(MoveMode::Line)
 }
 
 /// Run `work` until it ends or `shutdown` (Ctrl-C: exit 0).
@@ -190,6 +191,12 @@ pub async fn until_shutdown(
         r = work => r,
         _ = shutdown => Ok(()),
     }
+}
+
+/// Whether `refusal` is of our target stamped `stamp`, sent on `xyz_line_target` with
+/// `line` (else on `xyz_target`): its stamp, and its topic when it says one.
+fn is_ours(refusal: &feedback::Refusal, stamp: Time, line: bool) -> bool {
+    refusal.is_for(stamp) && (refusal.topic.is_empty() || refusal.topic == xyz_topic(line).name)
 }
 
 /// The local reachability check (the closed form compute_ik uses for the EezyBot).
@@ -207,7 +214,8 @@ struct Delivery {
     out: RosOutputs,
     joint_states: Subscription<JointState>,
     diagnostics: Subscription<DiagnosticArray>,
-    topic: String,
+    /// the resolved names of `xyz_target` and `xyz_line_target`
+    topics: [String; 2],
     timeout: Duration,
 }
 
@@ -217,7 +225,10 @@ impl Delivery {
             out: RosOutputs::new(node)?,
             joint_states: node.subscribe_to(&topics::JOINT_STATES)?,
             diagnostics: node.subscribe_to(&topics::DIAGNOSTICS)?,
-            topic: node.resolve(&topics::XYZ_TARGET)?,
+            topics: [
+                node.resolve(xyz_topic(false))?,
+                node.resolve(xyz_topic(true))?,
+            ],
             timeout: args.timeout,
         })
     }
@@ -233,23 +244,27 @@ impl Delivery {
         }
     }
 
-    /// Wait until someone subscribes `xyz_target` and a first `joint_states` message has
-    /// come (compute_ik sends the pose to each new subscriber over its next polls).
+    /// Wait until someone subscribes each target topic the targets go on (`lines`: each
+    /// target's kind, [`xyz_topic`]) and a first `joint_states` message has come
+    /// (compute_ik sends the pose to each new subscriber over its next polls).
     ///
     /// A matched publisher is not enough: with SROS2 our reader counts compute_ik's writer
     /// before we hold its crypto tokens, and what it sends meanwhile waits in its history
     /// (depth 10) for repair, so the first step of the answer, which alone carries the
     /// target's stamp, can be pushed out by the steps after it. A message we could read
     /// shows the whole path is up: its writer has our reader and we decrypt what it sends.
-    async fn connect(&self, node: &RosNode) -> Result<(), NotDelivered> {
+    async fn connect(&self, node: &RosNode, lines: &[bool]) -> Result<(), NotDelivered> {
         let deadline = Instant::now() + self.timeout;
-        while self.out.xyz.get_subscription_count(node.node()) == 0 {
-            if Instant::now() > deadline {
-                return Err(NotDelivered::NobodyListens {
-                    topic: self.topic.clone(),
-                });
+        for line in [false, true].into_iter().filter(|l| lines.contains(l)) {
+            let publisher = self.out.xyz_publisher(line);
+            while publisher.get_subscription_count(node.node()) == 0 {
+                if Instant::now() > deadline {
+                    return Err(NotDelivered::NobodyListens {
+                        topic: self.topics[usize::from(line)].clone(),
+                    });
+                }
+                tokio::time::sleep(Duration::from_millis(20)).await;
             }
-            tokio::time::sleep(Duration::from_millis(20)).await;
         }
         let js = self.joint_states.async_stream();
         tokio::pin!(js);
@@ -263,11 +278,13 @@ impl Delivery {
         }
     }
 
-    /// Publish `xyz` stamped now; wait until `joint_states` carries the stamp (taken)
-    /// or a `diagnostics` status reports its refusal (refused).
-    async fn send(&mut self, xyz: [f64; 3]) -> Result<(), NotDelivered> {
+    /// Publish `xyz` stamped now, on `xyz_line_target` with `line`, else on
+    /// `xyz_target`; wait until `joint_states` carries the stamp (taken) or a
+    /// `diagnostics` status reports the refusal of that stamp (refused: compute_ik's
+    /// reason names the topic).
+    async fn send(&mut self, xyz: [f64; 3], line: bool) -> Result<(), NotDelivered> {
         let stamp = Time::now();
-        self.out.xyz_target(xyz, stamp);
+        self.out.xyz_target(xyz, line, stamp);
         let deadline = Instant::now() + self.timeout;
         let js = self.joint_states.async_stream();
         let diags = self.diagnostics.async_stream();
@@ -288,10 +305,11 @@ impl Delivery {
                 Some(Ok((d, _))) = diags.next() => {
                     let refused = feedback::decode(&d).into_iter().find_map(|f| {
                         let node = f.node_or_name().to_string();
-                        f.refusal.filter(|r| r.is_for(stamp)).map(|r| (node, r.reason))
+                        f.refusal.filter(|r| is_ours(r, stamp, line)).map(|r| (node, r))
                     });
-                    if let Some((node, reason)) = refused {
-                        return Err(NotDelivered::Refused { node, xyz, reason });
+                    if let Some((node, r)) = refused {
+                        let (topic, reason) = (r.topic, r.reason);
+                        return Err(NotDelivered::Refused { node, xyz, topic, reason });
                     }
                 }
             }
@@ -327,120 +345,37 @@ impl Delivery {
     }
 }
 
-/// compute_ik's `motion` during a delivery: `line` with `--line`, each program point's
-/// mode before its move, and put back as it was afterwards.
-struct MotionSwitch {
-    client: RemoteParameters,
-    /// its value before we touched it
-    original: ParameterValue,
-    /// what we set it to last (or `original`)
-    current: ParameterValue,
-    /// for points without a mode: `line` with `--line`, else `original`
-    default: ParameterValue,
-    /// whether we tried to set it (a failed set may still have taken)
-    touched: bool,
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ros_plumbing::feedback::{ReasonCode, Refusal};
 
-impl MotionSwitch {
-    /// With `--line` or `modes` (the program names a mode for some point): connect to
-    /// the `motion` of `--ik-node` and read it; the first `set` changes it. `Some(None)`:
-    /// nothing to switch; `None`: `shutdown` came first (nothing was changed).
-    async fn engage(
-        node: &mut RosNode,
-        args: &DeliveryArgs,
-        modes: bool,
-        shutdown: impl Future<Output = ()>,
-    ) -> anyhow::Result<Option<Option<MotionSwitch>>> {
-        if !args.line && !modes {
-            return Ok(Some(None));
-        }
-        let client = RemoteParameters::new(node, &args.ik_node)?;
-        let read = async {
-            client
-                .wait(node, args.timeout)
-                .await
-                .map_err(|e| anyhow!(e))?;
-            client
-                .get("motion")
-                .await
-                .map_err(|e| anyhow!(e))?
-                .ok_or_else(|| {
-                    anyhow!(
-                        "{} has no `motion` parameter (too old a compute_ik?)",
-                        client.node_name()
-                    )
-                })
-        };
-        let original = tokio::select! {
-            r = read => r?,
-            _ = shutdown => return Ok(None),
-        };
-        let default = if args.line {
-            mode_value(MoveMode::Line)
-        } else {
-            original.clone()
-        };
-        Ok(Some(Some(MotionSwitch {
-            client,
-            current: original.clone(),
-            original,
-            default,
-            touched: false,
-        })))
-    }
-
-    /// Set `motion` for the next move: `mode`, or the default for none; nothing if it
-    /// is that already.
-    async fn set(&mut self, mode: Option<MoveMode>) -> anyhow::Result<()> {
-        let want = mode.map_or_else(|| self.default.clone(), mode_value);
-        if want == self.current {
-            return Ok(());
-        }
-        self.touched = true;
-        self.client.set("motion", want.clone()).await.map_err(|e| {
-            anyhow!(
-                "cannot set {}'s motion to {}: {e}",
-                self.client.node_name(),
-                shown(&want)
+    #[test]
+    fn a_refusal_is_ours_by_its_stamp_and_the_topic_the_target_went_on() {
+        let stamp = Time::new(7, 5);
+        let on = |topic| {
+            Refusal::new(
+                stamp,
+                ReasonCode::LineBlocked,
+                "leaves the workspace",
+                topic,
             )
-        })?;
-        log::info!("{} motion:={}", self.client.node_name(), shown(&want));
-        self.current = want;
-        Ok(())
-    }
-
-    /// Put `motion` back as it was (if we changed it).
-    async fn restore(switch: Option<MotionSwitch>) {
-        let Some(s) = switch else {
-            return;
         };
-        if !s.touched {
-            return;
-        }
-        match s.client.set("motion", s.original.clone()).await {
-            Ok(()) => log::info!(
-                "{} motion back to {}",
-                s.client.node_name(),
-                shown(&s.original)
-            ),
-            Err(e) => log::error!(
-                "could not put {}'s motion back to {}: {e}",
-                s.client.node_name(),
-                shown(&s.original)
-            ),
-        }
+        assert!(is_ours(&on("xyz_line_target"), stamp, true));
+        assert!(!is_ours(&on("xyz_line_target"), stamp, false));
+        assert!(is_ours(&on("xyz_target"), stamp, false));
+        assert!(!is_ours(&on("xyz_target"), stamp, true));
+        assert!(is_ours(&on(""), stamp, true), "a topic not said");
+        assert!(!is_ours(&on("xyz_line_target"), Time::new(7, 6), true));
+        let e = NotDelivered::Refused {
+            node: "compute_ik".into(),
+            xyz: [0.08, -0.075, 0.15],
+            topic: "xyz_line_target".into(),
+            reason: "leaves the workspace".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "compute_ik refused [0.08, -0.075, 0.15] on xyz_line_target: leaves the workspace"
+        );
     }
-}
-
-/// A parameter value as written on the command line (`line`, not `String("line")`).
-fn shown(value: &ParameterValue) -> String {
-    match value {
-        ParameterValue::String(s) => s.clone(),
-        other => format!("{other:?}"),
-    }
-}
-
-/// compute_ik's `motion` value for `mode`.
-fn mode_value(mode: MoveMode) -> ParameterValue {
-    ParameterValue::String(mode.as_str().into())
 }

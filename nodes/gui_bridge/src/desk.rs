@@ -2,8 +2,8 @@
 //! and edits, its files on the node's host, and its playback. Editing and the player are
 //! [`crate::program`]'s (pure); this module applies browser requests to them, turns the
 //! player's actions into the operator state's events (so a played target goes out as a
-//! slider move does: rate, e-stop and reachability rules included), and sets
-//! compute_ik's `motion` for points with a move mode through a [`MotionControl`].
+//! slider move does: rate, e-stop and reachability rules included), each target with
+//! its point's move kind (`xyz_line_target` for a line).
 
 use crate::message::ProgramView;
 use crate::program::{
@@ -13,7 +13,6 @@ use crate::program::{
 use crate::teleop::{Event, Teleop};
 use crate::web::ProgramOp;
 use eezybot_msgs::Time;
-use futures::future::LocalBoxFuture;
 use ros_plumbing::feedback::Refusal;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -120,33 +119,9 @@ impl FileJob {
     }
 }
 
-/// Sets compute_ik's `motion` parameter for program moves.
-pub trait MotionControl {
-    /// Set `motion` to `mode` (the first call remembers what it was).
-    fn set(&self, mode: MoveMode) -> LocalBoxFuture<'_, Result<(), String>>;
-    /// Put `motion` back as it was before the first [`MotionControl::set`], if any.
-    fn restore(&self) -> LocalBoxFuture<'_, ()>;
-}
-
-/// No compute_ik to set: a program whose points name a move mode fails with the reason.
-pub struct NoMotionControl;
-
-impl MotionControl for NoMotionControl {
-    fn set(&self, _mode: MoveMode) -> LocalBoxFuture<'_, Result<(), String>> {
-        Box::pin(async { Err("no compute_ik parameters to set the move mode".to_string()) })
-    }
-    fn restore(&self) -> LocalBoxFuture<'_, ()> {
-        Box::pin(async {})
-    }
-}
-
 /// What the run loop must do after the desk handled something.
 #[derive(Debug, Default, PartialEq)]
 pub struct DeskOutcome {
-    /// Set compute_ik's `motion` to this, then call [`Desk::mode_set`].
-    pub set_mode: Option<MoveMode>,
-    /// The player ended: put `motion` back.
-    pub restore_mode: bool,
     /// The desk changed: send [`Desk::view`] to every browser.
     pub changed: bool,
     /// Run this file operation off the event loop, then call [`Desk::file_done`].
@@ -165,8 +140,6 @@ pub struct Desk {
     target_stamp: Option<Time>,
     /// the player sent a target that has not been published yet
     awaiting_stamp: bool,
-    /// a move mode was set while playing: put it back at the end
-    mode_touched: bool,
     /// the program files in `dir`, read again on each browser request (not on each
     /// player step: the directory is no business of the playback)
     files: Vec<String>,
@@ -174,8 +147,6 @@ pub struct Desk {
     file_busy: bool,
     /// the program a save found existing: the panel asks whether to replace it
     confirm_overwrite: Option<String>,
-    /// why compute_ik did not take the move mode last set, for the player's failure
-    mode_error: Option<String>,
 }
 
 impl Desk {
@@ -190,10 +161,8 @@ impl Desk {
             message: String::new(),
             target_stamp: None,
             awaiting_stamp: false,
-            mode_touched: false,
             file_busy: false,
             confirm_overwrite: None,
-            mode_error: None,
         }
     }
 
@@ -293,7 +262,7 @@ impl Desk {
                 Err(e) => Err(e),
             },
             ProgramOp::Stop => {
-                out.restore_mode = self.stop();
+                self.stop();
                 Ok("stopped".into())
             }
             ProgramOp::Save { name, overwrite } => {
@@ -374,16 +343,14 @@ impl Desk {
         }
     }
 
-    /// Stop playing (the e-stop, a stop request). Returns whether `motion` is to be put
-    /// back.
-    pub fn stop(&mut self) -> bool {
+    /// Stop playing (the e-stop, a stop request).
+    pub fn stop(&mut self) {
         if let Some(p) = self.player.as_mut() {
             if p.is_running() {
                 p.stop();
             }
         }
         self.awaiting_stamp = false;
-        std::mem::take(&mut self.mode_touched)
     }
 
     /// When [`Desk::play_step`] is due again even without news (a dwell ends, a timeout).
@@ -405,18 +372,14 @@ impl Desk {
         let Some(player) = self.player.as_mut() else {
             return DeskOutcome::default();
         };
-        // a player that just failed (a refusal, a mode not taken) still has its
-        // `Failed` to hand out: the message, and `motion` to put back
+        // a player that just failed (a refusal) still has its `Failed` to hand out: the
+        // message
         let mut out = DeskOutcome::default();
         for action in player.step(now, tool) {
             out.changed = true;
             match action {
-                PlayerAction::SetMode(mode) => {
-                    self.mode_touched = true;
-                    out.set_mode = Some(mode);
-                }
-                PlayerAction::Target { index, xyz } => {
-                    match teleop.handle_event(Event::SetTarget { xyz }) {
+                PlayerAction::Target { index, xyz, line } => {
+                    match teleop.handle_event(Event::SetTarget { xyz, line }) {
                         Ok(_) => self.awaiting_stamp = true,
                         Err(refusal) => {
                             player.refused(&format!("point {}: {refusal}", index + 1));
@@ -432,30 +395,13 @@ impl Desk {
                         self.message = format!("at {}", p.label(index));
                     }
                 }
-                PlayerAction::Finished => {
-                    self.message = "finished".into();
-                    out.restore_mode |= std::mem::take(&mut self.mode_touched);
-                }
+                PlayerAction::Finished => self.message = "finished".into(),
                 PlayerAction::Failed { index, reason } => {
-                    let cause = self.mode_error.take().map(|e| format!(" ({e})"));
-                    self.message = format!(
-                        "stopped at point {}: {reason}{}",
-                        index + 1,
-                        cause.unwrap_or_default()
-                    );
-                    out.restore_mode |= std::mem::take(&mut self.mode_touched);
+                    self.message = format!("stopped at point {}: {reason}", index + 1);
                 }
             }
         }
         out
-    }
-
-    /// compute_ik took the move mode (or not, with the reason).
-    pub fn mode_set(&mut self, result: Result<(), String>) {
-        if let Some(p) = self.player.as_mut() {
-            p.mode_set(result.is_ok());
-            self.mode_error = result.err();
-        }
     }
 
     /// A target was published with `stamp`: if the player sent it, remember the stamp.

@@ -221,9 +221,10 @@ fn always_tapped_topics() -> BTreeSet<&'static str> {
         .collect()
 }
 
-/// Publishers of the four target topics, publishing samples given as CDR.
+/// Publishers of the five target topics, publishing samples given as CDR.
 pub struct TargetPublishers {
     xyz: TopicPublisher<PointStamped>,
+    xyz_line: TopicPublisher<PointStamped>,
     pose: TopicPublisher<PoseStamped>,
     gripper: TopicPublisher<Float64>,
     joints: TopicPublisher<JointState>,
@@ -234,22 +235,24 @@ impl TargetPublishers {
     pub fn new(node: &mut RosNode) -> anyhow::Result<TargetPublishers> {
         Ok(TargetPublishers {
             xyz: node.publish_on(&topics::XYZ_TARGET)?,
+            xyz_line: node.publish_on(&topics::XYZ_LINE_TARGET)?,
             pose: node.publish_on(&topics::POSE_TARGET)?,
             gripper: node.publish_on(&topics::GRIPPER_TARGET)?,
             joints: node.publish_on(&topics::JOINT_TARGET)?,
         })
     }
 
-    /// Wait until the subscribers of the four topics have acknowledged every target
+    /// Wait until the subscribers of the five topics have acknowledged every target
     /// published, at most `max_wait` (false on timeout).
     pub async fn delivered(&self, max_wait: Duration) -> bool {
-        let (xyz, pose, gripper, joints) = tokio::join!(
+        let (xyz, xyz_line, pose, gripper, joints) = tokio::join!(
             self.xyz.delivered(max_wait),
+            self.xyz_line.delivered(max_wait),
             self.pose.delivered(max_wait),
             self.gripper.delivered(max_wait),
             self.joints.delivered(max_wait)
         );
-        xyz && pose && gripper && joints
+        xyz && xyz_line && pose && gripper && joints
     }
 
     /// Publish the CDR sample `cdr` of the target topic `topic`; with `restamp`, its
@@ -263,10 +266,11 @@ impl TargetPublishers {
         };
         let bad = |e| anyhow!("{topic}: unreadable sample: {e}");
         match topic {
-            "xyz_target" => {
+            "xyz_target" | "xyz_line_target" => {
                 let mut m: PointStamped = eezybot_msgs::cdr::decode(cdr).map_err(bad)?;
                 stamp(&mut m.header.stamp);
-                self.xyz.publish(m);
+                let line = topic == topics::XYZ_LINE_TARGET.name;
+                if line { &self.xyz_line } else { &self.xyz }.publish(m);
             }
             "pose_target" => {
                 let mut m: PoseStamped = eezybot_msgs::cdr::decode(cdr).map_err(bad)?;

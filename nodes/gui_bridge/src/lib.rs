@@ -19,7 +19,7 @@ pub mod serve;
 pub mod teleop;
 pub mod web;
 
-use crate::desk::{FileDone, MotionControl};
+use crate::desk::FileDone;
 use crate::message::Snapshot;
 use crate::panel::{Clock, Effect, Panel};
 use crate::teleop::Command;
@@ -44,7 +44,7 @@ pub const FOXGLOVE_ORIGINS: &str = "https://app.foxglove.dev";
 pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
         name: "gui_bridge",
-        description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / gripper_target / joint_target / estop",
+        description: "operator input (web page, keyboard, gamepad, command line) -> xyz_target / xyz_line_target / gripper_target / joint_target / estop",
         usage: "[serve | once X Y Z [--gripper G] [--line] [--timeout S] | play WAYPOINTS.csv|RUN.mcap [--line] [--timeout S] | record OUT.csv|OUT.mcap | calibrate [--leader]]",
         params: vec![
             ParamSpec::new("bind", ParameterValue::String("127.0.0.1:8080".into()), "address:port of the web page").read_only(),
@@ -98,7 +98,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new(
                 "foxglove_publish",
                 ParameterValue::Boolean(false),
-                "let Foxglove clients publish xyz_target, pose_target, gripper_target, joint_target (each client passes the panel's rules first: Origin, Host, and the token, which a foxglove_bind beyond loopback requires)",
+                "let Foxglove clients publish xyz_target, xyz_line_target, pose_target, gripper_target, joint_target (each client passes the panel's rules first: Origin, Host, and the token, which a foxglove_bind beyond loopback requires)",
             )
             .read_only(),
             ParamSpec::new(
@@ -147,8 +147,9 @@ pub enum Input {
 
 /// Where the bridge's targets go.
 pub trait Outputs {
-    /// Publish on `xyz_target` with this stamp.
-    fn xyz_target(&self, xyz: [f64; 3], stamp: Time);
+    /// Publish on `xyz_target`, or with `line` on `xyz_line_target`
+    /// ([`teleop::xyz_topic`]), with this stamp.
+    fn xyz_target(&self, xyz: [f64; 3], line: bool, stamp: Time);
     /// Publish on `gripper_target`.
     fn gripper_target(&self, opening: f64);
     /// Publish on `joint_target` with this stamp.
@@ -270,8 +271,6 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
     pub params: Params,
     /// How the panel reports itself on `diagnostics`.
     pub reporting: Reporting<F>,
-    /// compute_ik's `motion`, for the program's move modes.
-    pub motion: &'a dyn MotionControl,
     /// The calibration wizard's ROS side.
     pub calibration: &'a dyn CalibrationControl,
     /// The loop ends when this resolves.
@@ -301,7 +300,6 @@ where
         outputs,
         params,
         mut reporting,
-        motion,
         calibration,
         shutdown,
     } = io;
@@ -310,12 +308,10 @@ where
         to_browsers: &to_browsers,
         snapshot: &snapshot,
         web,
-        motion,
         calibration,
     };
     let mut jobs = Jobs {
         file: None,
-        motion: None,
         calibration: None,
     };
     let mut diag_tick = tokio::time::interval(Duration::from_secs(1));
@@ -356,12 +352,6 @@ where
             done = finished(&mut jobs.file), if jobs.file.is_some() => {
                 jobs.file = None;
                 sink.apply(panel.on_file_done(done), None, &mut jobs);
-            }
-            done = finished(&mut jobs.motion), if jobs.motion.is_some() => {
-                jobs.motion = None;
-                if let Some(result) = done {
-                    sink.apply(panel.on_mode_set(result, Clock::read()), None, &mut jobs);
-                }
             }
             done = finished(&mut jobs.calibration), if jobs.calibration.is_some() => {
                 jobs.calibration = None;
@@ -404,11 +394,9 @@ where
 
 /// Work of the loop's beside it, at most one of each kind: a program file's load or
 /// save (off the event loop: a FIFO, a hung mount; the loop goes on, the job times
-/// out), and compute_ik's `motion` being set (Some: for a point's move mode) or put back
-/// (None).
+/// out), and the calibration wizard's ROS work.
 struct Jobs<'m> {
     file: Option<BoxFuture<'static, FileDone>>,
-    motion: Option<LocalBoxFuture<'m, Option<Result<(), String>>>>,
     /// the arm taken from compute_ik or given back, or a calibration saved and applied
     calibration: Option<LocalBoxFuture<'m, panel::CalibrationDone>>,
 }
@@ -427,7 +415,6 @@ struct Sink<'a, 'm, O> {
     to_browsers: &'a broadcast::Sender<String>,
     snapshot: &'a watch::Sender<Snapshot>,
     web: WebStats,
-    motion: &'m dyn MotionControl,
     calibration: &'m dyn CalibrationControl,
 }
 
@@ -443,7 +430,7 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
         for effect in effects {
             match effect {
                 Effect::Publish { command, stamp } => match command {
-                    Command::Target(xyz) => self.outputs.xyz_target(xyz, stamp),
+                    Command::Target { xyz, line } => self.outputs.xyz_target(xyz, line, stamp),
                     Command::Gripper(g) => self.outputs.gripper_target(g),
                     Command::Joints(q) => self.outputs.joint_target(&q, stamp),
                     Command::Estop(on) => self.outputs.estop(on),
@@ -459,17 +446,6 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                 }
                 Effect::Rejected { kind, reason } => {
                     log(self.web.rejected_request(kind, &reason, Instant::now()));
-                }
-                Effect::SetMotion(mode) => {
-                    let motion = self.motion;
-                    jobs.motion = Some(Box::pin(async move { Some(motion.set(mode).await) }));
-                }
-                Effect::RestoreMotion => {
-                    let motion = self.motion;
-                    jobs.motion = Some(Box::pin(async move {
-                        motion.restore().await;
-                        None
-                    }));
                 }
                 Effect::File { job, dir } => {
                     jobs.file = Some(Box::pin(async move {

@@ -1,15 +1,14 @@
 //! The web panel's core: teleoperation, the program desk and the live view, as one
 //! state owned by the bridge loop. Events go in with the time they happen at
 //! ([`Clock`]); [`Effect`]s come out for the loop to apply (publish, answer a browser,
-//! tell every browser, set compute_ik's move mode, run a file job, log). No I/O here.
+//! tell every browser, run a file job, log). No I/O here.
 
 use crate::calibrate::{self as cal, Wizard};
 use crate::desk::{Desk, DeskOutcome, FileDone, FileJob};
 use crate::message::{
     ArmFacts, ArmJointsMsg, NodeEntry, Pose, RobotInfo, Sent, Snapshot, ToClient, UrdfScene,
 };
-use crate::program::MoveMode;
-use crate::teleop::{Command, Event, Teleop};
+use crate::teleop::{xyz_topic, Command, Event, Teleop};
 use crate::web::{self, ClientRequest, WebStats};
 use crate::Input;
 use eezybot_kinematics::envelope::Envelope;
@@ -68,10 +67,6 @@ pub enum Effect {
         /// why
         reason: String,
     },
-    /// Set compute_ik's `motion` to this, then call [`Panel::on_mode_set`].
-    SetMotion(MoveMode),
-    /// Put compute_ik's `motion` back as it was.
-    RestoreMotion,
     /// Run this program file job in `dir` off the loop, then call [`Panel::on_file_done`].
     File {
         /// the job
@@ -578,12 +573,12 @@ impl Panel {
         for command in self.teleop.take_due(clock.now) {
             let stamp = clock.wall;
             let sent = match &command {
-                Command::Target(xyz) => {
+                Command::Target { xyz, line } => {
                     self.sent += 1;
                     self.latency.sent(stamp);
                     self.desk.published_target(stamp);
                     Sent::Xyz {
-                        topic: topics::XYZ_TARGET.name,
+                        topic: xyz_topic(*line).name,
                         xyz: *xyz,
                         stamp_ns: stamp.to_nanos(),
                     }
@@ -664,7 +659,7 @@ impl Panel {
                 );
                 return self.finish(effects);
             }
-            ClientRequest::Target { xyz } => Event::SetTarget { xyz },
+            ClientRequest::Target { xyz } => Event::SetTarget { xyz, line: false },
             ClientRequest::Jog { d } => Event::Jog { dxyz: d },
             ClientRequest::Gripper { v } => Event::Gripper { opening: v },
             ClientRequest::Joints { q } => Event::Joints {
@@ -820,14 +815,6 @@ impl Panel {
         self.finish(effects)
     }
 
-    /// compute_ik took the move mode of an [`Effect::SetMotion`] (or not, with the reason).
-    pub fn on_mode_set(&mut self, result: Result<(), String>, clock: Clock) -> Vec<Effect> {
-        let mut effects = vec![];
-        self.desk.mode_set(result);
-        self.desk_step(clock.now, &mut effects);
-        self.finish(effects)
-    }
-
     /// The panel's own `diagnostics` status (the loop adds the watched topics' peers).
     pub fn report(&self, name: &str, url: &str, web: &WebStats, now: Instant) -> DiagnosticStatus {
         let mut values = vec![
@@ -886,8 +873,8 @@ impl Panel {
 
     fn stop_playing(&mut self, effects: &mut Vec<Effect>) {
         if self.desk.playing() {
+            self.desk.stop();
             let out = DeskOutcome {
-                restore_mode: self.desk.stop(),
                 changed: true,
                 ..Default::default()
             };
@@ -901,19 +888,13 @@ impl Panel {
     }
 
     fn desk_outcome(&mut self, out: DeskOutcome, effects: &mut Vec<Effect>) {
-        let mode = out.set_mode.is_some() || out.restore_mode;
         if let Some(job) = out.file {
             effects.push(Effect::File {
                 job,
                 dir: self.desk.dir().to_path_buf(),
             });
         }
-        if let Some(mode) = out.set_mode {
-            effects.push(Effect::SetMotion(mode));
-        } else if out.restore_mode {
-            effects.push(Effect::RestoreMotion);
-        }
-        if out.changed || mode {
+        if out.changed {
             let view = Arc::new(ToClient::Program(self.desk.view()));
             effects.push(Effect::Broadcast((*view).clone()));
             self.program = view;

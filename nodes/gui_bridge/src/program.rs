@@ -14,8 +14,11 @@
 //!
 //! `x,y,z` is `tool0`'s position (m, `base_link`); `gripper` the claw opening 0 … 1 set
 //! once there (empty: leave the claw as it is); `dwell` the seconds to stay (0 … 3600);
-//! `mode` how to get there: `joint`, `line` or empty (leave compute_ik's `motion` as it
-//! is, or the command line's `--line`); `name` free text, the rest of the row (commas and
+//! `mode` how to get there: `line` (the tool on a straight line: the target goes on
+//! `xyz_line_target`), `joint` (on `xyz_target`, moved as compute_ik's `motion` says:
+//! `joint`, every servo together, unless it was started with `motion:=line`) or empty
+//! (as `joint`, or as `line` with the command line's `--line`; [`ProgramPoint::line`]
+//! decides); `name` free text, the rest of the row (commas and
 //! control characters become spaces, at most [`MAX_NAME_CHARS`] characters; empty: shown
 //! as `P1`, `P2` … by [`ProgramPoint::label`]; a name that a spreadsheet would take for a
 //! formula is written with a `'` in front, see [`name_cell`]). The older `x,y,z,gripper,dwell` files
@@ -58,19 +61,20 @@ pub const MAX_PROGRAM_NAME_CHARS: usize = 64;
 /// The largest program file [`load`] reads (bytes).
 pub const MAX_FILE_BYTES: u64 = 1 << 20;
 
-/// How compute_ik moves to a target: its `motion` parameter.
+/// How a point is moved to: the topic its target goes on ([`ProgramPoint::line`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MoveMode {
-    /// Every servo within its limits, together (`motion:=joint`).
+    /// On `xyz_target`: as compute_ik's `motion` says (set at its start; `joint` by
+    /// default: every servo within its limits, together).
     Joint,
-    /// The tool on a straight Cartesian line, refused before the move if any point of it
-    /// is unreachable (`motion:=line`).
+    /// On `xyz_line_target`: the tool on a straight Cartesian line, refused before the
+    /// move if any point of it is unreachable.
     Line,
 }
 
 impl MoveMode {
-    /// The value of compute_ik's `motion` parameter: `joint` or `line`.
+    /// As written in a program file: `joint` or `line`.
     pub fn as_str(self) -> &'static str {
         match self {
             MoveMode::Joint => "joint",
@@ -113,7 +117,8 @@ pub struct ProgramPoint {
     /// Seconds to stay once there (and the claw set), 0 … [`MAX_DWELL_S`].
     #[serde(default)]
     pub dwell_s: f64,
-    /// How to get there; `None`: as compute_ik is set (or the command line's `--line`).
+    /// How to get there; `None`: as `joint`, or as the command line's `--line` says
+    /// ([`ProgramPoint::line`]).
     #[serde(default)]
     pub mode: Option<MoveMode>,
 }
@@ -128,6 +133,23 @@ impl ProgramPoint {
             dwell_s: 0.0,
             mode: None,
         }
+    }
+
+    /// Whether it is moved to on a straight line, its target on `xyz_line_target`: its
+    /// own mode, else `default` (the command line's `--line`). Otherwise its target goes
+    /// on `xyz_target`, moved as compute_ik's `motion` says. The one place where a move's
+    /// kind is decided: the kind travels with each target, no parameter is switched.
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::program::{MoveMode, ProgramPoint};
+    /// let mut p = ProgramPoint::at([0.2, 0.0, 0.15]);
+    /// assert!(!p.line(None) && p.line(Some(MoveMode::Line)));
+    /// p.mode = Some(MoveMode::Joint);
+    /// assert!(!p.line(Some(MoveMode::Line)), "its own mode first");
+    /// ```
+    pub fn line(&self, default: Option<MoveMode>) -> bool {
+        self.mode.or(default) == Some(MoveMode::Line)
     }
 
     /// Its name, or `P{index + 1}` if it has none (`index` is its place in the program).
@@ -664,22 +686,20 @@ pub fn save(
 pub const ARRIVAL_TOLERANCE_M: f64 = 0.002;
 /// How long the [`Player`] waits for the arm to reach a point before failing.
 pub const MOVE_TIMEOUT: Duration = Duration::from_secs(30);
-/// How long the [`Player`] waits for [`Player::mode_set`] after a
-/// [`PlayerAction::SetMode`] before failing.
-pub const MODE_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// What the node must do for the [`Player`], from [`Player::step`], in order.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PlayerAction {
-    /// Set compute_ik's `motion` to this, then call [`Player::mode_set`] with the outcome.
-    SetMode(MoveMode),
     /// Send point `index`'s position as the target.
     Target {
         /// the point's place in the program
         index: usize,
         /// where (m, `base_link`)
         xyz: [f64; 3],
+        /// on a straight line (`xyz_line_target`), else on `xyz_target`
+        /// ([`ProgramPoint::line`])
+        line: bool,
     },
     /// Set the claw opening (0 … 1), at the point just reached.
     Gripper(f64),
@@ -707,8 +727,6 @@ pub enum PlayerPhase {
     Moving,
     /// At the point, staying its dwell.
     Dwelling,
-    /// Waiting for compute_ik to take a new `motion`.
-    SettingMode,
     /// Every point played.
     Finished,
     /// Stopped by a failure.
@@ -736,15 +754,8 @@ pub struct PlayerState {
 /// Where a [`Player`] is within a point.
 #[derive(Debug, Clone, PartialEq)]
 enum Phase {
-    /// Start the current point at the next step.
+    /// Send the current point's target at the next step.
     Begin,
-    /// [`PlayerAction::SetMode`] sent; waiting for [`Player::mode_set`] until `deadline`.
-    SettingMode {
-        mode: MoveMode,
-        deadline: Instant,
-    },
-    /// The mode was taken: send the target at the next step.
-    ModeSet,
     /// Target sent at the step before; waiting for the tool to arrive until `deadline`.
     Moving {
         deadline: Instant,
@@ -763,14 +774,13 @@ enum Phase {
 /// Plays a [`Program`]: a state machine driven by time and observations, without I/O.
 ///
 /// The node calls [`Player::step`] with the time and, when it has a new one, `tool0`'s
-/// observed position, carries out the [`PlayerAction`]s it returns, reports on them with
-/// [`Player::mode_set`] and [`Player::refused`] (then calls `step` again), and calls
-/// `step` by [`Player::next_wakeup`] at the latest. For each point: `SetMode` if its mode
-/// is not the one set last (then wait for `mode_set`), `Target`, wait until a tool
-/// position observed *after* the target was sent is within [`ARRIVAL_TOLERANCE_M`]
-/// ([`MOVE_TIMEOUT`] at most), `Arrived`, `Gripper` if it has one, then its dwell; after the
-/// last point `Finished`, or from point 0 again when looping. The player never puts
-/// compute_ik's `motion` back: the node does, once the player is over.
+/// observed position, carries out the [`PlayerAction`]s it returns, reports a refusal
+/// with [`Player::refused`] (then calls `step` again), and calls `step` by
+/// [`Player::next_wakeup`] at the latest. For each point: `Target` (with the move's kind,
+/// [`ProgramPoint::line`]), wait until a tool position observed *after* the target was
+/// sent is within [`ARRIVAL_TOLERANCE_M`] ([`MOVE_TIMEOUT`] at most), `Arrived`,
+/// `Gripper` if it has one, then its dwell; after the last point `Finished`, or from
+/// point 0 again when looping. Nothing is switched between moves of different kinds.
 ///
 /// # Examples
 /// ```
@@ -781,7 +791,7 @@ enum Phase {
 /// program.teach(ProgramPoint::at([0.2, 0.0, 0.15]))?;
 /// let t0 = Instant::now();
 /// let mut player = Player::start(&program, false, t0)?;
-/// assert_eq!(player.step(t0, None), [PlayerAction::Target { index: 0, xyz: [0.2, 0.0, 0.15] }]);
+/// assert_eq!(player.step(t0, None), [PlayerAction::Target { index: 0, xyz: [0.2, 0.0, 0.15], line: false }]);
 /// let t1 = t0 + Duration::from_secs(1);
 /// assert_eq!(player.step(t1, Some([0.2, 0.0005, 0.15])), [PlayerAction::Arrived { index: 0 }, PlayerAction::Finished]);
 /// assert_eq!(player.next_wakeup(), None);
@@ -794,11 +804,9 @@ pub struct Player {
     index: usize,
     loops: usize,
     phase: Phase,
-    /// the `motion` last set by the player (or said to be compute_ik's at the start)
-    mode: Option<MoveMode>,
     /// for points without a mode, if set: see [`Player::with_base_mode`]
     base_mode: Option<MoveMode>,
-    /// actions of [`Player::mode_set`] / [`Player::refused`] for the next step
+    /// actions of [`Player::refused`] (a failure) for the next step
     pending: Vec<PlayerAction>,
     /// the time of the last step (or of the start)
     now: Instant,
@@ -818,19 +826,16 @@ impl Player {
             index: 0,
             loops: 0,
             phase: Phase::Begin,
-            mode: None,
             base_mode: None,
             pending: vec![],
             now,
         })
     }
 
-    /// Say what compute_ik's `motion` is at the start, and that points without a mode
-    /// are to be moved to that way (as `gui_bridge play` does), instead of the way the
-    /// point before left it. Without it, a point without a mode sends no `SetMode`.
+    /// Points without a mode are moved to as `mode` says (as `gui_bridge play --line`
+    /// does: [`ProgramPoint::line`]); without it, as `joint`.
     pub fn with_base_mode(mut self, mode: MoveMode) -> Player {
         self.base_mode = Some(mode);
-        self.mode = Some(mode);
         self
     }
 
@@ -848,21 +853,6 @@ impl Player {
             self.phase,
             Phase::Finished | Phase::Failed { .. } | Phase::Stopped
         )
-    }
-
-    /// The outcome of a [`PlayerAction::SetMode`]: whether compute_ik took the `motion`.
-    /// `false` fails the playback. Ignored unless a `SetMode` is awaited. Call
-    /// [`Player::step`] next.
-    pub fn mode_set(&mut self, ok: bool) {
-        let Phase::SettingMode { mode, .. } = self.phase else {
-            return;
-        };
-        if ok {
-            self.mode = Some(mode);
-            self.phase = Phase::ModeSet;
-        } else {
-            self.fail(format!("compute_ik did not take motion:={mode}"));
-        }
     }
 
     /// compute_ik refused the target sent last (its diagnostics carried that target's
@@ -900,34 +890,15 @@ impl Player {
                 return out;
             };
             match self.phase {
-                Phase::Begin => match point.mode.or(self.base_mode) {
-                    Some(m) if self.mode != Some(m) => {
-                        out.push(PlayerAction::SetMode(m));
-                        self.phase = Phase::SettingMode {
-                            mode: m,
-                            deadline: now + MODE_TIMEOUT,
-                        };
-                    }
-                    _ => self.phase = Phase::ModeSet,
-                },
-                Phase::ModeSet => {
+                Phase::Begin => {
                     out.push(PlayerAction::Target {
                         index: self.index,
                         xyz: point.xyz,
+                        line: point.line(self.base_mode),
                     });
                     self.phase = Phase::Moving {
                         deadline: now + MOVE_TIMEOUT,
                     };
-                    return out;
-                }
-                Phase::SettingMode { mode, deadline } => {
-                    if now >= deadline {
-                        let s = MODE_TIMEOUT.as_secs_f64();
-                        self.fail(format!(
-                            "compute_ik did not take motion:={mode} in {s:.0} s"
-                        ));
-                        out.append(&mut self.pending);
-                    }
                     return out;
                 }
                 Phase::Moving { deadline } => {
@@ -980,8 +951,8 @@ impl Player {
             return Some(self.now);
         }
         match self.phase {
-            Phase::Begin | Phase::ModeSet => Some(self.now),
-            Phase::SettingMode { deadline, .. } | Phase::Moving { deadline } => Some(deadline),
+            Phase::Begin => Some(self.now),
+            Phase::Moving { deadline } => Some(deadline),
             Phase::Dwelling { until } => Some(until),
             Phase::Finished | Phase::Failed { .. } | Phase::Stopped => None,
         }
@@ -990,8 +961,7 @@ impl Player {
     /// What it is doing, for the panel.
     pub fn state(&self) -> PlayerState {
         let (phase, reason) = match &self.phase {
-            Phase::Begin | Phase::ModeSet | Phase::Moving { .. } => (PlayerPhase::Moving, None),
-            Phase::SettingMode { .. } => (PlayerPhase::SettingMode, None),
+            Phase::Begin | Phase::Moving { .. } => (PlayerPhase::Moving, None),
             Phase::Dwelling { .. } => (PlayerPhase::Dwelling, None),
             Phase::Finished => (PlayerPhase::Finished, None),
             Phase::Failed { reason } => (PlayerPhase::Failed, Some(reason.clone())),
@@ -1350,13 +1320,13 @@ mod tests {
         );
         let s = PlayerState {
             index: 2,
-            phase: PlayerPhase::SettingMode,
+            phase: PlayerPhase::Dwelling,
             loops: 1,
             reason: None,
         };
         assert_eq!(
             serde_json::to_value(&s).unwrap(),
-            serde_json::json!({"index": 2, "phase": "setting_mode", "loop": 1})
+            serde_json::json!({"index": 2, "phase": "dwelling", "loop": 1})
         );
     }
 
@@ -1551,24 +1521,6 @@ mod tests {
         pl
     }
 
-    /// The arm arrives at point `i` (at `xyz`) at `at`: the player asks for `mode`, and
-    /// once it is set, sends point `j` 10 ms later.
-    fn switch_mode(
-        pl: &mut Player,
-        at: Instant,
-        (i, xyz): (usize, [f64; 3]),
-        mode: MoveMode,
-        (j, next): (usize, [f64; 3]),
-    ) {
-        let asked = [arrived(i), PlayerAction::SetMode(mode)];
-        assert_eq!(pl.step(at, Some(xyz)), asked);
-        pl.mode_set(true);
-        assert_eq!(
-            pl.step(at + Duration::from_millis(10), None),
-            [target(j, next)]
-        );
-    }
-
     /// The state of a player with no failure.
     fn state(index: usize, phase: PlayerPhase, loops: usize) -> PlayerState {
         PlayerState {
@@ -1579,8 +1531,22 @@ mod tests {
         }
     }
 
+    /// Point `index`'s target on `xyz_target`.
     fn target(index: usize, xyz: [f64; 3]) -> PlayerAction {
-        PlayerAction::Target { index, xyz }
+        PlayerAction::Target {
+            index,
+            xyz,
+            line: false,
+        }
+    }
+
+    /// Point `index`'s target on `xyz_line_target`.
+    fn line_target(index: usize, xyz: [f64; 3]) -> PlayerAction {
+        PlayerAction::Target {
+            index,
+            xyz,
+            line: true,
+        }
     }
 
     fn arrived(index: usize) -> PlayerAction {
@@ -1659,44 +1625,47 @@ mod tests {
     }
 
     #[test]
-    fn the_mode_is_set_only_when_it_changes() {
+    fn each_target_carries_its_points_move_kind_in_order_with_nothing_between() {
         let t0 = Instant::now();
-        let mut pl = start(vec![line(A), line(B), to(C), joint(A)], false, t0);
-        assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
-        assert_eq!(pl.state().phase, PlayerPhase::SettingMode);
-        assert_eq!(pl.next_wakeup(), Some(t0 + MODE_TIMEOUT));
-        assert_eq!(pl.step(ms(t0, 10), Some(A)), [], "waits for mode_set");
-        pl.refused("stray"); // not moving: ignored
-        pl.mode_set(true);
-        assert_eq!(pl.next_wakeup(), Some(ms(t0, 10)), "due at once");
-        assert_eq!(pl.step(ms(t0, 20), None), [target(0, A)]);
-        pl.mode_set(false); // nothing awaited: ignored
+        let mut pl = start(vec![line(A), line(B), to(C), joint(A), line(B)], false, t0);
+        assert_eq!(pl.step(t0, None), [line_target(0, A)]);
+        assert_eq!(pl.state().phase, PlayerPhase::Moving);
+        assert_eq!(pl.next_wakeup(), Some(t0 + MOVE_TIMEOUT));
         assert_eq!(
-            pl.step(ms(t0, 30), Some(A)),
-            [arrived(0), target(1, B)],
-            "line still set"
+            pl.step(ms(t0, 10), Some(A)),
+            [arrived(0), line_target(1, B)]
         );
         assert_eq!(
-            pl.step(ms(t0, 40), Some(B)),
+            pl.step(ms(t0, 20), Some(B)),
             [arrived(1), target(2, C)],
-            "no mode: as it is"
+            "no mode: xyz_target"
         );
-        switch_mode(&mut pl, ms(t0, 50), (2, C), MoveMode::Joint, (3, A));
+        assert_eq!(pl.step(ms(t0, 30), Some(C)), [arrived(2), target(3, A)]);
         assert_eq!(
-            pl.step(ms(t0, 70), Some(A)),
-            [arrived(3), PlayerAction::Finished]
+            pl.step(ms(t0, 40), Some(A)),
+            [arrived(3), line_target(4, B)],
+            "from joint to line: no step between"
+        );
+        assert_eq!(
+            pl.step(ms(t0, 50), Some(B)),
+            [arrived(4), PlayerAction::Finished]
         );
     }
 
     #[test]
-    fn a_base_mode_is_restored_for_points_without_one() {
+    fn a_base_mode_is_for_the_points_without_one() {
         let t0 = Instant::now();
-        let mut pl = start(vec![to(A), line(B), to(C)], false, t0).with_base_mode(MoveMode::Joint);
-        assert_eq!(pl.step(t0, None), [target(0, A)], "joint already");
-        switch_mode(&mut pl, ms(t0, 10), (0, A), MoveMode::Line, (1, B));
+        let mut pl =
+            start(vec![to(A), joint(B), line(C)], false, t0).with_base_mode(MoveMode::Line);
+        assert_eq!(pl.step(t0, None), [line_target(0, A)], "--line");
         assert_eq!(
-            pl.step(ms(t0, 30), Some(B)),
-            [arrived(1), PlayerAction::SetMode(MoveMode::Joint)]
+            pl.step(ms(t0, 10), Some(A)),
+            [arrived(0), target(1, B)],
+            "its own"
+        );
+        assert_eq!(
+            pl.step(ms(t0, 20), Some(B)),
+            [arrived(1), line_target(2, C)]
         );
     }
 
@@ -1745,22 +1714,16 @@ mod tests {
     fn looping_starts_over_at_point_0() {
         let t0 = Instant::now();
         let mut pl = start(vec![line(A), joint(B)], true, t0);
-        assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
-        pl.mode_set(true);
-        assert_eq!(pl.step(t0, None), [target(0, A)]);
-        switch_mode(&mut pl, ms(t0, 10), (0, A), MoveMode::Joint, (1, B));
-        // after the last point: point 0 again, no Finished, the loop counted
+        assert_eq!(pl.step(t0, None), [line_target(0, A)]);
+        assert_eq!(pl.step(ms(t0, 10), Some(A)), [arrived(0), target(1, B)]);
+        // after the last point: point 0 again, in its own kind, no Finished, the loop
+        // counted
         assert_eq!(
             pl.step(ms(t0, 30), Some(B)),
-            [arrived(1), PlayerAction::SetMode(MoveMode::Line)]
+            [arrived(1), line_target(0, A)]
         );
-        assert_eq!(pl.state(), state(0, PlayerPhase::SettingMode, 1));
-        pl.mode_set(true);
-        assert_eq!(pl.step(ms(t0, 40), None), [target(0, A)]);
-        assert_eq!(
-            pl.step(ms(t0, 50), Some(A)),
-            [arrived(0), PlayerAction::SetMode(MoveMode::Joint)]
-        );
+        assert_eq!(pl.state(), state(0, PlayerPhase::Moving, 1));
+        assert_eq!(pl.step(ms(t0, 50), Some(A)), [arrived(0), target(1, B)]);
         // a single point looping without dwell: one target a step, never a busy loop
         let one = program(vec![to(A)]);
         let mut pl = Player::start(&one, true, t0).unwrap();
@@ -1779,7 +1742,6 @@ mod tests {
         assert_eq!(pl.next_wakeup(), None);
         assert_eq!(pl.step(ms(t0, 6000), Some(B)), []);
         pl.refused("late");
-        pl.mode_set(false);
         assert_eq!(pl.step(ms(t0, 7000), None), []);
         assert_eq!(pl.state().phase, PlayerPhase::Stopped);
     }
@@ -1823,30 +1785,5 @@ mod tests {
         );
         assert_eq!(pl.step(ms(t0, 20), Some(A)), []);
         assert_eq!(pl.next_wakeup(), None);
-    }
-
-    #[test]
-    fn a_mode_not_taken_fails() {
-        let t0 = Instant::now();
-        let mut pl = start(vec![line(A)], false, t0);
-        assert_eq!(pl.step(t0, None), [PlayerAction::SetMode(MoveMode::Line)]);
-        pl.mode_set(false);
-        let out = pl.step(ms(t0, 10), None);
-        let [PlayerAction::Failed { index: 0, reason }] = out.as_slice() else {
-            panic!("{out:?}")
-        };
-        assert!(reason.contains("motion:=line"), "{reason}");
-        // and one never confirmed times out
-        let mut pl = start(vec![line(A)], false, t0);
-        pl.step(t0, None);
-        assert_eq!(
-            pl.step(t0 + MODE_TIMEOUT - Duration::from_millis(1), None),
-            []
-        );
-        let out = pl.step(t0 + MODE_TIMEOUT, None);
-        assert!(
-            matches!(out.as_slice(), [PlayerAction::Failed { index: 0, .. }]),
-            "{out:?}"
-        );
     }
 }

@@ -1,8 +1,10 @@
 //! `record FILE`: every target an operator sends (from the panel or anything else on
-//! `xyz_target` / `gripper_target`) as rows of a waypoint program
-//! ([`crate::program`]), dwell = the time until the next one; until Ctrl-C / SIGTERM.
+//! `xyz_target` / `xyz_line_target` / `gripper_target`) as rows of a waypoint program
+//! ([`crate::program`]), dwell = the time until the next one, mode `line` for a target
+//! of `xyz_line_target` (empty for `xyz_target`'s: `play` sends each row back on its
+//! topic); until Ctrl-C / SIGTERM.
 
-use crate::program::{ProgramPoint, MAX_DWELL_S, PROGRAM_HEADER};
+use crate::program::{MoveMode, ProgramPoint, MAX_DWELL_S, PROGRAM_HEADER};
 use anyhow::Context as _;
 use futures::StreamExt;
 use ros_plumbing::{topics, RosNode};
@@ -21,13 +23,22 @@ pub async fn record(
     let mut file = std::fs::File::create(path).with_context(|| format!("cannot create {shown}"))?;
     writeln!(file, "{PROGRAM_HEADER}")?;
     let targets = node.subscribe_to(&topics::XYZ_TARGET)?;
+    let line_targets = node.subscribe_to(&topics::XYZ_LINE_TARGET)?;
     let gripper = node.subscribe_to(&topics::GRIPPER_TARGET)?;
     println!(
-        "recording {} and {} into {shown}; Ctrl-C to stop",
+        "recording {}, {} and {} into {shown}; Ctrl-C to stop",
         node.resolve(&topics::XYZ_TARGET)?,
+        node.resolve(&topics::XYZ_LINE_TARGET)?,
         node.resolve(&topics::GRIPPER_TARGET)?
     );
-    let (t, g) = (targets.async_stream(), gripper.async_stream());
+    // each target with its kind: None on xyz_target, line on xyz_line_target
+    let t = futures::stream::select(
+        targets.async_stream().map(|r| r.map(|(m, _)| (m, None))),
+        line_targets
+            .async_stream()
+            .map(|r| r.map(|(m, _)| (m, Some(MoveMode::Line)))),
+    );
+    let g = gripper.async_stream();
     tokio::pin!(t, g, shutdown);
     let mut pending: Option<(ProgramPoint, Instant)> = None;
     let mut opening: Option<f64> = None;
@@ -35,7 +46,7 @@ pub async fn record(
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
-            Some(Ok((m, _))) = t.next() => {
+            Some(Ok((m, mode))) = t.next() => {
                 if let Some((mut w, at)) = pending.take() {
                     // what `play` takes: an hour at most
                     w.dwell_s = at.elapsed().as_secs_f64().min(MAX_DWELL_S);
@@ -44,6 +55,7 @@ pub async fn record(
                 }
                 let mut w = ProgramPoint::at([m.point.x, m.point.y, m.point.z]);
                 w.gripper = opening;
+                w.mode = mode;
                 pending = Some((w, Instant::now()));
             }
             Some(Ok((m, _))) = g.next() => {

@@ -13,6 +13,8 @@ use ros_plumbing::{topics, PlumbingError, RosNode, TopicPublisher};
 pub struct RosOutputs {
     /// `xyz_target`
     pub xyz: TopicPublisher<PointStamped>,
+    /// `xyz_line_target`
+    pub xyz_line: TopicPublisher<PointStamped>,
     gripper: TopicPublisher<Float64>,
     joints: TopicPublisher<JointState>,
     estop: TopicPublisher<Bool>,
@@ -29,6 +31,7 @@ impl RosOutputs {
             .unwrap_or_else(|| "base_link".into());
         Ok(RosOutputs {
             xyz: node.publish_on(&topics::XYZ_TARGET)?,
+            xyz_line: node.publish_on(&topics::XYZ_LINE_TARGET)?,
             gripper: node.publish_on(&topics::GRIPPER_TARGET)?,
             joints: node.publish_on(&topics::JOINT_TARGET)?,
             estop: node.publish_on(&topics::ESTOP)?,
@@ -39,21 +42,31 @@ impl RosOutputs {
 }
 
 impl RosOutputs {
-    /// Wait until the subscribers of the three target topics have acknowledged every
+    /// The publisher of `xyz_target`, or with `line` of `xyz_line_target`.
+    pub fn xyz_publisher(&self, line: bool) -> &TopicPublisher<PointStamped> {
+        if line {
+            &self.xyz_line
+        } else {
+            &self.xyz
+        }
+    }
+
+    /// Wait until the subscribers of the four target topics have acknowledged every
     /// target published, at most `max_wait` (false on timeout): before a command-line
     /// delivery exits, so its last target is not lost with the process.
     pub async fn delivered(&self, max_wait: std::time::Duration) -> bool {
-        let (xyz, gripper, joints) = tokio::join!(
+        let (xyz, xyz_line, gripper, joints) = tokio::join!(
             self.xyz.delivered(max_wait),
+            self.xyz_line.delivered(max_wait),
             self.gripper.delivered(max_wait),
             self.joints.delivered(max_wait)
         );
-        xyz && gripper && joints
+        xyz && xyz_line && gripper && joints
     }
 }
 
 impl Outputs for RosOutputs {
-    fn xyz_target(&self, xyz: [f64; 3], stamp: Time) {
+    fn xyz_target(&self, xyz: [f64; 3], line: bool, stamp: Time) {
         let msg = PointStamped {
             header: Header {
                 stamp,
@@ -65,7 +78,7 @@ impl Outputs for RosOutputs {
                 z: xyz[2],
             },
         };
-        self.xyz.publish(msg);
+        self.xyz_publisher(line).publish(msg);
     }
     fn gripper_target(&self, opening: f64) {
         self.gripper.publish(Float64 { data: opening });

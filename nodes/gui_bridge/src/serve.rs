@@ -56,15 +56,6 @@ pub async fn serve(
         },
     )?;
     hide_token_parameter(node, &params, source);
-    // compute_ik's parameters, for the move modes of the panel's programs: made now, so
-    // that the services are matched long before a program plays
-    let ik_params = match ros_plumbing::remote_params::RemoteParameters::new(node, "compute_ik") {
-        Ok(c) => Some(c),
-        Err(e) => {
-            log::warn!("programs cannot set move modes: {e}");
-            None
-        }
-    };
     let desk = crate::desk::Desk::new(crate::program_dir(
         &params.string("program_dir").unwrap_or_default(),
     ));
@@ -166,10 +157,6 @@ pub async fn serve(
         "the calibration wizard saves to {}",
         calibration.path().display()
     );
-    let motion = ComputeIkMotion {
-        client: ik_params,
-        original: std::cell::RefCell::new(None),
-    };
     let panel = crate::run(
         panel,
         crate::Handles {
@@ -181,7 +168,6 @@ pub async fn serve(
             outputs: &outputs,
             params,
             reporting,
-            motion: &motion,
             calibration: &calibration,
             shutdown,
         },
@@ -295,68 +281,4 @@ fn print_panel_urls(local: SocketAddr, token: Option<&Token>) {
         );
     }
     let _ = out.flush();
-}
-
-/// compute_ik's `motion` parameter, set for the panel's program moves through its
-/// parameter services.
-struct ComputeIkMotion {
-    client: Option<ros_plumbing::remote_params::RemoteParameters>,
-    /// `motion` before the first set
-    original: std::cell::RefCell<Option<ParameterValue>>,
-}
-
-/// How long compute_ik has to answer a parameter request.
-const PARAM_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(3);
-
-impl ComputeIkMotion {
-    fn client(&self) -> Result<&ros_plumbing::remote_params::RemoteParameters, String> {
-        self.client
-            .as_ref()
-            .ok_or_else(|| "no parameter client for compute_ik".to_string())
-    }
-}
-
-impl crate::desk::MotionControl for ComputeIkMotion {
-    fn set(
-        &self,
-        mode: crate::program::MoveMode,
-    ) -> futures::future::LocalBoxFuture<'_, Result<(), String>> {
-        Box::pin(async move {
-            let client = self.client()?;
-            let timeout = |what: &str| {
-                format!(
-                    "{} did not answer ({what}) within {:.0} s",
-                    client.node_name(),
-                    PARAM_TIMEOUT.as_secs_f64()
-                )
-            };
-            if self.original.borrow().is_none() {
-                let was = tokio::time::timeout(PARAM_TIMEOUT, client.get("motion"))
-                    .await
-                    .map_err(|_| timeout("get motion"))??
-                    .ok_or_else(|| format!("{} has no motion parameter", client.node_name()))?;
-                *self.original.borrow_mut() = Some(was);
-            }
-            tokio::time::timeout(
-                PARAM_TIMEOUT,
-                client.set("motion", ParameterValue::String(mode.as_str().into())),
-            )
-            .await
-            .map_err(|_| timeout("set motion"))?
-        })
-    }
-
-    fn restore(&self) -> futures::future::LocalBoxFuture<'_, ()> {
-        Box::pin(async move {
-            let Some(was) = self.original.borrow_mut().take() else {
-                return;
-            };
-            let Ok(client) = self.client() else { return };
-            match tokio::time::timeout(PARAM_TIMEOUT, client.set("motion", was)).await {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) => log::warn!("compute_ik's motion not put back: {e}"),
-                Err(_) => log::warn!("compute_ik's motion not put back: no answer"),
-            }
-        })
-    }
 }

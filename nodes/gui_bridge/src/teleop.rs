@@ -4,8 +4,10 @@
 
 use eezybot_kinematics::urdf::{JointKind, RobotModel};
 use eezybot_kinematics::{Arm, ArmJoints, KinematicsError, ACTUATED_JOINTS};
+use eezybot_msgs::geometry_msgs::PointStamped;
 use nalgebra::Vector3;
 use ros_plumbing::logging::{shorten, NAME_MAX};
+use ros_plumbing::topics::{self, Topic};
 use std::f64::consts::PI;
 use std::time::{Duration, Instant};
 
@@ -124,6 +126,9 @@ pub enum Event {
     SetTarget {
         /// the point
         xyz: [f64; 3],
+        /// on a straight line (a program's line move), else as compute_ik's `motion`
+        /// says ([`Command::Target`])
+        line: bool,
     },
     /// Move `tool0` by a step (m) from the current target (keyboard jog, gamepad).
     Jog {
@@ -150,14 +155,29 @@ pub enum Event {
 /// Something to publish.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Command {
-    /// On `xyz_target`.
-    Target([f64; 3]),
+    /// On `xyz_target` (moved as compute_ik's `motion` says: `joint` unless started
+    /// otherwise), or with `line` on `xyz_line_target` (the tool on a straight line).
+    Target {
+        /// the point (m, `base_link`)
+        xyz: [f64; 3],
+        /// on `xyz_line_target`
+        line: bool,
+    },
     /// On `gripper_target`.
     Gripper(f64),
     /// On `joint_target`.
     Joints(Vec<(String, f64)>),
     /// On `estop`.
     Estop(bool),
+}
+
+/// The topic of an xyz target: `xyz_line_target` for a straight line, else `xyz_target`.
+pub fn xyz_topic(line: bool) -> &'static Topic<PointStamped> {
+    if line {
+        &topics::XYZ_LINE_TARGET
+    } else {
+        &topics::XYZ_TARGET
+    }
 }
 
 /// Why an event sends nothing.
@@ -316,7 +336,8 @@ pub struct Teleop {
     target: Vector3<f64>,
     joints: ArmJoints,
     min_interval: Duration,
-    xyz: Slot<[f64; 3]>,
+    /// the point, and whether on a straight line
+    xyz: Slot<([f64; 3], bool)>,
     gripper: Slot<f64>,
     joint_target: Slot<Vec<(String, f64)>>,
     estop: Option<bool>,
@@ -411,7 +432,7 @@ impl Teleop {
     /// Apply an operator event. A refused event changes nothing and sends nothing.
     pub fn handle_event(&mut self, event: Event) -> Result<Feedback, Refusal> {
         match event {
-            Event::SetTarget { xyz } => self.move_to(xyz),
+            Event::SetTarget { xyz, line } => self.move_to(xyz, line),
             Event::Jog { dxyz } => {
                 if dxyz.iter().any(|d| !d.is_finite() || d.abs() > 0.05) {
                     return Err(Refusal::BadValue(format!(
@@ -419,7 +440,7 @@ impl Teleop {
                     )));
                 }
                 let t = self.target();
-                self.move_to([t[0] + dxyz[0], t[1] + dxyz[1], t[2] + dxyz[2]])
+                self.move_to([t[0] + dxyz[0], t[1] + dxyz[1], t[2] + dxyz[2]], false)
             }
             Event::Gripper { opening } => {
                 if !(0.0..=1.0).contains(&opening) {
@@ -459,7 +480,7 @@ impl Teleop {
         }
     }
 
-    fn move_to(&mut self, xyz: [f64; 3]) -> Result<Feedback, Refusal> {
+    fn move_to(&mut self, xyz: [f64; 3], line: bool) -> Result<Feedback, Refusal> {
         let joints = if self.is_eezybot() {
             self.check(xyz)?
         } else {
@@ -472,7 +493,7 @@ impl Teleop {
         self.target = Vector3::from(xyz);
         self.joints = joints;
         self.joint_target.pending = None;
-        self.xyz.pending = Some(xyz);
+        self.xyz.pending = Some((xyz, line));
         Ok(self.feedback())
     }
 
@@ -504,8 +525,8 @@ impl Teleop {
         if let Some(e) = self.estop.take() {
             out.push(Command::Estop(e));
         }
-        if let Some(t) = self.xyz.take(now, self.min_interval) {
-            out.push(Command::Target(t));
+        if let Some((xyz, line)) = self.xyz.take(now, self.min_interval) {
+            out.push(Command::Target { xyz, line });
         }
         if let Some(g) = self.gripper.take(now, self.min_interval) {
             out.push(Command::Gripper(g));

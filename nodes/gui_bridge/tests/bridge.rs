@@ -26,7 +26,7 @@ struct Fake {
 }
 
 impl Outputs for Fake {
-    fn xyz_target(&self, _: [f64; 3], _: Time) {}
+    fn xyz_target(&self, _: [f64; 3], _: bool, _: Time) {}
     fn gripper_target(&self, _: f64) {}
     fn joint_target(&self, _: &[(String, f64)], _: Time) {}
     fn estop(&self, engaged: bool) {
@@ -39,7 +39,7 @@ impl Outputs for Fake {
     fn diagnostics(&self, _: DiagnosticStatus) {}
 }
 
-use gui_bridge::desk::{Desk, NoMotionControl};
+use gui_bridge::desk::Desk;
 
 /// A desk whose program files would go to a directory of this test's own.
 fn desk() -> Desk {
@@ -73,7 +73,6 @@ fn handles<'a, I, O, S>(
             peers: PeerWatch::new(&[]),
             counts: Vec::new,
         },
-        motion: &NoMotionControl,
         calibration: &gui_bridge::NoCalibration,
         shutdown,
     }
@@ -157,7 +156,7 @@ struct Recorder {
 }
 
 impl Outputs for Recorder {
-    fn xyz_target(&self, _: [f64; 3], _: Time) {}
+    fn xyz_target(&self, _: [f64; 3], _: bool, _: Time) {}
     fn gripper_target(&self, _: f64) {}
     fn joint_target(&self, q: &[(String, f64)], _: Time) {
         self.joint_targets.borrow_mut().push(q.to_vec());

@@ -8,7 +8,6 @@ use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
 use gui_bridge::desk::Desk;
 use gui_bridge::panel::{Clock, Effect, Panel};
-use gui_bridge::program::MoveMode;
 use gui_bridge::teleop::Command;
 use gui_bridge::web::{ClientRequest, ProgramOp};
 use gui_bridge::Input;
@@ -61,6 +60,11 @@ fn target(xyz: [f64; 3]) -> ClientRequest {
     ClientRequest::Target { xyz }
 }
 
+/// A target published on `xyz_target`.
+fn on_xyz_target(xyz: [f64; 3]) -> Command {
+    Command::Target { xyz, line: false }
+}
+
 #[test]
 fn targets_go_out_at_the_rate_latest_wins_and_the_estop_first() {
     let mut p = panel("rate");
@@ -72,7 +76,7 @@ fn targets_go_out_at_the_rate_latest_wins_and_the_estop_first() {
         .any(|e| matches!(e, Effect::Snapshot(s) if s.target == [0.2, 0.0, 0.15])));
     assert!(p.publish_due(at(t0, 0).now));
     let e = p.on_tick(at(t0, 0));
-    assert_eq!(published(&e), [Command::Target([0.2, 0.0, 0.15])]);
+    assert_eq!(published(&e), [on_xyz_target([0.2, 0.0, 0.15])]);
     let sent = told(&e, true);
     assert_eq!(sent[0]["t"], "sent");
     assert_eq!(sent[0]["stamp_ns"], 1_000_000_000_000_i64);
@@ -88,7 +92,7 @@ fn targets_go_out_at_the_rate_latest_wins_and_the_estop_first() {
     assert!(published(&p.on_tick(at(t0, 10))).is_empty());
     assert_eq!(
         published(&p.on_tick(at(t0, 20))),
-        [Command::Target([0.2, 0.03, 0.15])]
+        [on_xyz_target([0.2, 0.03, 0.15])]
     );
 }
 
@@ -147,45 +151,100 @@ fn program_messages(effects: &[Effect]) -> Vec<Value> {
         .collect()
 }
 
-/// A panel playing a program of one point (where the arm is) to be moved to in a
-/// straight line; the effects of `play`.
-fn play_one_point_in_line_mode(test: &str) -> (Panel, Instant, Vec<Effect>) {
-    let mut p = panel(test);
-    let t0 = Instant::now();
-    p.on_request(ClientRequest::Program(ProgramOp::Teach), at(t0, 0));
-    let mode = ProgramOp::Mode {
-        i: 0,
-        mode: Some("line".into()),
-    };
-    p.on_request(ClientRequest::Program(mode), at(t0, 1));
-    let play = ProgramOp::Play { looping: false };
-    let e = p.on_request(ClientRequest::Program(play), at(t0, 2));
-    (p, t0, e)
+/// `joint_states` with the EezyBot's tool at `xyz`.
+fn joint_states_at(xyz: [f64; 3]) -> Input {
+    let arm = gui_bridge::load_arm("").unwrap();
+    let q = arm.solve_position(&xyz.into(), 0.0).unwrap();
+    Input::JointStates(JointState {
+        name: ["base_joint", "shoulder_joint", "elbow_joint"]
+            .map(String::from)
+            .to_vec(),
+        position: vec![q.base_rad, q.shoulder_rad, q.elbow_rad],
+        ..Default::default()
+    })
+}
+
+/// Teach `points` (the target moved to each first; no `joint_states` yet, so the target
+/// is taught) with their modes, from `t0`; returns the time after.
+fn teach(p: &mut Panel, t0: Instant, points: &[([f64; 3], Option<&str>)]) -> u64 {
+    let mut ms = 0;
+    for (i, (xyz, mode)) in points.iter().enumerate() {
+        p.on_request(target(*xyz), at(t0, ms));
+        p.on_request(ClientRequest::Program(ProgramOp::Teach), at(t0, ms + 1));
+        let mode = ProgramOp::Mode {
+            i,
+            mode: mode.map(String::from),
+        };
+        p.on_request(ClientRequest::Program(mode), at(t0, ms + 2));
+        ms += 30;
+    }
+    ms
 }
 
 #[test]
-fn a_program_sets_its_move_mode_plays_and_an_estop_stops_it_and_puts_the_mode_back() {
-    let (mut p, t0, e) = play_one_point_in_line_mode("play");
-    assert!(e
-        .iter()
-        .any(|e| matches!(e, Effect::SetMotion(MoveMode::Line))));
-    assert_eq!(
-        program_messages(&e).last().unwrap()["player"]["phase"],
-        "setting_mode"
+fn a_program_sends_each_point_on_its_kinds_topic_in_order_and_an_estop_stops_it() {
+    let mut p = panel("kinds");
+    let t0 = Instant::now();
+    let (a, b, c) = ([0.2, 0.0, 0.15], [0.18, 0.05, 0.12], [0.22, -0.04, 0.18]);
+    let mut ms = teach(
+        &mut p,
+        t0,
+        &[(a, None), (b, Some("line")), (c, Some("joint"))],
     );
-    // nothing goes out before compute_ik took the mode
-    assert!(!p.publish_due(at(t0, 3).now));
-    p.on_mode_set(Ok(()), at(t0, 4));
-    let e = p.on_tick(at(t0, 4));
-    assert_eq!(published(&e).len(), 1, "{e:?}");
-    // compute_ik's e-stop on the topic: stop, and put `motion` back
-    let e = p.on_input(Input::Estop(true), at(t0, 5));
+    let play = ProgramOp::Play { looping: false };
+    let mut phases = vec![];
+    let mut effects = p.on_request(ClientRequest::Program(play), at(t0, ms));
+    let mut sent = vec![];
+    for next in [Some(a), Some(b), Some(c), None] {
+        ms += 30;
+        effects.extend(p.on_tick(at(t0, ms)));
+        let published = published(&effects);
+        let told = told(&effects, true);
+        phases.extend(
+            program_messages(&effects)
+                .iter()
+                .map(|m| m["player"]["phase"].as_str().unwrap_or("").to_string()),
+        );
+        sent.extend(
+            published.into_iter().zip(
+                of_kind(&told, "sent")
+                    .into_iter()
+                    .map(|m| m["topic"].clone()),
+            ),
+        );
+        // the arm arrives: the next point is sent at once, nothing between
+        effects = next.map_or_else(Vec::new, |xyz| {
+            p.on_input(joint_states_at(xyz), at(t0, ms + 1))
+        });
+    }
+    let line = |xyz| Command::Target { xyz, line: true };
+    assert_eq!(
+        sent,
+        [
+            (on_xyz_target(a), Value::from("xyz_target")),
+            (line(b), Value::from("xyz_line_target")),
+            (on_xyz_target(c), Value::from("xyz_target")),
+        ]
+    );
+    assert!(
+        phases
+            .iter()
+            .all(|ph| ["moving", "dwelling", "finished"].contains(&ph.as_str())),
+        "{phases:?}"
+    );
+    assert_eq!(phases.last().map(String::as_str), Some("finished"));
+
+    // played again: compute_ik's e-stop on the topic stops it
+    let play = ProgramOp::Play { looping: true };
+    p.on_request(ClientRequest::Program(play), at(t0, ms + 100));
+    assert_eq!(published(&p.on_tick(at(t0, ms + 130))), [on_xyz_target(a)]);
+    let e = p.on_input(Input::Estop(true), at(t0, ms + 140));
     assert_eq!(of_kind(&told(&e, true), "estop").len(), 1);
-    assert!(e.iter().any(|e| matches!(e, Effect::RestoreMotion)));
     assert_eq!(
         program_messages(&e).last().unwrap()["player"]["phase"],
         "stopped"
     );
+    assert!(!p.publish_due(at(t0, ms + 200).now));
 }
 
 #[test]
@@ -312,24 +371,4 @@ fn an_unusable_robot_description_is_logged_and_changes_nothing() {
         at(t0, 2),
     );
     assert!(told(&e, false)[0]["reachable"].is_null());
-}
-
-#[test]
-fn a_move_mode_compute_ik_does_not_take_stops_the_program_with_the_reason_and_puts_it_back() {
-    let (mut p, t0, _) = play_one_point_in_line_mode("mode");
-    let e = p.on_mode_set(Err("compute_ik did not answer".into()), at(t0, 3));
-    assert!(
-        e.iter().any(|e| matches!(e, Effect::RestoreMotion)),
-        "{e:?}"
-    );
-    let last = program_messages(&e).pop().unwrap();
-    assert_eq!(last["player"]["phase"], "failed");
-    assert_eq!(
-        last["message"],
-        "stopped at point 1: compute_ik did not take motion:=line (compute_ik did not answer)"
-    );
-    assert!(
-        !p.publish_due(at(t0, 4).now),
-        "no target after a failed mode"
-    );
 }

@@ -24,7 +24,8 @@ fn jaco() -> eezybot_kinematics::urdf::RobotModel {
 /// A teleop that took the target `xyz`.
 fn teleop_at(xyz: [f64; 3]) -> Teleop {
     let mut t = teleop();
-    t.handle_event(Event::SetTarget { xyz }).unwrap();
+    t.handle_event(Event::SetTarget { xyz, line: false })
+        .unwrap();
     t
 }
 
@@ -35,6 +36,7 @@ fn unreachable_targets_send_nothing_and_keep_the_target() {
     let e = t
         .handle_event(Event::SetTarget {
             xyz: [1.0, 0.0, 0.1],
+            line: true,
         })
         .unwrap_err();
     assert!(e.to_string().contains("out of reach"));
@@ -50,7 +52,13 @@ fn jog_moves_by_the_step_from_the_current_target() {
     })
     .unwrap();
     let now = Instant::now();
-    assert_eq!(t.take_due(now), vec![Command::Target([0.2, 0.01, 0.15])]);
+    assert_eq!(
+        t.take_due(now),
+        vec![Command::Target {
+            xyz: [0.2, 0.01, 0.15],
+            line: false
+        }]
+    );
 }
 
 #[test]
@@ -58,9 +66,11 @@ fn latest_wins_within_the_rate_limit() {
     let mut t = teleop_at([0.2, 0.0, 0.15]);
     let t0 = Instant::now();
     assert_eq!(t.take_due(t0).len(), 1);
-    for y in [0.01, 0.02, 0.03] {
+    // the latest with its kind: a line move of a program's
+    for (y, line) in [(0.01, false), (0.02, false), (0.03, true)] {
         t.handle_event(Event::SetTarget {
             xyz: [0.2, y, 0.15],
+            line,
         })
         .unwrap();
     }
@@ -74,7 +84,10 @@ fn latest_wins_within_the_rate_limit() {
     );
     assert_eq!(
         t.take_due(t0 + Duration::from_millis(20)),
-        vec![Command::Target([0.2, 0.03, 0.15])]
+        vec![Command::Target {
+            xyz: [0.2, 0.03, 0.15],
+            line: true
+        }]
     );
 }
 
@@ -124,11 +137,15 @@ fn a_urdf_arm_gets_its_own_joints_and_no_eezybot_check() {
     // a Cartesian target out of the EezyBot's reach is sent: compute_ik judges it
     t.handle_event(Event::SetTarget {
         xyz: [0.5, 0.2, 0.4],
+        line: false,
     })
     .unwrap();
     assert_eq!(
         t.take_due(Instant::now() + Duration::from_secs(1)),
-        vec![Command::Target([0.5, 0.2, 0.4])]
+        vec![Command::Target {
+            xyz: [0.5, 0.2, 0.4],
+            line: false
+        }]
     );
 }
 

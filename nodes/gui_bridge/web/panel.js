@@ -438,14 +438,14 @@ function renderProgram() {
   list.innerHTML = "";
   program.points.forEach((p, i) => {
     const li = document.createElement("li");
-    if (player && player.index === i && ["moving", "dwelling", "setting_mode"].includes(player.phase)) li.className = "current";
+    if (player && player.index === i && ["moving", "dwelling"].includes(player.phase)) li.className = "current";
     const name = Object.assign(document.createElement("input"), { className: "name", value: p.name || `P${i + 1}`, title: `(${p.xyz.map((v) => v.toFixed(3)).join(", ")}) m` });
     name.addEventListener("change", () => progSend("rename", { i, name: name.value }));
     const dwell = Object.assign(document.createElement("input"), { className: "dwell", type: "number", min: 0, step: 0.1, value: p.dwell_s, title: "dwell (s)" });
     dwell.addEventListener("change", () => progSend("dwell", { i, s: parseFloat(dwell.value) }));
     const modeSel = document.createElement("select");
     for (const [v, label] of [["", "default"], ["joint", "joint"], ["line", "line"]]) modeSel.append(Object.assign(document.createElement("option"), { value: v, textContent: label }));
-    modeSel.value = p.mode || ""; modeSel.title = "move mode: joint space, or a straight Cartesian line";
+    modeSel.value = p.mode || ""; modeSel.title = "how to get there: line = the tool on a straight line (xyz_line_target); joint = xyz_target, as compute_ik's motion says (joint space unless started otherwise); default = joint here, line under gui_bridge play --line";
     modeSel.addEventListener("change", () => progSend("mode", { i, mode: modeSel.value || null }));
     const tools = document.createElement("span");
     const btn = (label, title, f) => { const b = Object.assign(document.createElement("button"), { textContent: label, title }); b.onclick = f; tools.append(b); };
