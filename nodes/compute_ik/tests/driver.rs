@@ -576,3 +576,71 @@ fn a_switch_that_deactivates_arm_controller_stops_its_trajectory_where_it_is() {
     assert_eq!(active(&mut d, t2, w2), ["teleop", "gripper_controller"]);
     assert!(controller_value(&d, "last_switch_controller") == "done");
 }
+
+/// The claw's servo angle (deg) of a published step.
+fn claw_deg(effect: &Effect) -> Option<f64> {
+    match effect {
+        Effect::Publish(s) => s.servo_angles.as_ref().map(|m| {
+            let i = m.name.iter().position(|n| n == "gripper_servo").unwrap();
+            m.position[i].to_degrees()
+        }),
+        _ => None,
+    }
+}
+
+/// A trajectory that starts while a gripper goal moves the claw (the core's planner
+/// moving it, the arm idle) takes the claw on from where it is: no step of the claw's
+/// servo is longer than its speed allows in a period (found by tests/soak/switching.py:
+/// the claw jumped back 85° to where the gripper goal had started).
+#[test]
+fn a_trajectory_started_during_a_gripper_goal_takes_the_claw_on_from_where_it_is() {
+    use compute_ik::pipeline::GoalRequest;
+    use eezybot_msgs::control_msgs::{GripperCommand, GripperCommandGoal};
+    let clock = Clock::new();
+    let mut d = driver();
+    let h = home(&d);
+    let (t0, w0) = clock.at(ms(0));
+    let open = ArmConfig::default().geometry.gripper_open_rad;
+    let goal = Input::GripperGoal(GoalRequest {
+        request: Default::default(),
+        id: ros2_client::action::GoalId::ZERO,
+        goal: Box::new(GripperCommandGoal {
+            command: GripperCommand {
+                position: open,
+                max_effort: 0.0,
+            },
+        }),
+    });
+    let mut steps: Vec<f64> = d
+        .on_inputs(vec![goal], t0, w0)
+        .iter()
+        .filter_map(claw_deg)
+        .collect();
+    let (t1, w1) = clock.at(ms(200));
+    while let Some(t) = d.deadline().filter(|t| *t <= t1) {
+        let e = d.on_time(t, clock.wall(t - clock.t0));
+        steps.extend(e.iter().filter_map(claw_deg));
+    }
+    let moved = steps.last().unwrap() - steps.first().unwrap();
+    assert!(moved.abs() > 20.0, "the claw is under way: {steps:?}");
+    let end = [h[0] - 0.2, h[1], h[2]];
+    let e = d.on_inputs(vec![trajectory(&[(end, 1.0)])], t1, w1);
+    steps.extend(e.iter().filter_map(claw_deg));
+    steps.extend(
+        run_until_idle(&mut d, &clock)
+            .iter()
+            .filter_map(|(_, e)| claw_deg(e)),
+    );
+    let max_step = ArmConfig::default().motion.gripper.max_velocity_deg_s * 0.02;
+    for (a, b) in steps.iter().zip(&steps[1..]) {
+        assert!(
+            (b - a).abs() <= max_step + 1e-6,
+            "the claw stepped {a} -> {b} deg: {steps:?}"
+        );
+    }
+    let last = steps.last().unwrap();
+    assert!(
+        (last - 180.0).abs() < 1e-6,
+        "the gripper goal got there: {last}"
+    );
+}

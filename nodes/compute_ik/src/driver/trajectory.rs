@@ -8,6 +8,7 @@ use crate::controller::{self, Actual, ControllerMap, Execution, Outcome};
 use crate::pipeline::{ArmModel, GoalRequest};
 use arbiter::{Command, Controller};
 use eezybot_motion::track;
+use eezybot_motion::AxisState;
 use eezybot_msgs::control_msgs::{
     FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal, FollowJointTrajectoryResult as Fjt,
     JointTrajectoryControllerState,
@@ -169,6 +170,17 @@ impl<M: ArmModel> Driver<M> {
         );
         self.take(Command::Trajectory, "arm_controller", now, wall, effects);
         self.core.stop_motion();
+        // a gripper goal under way goes on from where the core's planner moved the claw
+        // (tracked from here on beside the trajectory), not from where it started
+        if let (Some(g), Some(gm)) = (
+            &mut self.gripper,
+            self.map.as_ref().and_then(|m| m.gripper.as_ref()),
+        ) {
+            g.motion = AxisState {
+                position: self.core.axes()[gm.axis],
+                velocity: 0.0,
+            };
+        }
         self.last_trajectory = Some(format!(
             "executing: {} points over {:.3} s",
             plan.trajectory.point_times().len(),
