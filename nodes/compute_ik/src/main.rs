@@ -86,15 +86,14 @@ impl Outputs for RosOutputs<'_> {
         let Some(c) = self.controllers else { return };
         match effect {
             Effect::AnswerGoal {
-                request,
-                id,
+                ticket,
                 accepted,
                 gripper,
             } => match (gripper, accepted) {
-                (false, true) => c.trajectory.accept(request, id),
-                (false, false) => c.trajectory.reject(request),
-                (true, true) => c.gripper.accept(request, id),
-                (true, false) => c.gripper.reject(request),
+                (false, true) => c.trajectory.accept(ticket),
+                (false, false) => c.trajectory.reject(ticket),
+                (true, true) => c.gripper.accept(ticket),
+                (true, false) => c.gripper.reject(ticket),
             },
             Effect::TrajectoryFeedback(id, f) => {
                 let wire = match c.layout {
@@ -336,11 +335,11 @@ where
         loop {
             let input = match server.next().await {
                 ActionRequest::Goal {
-                    request,
+                    ticket,
                     id,
                     goal: g,
                 } => goal(GoalRequest {
-                    request,
+                    ticket,
                     id,
                     goal: Box::new(g),
                 }),
