@@ -34,7 +34,7 @@ enum FeedbackWire {
     Kilted(FollowJointTrajectoryFeedback),
     Jazzy(FollowJointTrajectoryFeedbackJazzy),
 }
-impl ros2_client::Message for FeedbackWire {}
+impl ros_plumbing::Message for FeedbackWire {}
 
 type TrajectoryServer =
     ActionServer<FollowJointTrajectoryGoal, FollowJointTrajectoryResult, FeedbackWire>;
@@ -327,9 +327,9 @@ fn action_inputs<'a, G, R, F>(
     goal: fn(GoalRequest<G>) -> Input,
 ) -> futures::stream::LocalBoxStream<'a, Input>
 where
-    G: ros2_client::Message + Clone + 'static,
-    R: ros2_client::Message + Clone + Default + 'static,
-    F: ros2_client::Message + 'static,
+    G: ros_plumbing::Message + Clone + 'static,
+    R: ros_plumbing::Message + Clone + Default + 'static,
+    F: ros_plumbing::Message + 'static,
 {
     futures::stream::unfold(server, move |server| async move {
         loop {
@@ -361,8 +361,8 @@ fn service_inputs<'a, Req, Resp>(
     input: fn(ros_plumbing::service::Ticket, ros_plumbing::service::Caller, Req) -> Input,
 ) -> futures::stream::LocalBoxStream<'a, Input>
 where
-    Req: ros2_client::Message + Clone + 'static,
-    Resp: ros2_client::Message + 'static,
+    Req: ros_plumbing::Message + Clone + 'static,
+    Resp: ros_plumbing::Message + 'static,
 {
     futures::stream::unfold(server, move |server| async move {
         loop {
