@@ -14,16 +14,19 @@ use crate::names::Resolver;
 use crate::qos;
 use crate::PlumbingError;
 use ros2_client::action::{
-    ActionServerQosPolicies, CancelGoalRequest, CancelGoalResponse, GoalId, GoalInfo,
-    GoalStatusEnum,
+    ActionServerQosPolicies, CancelGoalRequest, CancelGoalResponse, GoalInfo, GoalStatusEnum,
 };
 use ros2_client::action_msgs::{CancelGoalResponseEnum, GoalStatus, GoalStatusArray};
 use ros2_client::builtin_interfaces::Time;
 use ros2_client::service::request_id::RmwRequestId;
 use ros2_client::{ActionTypeName, Message, Name, Node, ServiceMapping};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
+
+/// ros2-client's goal id (a `unique_identifier_msgs/UUID`): the wire's, kept inside
+/// this module.
+type RosGoalId = ros2_client::action::GoalId;
 
 /// How long a finished goal's result is kept for a client that asks late (rcl_action's
 /// default `result_timeout`, 15 min).
@@ -74,7 +77,7 @@ struct Goal<R, Q> {
 /// waiting for them. `R`: the result type; `Q`: what identifies a request to answer.
 #[derive(Debug)]
 pub struct GoalTable<R, Q> {
-    goals: BTreeMap<GoalId, Goal<R, Q>>,
+    goals: BTreeMap<RosGoalId, Goal<R, Q>>,
 }
 
 impl<R, Q> Default for GoalTable<R, Q> {
@@ -99,7 +102,7 @@ pub enum ResultAnswer<R> {
 
 impl<R: Clone, Q> GoalTable<R, Q> {
     /// A goal accepted at `stamp` (already executing: this server has no queue).
-    pub fn accept(&mut self, id: GoalId, stamp: Time) {
+    pub fn accept(&mut self, id: RosGoalId, stamp: Time) {
         self.goals.insert(
             id,
             Goal {
@@ -113,17 +116,17 @@ impl<R: Clone, Q> GoalTable<R, Q> {
     }
 
     /// Whether `id` is known (running or finished and kept).
-    pub fn contains(&self, id: &GoalId) -> bool {
+    pub fn contains(&self, id: &RosGoalId) -> bool {
         self.goals.contains_key(id)
     }
 
     /// Whether `id` is running (executing or canceling).
-    pub fn is_active(&self, id: &GoalId) -> bool {
+    pub fn is_active(&self, id: &RosGoalId) -> bool {
         self.goals.get(id).is_some_and(|g| g.finished.is_none())
     }
 
     /// The goals still running.
-    pub fn active(&self) -> Vec<GoalId> {
+    pub fn active(&self) -> Vec<RosGoalId> {
         self.goals
             .iter()
             .filter(|(_, g)| g.finished.is_none())
@@ -133,7 +136,7 @@ impl<R: Clone, Q> GoalTable<R, Q> {
 
     /// A result request for `id` from `requester`: answered now, or kept until the
     /// goal ends.
-    pub fn result_request(&mut self, id: GoalId, requester: Q) -> ResultAnswer<R> {
+    pub fn result_request(&mut self, id: RosGoalId, requester: Q) -> ResultAnswer<R> {
         match self.goals.get_mut(&id) {
             None => ResultAnswer::Unknown,
             Some(Goal {
@@ -152,7 +155,7 @@ impl<R: Clone, Q> GoalTable<R, Q> {
     /// or before `stamp`, or all when both are zero, as rcl_action reads it), now
     /// canceling, and the answer's return code.
     pub fn cancel_request(&mut self, info: &GoalInfo) -> (Vec<GoalInfo>, CancelGoalResponseEnum) {
-        let zero_id = info.goal_id == GoalId::ZERO;
+        let zero_id = info.goal_id == RosGoalId::ZERO;
         let zero_stamp = info.stamp == Time::ZERO;
         let mut canceling = Vec::new();
         let mut terminated = false;
@@ -186,7 +189,7 @@ impl<R: Clone, Q> GoalTable<R, Q> {
     }
 
     /// Whether a cancel of `id` was asked for (it is canceling).
-    pub fn is_canceling(&self, id: &GoalId) -> bool {
+    pub fn is_canceling(&self, id: &RosGoalId) -> bool {
         self.goals
             .get(id)
             .is_some_and(|g| g.status == GoalStatusEnum::Canceling)
@@ -196,7 +199,7 @@ impl<R: Clone, Q> GoalTable<R, Q> {
     /// answer with the returned status. `None` if it is not running.
     pub fn finish(
         &mut self,
-        id: &GoalId,
+        id: &RosGoalId,
         end: GoalEnd,
         result: R,
         now: Instant,
@@ -216,7 +219,7 @@ impl<R: Clone, Q> GoalTable<R, Q> {
             g.finished
                 .is_none_or(|t| now.saturating_duration_since(t) < RESULT_KEEP)
         });
-        let mut finished: Vec<(Instant, GoalId)> = self
+        let mut finished: Vec<(Instant, RosGoalId)> = self
             .goals
             .iter()
             .filter_map(|(id, g)| g.finished.map(|t| (t, *id)))
@@ -248,13 +251,59 @@ impl<R: Clone, Q> GoalTable<R, Q> {
     }
 }
 
+/// An action goal's id: the 16 bytes of its UUID (`unique_identifier_msgs/UUID`),
+/// chosen by the client. Shown as the UUID (`0a1b2c3d-…`).
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct GoalId([u8; 16]);
+
+impl GoalId {
+    /// The nil UUID (all zeros).
+    pub const ZERO: GoalId = GoalId([0; 16]);
+
+    /// The goal id of these 16 bytes (in the UUID's byte order).
+    pub const fn from_bytes(bytes: [u8; 16]) -> GoalId {
+        GoalId(bytes)
+    }
+
+    /// Its 16 bytes.
+    pub const fn as_bytes(&self) -> &[u8; 16] {
+        &self.0
+    }
+
+    fn from_ros(id: RosGoalId) -> GoalId {
+        GoalId(*id.uuid.as_bytes())
+    }
+
+    fn to_ros(self) -> RosGoalId {
+        RosGoalId {
+            uuid: uuid::Uuid::from_bytes(self.0),
+        }
+    }
+}
+
+impl std::fmt::Display for GoalId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(&uuid::Uuid::from_bytes(self.0).hyphenated(), f)
+    }
+}
+
+impl std::fmt::Debug for GoalId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "GoalId({self})")
+    }
+}
+
+/// A goal request to answer (with [`ActionServer::accept`] or [`ActionServer::reject`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Ticket(pub u64);
+
 /// A request an [`ActionServer`] hands to the node.
 #[derive(Debug)]
 pub enum ActionRequest<G> {
     /// A new goal: accept ([`ActionServer::accept`]) or reject it.
     Goal {
         /// The request, to answer.
-        request: RmwRequestId,
+        ticket: Ticket,
         /// The goal's id.
         id: GoalId,
         /// The goal.
@@ -302,7 +351,15 @@ where
     server: ros2_client::action::ActionServer<G, R, F>,
     table: Mutex<GoalTable<R, RmwRequestId>>,
     waiting: Mutex<Vec<(RmwRequestId, Answer<R>, Instant)>>,
+    goal_requests: Mutex<GoalRequests>,
     name: String,
+}
+
+/// The goal requests not answered yet, by ticket: the request and the goal's id.
+#[derive(Default)]
+struct GoalRequests {
+    next: u64,
+    open: HashMap<Ticket, (RmwRequestId, RosGoalId)>,
 }
 
 impl<G, R, F> ActionServer<G, R, F>
@@ -337,6 +394,7 @@ where
             server,
             table: Mutex::new(GoalTable::default()),
             waiting: Mutex::new(Vec::new()),
+            goal_requests: Mutex::new(GoalRequests::default()),
             name: resolved,
         };
         s.publish_statuses();
@@ -350,6 +408,27 @@ where
 
     fn table(&self) -> std::sync::MutexGuard<'_, GoalTable<R, RmwRequestId>> {
         self.table.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn goal_requests(&self) -> std::sync::MutexGuard<'_, GoalRequests> {
+        self.goal_requests.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// A goal request, given a ticket to answer it by.
+    fn goal_request(
+        &self,
+        request: RmwRequestId,
+        goal: ros2_client::action::SendGoalRequest<G>,
+    ) -> ActionRequest<G> {
+        let mut requests = self.goal_requests();
+        let ticket = Ticket(requests.next);
+        requests.next += 1;
+        requests.open.insert(ticket, (request, goal.goal_id));
+        ActionRequest::Goal {
+            ticket,
+            id: GoalId::from_ros(goal.goal_id),
+            goal: goal.goal,
+        }
     }
 
     fn publish_statuses(&self) {
@@ -370,7 +449,7 @@ where
             tokio::select! {
                 _ = tokio::time::sleep(ANSWER_RECHECK), if waiting => {}
                 r = goal => match r {
-                    Ok((request, g)) => return ActionRequest::Goal { request, id: g.goal_id, goal: g.goal },
+                    Ok((request, g)) => return self.goal_request(request, g),
                     Err(e) => return ActionRequest::Unreadable(format!("send_goal: {e:?}")),
                 },
                 r = cancel => match r {
@@ -391,7 +470,10 @@ where
 
     fn cancel(&self, request: RmwRequestId, c: &CancelGoalRequest) -> Option<Vec<GoalId>> {
         let (canceling, return_code) = self.table().cancel_request(&c.goal_info);
-        let ids: Vec<GoalId> = canceling.iter().map(|g| g.goal_id).collect();
+        let ids: Vec<GoalId> = canceling
+            .iter()
+            .map(|g| GoalId::from_ros(g.goal_id))
+            .collect();
         let response = CancelGoalResponse {
             return_code,
             goals_canceling: canceling,
@@ -404,7 +486,7 @@ where
         Some(ids)
     }
 
-    fn result_request(&self, request: RmwRequestId, id: GoalId) {
+    fn result_request(&self, request: RmwRequestId, id: RosGoalId) {
         let answer = self.table().result_request(id, request);
         let (status, result) = match answer {
             ResultAnswer::Later => return,
@@ -419,8 +501,12 @@ where
         self.answer(request, Answer::Result(response));
     }
 
-    /// Accept goal `id` (it executes at once).
-    pub fn accept(&self, request: RmwRequestId, id: GoalId) {
+    /// Accept the goal of `ticket` (it executes at once); an unknown or answered ticket
+    /// is ignored.
+    pub fn accept(&self, ticket: Ticket) {
+        let Some((request, id)) = self.goal_requests().open.remove(&ticket) else {
+            return;
+        };
         let stamp = Time::now();
         {
             let mut table = self.table();
@@ -431,8 +517,12 @@ where
         self.answer_goal(request, true, stamp);
     }
 
-    /// Reject a goal (it is forgotten).
-    pub fn reject(&self, request: RmwRequestId) {
+    /// Reject the goal of `ticket` (it is forgotten); an unknown or answered ticket is
+    /// ignored.
+    pub fn reject(&self, ticket: Ticket) {
+        let Some((request, _)) = self.goal_requests().open.remove(&ticket) else {
+            return;
+        };
         self.answer_goal(request, false, Time::now());
     }
 
@@ -521,11 +611,12 @@ where
 
     /// Whether goal `id` is running.
     pub fn is_active(&self, id: &GoalId) -> bool {
-        self.table().is_active(id)
+        self.table().is_active(&id.to_ros())
     }
 
     /// Feedback on running goal `id`.
     pub fn feedback(&self, id: GoalId, feedback: F) {
+        let id = id.to_ros();
         if !self.table().is_active(&id) {
             return;
         }
@@ -537,6 +628,7 @@ where
     /// Goal `id` ended: its status is published and its result sent to every client
     /// that asked (and kept for those that ask later). Nothing if it is not running.
     pub fn finish(&self, id: GoalId, end: GoalEnd, result: R) {
+        let id = id.to_ros();
         let done = self
             .table()
             .finish(&id, end, result.clone(), Instant::now());
@@ -554,20 +646,39 @@ where
 mod tests {
     use super::*;
 
-    /// A goal id whose first byte is `n` (its CDR form is its 16 bytes).
-    fn id(n: u8) -> GoalId {
+    /// A goal id whose first byte is `n`.
+    fn id(n: u8) -> RosGoalId {
         let mut bytes = [0u8; 16];
         bytes[0] = n;
-        rustdds::serialization::deserialize_from_cdr_with_rep_id::<GoalId>(
-            &bytes,
-            rustdds::RepresentationIdentifier::CDR_LE,
-        )
-        .map(|(v, _)| v)
-        .expect("a UUID is 16 bytes")
+        GoalId::from_bytes(bytes).to_ros()
     }
 
     fn t(s: i32) -> Time {
         Time::from_nanos(i64::from(s) * 1_000_000_000)
+    }
+
+    #[test]
+    fn a_goal_id_is_the_uuid_of_its_wire_bytes_and_shows_as_that_uuid() {
+        let bytes: [u8; 16] = std::array::from_fn(|i| (i as u8 * 17).wrapping_add(1));
+        let wire = rustdds::serialization::deserialize_from_cdr_with_rep_id::<RosGoalId>(
+            &bytes,
+            rustdds::RepresentationIdentifier::CDR_LE,
+        )
+        .map(|(v, _)| v)
+        .expect("a UUID is 16 bytes");
+        let id = GoalId::from_bytes(bytes);
+        assert_eq!(GoalId::from_ros(wire), id);
+        assert_eq!(id.to_ros(), wire);
+        assert_eq!(id.as_bytes(), &bytes);
+        assert_eq!(id.to_string(), "01122334-4556-6778-899a-abbccddeef00");
+        assert_eq!(
+            format!("{id:?}"),
+            "GoalId(01122334-4556-6778-899a-abbccddeef00)"
+        );
+        assert_eq!(
+            GoalId::ZERO.to_string(),
+            "00000000-0000-0000-0000-000000000000"
+        );
     }
 
     #[test]
@@ -616,13 +727,13 @@ mod tests {
             CancelGoalResponseEnum::UnknownGoal
         );
         let before_2 = GoalInfo {
-            goal_id: GoalId::ZERO,
+            goal_id: RosGoalId::ZERO,
             stamp: t(2),
         };
         let (c, _) = table.cancel_request(&before_2);
         assert_eq!(c.iter().map(|g| g.goal_id).collect::<Vec<_>>(), vec![id(1)]);
         let all = GoalInfo {
-            goal_id: GoalId::ZERO,
+            goal_id: RosGoalId::ZERO,
             stamp: Time::ZERO,
         };
         let (c, _) = table.cancel_request(&all);

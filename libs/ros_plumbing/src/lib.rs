@@ -30,5 +30,5 @@ pub use params::{ParamRange, ParamSpec, Params};
 pub use publisher::TopicPublisher;
 /// The ros2-client types a node's I/O shell names (so that nodes depend on this crate,
 /// not on ros2-client).
-pub use ros2_client::{Node, ParameterValue, Subscription};
+pub use ros2_client::{Message, Node, ParameterValue, Subscription};
 pub use topics::Topic;

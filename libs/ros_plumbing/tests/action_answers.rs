@@ -108,23 +108,25 @@ async fn a_goal_answer_waits_for_the_clients_response_reader() {
             sequence_number: SequenceNumber::from(1),
         })
         .build();
+    let goal_id = GoalId::new_random();
     let goal = SendGoalRequest {
-        goal_id: GoalId::new_random(),
+        goal_id,
         goal: Order { order: 5 },
     };
     writer.write_with_options(goal, options).unwrap();
 
-    let (request, id) = match tokio::time::timeout(Duration::from_secs(10), server.next()).await {
-        Ok(ActionRequest::Goal { request, id, goal }) => {
+    let ticket = match tokio::time::timeout(Duration::from_secs(10), server.next()).await {
+        Ok(ActionRequest::Goal { ticket, id, goal }) => {
             assert_eq!(goal.order, 5);
-            (request, id)
+            assert_eq!(id.as_bytes(), goal_id.uuid.as_bytes());
+            ticket
         }
         other => panic!(
             "expected the goal, got {:?}",
             other.map(|_| "another request")
         ),
     };
-    server.accept(request, id);
+    server.accept(ticket);
     // the server runs on for a while before the client's reader exists
     let _ = tokio::time::timeout(Duration::from_millis(300), server.next()).await;
 

@@ -34,7 +34,7 @@ enum FeedbackWire {
     Kilted(FollowJointTrajectoryFeedback),
     Jazzy(FollowJointTrajectoryFeedbackJazzy),
 }
-impl ros2_client::Message for FeedbackWire {}
+impl ros_plumbing::Message for FeedbackWire {}
 
 type TrajectoryServer =
     ActionServer<FollowJointTrajectoryGoal, FollowJointTrajectoryResult, FeedbackWire>;
@@ -86,15 +86,14 @@ impl Outputs for RosOutputs<'_> {
         let Some(c) = self.controllers else { return };
         match effect {
             Effect::AnswerGoal {
-                request,
-                id,
+                ticket,
                 accepted,
                 gripper,
             } => match (gripper, accepted) {
-                (false, true) => c.trajectory.accept(request, id),
-                (false, false) => c.trajectory.reject(request),
-                (true, true) => c.gripper.accept(request, id),
-                (true, false) => c.gripper.reject(request),
+                (false, true) => c.trajectory.accept(ticket),
+                (false, false) => c.trajectory.reject(ticket),
+                (true, true) => c.gripper.accept(ticket),
+                (true, false) => c.gripper.reject(ticket),
             },
             Effect::TrajectoryFeedback(id, f) => {
                 let wire = match c.layout {
@@ -328,19 +327,19 @@ fn action_inputs<'a, G, R, F>(
     goal: fn(GoalRequest<G>) -> Input,
 ) -> futures::stream::LocalBoxStream<'a, Input>
 where
-    G: ros2_client::Message + Clone + 'static,
-    R: ros2_client::Message + Clone + Default + 'static,
-    F: ros2_client::Message + 'static,
+    G: ros_plumbing::Message + Clone + 'static,
+    R: ros_plumbing::Message + Clone + Default + 'static,
+    F: ros_plumbing::Message + 'static,
 {
     futures::stream::unfold(server, move |server| async move {
         loop {
             let input = match server.next().await {
                 ActionRequest::Goal {
-                    request,
+                    ticket,
                     id,
                     goal: g,
                 } => goal(GoalRequest {
-                    request,
+                    ticket,
                     id,
                     goal: Box::new(g),
                 }),
@@ -362,8 +361,8 @@ fn service_inputs<'a, Req, Resp>(
     input: fn(ros_plumbing::service::Ticket, ros_plumbing::service::Caller, Req) -> Input,
 ) -> futures::stream::LocalBoxStream<'a, Input>
 where
-    Req: ros2_client::Message + Clone + 'static,
-    Resp: ros2_client::Message + 'static,
+    Req: ros_plumbing::Message + Clone + 'static,
+    Resp: ros_plumbing::Message + 'static,
 {
     futures::stream::unfold(server, move |server| async move {
         loop {

@@ -21,8 +21,7 @@ use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::trajectory_msgs::JointTrajectory;
 use eezybot_msgs::Time;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use ros2_client::action::GoalId;
-use ros2_client::service::request_id::RmwRequestId;
+use ros_plumbing::action::{self, GoalId};
 use ros_plumbing::feedback::{self, Refusal};
 use ros_plumbing::service::{Caller, Ticket};
 use ros_plumbing::Params;
@@ -76,7 +75,7 @@ pub enum Input {
 #[derive(Clone, Debug)]
 pub struct GoalRequest<G> {
     /// The request (answered with accept or reject).
-    pub request: RmwRequestId,
+    pub ticket: action::Ticket,
     /// The goal's id.
     pub id: GoalId,
     /// The goal.

@@ -19,9 +19,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::trajectory_msgs::{JointTrajectory, JointTrajectoryPoint};
 use eezybot_msgs::Time;
-use ros2_client::action::GoalId;
-use ros2_client::service::request_id::RmwRequestId;
-use ros_plumbing::action::GoalEnd;
+use ros_plumbing::action::{GoalEnd, GoalId, Ticket};
 use ros_plumbing::{ParameterValue, Params};
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -136,12 +134,9 @@ fn trajectory(to: [f64; 3], secs: f64) -> JointTrajectory {
     }
 }
 
-fn goal(n: i64, to: [f64; 3], secs: f64) -> Input {
+fn goal(n: u64, to: [f64; 3], secs: f64) -> Input {
     Input::TrajectoryGoal(GoalRequest {
-        request: RmwRequestId {
-            sequence_number: n,
-            ..Default::default()
-        },
+        ticket: Ticket(n),
         id: GoalId::ZERO,
         goal: Box::new(FollowJointTrajectoryGoal {
             trajectory: trajectory(to, secs),

@@ -10,8 +10,7 @@ use eezybot_msgs::control_msgs::{
     FollowJointTrajectoryResult as Fjt, GripperCommandGoal, GripperCommandResult,
 };
 use eezybot_msgs::Time;
-use ros2_client::action::GoalId;
-use ros_plumbing::action::GoalEnd;
+use ros_plumbing::action::{GoalEnd, GoalId};
 use std::time::Instant;
 
 /// How close (rad) the claw's reported angle must come to a GripperCommand's position.
@@ -46,8 +45,7 @@ impl<M: ArmModel> Driver<M> {
             Ok(opening) => opening,
             Err((code, why)) => {
                 effects.push(Effect::AnswerGoal {
-                    request: g.request,
-                    id: g.id,
+                    ticket: g.ticket,
                     accepted: false,
                     gripper: true,
                 });
@@ -56,8 +54,7 @@ impl<M: ArmModel> Driver<M> {
             }
         };
         effects.push(Effect::AnswerGoal {
-            request: g.request,
-            id: g.id,
+            ticket: g.ticket,
             accepted: true,
             gripper: true,
         });

@@ -25,9 +25,7 @@ use eezybot_msgs::control_msgs::{
 use eezybot_msgs::controller_manager_msgs::{ListControllersResponse, SwitchControllerResponse};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
-use ros2_client::action::GoalId;
-use ros2_client::service::request_id::RmwRequestId;
-use ros_plumbing::action::GoalEnd;
+use ros_plumbing::action::{self, GoalEnd, GoalId};
 use ros_plumbing::burst;
 use ros_plumbing::feedback;
 use ros_plumbing::logging::Throttle;
@@ -71,9 +69,7 @@ pub enum Effect {
     /// `gripper`).
     AnswerGoal {
         /// the request
-        request: RmwRequestId,
-        /// the goal
-        id: GoalId,
+        ticket: action::Ticket,
         /// accepted (else rejected)
         accepted: bool,
         /// gripper_controller's

@@ -17,8 +17,7 @@ use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::trajectory_msgs::{JointTrajectory, JointTrajectoryPoint};
 use eezybot_msgs::Time;
-use ros2_client::action::GoalId;
-use ros_plumbing::action::GoalEnd;
+use ros_plumbing::action::{GoalEnd, GoalId};
 use std::time::Instant;
 
 /// Who sent the running trajectory.
@@ -235,8 +234,7 @@ impl<M: ArmModel> Driver<M> {
         match self.plan(&g.goal.trajectory, Some(&g.goal), wall, now) {
             Ok(plan) => {
                 effects.push(Effect::AnswerGoal {
-                    request: g.request,
-                    id: g.id,
+                    ticket: g.ticket,
                     accepted: true,
                     gripper: false,
                 });
@@ -244,8 +242,7 @@ impl<M: ArmModel> Driver<M> {
             }
             Err(r) => {
                 effects.push(Effect::AnswerGoal {
-                    request: g.request,
-                    id: g.id,
+                    ticket: g.ticket,
                     accepted: false,
                     gripper: false,
                 });
