@@ -602,8 +602,8 @@ fn a_trajectory_started_during_a_gripper_goal_takes_the_claw_on_from_where_it_is
     let (t0, w0) = clock.at(ms(0));
     let open = ArmConfig::default().geometry.gripper_open_rad;
     let goal = Input::GripperGoal(GoalRequest {
-        request: Default::default(),
-        id: ros2_client::action::GoalId::ZERO,
+        ticket: ros_plumbing::action::Ticket(1),
+        id: ros_plumbing::action::GoalId::ZERO,
         goal: Box::new(GripperCommandGoal {
             command: GripperCommand {
                 position: open,
