@@ -197,3 +197,20 @@ def test_the_list_gives_moveit_the_types_and_joints_it_executes_with(cm):
     assert holders == ["teleop"]
     r = cm.switch(activate=["arm_controller"], deactivate=holders)
     assert r.ok, r.message
+
+
+def test_random_switching_commands_no_joint_twice_in_a_period(tmp_path):
+    """One short trial of tests/soak/switching.py (its 10-minute runs are in
+    BENCHMARKS.md): the five commanders switched at random on the virtual Arduino; no
+    servo steps further than its speed allows (two commanders in one period), nothing
+    is sent while calibrating or under the e-stop, every switch is answered. It leases
+    a ROS domain of its own."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    soak = Path(__file__).resolve().parent / "soak" / "switching.py"
+    r = subprocess.run([sys.executable, str(soak), "--minutes", "0.5", "--seed", "3", "--json", str(tmp_path / "s.json")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "soak passed" in r.stdout, r.stdout[-3000:]
