@@ -38,6 +38,12 @@ pub type ValueCheck = fn(&ParameterValue) -> Result<(), String>;
 /// A further check of a string parameter's value; the error says why it is refused.
 pub type TextCheck = fn(&str) -> Result<(), String>;
 
+/// What a file parameter's [`FileLoader`] made of its file ([`Params::loaded`]).
+pub type Loaded = Arc<dyn std::any::Any + Send + Sync>;
+
+/// Loads the file a string parameter names ([`Params::load_with`]).
+pub type FileLoader = fn(&str) -> Result<Loaded, String>;
+
 /// A declared parameter.
 #[derive(Clone, Debug)]
 pub struct ParamSpec {
@@ -354,6 +360,8 @@ pub struct Params {
     values: Arc<RwLock<BTreeMap<String, ParameterValue>>>,
     changed: Arc<tokio::sync::watch::Sender<u64>>,
     refusals: Arc<RwLock<Refusals>>,
+    /// file parameters: their loader, and what it made of the file the value names
+    files: Arc<RwLock<BTreeMap<String, (FileLoader, Loaded)>>>,
 }
 
 /// The values the parameter services refused: how many, and the last one.
@@ -377,7 +385,28 @@ impl Params {
             values: Arc::new(RwLock::new(values)),
             changed: Arc::new(tx),
             refusals: Arc::default(),
+            files: Arc::default(),
         }
+    }
+
+    /// Load the file parameter `name`'s file with `loader` now, and again whenever the
+    /// parameter is set, by whoever sets it (the parameter services, off the node's
+    /// loop), before the change is announced: the loop reads the result with
+    /// [`Params::loaded`] and never touches the file. Fails if the current file does not
+    /// load.
+    pub fn load_with(&self, name: &str, loader: FileLoader) -> Result<(), String> {
+        let loaded = loader(&self.string(name).unwrap_or_default())?;
+        if let Ok(mut f) = self.files.write() {
+            f.insert(name.to_string(), (loader, loaded));
+        }
+        Ok(())
+    }
+
+    /// What the loader of file parameter `name` made of the file its value names, if
+    /// it has a loader ([`Params::load_with`]) and made a `T`.
+    pub fn loaded<T: std::any::Any + Send + Sync>(&self, name: &str) -> Option<Arc<T>> {
+        let loaded = self.files.read().ok()?.get(name)?.1.clone();
+        loaded.downcast::<T>().ok()
     }
 
     /// Record a value the parameter services refused (the value is not stored), log it
@@ -446,6 +475,16 @@ impl Params {
 
     /// Store a value (already checked) and wake [`Params::subscribe`]rs.
     pub fn set(&self, name: &str, value: ParameterValue) {
+        if let (Ok(mut files), ParameterValue::String(path)) = (self.files.write(), &value) {
+            if let Some((loader, loaded)) = files.get_mut(name) {
+                // (checked by the parameter services before it was stored: a file that
+                // changed since keeps what was loaded before)
+                match loader(path) {
+                    Ok(l) => *loaded = l,
+                    Err(e) => log::error!("{name}: keeping the file loaded before: {e}"),
+                }
+            }
+        }
         if let Ok(mut v) = self.values.write() {
             v.insert(name.to_string(), value);
         }
@@ -564,5 +603,43 @@ mod tests {
             .to_string();
         assert!(err.contains("missing.yaml"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A file parameter's loader runs when the value is set, by the setter (the
+    /// parameter services), before the change is announced; the loop reads the result.
+    #[test]
+    fn a_file_parameter_is_loaded_by_whoever_sets_it_and_kept_if_it_fails() {
+        fn length(path: &str) -> Result<Loaded, String> {
+            match path {
+                "" => Ok(Arc::new(0usize)),
+                p if p.starts_with("bad") => Err(format!("{p} does not load")),
+                p => Ok(Arc::new(p.len())),
+            }
+        }
+        let params = Params::new(BTreeMap::from([(
+            "file".to_string(),
+            ParameterValue::String(String::new()),
+        )]));
+        let mut changes = params.subscribe();
+        params.load_with("file", length).unwrap();
+        assert_eq!(params.loaded::<usize>("file").as_deref(), Some(&0));
+        assert!(params.loaded::<String>("file").is_none(), "another type");
+        assert!(params.loaded::<usize>("other").is_none(), "no loader");
+        params.set("file", ParameterValue::String("abcd".into()));
+        assert!(changes.has_changed().unwrap());
+        changes.borrow_and_update();
+        assert_eq!(params.loaded::<usize>("file").as_deref(), Some(&4));
+        // a file that no longer loads keeps what was loaded before
+        params.set("file", ParameterValue::String("bad.yaml".into()));
+        assert_eq!(params.loaded::<usize>("file").as_deref(), Some(&4));
+        // a loader refuses the start as it is
+        let bad = Params::new(BTreeMap::from([(
+            "file".to_string(),
+            ParameterValue::String("bad-start".into()),
+        )]));
+        assert!(bad
+            .load_with("file", length)
+            .unwrap_err()
+            .contains("bad-start"));
     }
 }

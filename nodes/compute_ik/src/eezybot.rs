@@ -233,10 +233,16 @@ impl ArmModel for EezyBot {
     }
 
     fn apply_params(&mut self, params: &Params) -> bool {
-        // Values were validated before they were stored; a file that vanished since is reported.
-        match ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default()) {
-            Ok(config) => self.set_config(&config),
-            Err(e) => log::error!("keeping the previous arm configuration: {e}"),
+        // loaded when it was set, off the loop ([`crate::load_arm_config`]); a store
+        // without the loader (a test's) loads it here
+        match params.loaded::<ArmConfig>("arm_config") {
+            Some(config) => self.set_config(&config),
+            None => {
+                match ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default()) {
+                    Ok(config) => self.set_config(&config),
+                    Err(e) => log::error!("keeping the previous arm configuration: {e}"),
+                }
+            }
         }
         true
     }

@@ -366,6 +366,17 @@ where
     }
 }
 
+/// `arm_config`'s file is loaded whenever the parameter is set, by the parameter
+/// services (off the loop), which apply it ([`Params::loaded`]) once the loop sees the
+/// change.
+pub fn load_arm_config(params: &Params) -> Result<(), String> {
+    params.load_with("arm_config", |path| {
+        ArmConfig::load_or_shipped(path)
+            .map(|c| std::sync::Arc::new(c) as ros_plumbing::params::Loaded)
+            .map_err(|e| e.to_string())
+    })
+}
+
 /// What woke [`run`]'s loop.
 enum Event {
     /// the driver's deadline, with the inputs already waiting
@@ -410,6 +421,9 @@ impl<M: ArmModel, O: Outputs> EventLoop<M, O> {
         // (only the first: one made anew by a parameter change keeps tokio's default)
         ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let param_changes = h.params.subscribe();
+        if let Err(e) = load_arm_config(&h.params) {
+            log::error!("arm_config: {e}");
+        }
         core.apply_params(&h.params);
         let mut driver = Driver::new(core);
         driver.set_controller_settings(controller_settings(&h.params));

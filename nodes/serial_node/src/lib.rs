@@ -552,7 +552,18 @@ impl<'a, O: Outputs> Node<'a, O> {
     /// velocity limits.
     pub fn new(io: Io<'a, O>) -> Self {
         let params = &io.params;
-        let config = ArmConfig::load_or_shipped(&params.string("arm_config").unwrap_or_default())
+        // loaded again whenever the parameter is set, by the parameter services (off the
+        // loop): the loop only applies what was loaded
+        if let Err(e) = params.load_with("arm_config", |path| {
+            ArmConfig::load_or_shipped(path)
+                .map(|c| std::sync::Arc::new(c) as ros_plumbing::params::Loaded)
+                .map_err(|e| e.to_string())
+        }) {
+            log::error!("arm_config: {e}");
+        }
+        let config = params
+            .loaded::<ArmConfig>("arm_config")
+            .map(|c| (*c).clone())
             .unwrap_or_default();
         io.link
             .set_velocity_limits(config.motion.ticks_per_s(&config.servos));
@@ -649,7 +660,12 @@ impl<'a, O: Outputs> Node<'a, O> {
     /// and apply `mock_stalled_servos`.
     pub fn on_params(&mut self) {
         self.apply_stall();
-        match ArmConfig::load_or_shipped(&self.io.params.string("arm_config").unwrap_or_default()) {
+        match self
+            .io
+            .params
+            .loaded::<ArmConfig>("arm_config")
+            .ok_or("it did not load")
+        {
             Ok(c) => {
                 self.cal = c.servos;
                 self.io
