@@ -463,8 +463,8 @@ enum Event {
     Params,
     Link(LinkEvent),
     Leader(LeaderState),
-    /// the first of the inputs waiting
-    Input(Input),
+    /// the inputs waiting: the first and those right behind it
+    Inputs(Vec<Input>),
 }
 
 /// The loop: runs until `shutdown` resolves or `inputs` ends. Each input, link event
@@ -500,8 +500,10 @@ pub async fn run<O: Outputs>(
             Ok(()) = param_changes.changed() => Event::Params,
             Some(event) = events.recv() => Event::Link(event),
             Some(sample) = leader.recv(), if has_leader => Event::Leader(sample),
+            // a burst (DDS repairing what a network outage held back) moves the arm to
+            // its newest command only; a lone command goes at once
             input = inputs.next() => match input {
-                Some(first) => Event::Input(first),
+                Some(first) => Event::Inputs(burst::take_burst(first, &mut inputs)),
                 None => break,
             },
         };
@@ -513,24 +515,7 @@ pub async fn run<O: Outputs>(
             node.on_params();
             ticker = tokio::time::interval(period(&params));
         }
-        match event {
-            Event::Report => node.report(),
-            Event::PeerPoll => node.on_peer_poll(),
-            Event::Params => {}
-            Event::Link(event) => node.on_event(event),
-            Event::Leader(sample) => node.on_leader_state(&sample),
-            Event::Input(first) => {
-                // a burst (DDS repairing what a network outage held back) moves the
-                // arm to its newest command only; a lone command goes at once
-                for input in node.coalesce(burst::take_burst(first, &mut inputs)) {
-                    match input {
-                        Input::ServoAngles(msg, received) => node.on_servo_angles(&msg, received),
-                        Input::Estop(engaged) => node.on_estop(engaged),
-                        Input::Unreadable(e) => node.on_unreadable(&e),
-                    }
-                }
-            }
-        }
+        node.on_loop_event(event);
     }
 }
 
@@ -652,6 +637,26 @@ impl<'a, O: Outputs> Node<'a, O> {
         changes.iter().for_each(|c| c.log());
         if !changes.is_empty() {
             self.report();
+        }
+    }
+
+    /// What woke the loop, to its handler (the parameters synced already).
+    fn on_loop_event(&mut self, event: Event) {
+        match event {
+            Event::Report => self.report(),
+            Event::PeerPoll => self.on_peer_poll(),
+            Event::Params => {}
+            Event::Link(event) => self.on_event(event),
+            Event::Leader(sample) => self.on_leader_state(&sample),
+            Event::Inputs(burst) => {
+                for input in self.coalesce(burst) {
+                    match input {
+                        Input::ServoAngles(msg, received) => self.on_servo_angles(&msg, received),
+                        Input::Estop(engaged) => self.on_estop(engaged),
+                        Input::Unreadable(e) => self.on_unreadable(&e),
+                    }
+                }
+            }
         }
     }
 
