@@ -8,7 +8,8 @@
 //! against [`all`] and [`CALLABLES`] by `tests/contract.rs` and `tests/docs.rs`;
 //! regenerate them with `cargo run -p ros_plumbing --example topics -- --json` and
 //! `EEZYBOT_BLESS=1 cargo test -p ros_plumbing --test docs`. The SROS2 permissions
-//! ([`crate::sros2`]) are generated from them. Foxglove's channels and MCAP recordings are derived from
+//! ([`crate::sros2`]) are generated from them, and wan/'s `CROSSING` is checked against
+//! them (`tests/crossing.rs`). Foxglove's channels and MCAP recordings are derived from
 //! it too (`foxglove_bridge::TOPICS`, the topics with [`Topic::foxglove`]): a
 //! transient-local topic is "latched", and the roles [`Topic::target`] and
 //! [`Topic::recorded`] are declared here.
