@@ -27,6 +27,7 @@ TOPIC_TYPES = {
     "/servo_state": "sensor_msgs/msg/JointState",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     "/xyz_target": "geometry_msgs/msg/PointStamped",
+    "/xyz_line_target": "geometry_msgs/msg/PointStamped",
     "/pose_target": "geometry_msgs/msg/PoseStamped",
     "/gripper_target": "std_msgs/msg/Float64",
     "/joint_target": "sensor_msgs/msg/JointState",

@@ -17,6 +17,7 @@ from conftest import bin_path
 
 RECORDED = {
     "/xyz_target": "geometry_msgs/msg/PointStamped",
+    "/xyz_line_target": "geometry_msgs/msg/PointStamped",
     "/pose_target": "geometry_msgs/msg/PoseStamped",
     "/gripper_target": "std_msgs/msg/Float64",
     "/joint_target": "sensor_msgs/msg/JointState",
