@@ -27,9 +27,12 @@ import twohost  # noqa: E402  (after the path insert)
 
 OUTPUT = Path(os.environ.get("EEZYBOT_TEST_OUTPUT", REPO / "test-output"))
 
-# The topic contract, declared once in libs/ros_plumbing/src/topics.rs; this file is
-# generated from it and checked against it by libs/ros_plumbing/tests/contract.rs.
-TOPICS = {t["name"]: t for t in json.loads((REPO / "tests" / "data" / "topics.json").read_text())["topics"]}
+# The contract (topics, actions, services), declared once in libs/ros_plumbing/src/topics.rs;
+# this file is generated from it and checked against it by libs/ros_plumbing/tests/contract.rs.
+CONTRACT = json.loads((REPO / "tests" / "data" / "topics.json").read_text())
+TOPICS = {t["name"]: t for t in CONTRACT["topics"]}
+ACTIONS = {a["name"]: a for a in CONTRACT["actions"]}
+SERVICES = {s["name"]: s for s in CONTRACT["services"]}
 
 
 def topic_entry(topic):

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO, TOPICS, bin_path, default_sigint
+from conftest import ACTIONS, REPO, SERVICES, TOPICS, bin_path, default_sigint
 from launch_script import Script, node_processes, reap_scripts  # noqa: F401 (fixture)
 
 KEYSTORE_SH = REPO / "launch_scripts" / "keystore.sh"
@@ -27,6 +27,14 @@ ENCLAVE_FILES = ("cert.pem", "key.pem", "identity_ca.cert.pem", "permissions_ca.
                  "permissions.p7s", "permissions.xml")
 PC_NODES = {"gui_bridge", "compute_ik", "state_publisher"}
 PI_NODES = {"serial_node"}
+# roles that run beside either half, wherever their hardware is (ros_plumbing::sros2::EITHER_HALF):
+# a leader arm's reader
+EITHER_HALF = {"serial_node (leader)"}
+
+
+def runs_in(role, nodes):
+    """Whether the contract's role `role` (`gui_bridge (record)`) runs in the enclave of `nodes`."""
+    return role.split(" ")[0] in nodes or role in EITHER_HALF
 NO_SECURITY = {"ROS_SECURITY_ENABLE": "", "ROS_SECURITY_STRATEGY": "", "ROS_SECURITY_KEYSTORE": "",
                "ROS_SECURITY_ENCLAVE_OVERRIDE": ""}
 
@@ -234,19 +242,30 @@ def test_the_pi_may_publish_servo_state_and_not_xyz_target(keystore):
 
 def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(keystore):
     """For each topic of tests/data/topics.json: an enclave may publish (subscribe) it
-    exactly when one of its nodes does; besides, each may use its nodes' parameter
-    services, gui_bridge's calls of compute_ik's, and the ROS graph topics."""
+    exactly when one of its nodes does; for each action and service, it may take the
+    requests (send them) exactly when one of its nodes serves (calls) it; besides, each
+    may use its nodes' parameter services, gui_bridge's calls of compute_ik's, and the
+    ROS graph topics."""
     grants = {n: grant_topics(enclave(keystore, n) / "permissions.xml")[4] for n in ("/eezybot/pc", "/eezybot/pi")}
     nodes = {"/eezybot/pc": PC_NODES, "/eezybot/pi": PI_NODES}
     covered = set()
     for name, t in TOPICS.items():
         for e, g in grants.items():
             for kind, roles in (("publish", t["publishers"]), ("subscribe", t["subscribers"])):
-                ours = any(r.split(" ")[0] in nodes[e] for r in roles)
+                ours = any(runs_in(r, nodes[e]) for r in roles)
                 assert (f"rt/{name}" in g[kind]) == ours, (e, kind, name)
                 if f"rt/{name}" in g[kind]:
                     covered.add(name)
     assert covered == set(TOPICS)
+    callables = [(f"{a}/_action/{s}", c) for a, c in ACTIONS.items() for s in ("send_goal", "cancel_goal", "get_result")]
+    callables += list(SERVICES.items())
+    assert len(callables) == 3 * 2 + 2, callables  # two actions (the controllers'), the controller manager's two
+    for name, c in callables:
+        for e, g in grants.items():
+            serves = any(runs_in(r, nodes[e]) for r in c["servers"])
+            calls = any(runs_in(r, nodes[e]) for r in c["clients"])
+            assert (f"rq/{name}Request" in g["subscribe"] and f"rr/{name}Reply" in g["publish"]) == serves, (e, name)
+            assert (f"rq/{name}Request" in g["publish"] and f"rr/{name}Reply" in g["subscribe"]) == calls, (e, name)
     srv = ["describe_parameters", "get_parameters", "get_parameter_types", "list_parameters", "set_parameters",
            "set_parameters_atomically"]
     for e, g in grants.items():
@@ -258,17 +277,11 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
         contract = {f"rt/{n}" for n in TOPICS}
         services = {t for t in g["publish"] | g["subscribe"] if t.startswith(("rq/", "rr/"))}
         graph = {"ros_discovery_info", "rt/parameter_events", "rt/rosout", "rt/clock"}
-        # compute_ik's controllers (not in the topic table): arm_controller's topics, both
-        # actions' feedback and status, and the leader arm's topics it follows, on the PC only
-        controllers = {"rt/arm_controller/joint_trajectory", "rt/arm_controller/controller_state",
-                       "rt/leader/joint_states", "rt/leader/deadman"} | {
-            f"rt/{a}/_action/{t}" for a in ("arm_controller/follow_joint_trajectory", "gripper_controller/gripper_cmd")
-            for t in ("feedback", "status")}
-        leader = {"rt/leader/joint_states", "rt/leader/deadman"}  # a leader's serial_node on either
-        expected = controllers if e == "/eezybot/pc" else leader
-        assert (g["publish"] | g["subscribe"]) & controllers == expected, e
-        assert leader <= g["publish"], e
-        assert g["publish"] | g["subscribe"] <= contract | services | graph | controllers, e
+        # the actions' feedback and status, published by compute_ik's controllers, on the PC only
+        actions = {f"rt/{a}/_action/{t}" for a in ACTIONS for t in ("feedback", "status")}
+        assert (g["publish"] & actions) == (actions if e == "/eezybot/pc" else set()), e
+        assert {"rt/leader/joint_states", "rt/leader/deadman"} <= g["publish"], e  # a leader's reader on either
+        assert g["publish"] | g["subscribe"] <= contract | services | graph | actions, e
     pc = grants["/eezybot/pc"]
     assert "rq/compute_ik/set_parametersRequest" in pc["publish"]
     assert "rr/compute_ik/set_parametersReply" in pc["subscribe"]

@@ -129,8 +129,8 @@ impl TopicSpec {
     }
 }
 
-/// Every topic of the graph: the topic contract (`ros_plumbing::topics::all()`), in its
-/// order. Iterate it (`for spec in TOPICS`) or use it as a slice (`TOPICS.iter()`,
+/// Every topic of the graph with a Foxglove channel: the topic contract's
+/// (`ros_plumbing::topics::all()`) with `foxglove`, in its order. Iterate it (`for spec in TOPICS`) or use it as a slice (`TOPICS.iter()`,
 /// `TOPICS.len()`).
 pub const TOPICS: Topics = Topics;
 
@@ -138,8 +138,13 @@ pub const TOPICS: Topics = Topics;
 #[derive(Debug, Clone, Copy)]
 pub struct Topics;
 
-static TABLE: LazyLock<Vec<TopicSpec>> =
-    LazyLock::new(|| topics::all().iter().filter_map(TopicSpec::of).collect());
+static TABLE: LazyLock<Vec<TopicSpec>> = LazyLock::new(|| {
+    topics::all()
+        .iter()
+        .filter(|t| t.foxglove)
+        .filter_map(TopicSpec::of)
+        .collect()
+});
 
 impl std::ops::Deref for Topics {
     type Target = [TopicSpec];
@@ -167,10 +172,11 @@ mod tests {
 
     #[test]
     fn every_topic_and_every_dependency_has_a_definition() {
-        for t in topics::all() {
+        let channels: Vec<_> = topics::all().into_iter().filter(|t| t.foxglove).collect();
+        for t in &channels {
             assert!(ros2msg_schema(&t.type_name).is_some(), "{}", t.type_name);
         }
-        assert_eq!(TOPICS.len(), topics::all().len());
+        assert_eq!(TOPICS.len(), channels.len());
         for d in DEFINITIONS {
             for u in d.uses {
                 assert!(definition(u).is_some(), "{} uses {u}", d.name);

@@ -1,6 +1,6 @@
-//! Print the topic contract ([`ros_plumbing::topics::all`]): `--json` as
-//! `tests/data/topics.json` holds it (what the Python tests read), `--markdown` as the
-//! README's topic table.
+//! Print the contract ([`ros_plumbing::topics::all`], [`ros_plumbing::topics::CALLABLES`]):
+//! `--json` as `tests/data/topics.json` holds it (what the Python tests read),
+//! `--markdown` as docs/topics.md's topic table.
 //!
 //! ```sh
 //! cargo run -q -p ros_plumbing --example topics -- --json > tests/data/topics.json
@@ -12,7 +12,7 @@ use std::process::ExitCode;
 fn main() -> ExitCode {
     let all = topics::all();
     match std::env::args().nth(1).as_deref() {
-        Some("--json") => print!("{}", topics::json(&all)),
+        Some("--json") => print!("{}", topics::json(&all, topics::CALLABLES)),
         Some("--markdown") => print!("{}", topics::markdown_table(&all)),
         _ => {
             eprintln!("usage: topics --json | --markdown");

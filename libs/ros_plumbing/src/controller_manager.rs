@@ -32,16 +32,8 @@ impl ControllerManager {
             Some(0) | None => String::new(),
             Some(i) => full[..i].to_string(),
         };
-        let list = client(
-            ros,
-            &format!("{namespace}/{}", crate::topics::LIST_CONTROLLERS),
-            "ListControllers",
-        )?;
-        let switch = client(
-            ros,
-            &format!("{namespace}/{}", crate::topics::SWITCH_CONTROLLER),
-            "SwitchController",
-        )?;
+        let list = client(ros, &namespace, &crate::topics::LIST_CONTROLLERS)?;
+        let switch = client(ros, &namespace, &crate::topics::SWITCH_CONTROLLER)?;
         Ok(ControllerManager {
             namespace,
             list,
@@ -112,14 +104,16 @@ impl ControllerManager {
     }
 }
 
-/// A client of the controller manager service `full` (controller_manager_msgs/`type_name`).
+/// A client of the controller manager's `service` ([`crate::topics::CALLABLES`]) in
+/// `namespace` (empty or `/arm2`).
 fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
     ros: &mut RosNode,
-    full: &str,
-    type_name: &str,
+    namespace: &str,
+    service: &crate::topics::Callable,
 ) -> Result<Client<Req, Resp>, PlumbingError> {
-    let name = Name::parse(full).map_err(|e| PlumbingError::Name {
-        name: full.to_string(),
+    let full = format!("{namespace}/{}", service.name);
+    let name = Name::parse(&full).map_err(|e| PlumbingError::Name {
+        name: full.clone(),
         why: format!("{e:?}"),
     })?;
     let qos = crate::qos::SERVICES;
@@ -127,7 +121,7 @@ fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
         .create_client(
             ServiceMapping::Enhanced,
             &name,
-            &ServiceTypeName::new("controller_manager_msgs", type_name),
+            &ServiceTypeName::new(service.package, service.type_name),
             qos.clone(),
             qos,
         )

@@ -1,6 +1,7 @@
-//! SROS2 policy documents generated from the topic contract ([`crate::topics`]): the
-//! DDS Security governance document and, for each enclave, the permissions document
-//! that lets it publish and subscribe exactly what its nodes use.
+//! SROS2 policy documents generated from the contract ([`crate::topics`]: its topics,
+//! actions and services): the DDS Security governance document and, for each enclave,
+//! the permissions document that lets it publish and subscribe exactly what its nodes
+//! use.
 //!
 //! The documents have the shape `ros2 security create_keystore` / `create_enclave` /
 //! `create_permission` write (sros2's `policy/defaults/dds/governance.xml` and
@@ -61,7 +62,7 @@ pub enum Sros2Error {
         /// What is wrong with it.
         why: String,
     },
-    /// A node name that none of the contract's topics knows.
+    /// A node name that none of the contract's topics, actions or services knows.
     #[error("`{node}` is not one of our nodes ({known})")]
     UnknownNode {
         /// The node name given.
@@ -146,10 +147,11 @@ pub enum Role {
     Pc,
     /// The Raspberry Pi: what serial_node uses.
     Pi,
-    /// Stock ROS 2 tools (`ros2 topic echo`, `ros2 param set`, RViz2) on an operator's
-    /// machine: every contract topic published and subscribed, `/rosout` read, and every
-    /// service (`rq/*`, `rr/*`: a tool's node has a random name and parameter services
-    /// of its own, and `ros2 param` calls any node's).
+    /// Stock ROS 2 tools (`ros2 topic echo`, `ros2 param set`, RViz2, MoveIt,
+    /// `ros2 control`) on an operator's machine: every contract topic published and
+    /// subscribed, the client side of every contract action and service, `/rosout`
+    /// read, and every service (`rq/*`, `rr/*`: a tool's node has a random name and
+    /// parameter services of its own, and `ros2 param` calls any node's).
     Tools,
 }
 
@@ -182,11 +184,9 @@ impl Role {
                 r.publish.insert(dds.clone());
                 r.subscribe.insert(dds);
             }
-            // a trajectory client's side of the controllers (MoveIt)
-            let (mut publish, mut subscribe) = (BTreeSet::new(), BTreeSet::new());
-            controller_rules(namespace, &mut subscribe, &mut publish);
-            r.publish.extend(publish);
-            r.subscribe.extend(subscribe);
+            for c in topics::CALLABLES {
+                callable_rules(namespace, c, Side::Client, &mut r);
+            }
             for pattern in ["rq/*", "rr/*"] {
                 r.publish.insert(pattern.to_string());
                 r.subscribe.insert(pattern.to_string());
@@ -434,17 +434,43 @@ fn checked(ns: &str, error: fn(String, String) -> Sros2Error) -> Result<(), Sros
 }
 
 /// The node of a role in the contract (`gui_bridge (record)` → `gui_bridge`).
-fn node_of(role: &str) -> &str {
+pub fn node_of(role: &str) -> &str {
     role.split(' ').next().unwrap_or(role)
+}
+
+/// Roles of the contract that run beside either half of the graph, so that every
+/// enclave of our nodes is granted what they use: a leader arm's reader runs on the PC
+/// or on the Pi, wherever the leader's cable goes.
+pub const EITHER_HALF: &[&str] = &[topics::LEADER_READER];
+
+/// Whether the role `role` of the contract (`compute_ik`, `gui_bridge (record)`) runs
+/// in the enclave of `nodes`: its node is one of them, or it is one of [`EITHER_HALF`]
+/// (in an enclave of any of our nodes).
+fn runs_in(role: &str, nodes: &BTreeSet<&str>) -> bool {
+    nodes.contains(node_of(role)) || (EITHER_HALF.contains(&role) && !nodes.is_empty())
+}
+
+/// Every role the contract names: the publishers and subscribers of its topics, the
+/// servers and clients of its actions and services.
+fn contract_roles() -> Vec<&'static str> {
+    let topics = topics::all();
+    let mut roles: Vec<&'static str> = topics
+        .iter()
+        .flat_map(|t| t.publishers.iter().chain(t.subscribers))
+        .copied()
+        .collect();
+    roles.extend(
+        topics::CALLABLES
+            .iter()
+            .flat_map(|c| c.servers.iter().chain(c.clients))
+            .copied(),
+    );
+    roles
 }
 
 /// Every node of ours the contract names.
 pub fn contract_nodes() -> BTreeSet<&'static str> {
-    topics::all()
-        .iter()
-        .flat_map(|t| t.publishers.iter().chain(t.subscribers))
-        .map(|r| node_of(r))
-        .collect()
+    contract_roles().into_iter().map(node_of).collect()
 }
 
 /// The DDS topic names an enclave may publish and subscribe.
@@ -467,9 +493,11 @@ fn in_namespace(namespace: &str, name: &str) -> String {
 }
 
 /// What the nodes `nodes` in `namespace` publish and subscribe, as DDS topic names:
-/// their contract topics (`rt/<ns>/<topic>`), their parameter services (server side),
-/// the parameter services they call on other nodes (client side), and the graph topics
-/// every node uses ([`GRAPH_PUBLISH`], [`GRAPH_SUBSCRIBE`]).
+/// their contract topics (`rt/<ns>/<topic>`), the contract actions and services they
+/// serve or call ([`topics::CALLABLES`]), their parameter services (server side), the
+/// parameter services they call on other nodes (client side), and the graph topics
+/// every node uses ([`GRAPH_PUBLISH`], [`GRAPH_SUBSCRIBE`]). A role of
+/// [`EITHER_HALF`] runs in the enclave of any of our nodes.
 pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2Error> {
     check_namespace(namespace)?;
     let known = contract_nodes();
@@ -485,11 +513,19 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
     let mut r = Rules::default();
     for t in topics::all() {
         let dds = format!("rt/{}", in_namespace(namespace, t.name));
-        if t.publishers.iter().any(|p| nodes.contains(node_of(p))) {
+        if t.publishers.iter().any(|p| runs_in(p, &nodes)) {
             r.publish.insert(dds.clone());
         }
-        if t.subscribers.iter().any(|s| nodes.contains(node_of(s))) {
+        if t.subscribers.iter().any(|s| runs_in(s, &nodes)) {
             r.subscribe.insert(dds);
+        }
+    }
+    for c in topics::CALLABLES {
+        if c.servers.iter().any(|s| runs_in(s, &nodes)) {
+            callable_rules(namespace, c, Side::Server, &mut r);
+        }
+        if c.clients.iter().any(|s| runs_in(s, &nodes)) {
+            callable_rules(namespace, c, Side::Client, &mut r);
         }
     }
     for n in &nodes {
@@ -508,27 +544,6 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
             }
         }
     }
-    if nodes.contains("compute_ik") {
-        controller_rules(namespace, &mut r.publish, &mut r.subscribe);
-    }
-    if nodes.contains("gui_bridge") {
-        // the calibration wizard takes the arm through the controller manager
-        for service in [topics::LIST_CONTROLLERS, topics::SWITCH_CONTROLLER] {
-            let s = in_namespace(namespace, service);
-            r.publish.insert(format!("rq/{s}Request"));
-            r.subscribe.insert(format!("rr/{s}Reply"));
-        }
-    }
-    if nodes.contains("serial_node") || nodes.contains("compute_ik") {
-        // serial_node in the leader role reads a leader arm next to the PC or the Pi
-        for t in [
-            topics::LEADER_JOINT_STATES.name,
-            topics::LEADER_DEADMAN.name,
-        ] {
-            r.publish
-                .insert(format!("rt/{}", in_namespace(namespace, t)));
-        }
-    }
     r.publish
         .extend(GRAPH_PUBLISH.iter().map(|s| s.to_string()));
     r.subscribe
@@ -539,35 +554,43 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
 /// The services of a ROS 2 action (`<action>/_action/<service>`).
 const ACTION_SERVICES: [&str; 3] = ["send_goal", "cancel_goal", "get_result"];
 
-/// compute_ik's controllers (arm_controller, gripper_controller and the controller
-/// manager's services: not in the topic table): what their server side publishes
-/// (`publish`) and subscribes (`subscribe`); a client (a tools enclave: MoveIt,
-/// `ros2 control`) is the other way round.
-fn controller_rules(
-    namespace: &str,
-    publish: &mut BTreeSet<String>,
-    subscribe: &mut BTreeSet<String>,
-) {
-    let ns = |name: &str| in_namespace(namespace, name);
-    subscribe.insert(format!("rt/{}", ns(topics::JOINT_TRAJECTORY.name)));
-    subscribe.insert(format!("rt/{}", ns(topics::LEADER_JOINT_STATES.name)));
-    subscribe.insert(format!("rt/{}", ns(topics::LEADER_DEADMAN.name)));
-    publish.insert(format!("rt/{}", ns(topics::CONTROLLER_STATE.name)));
-    for action in [topics::FOLLOW_JOINT_TRAJECTORY, topics::GRIPPER_CMD] {
-        let a = ns(action);
-        for srv in ACTION_SERVICES {
-            subscribe.insert(format!("rq/{a}/_action/{srv}Request"));
-            publish.insert(format!("rr/{a}/_action/{srv}Reply"));
-        }
-        for t in ["feedback", "status"] {
-            publish.insert(format!("rt/{a}/_action/{t}"));
-        }
+/// Which end of an action or service.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Side {
+    /// Takes the requests, publishes the replies (and an action's feedback and status).
+    Server,
+    /// Publishes the requests, takes the replies (and an action's feedback and status).
+    Client,
+}
+
+/// The DDS topics of one end of an action or service of the contract, in `namespace`:
+/// a service `<s>` is `rq/<s>Request` and `rr/<s>Reply`; an action `<a>` is the three
+/// services `<a>/_action/{send_goal,cancel_goal,get_result}` and the topics
+/// `rt/<a>/_action/{feedback,status}` (rcl_action's names).
+fn callable_rules(namespace: &str, c: &topics::Callable, side: Side, r: &mut Rules) {
+    let name = in_namespace(namespace, c.name);
+    let services = match c.kind {
+        topics::CallableKind::Service => vec![name.clone()],
+        topics::CallableKind::Action => ACTION_SERVICES
+            .iter()
+            .map(|srv| format!("{name}/_action/{srv}"))
+            .collect(),
+    };
+    let (requests, replies) = match side {
+        Side::Server => (&mut r.subscribe, &mut r.publish),
+        Side::Client => (&mut r.publish, &mut r.subscribe),
+    };
+    for s in services {
+        requests.insert(format!("rq/{s}Request"));
+        replies.insert(format!("rr/{s}Reply"));
     }
-    // ros2_control's controller manager interface (compute_ik's arbiter)
-    for service in [topics::LIST_CONTROLLERS, topics::SWITCH_CONTROLLER] {
-        let s = ns(service);
-        subscribe.insert(format!("rq/{s}Request"));
-        publish.insert(format!("rr/{s}Reply"));
+    if c.kind == topics::CallableKind::Action {
+        let topics = ["feedback", "status"].map(|t| format!("rt/{name}/_action/{t}"));
+        let feedback_and_status = match side {
+            Side::Server => &mut r.publish,
+            Side::Client => &mut r.subscribe,
+        };
+        feedback_and_status.extend(topics);
     }
 }
 
@@ -831,6 +854,27 @@ mod tests {
             assert_eq!(pi.publish.contains(&dds), pi_publishes, "{dds}");
             let pi_subscribes = t.subscribers.iter().any(|p| PI_NODES.contains(&node_of(p)));
             assert_eq!(pi.subscribe.contains(&dds), pi_subscribes, "{dds}");
+        }
+        for c in topics::CALLABLES {
+            let request = |s: &str| format!("rq/{s}Request");
+            let first = match c.kind {
+                topics::CallableKind::Service => c.name.to_string(),
+                topics::CallableKind::Action => format!("{}/_action/send_goal", c.name),
+            };
+            for s in c.servers {
+                let r = enclave_of(node_of(s)).unwrap_or_else(|| panic!("{s} in no enclave"));
+                assert!(r.subscribe.contains(&request(&first)), "{s} serves {first}");
+            }
+            for s in c.clients {
+                let r = enclave_of(node_of(s)).unwrap_or_else(|| panic!("{s} in no enclave"));
+                assert!(r.publish.contains(&request(&first)), "{s} calls {first}");
+            }
+            let pi_serves = c.servers.iter().any(|s| PI_NODES.contains(&node_of(s)));
+            assert_eq!(
+                pi.subscribe.contains(&request(&first)),
+                pi_serves,
+                "{first}"
+            );
         }
         let all: BTreeSet<&str> = PC_NODES.iter().chain(PI_NODES).copied().collect();
         assert_eq!(

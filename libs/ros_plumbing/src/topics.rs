@@ -1,13 +1,18 @@
-//! The topic contract of the graph, each topic declared once: name, message type, QoS and
-//! which of our nodes publish and subscribe it. Every endpoint of every node is created
-//! from these constants ([`RosNode::publish_on`](crate::RosNode::publish_on),
-//! [`RosNode::subscribe_to`](crate::RosNode::subscribe_to)); the Python tests read the
-//! same table from `tests/data/topics.json` and the README's topic table is
-//! [`markdown_table`]. Both are checked against [`all`] by `tests/contract.rs`;
+//! The contract of the graph, each topic, action and service declared once: name, type,
+//! QoS (topics) and which of our nodes publish and subscribe (topics) or serve and call
+//! (actions, services). Every endpoint of every node is created from these constants
+//! ([`RosNode::publish_on`](crate::RosNode::publish_on),
+//! [`RosNode::subscribe_to`](crate::RosNode::subscribe_to), [`Callable::name`]); the
+//! Python tests read the same tables from `tests/data/topics.json` ([`json`]) and
+//! docs/topics.md's tables are [`markdown_table`] and [`callables_table`], both checked
+//! against [`all`] and [`CALLABLES`] by `tests/contract.rs` and `tests/docs.rs`;
 //! regenerate them with `cargo run -p ros_plumbing --example topics -- --json` and
-//! `-- --markdown`. Foxglove's channels and MCAP recordings are derived from it too
-//! (`foxglove_bridge::TOPICS`): a transient-local topic is "latched", and the roles
-//! [`Topic::target`] and [`Topic::recorded`] are declared here.
+//! `EEZYBOT_BLESS=1 cargo test -p ros_plumbing --test docs`. The SROS2 permissions
+//! ([`crate::sros2`]) are generated from them, and wan/'s `CROSSING` is checked against
+//! them (`tests/crossing.rs`). Foxglove's channels and MCAP recordings are derived from
+//! it too (`foxglove_bridge::TOPICS`, the topics with [`Topic::foxglove`]): a
+//! transient-local topic is "latched", and the roles [`Topic::target`] and
+//! [`Topic::recorded`] are declared here.
 //!
 //! # Examples
 //! ```
@@ -45,6 +50,9 @@ pub struct Topic<M> {
     /// An operator target: a Foxglove panel may publish it, and a recording replays it
     /// ([`Topic::as_target`]).
     pub target: bool,
+    /// A channel of gui_bridge's Foxglove server, and so a topic MCAP recordings and
+    /// `gui_bridge play` know ([`Topic::off_foxglove`]).
+    pub foxglove: bool,
     message: PhantomData<fn() -> M>,
 }
 
@@ -62,7 +70,17 @@ impl<M: RosMessage> Topic<M> {
             publishers,
             subscribers,
             target: false,
+            foxglove: true,
             message: PhantomData,
+        }
+    }
+
+    /// The topic without a Foxglove channel ([`Topic::foxglove`]): the controllers' and
+    /// the leader arm's topics, which Foxglove does not show nor a recording keep.
+    pub const fn off_foxglove(self) -> Self {
+        Topic {
+            foxglove: false,
+            ..self
         }
     }
 
@@ -106,6 +124,7 @@ impl<M: RosMessage> Topic<M> {
             publishers: self.publishers,
             subscribers: self.subscribers,
             target: self.target,
+            foxglove: self.foxglove,
         }
     }
 }
@@ -125,6 +144,8 @@ pub struct TopicEntry {
     pub subscribers: &'static [&'static str],
     /// [`Topic::target`]
     pub target: bool,
+    /// [`Topic::foxglove`]
+    pub foxglove: bool,
 }
 
 impl TopicEntry {
@@ -158,6 +179,9 @@ const FOXGLOVE: &str = "gui_bridge (Foxglove)";
 /// gui_bridge's calibration wizard (it drives the servos while compute_ik's `calibration`
 /// controller is active, and shows a leader arm beside the follower).
 const CALIBRATION: &str = "gui_bridge (calibration)";
+/// serial_node in the leader role (`-p role:=leader`, README "A leader arm"): it reads a
+/// leader arm on the PC or on the Pi, wherever the leader's cable goes.
+pub const LEADER_READER: &str = "serial_node (leader)";
 
 /// Desired position of `tool0`, metres, in `header.frame_id`.
 pub const XYZ_TARGET: Topic<PointStamped> = Topic::new_target("xyz_target", &[GUI]);
@@ -206,32 +230,116 @@ pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
 );
 
 /// arm_controller's trajectory topic (ros2_controllers' joint_trajectory_controller
-/// name): a trajectory to execute now, replacing any running one. Not in [`visit_all`]:
-/// the controller's topics are not recorded nor bridged to Foxglove.
+/// name): a trajectory to execute now, replacing any running one. compute_ik has it when
+/// its arm has controllers.
 pub const JOINT_TRAJECTORY: Topic<JointTrajectory> =
-    Topic::new("arm_controller/joint_trajectory", qos::COMMANDS, &[], &[IK]);
-/// arm_controller's state: reference, feedback (servo_state), error and output. Not in
-/// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
+    Topic::new("arm_controller/joint_trajectory", qos::COMMANDS, &[], &[IK]).off_foxglove();
+/// arm_controller's state: reference, feedback (servo_state), error and output.
 pub const CONTROLLER_STATE: Topic<JointTrajectoryControllerState> =
-    Topic::new("arm_controller/controller_state", qos::COMMANDS, &[IK], &[]);
-/// A leader arm's joints (serial_node in the leader role), in the follower's joint
-/// convention; compute_ik follows them while [`LEADER_DEADMAN`] is held. Not in
-/// [`visit_all`] (see [`JOINT_TRAJECTORY`]).
-pub const LEADER_JOINT_STATES: Topic<JointState> =
-    Topic::new("leader/joint_states", qos::COMMANDS, &[SERIAL], &[IK, GUI]);
+    Topic::new("arm_controller/controller_state", qos::COMMANDS, &[IK], &[]).off_foxglove();
+/// A leader arm's joints ([`LEADER_READER`]), in the follower's joint convention;
+/// compute_ik follows them while [`LEADER_DEADMAN`] is held, gui_bridge shows them.
+pub const LEADER_JOINT_STATES: Topic<JointState> = Topic::new(
+    "leader/joint_states",
+    qos::COMMANDS,
+    &[LEADER_READER],
+    &[IK, GUI],
+)
+.off_foxglove();
 /// The leader arm's deadman button: `true` while held, with every leader sample.
-pub const LEADER_DEADMAN: Topic<Bool> =
-    Topic::new("leader/deadman", qos::COMMANDS, &[SERIAL], &[IK, GUI]);
-/// arm_controller's FollowJointTrajectory action (control_msgs/action/FollowJointTrajectory).
-pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
-/// gripper_controller's GripperCommand action (control_msgs/action/GripperCommand).
-pub const GRIPPER_CMD: &str = "gripper_controller/gripper_cmd";
+pub const LEADER_DEADMAN: Topic<Bool> = Topic::new(
+    "leader/deadman",
+    qos::COMMANDS,
+    &[LEADER_READER],
+    &[IK, GUI],
+)
+.off_foxglove();
+
+/// One action or service of the contract: its name, its type, the nodes of ours that
+/// serve it and those that call it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Callable {
+    /// An action (`<name>/_action/send_goal`, …) or a service.
+    pub kind: CallableKind,
+    /// The name, relative to the node's namespace (`controller_manager/list_controllers`).
+    pub name: &'static str,
+    /// The type's package (`control_msgs`).
+    pub package: &'static str,
+    /// The type's name in its package (`FollowJointTrajectory`).
+    pub type_name: &'static str,
+    /// The nodes of ours that serve it.
+    pub servers: &'static [&'static str],
+    /// The nodes of ours that call it (empty: only outside tools do).
+    pub clients: &'static [&'static str],
+}
+
+/// Whether a [`Callable`] is an action or a service.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CallableKind {
+    /// A ROS 2 action: three services and two topics under `<name>/_action/`.
+    Action,
+    /// A ROS 2 service.
+    Service,
+}
+
+impl Callable {
+    /// The type as `ros2 action list -t` / `ros2 service list -t` print it
+    /// (`control_msgs/action/FollowJointTrajectory`).
+    pub fn type_text(&self) -> String {
+        let kind = match self.kind {
+            CallableKind::Action => "action",
+            CallableKind::Service => "srv",
+        };
+        format!("{}/{kind}/{}", self.package, self.type_name)
+    }
+}
+
+/// arm_controller's FollowJointTrajectory action (MoveIt's, `ros2 action send_goal`'s).
+pub const FOLLOW_JOINT_TRAJECTORY: Callable = Callable {
+    kind: CallableKind::Action,
+    name: "arm_controller/follow_joint_trajectory",
+    package: "control_msgs",
+    type_name: "FollowJointTrajectory",
+    servers: &[IK],
+    clients: &[],
+};
+/// gripper_controller's GripperCommand action.
+pub const GRIPPER_CMD: Callable = Callable {
+    kind: CallableKind::Action,
+    name: "gripper_controller/gripper_cmd",
+    package: "control_msgs",
+    type_name: "GripperCommand",
+    servers: &[IK],
+    clients: &[],
+};
 /// ros2_control's controller manager: which controllers there are, active or not, and
-/// what they claim (controller_manager_msgs/srv/ListControllers; compute_ik serves it).
-pub const LIST_CONTROLLERS: &str = "controller_manager/list_controllers";
-/// ros2_control's controller manager: activate and deactivate controllers
-/// (controller_manager_msgs/srv/SwitchController; compute_ik serves it).
-pub const SWITCH_CONTROLLER: &str = "controller_manager/switch_controller";
+/// what they claim.
+pub const LIST_CONTROLLERS: Callable = Callable {
+    kind: CallableKind::Service,
+    name: "controller_manager/list_controllers",
+    package: "controller_manager_msgs",
+    type_name: "ListControllers",
+    servers: &[IK],
+    clients: &[CALIBRATION],
+};
+/// ros2_control's controller manager: activate and deactivate controllers.
+pub const SWITCH_CONTROLLER: Callable = Callable {
+    kind: CallableKind::Service,
+    name: "controller_manager/switch_controller",
+    package: "controller_manager_msgs",
+    type_name: "SwitchController",
+    servers: &[IK],
+    clients: &[CALIBRATION],
+};
+
+/// Every action and service of the contract (besides the parameter services every node
+/// has), in the order of the docs' table.
+pub const CALLABLES: &[Callable] = &[
+    FOLLOW_JOINT_TRAJECTORY,
+    GRIPPER_CMD,
+    LIST_CONTROLLERS,
+    SWITCH_CONTROLLER,
+];
 
 /// Something done with each typed topic of the contract ([`visit_all`]): for code that
 /// needs the message type, e.g. to subscribe a topic chosen by name.
@@ -240,7 +348,7 @@ pub trait TopicVisitor {
     fn visit<M: RosMessage>(&mut self, topic: &Topic<M>);
 }
 
-/// Every topic of the contract, typed, in the order of the README's topic table.
+/// Every topic of the contract, typed, in the order of the docs' topic table.
 pub fn visit_all(v: &mut impl TopicVisitor) {
     macro_rules! each {
         ($($topic:ident),*) => {$(v.visit(&$topic);)*};
@@ -258,7 +366,11 @@ pub fn visit_all(v: &mut impl TopicVisitor) {
         ROBOT_DESCRIPTION,
         TF,
         TF_STATIC,
-        DIAGNOSTICS
+        DIAGNOSTICS,
+        JOINT_TRAJECTORY,
+        CONTROLLER_STATE,
+        LEADER_JOINT_STATES,
+        LEADER_DEADMAN
     );
 }
 
@@ -328,16 +440,17 @@ fn json_list(items: &[&str]) -> String {
     format!("[{}]", items.join(", "))
 }
 
-/// The table as JSON, one topic per line, as `tests/data/topics.json` holds it:
-/// `{"topics": [{"name", "type", "reliability", "durability", "depth", "qos",
-/// "publishers", "subscribers", "latched", "target", "recorded"}, …]}` (`depth` null
-/// for keep all).
-pub fn json(entries: &[TopicEntry]) -> String {
+/// The tables as JSON, one topic, action or service per line, as `tests/data/topics.json`
+/// holds them: `{"topics": [{"name", "type", "reliability", "durability", "depth", "qos",
+/// "publishers", "subscribers", "latched", "target", "recorded", "foxglove"}, …],
+/// "actions": [{"name", "type", "servers", "clients"}, …], "services": […]}` (`depth`
+/// null for keep all).
+pub fn json(entries: &[TopicEntry], callables: &[Callable]) -> String {
     let rows: Vec<String> = entries
         .iter()
         .map(|e| {
             format!(
-                "    {{\"name\": {}, \"type\": {}, \"reliability\": {}, \"durability\": {}, \"depth\": {}, \"qos\": {}, \"publishers\": {}, \"subscribers\": {}, \"latched\": {}, \"target\": {}, \"recorded\": {}}}",
+                "    {{\"name\": {}, \"type\": {}, \"reliability\": {}, \"durability\": {}, \"depth\": {}, \"qos\": {}, \"publishers\": {}, \"subscribers\": {}, \"latched\": {}, \"target\": {}, \"recorded\": {}, \"foxglove\": {}}}",
                 json_string(e.name),
                 json_string(&e.type_name),
                 json_string(reliability_text(&e.qos)),
@@ -349,10 +462,32 @@ pub fn json(entries: &[TopicEntry]) -> String {
                 e.latched(),
                 e.target,
                 e.recorded(),
+                e.foxglove,
             )
         })
         .collect();
-    format!("{{\"topics\": [\n{}\n]}}\n", rows.join(",\n"))
+    let callables_of = |kind: CallableKind| -> String {
+        callables
+            .iter()
+            .filter(|c| c.kind == kind)
+            .map(|c| {
+                format!(
+                    "    {{\"name\": {}, \"type\": {}, \"servers\": {}, \"clients\": {}}}",
+                    json_string(c.name),
+                    json_string(&c.type_text()),
+                    json_list(c.servers),
+                    json_list(c.clients),
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(",\n")
+    };
+    format!(
+        "{{\"topics\": [\n{}\n],\n\"actions\": [\n{}\n],\n\"services\": [\n{}\n]}}\n",
+        rows.join(",\n"),
+        callables_of(CallableKind::Action),
+        callables_of(CallableKind::Service),
+    )
 }
 
 fn nodes_text(nodes: &[&str]) -> String {
@@ -370,7 +505,8 @@ fn nodes_text(nodes: &[&str]) -> String {
     }
 }
 
-/// The table as the README shows it: `| topic | type | QoS | publishers | subscribers |`.
+/// The topic table as docs/topics.md shows it:
+/// `| topic | type | QoS | publishers | subscribers |`.
 pub fn markdown_table(entries: &[TopicEntry]) -> String {
     let mut s =
         String::from("| topic | type | QoS | publishers | subscribers |\n|---|---|---|---|---|\n");
@@ -383,6 +519,24 @@ pub fn markdown_table(entries: &[TopicEntry]) -> String {
             qos_text(&e.qos),
             nodes_text(e.publishers),
             nodes_text(e.subscribers)
+        );
+    }
+    s
+}
+
+/// The actions and services as docs/topics.md shows them:
+/// `| action or service | type | served by | called by |`.
+pub fn callables_table(callables: &[Callable]) -> String {
+    let mut s =
+        String::from("| action or service | type | served by | called by |\n|---|---|---|---|\n");
+    for c in callables {
+        let _ = writeln!(
+            s,
+            "| `{}` | `{}` | {} | {} |",
+            c.name,
+            c.type_text(),
+            nodes_text(c.servers),
+            nodes_text(c.clients)
         );
     }
     s
@@ -405,6 +559,45 @@ mod tests {
                 assert!([GUI, IK, SERIAL, STATE].contains(&node), "{}: {n}", e.name);
             }
         }
+        let mut callables: Vec<_> = CALLABLES.iter().map(|c| c.name).collect();
+        callables.sort_unstable();
+        callables.dedup();
+        assert_eq!(callables.len(), CALLABLES.len());
+        for c in CALLABLES {
+            assert!(
+                !c.servers.is_empty(),
+                "{}: served by a node of ours",
+                c.name
+            );
+            assert!(!names.contains(&c.name), "{} is a topic too", c.name);
+            for n in c.servers.iter().chain(c.clients) {
+                let node = n.split(' ').next().unwrap_or_default();
+                assert!([GUI, IK, SERIAL, STATE].contains(&node), "{}: {n}", c.name);
+            }
+        }
+    }
+
+    #[test]
+    fn callables_have_their_ros_type_text() {
+        assert_eq!(
+            FOLLOW_JOINT_TRAJECTORY.type_text(),
+            "control_msgs/action/FollowJointTrajectory"
+        );
+        assert_eq!(
+            SWITCH_CONTROLLER.type_text(),
+            "controller_manager_msgs/srv/SwitchController"
+        );
+        let table = callables_table(CALLABLES);
+        assert!(table.contains(
+            "| `controller_manager/list_controllers` | `controller_manager_msgs/srv/ListControllers` | `compute_ik` | `gui_bridge` (calibration) |"
+        ), "{table}");
+        let json = json(&[], CALLABLES);
+        assert!(
+            json.contains(
+                "\"actions\": [\n    {\"name\": \"arm_controller/follow_joint_trajectory\""
+            ),
+            "{json}"
+        );
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! docs/topics.md's table is the topic contract, [`ros_plumbing::topics::all`].
+//! docs/topics.md's tables are the contract: its topics ([`ros_plumbing::topics::all`])
+//! and its actions and services ([`ros_plumbing::topics::CALLABLES`]).
 
 use ros_plumbing::feedback::ReasonCode;
 use ros_plumbing::{docs, topics};
@@ -9,6 +10,18 @@ fn the_topics_page_is_the_contract() {
         &docs::repo_root().join("docs/topics.md"),
         "topics",
         &topics::markdown_table(&topics::all()),
+        "cargo test -p ros_plumbing --test docs",
+    ) {
+        panic!("{why}");
+    }
+}
+
+#[test]
+fn the_topics_page_lists_the_actions_and_services() {
+    if let Err(why) = docs::check_section(
+        &docs::repo_root().join("docs/topics.md"),
+        "actions and services",
+        &topics::callables_table(topics::CALLABLES),
         "cargo test -p ros_plumbing --test docs",
     ) {
         panic!("{why}");

@@ -173,16 +173,16 @@ async fn serve<M: ArmModel>(
             let trajectory = ActionServer::new(
                 node.node_mut(),
                 &resolver,
-                topics::FOLLOW_JOINT_TRAJECTORY,
-                "control_msgs",
-                "FollowJointTrajectory",
+                topics::FOLLOW_JOINT_TRAJECTORY.name,
+                topics::FOLLOW_JOINT_TRAJECTORY.package,
+                topics::FOLLOW_JOINT_TRAJECTORY.type_name,
             )?;
             let gripper = ActionServer::new(
                 node.node_mut(),
                 &resolver,
-                topics::GRIPPER_CMD,
-                "control_msgs",
-                "GripperCommand",
+                topics::GRIPPER_CMD.name,
+                topics::GRIPPER_CMD.package,
+                topics::GRIPPER_CMD.type_name,
             )?;
             Some(Controllers {
                 trajectory,
@@ -213,16 +213,16 @@ async fn serve<M: ArmModel>(
             list: ServiceServer::new(
                 node.node_mut(),
                 &resolver,
-                topics::LIST_CONTROLLERS,
-                "controller_manager_msgs",
-                "ListControllers",
+                topics::LIST_CONTROLLERS.name,
+                topics::LIST_CONTROLLERS.package,
+                topics::LIST_CONTROLLERS.type_name,
             )?,
             switch: ServiceServer::new(
                 node.node_mut(),
                 &resolver,
-                topics::SWITCH_CONTROLLER,
-                "controller_manager_msgs",
-                "SwitchController",
+                topics::SWITCH_CONTROLLER.name,
+                topics::SWITCH_CONTROLLER.package,
+                topics::SWITCH_CONTROLLER.type_name,
             )?,
         }
     };

@@ -20,8 +20,9 @@ usage:
 
   governance    sros2's default governance: authentication required, discovery,
                 liveliness and data encrypted, RTPS signed, access control on every topic
-  permissions   the permissions.xml of one enclave: subject CN=PATH, its nodes' topics
-                and parameter services, the ROS graph topics, default DENY
+  permissions   the permissions.xml of one enclave: subject CN=PATH, its nodes' topics,
+                actions, services and parameter services, the ROS graph topics,
+                default DENY
   topics        the DDS topic names the enclave may publish and subscribe, one a line
                 (`publish rt/servo_state`)
 
