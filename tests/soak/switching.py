@@ -12,8 +12,9 @@ What is checked, from outside, by order and content (never by the clock):
   its speed (config/arm.yaml) allows in a period, or in the time between their stamps
   if longer. Each commander steps within the limits once a period, so two commanders
   moving one joint in the same periods show as a longer step (serial_node's count of
-  frames its velocity guard ramped is printed, not judged: the link also ramps a burst
-  of full-speed steps it coalesced);
+  frames its velocity guard ramped is printed, not judged: the guard measures a step
+  against the time since the frame before it was sent, so a full-speed step that
+  arrives a few ms early after the one before is ramped too);
 - calibration excludes everything else: every compute_ik `diagnostics` report with
   `calibrating` true shows the same `servo_angles_sent` count within one calibration
   (compute_ik published no servo_angles meanwhile);
