@@ -32,6 +32,7 @@ use futures::{Stream, StreamExt};
 use ros_plumbing::peers::{Peer, PeerWatch};
 use ros_plumbing::{ParamRange, ParamSpec, ParameterValue, Params};
 use std::future::Future;
+use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, mpsc, watch};
 
@@ -279,114 +280,221 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
 
 /// The loop between browsers and ROS, around `panel`; runs until `shutdown` resolves.
 ///
-/// Its work in order of priority: shutdown, e-stop requests, targets due, the periodic
-/// reports, ROS inputs, what happened to the web side's connections (counted in the
-/// loop's own [`WebStats`]: the server's tasks share no lock), then other browser
-/// requests; so a browser flooding requests delays neither an e-stop nor the targets nor
-/// the live view.
-pub async fn run<I, O, F, S>(mut panel: Panel, io: Handles<'_, I, O, F, S>)
+/// Its work in order of priority: shutdown, e-stop requests, targets due, the jobs
+/// beside it finishing (a program file's, the calibration wizard's), the periodic
+/// reports, a change of `rate`, ROS inputs, what happened to the web side's connections
+/// (counted in the loop's own [`WebStats`]: the server's tasks share no lock), then
+/// other browser requests; so a browser flooding requests delays neither an e-stop nor
+/// the targets nor the live view. Each wakeup is an `Event`, handled by
+/// `Bridge::on_event`.
+pub async fn run<I, O, F, S>(panel: Panel, io: Handles<'_, I, O, F, S>)
 where
     I: Stream<Item = Input>,
     O: Outputs,
     F: Fn() -> Vec<usize>,
     S: Future<Output = ()>,
 {
-    let Handles {
-        inputs,
-        mut requests,
-        web,
-        to_browsers,
-        snapshot,
-        outputs,
-        params,
-        mut reporting,
-        calibration,
-        shutdown,
-    } = io;
-    let mut sink = Sink {
-        outputs,
-        to_browsers: &to_browsers,
-        snapshot: &snapshot,
-        web,
-        calibration,
-    };
-    let mut jobs = Jobs {
-        file: None,
-        calibration: None,
-    };
-    let mut diag_tick = tokio::time::interval(Duration::from_secs(1));
-    let mut peer_poll = tokio::time::interval(Duration::from_millis(250));
-    let mut status_tick = tokio::time::interval(Duration::from_millis(500));
-    let mut param_changes = params.subscribe();
+    let (mut bridge, inputs, shutdown) = Bridge::new(panel, io);
     tokio::pin!(inputs);
     tokio::pin!(shutdown);
-    snapshot.send_replace(panel.snapshot());
     loop {
         let clock = Clock::read();
-        if panel.publish_due(clock.now) {
+        if bridge.panel.publish_due(clock.now) {
             // Due now: publish before anything else. (A sleep until a past instant ends
             // only when the timer next runs, which a loop kept busy by requests would put
             // off for as long as they keep coming.)
-            sink.apply(panel.on_tick(clock), None, &mut jobs);
+            bridge
+                .sink
+                .apply(bridge.panel.on_tick(clock), None, &mut bridge.jobs);
             continue;
         }
-        let wake = panel.next_wakeup(clock.now);
-        tokio::select! {
+        let wake = bridge.panel.next_wakeup(clock.now);
+        let event = tokio::select! {
             biased;
-            _ = &mut shutdown => {
-                if panel.calibrating() {
-                    // the wizard holds the arm: give it back to compute_ik
-                    log::warn!("stopping while calibrating: giving the arm back to compute_ik");
-                    if let Err(e) = tokio::time::timeout(Duration::from_secs(3), calibration.set_calibrating(false)).await.unwrap_or_else(|_| Err("no answer".into())) {
-                        log::error!("the arm is still held for calibration ({e}): `ros2 control switch_controllers --deactivate calibration`, or compute_ik gives it back after its calibration_lease");
-                    }
-                }
-                break;
+            _ = &mut shutdown => Event::Shutdown,
+            Some(from) = bridge.requests.estops.recv() => Event::Estop(from),
+            _ = async { if let Some(w) = wake { tokio::time::sleep_until(w.into()).await } }, if wake.is_some() => Event::Due,
+            done = finished(&mut bridge.jobs.file), if bridge.jobs.file.is_some() => Event::FileDone(done),
+            done = finished(&mut bridge.jobs.calibration), if bridge.jobs.calibration.is_some() => Event::CalibrationDone(done),
+            _ = bridge.status_tick.tick() => Event::StatusTick,
+            _ = bridge.diag_tick.tick() => Event::Report,
+            _ = bridge.peer_poll.tick() => Event::PeerPoll,
+            Ok(()) = bridge.param_changes.changed() => Event::Rate,
+            input = inputs.next() => match input {
+                Some(input) => Event::Input(input),
+                None => break,
+            },
+            Some(event) = bridge.requests.events.recv() => Event::Web(event),
+            Some(from) = bridge.requests.others.recv() => Event::Request(from),
+        };
+        if bridge.on_event(event).await.is_break() {
+            break;
+        }
+    }
+}
+
+/// What woke [`run`]'s loop, in its order of priority.
+enum Event {
+    /// `shutdown` resolved
+    Shutdown,
+    /// an e-stop request of a browser's
+    Estop(web::FromClient),
+    /// the panel's next wakeup (a target due)
+    Due,
+    /// the program file's job is done
+    FileDone(FileDone),
+    /// the calibration wizard's job is done
+    CalibrationDone(panel::CalibrationDone),
+    /// the calibration's status (every 500 ms)
+    StatusTick,
+    /// the panel's `diagnostics` (every second)
+    Report,
+    /// the watched topics' peers (every 250 ms)
+    PeerPoll,
+    /// a parameter was set (`rate` may have changed)
+    Rate,
+    /// a ROS input
+    Input(Input),
+    /// what happened to a connection of the web side
+    Web(WebEvent),
+    /// any other request of a browser's
+    Request(web::FromClient),
+}
+
+/// What [`run`] holds besides its ROS inputs and shutdown: the panel, where its effects
+/// go and the jobs they start, the browsers' requests, the timers, the parameters and
+/// the watch on their changes, how the panel reports itself.
+struct Bridge<'a, O, F: Fn() -> Vec<usize>> {
+    panel: Panel,
+    sink: Sink<'a, 'a, O>,
+    jobs: Jobs<'a>,
+    requests: Requests,
+    /// the `diagnostics` report, every second
+    diag_tick: tokio::time::Interval,
+    /// the watched topics' peers, polled every 250 ms
+    peer_poll: tokio::time::Interval,
+    /// the calibration's status (and the parameter clients of the nodes heard), every 500 ms
+    status_tick: tokio::time::Interval,
+    params: Params,
+    param_changes: watch::Receiver<u64>,
+    reporting: Reporting<F>,
+}
+
+impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
+    /// The loop's state from its ends, and the ROS inputs and shutdown; the first
+    /// snapshot is sent.
+    fn new<I, S>(panel: Panel, io: Handles<'a, I, O, F, S>) -> (Self, I, S) {
+        let Handles {
+            inputs,
+            requests,
+            web,
+            to_browsers,
+            snapshot,
+            outputs,
+            params,
+            reporting,
+            calibration,
+            shutdown,
+        } = io;
+        snapshot.send_replace(panel.snapshot());
+        let bridge = Bridge {
+            panel,
+            sink: Sink {
+                outputs,
+                to_browsers,
+                snapshot,
+                web,
+                calibration,
+            },
+            jobs: Jobs {
+                file: None,
+                calibration: None,
+            },
+            requests,
+            diag_tick: tokio::time::interval(Duration::from_secs(1)),
+            peer_poll: tokio::time::interval(Duration::from_millis(250)),
+            status_tick: tokio::time::interval(Duration::from_millis(500)),
+            param_changes: params.subscribe(),
+            params,
+            reporting,
+        };
+        (bridge, inputs, shutdown)
+    }
+
+    /// Handle `event`; `Break` once the loop is to end (shutdown).
+    async fn on_event(&mut self, event: Event) -> ControlFlow<()> {
+        let (panel, sink, jobs) = (&mut self.panel, &mut self.sink, &mut self.jobs);
+        match event {
+            Event::Shutdown => {
+                self.stop().await;
+                return ControlFlow::Break(());
             }
-            Some(from) = requests.estops.recv() => {
-                sink.apply(panel.on_request(from.request, Clock::read()), Some(&from.reply), &mut jobs);
-            }
-            _ = async { if let Some(w) = wake { tokio::time::sleep_until(w.into()).await } }, if wake.is_some() => {
-                sink.apply(panel.on_tick(Clock::read()), None, &mut jobs);
-            }
-            done = finished(&mut jobs.file), if jobs.file.is_some() => {
+            Event::Estop(from) => sink.apply(
+                panel.on_request(from.request, Clock::read()),
+                Some(&from.reply),
+                jobs,
+            ),
+            Event::Due => sink.apply(panel.on_tick(Clock::read()), None, jobs),
+            Event::FileDone(done) => {
                 jobs.file = None;
-                sink.apply(panel.on_file_done(done), None, &mut jobs);
+                sink.apply(panel.on_file_done(done), None, jobs);
             }
-            done = finished(&mut jobs.calibration), if jobs.calibration.is_some() => {
+            Event::CalibrationDone(done) => {
                 jobs.calibration = None;
-                sink.apply(panel.on_calibration_done(done, Clock::read()), None, &mut jobs);
+                sink.apply(panel.on_calibration_done(done, Clock::read()), None, jobs);
             }
-            _ = status_tick.tick() => {
-                calibration.prepare(&panel.calibration_nodes());
-                sink.apply(panel.on_status_tick(Clock::read()), None, &mut jobs)
+            Event::StatusTick => {
+                sink.calibration.prepare(&panel.calibration_nodes());
+                sink.apply(panel.on_status_tick(Clock::read()), None, jobs)
             }
-            _ = diag_tick.tick() => sink.report(&panel, &reporting),
-            _ = peer_poll.tick() => {
-                let changes = reporting.peers.update(&(reporting.counts)(), Instant::now());
-                changes.iter().for_each(|c| c.log());
-                if !changes.is_empty() {
-                    sink.report(&panel, &reporting);
-                }
-            }
-            Ok(()) = param_changes.changed() => panel.set_rate(params.f64("rate").unwrap_or(50.0)),
-            input = inputs.next() => {
-                let Some(input) = input else { break };
-                sink.apply(panel.on_input(input, Clock::read()), None, &mut jobs);
-            }
-            Some(event) = requests.events.recv() => {
+            Event::Report => sink.report(panel, &self.reporting),
+            Event::PeerPoll => self.poll_peers(),
+            Event::Rate => panel.set_rate(self.params.f64("rate").unwrap_or(50.0)),
+            Event::Input(input) => sink.apply(panel.on_input(input, Clock::read()), None, jobs),
+            Event::Web(event) => {
                 let ended = matches!(event, WebEvent::Ended { .. });
                 sink.web_event(event);
                 if ended && sink.web.clients() == 0 {
                     // nobody is left to finish a calibration: the arm goes back
-                    sink.apply(panel.on_every_client_gone(Clock::read()), None, &mut jobs);
+                    sink.apply(panel.on_every_client_gone(Clock::read()), None, jobs);
                 }
             }
-            Some(from) = requests.others.recv() => {
-                sink.apply(panel.on_request(from.request, Clock::read()), Some(&from.reply), &mut jobs);
+            Event::Request(from) => {
+                sink.apply(
+                    panel.on_request(from.request, Clock::read()),
+                    Some(&from.reply),
+                    jobs,
+                );
                 // one request at a time, then let the other tasks run (on this node's
                 // one thread: another client's handler with an e-stop in hand)
                 tokio::task::yield_now().await;
+            }
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// Poll the watched topics' peers: log what changed, and report it at once.
+    fn poll_peers(&mut self) {
+        let reporting = &mut self.reporting;
+        let changes = reporting
+            .peers
+            .update(&(reporting.counts)(), Instant::now());
+        changes.iter().for_each(|c| c.log());
+        if !changes.is_empty() {
+            self.sink.report(&self.panel, &self.reporting);
+        }
+    }
+
+    /// Before the loop ends: give the arm back to compute_ik if the wizard holds it.
+    async fn stop(&self) {
+        if self.panel.calibrating() {
+            log::warn!("stopping while calibrating: giving the arm back to compute_ik");
+            let give_back = self.sink.calibration.set_calibrating(false);
+            if let Err(e) = tokio::time::timeout(Duration::from_secs(3), give_back)
+                .await
+                .unwrap_or_else(|_| Err("no answer".into()))
+            {
+                log::error!("the arm is still held for calibration ({e}): `ros2 control switch_controllers --deactivate calibration`, or compute_ik gives it back after its calibration_lease");
             }
         }
     }
@@ -412,8 +520,8 @@ async fn finished<J: Future + Unpin>(job: &mut Option<J>) -> J::Output {
 /// Where the panel's effects go; the web side's counters.
 struct Sink<'a, 'm, O> {
     outputs: &'a O,
-    to_browsers: &'a broadcast::Sender<String>,
-    snapshot: &'a watch::Sender<Snapshot>,
+    to_browsers: broadcast::Sender<String>,
+    snapshot: watch::Sender<Snapshot>,
     web: WebStats,
     calibration: &'m dyn CalibrationControl,
 }
