@@ -412,8 +412,7 @@ fn after_mark_a_the_servo_moves_to_where_b_is_expected() {
     });
     let mut sim = Sim::new(shipped(), home_state());
     sim.start_follower();
-    for step in 0..4 {
-        let servo = CALIBRATION_ORDER[step];
+    for (step, &servo) in CALIBRATION_ORDER.iter().enumerate() {
         let a = shipped_lines[idx(servo)].at(sim.reference_input(0));
         sim.mark_model(&shipped_lines, 0).unwrap();
         let expected = a + expected_gain(servo) * (sim.reference_input(1) - sim.reference_input(0));
