@@ -151,7 +151,7 @@ impl<M: ArmModel> Driver<M> {
             last_servo_state: None,
             leader: Leader {
                 timeout: DEFAULT_LEADER_TIMEOUT,
-                state: "no leader".into(),
+                state: Default::default(),
                 ..Leader::default()
             },
             arbiter: Arbiter::new(Layout {
@@ -196,7 +196,7 @@ impl<M: ArmModel> Driver<M> {
             .collect();
         let mut v = vec![
             ("arm_controller".to_string(), running),
-            ("leader".to_string(), self.leader.state.clone()),
+            ("leader".to_string(), self.leader.state.to_string()),
             (
                 feedback::ACTIVE_CONTROLLERS_KEY.to_string(),
                 if active.is_empty() {
