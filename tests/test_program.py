@@ -41,10 +41,13 @@ def test_play_sends_each_point_on_its_modes_topic_and_never_sets_motion(launch, 
     assert cli.returncode == 0, err
     assert out.count("waypoint ") == 3, out
     assert motions == {"joint"}, motions
-    # b on xyz_line_target, a and c on xyz_target
+    # b on xyz_line_target, a and c on xyz_target (the observer's readers match
+    # gui_bridge's new writers on their own time: a, sent once compute_ik's reader had
+    # matched, may go before the observer's did; b and c go after a was reached)
     observer.spin_for(0.2)
     assert [(m.point.x, m.point.y, m.point.z) for _, m in lines] == [b]
-    assert [(m.point.x, m.point.y, m.point.z) for _, m in plain] == [a, c]
+    seen = [(m.point.x, m.point.y, m.point.z) for _, m in plain]
+    assert seen in ([a, c], [c]), seen
     # a to b (mode line): on the straight segment; b to c (no mode: joint, as compute_ik
     # was): off it
     tools = [tool_of(m) for _, m in states]
