@@ -381,6 +381,21 @@ def estop_held(events, after_cycle, seq):
                 if t == STATE and c >= after_cycle and p[0] == seq)
 
 
+def last_width_change(events, after_cycle, before_cycle=None):
+    """The rise of the last pulse, on any pin, whose width differs (by more than 1 us) from
+    the pulse before it on that pin, among the pulses after `after_cycle` and before
+    `before_cycle`; `after_cycle` if there is none. From there on no servo was given a new
+    position: after an e-stop (hold) that moment, not the next pulse's rise (the frame's
+    phase), is when the servos are held."""
+    last = after_cycle
+    for pin in range(4):
+        ps = events.pulses(pin)
+        for (_, w0), (c1, w1) in zip(ps, ps[1:]):
+            if c1 > after_cycle and (before_cycle is None or c1 < before_cycle) and abs(w1 - w0) > 1.0:
+                last = max(last, c1)
+    return last
+
+
 def engaged_estop_frames(events):
     """ESTOP frames that engage (payload 1 hold, 2 detach): [(payload, seq, cycle)]."""
     return [(p[0], seq, c) for t, seq, p, c in events.frames() if t == ESTOP and p[0] in (1, 2)]

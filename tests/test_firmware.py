@@ -515,6 +515,46 @@ def test_estop_holds_and_ignores_commands(uno):
     assert state_reply(uno, 4)["state"] == "running"
 
 
+def test_an_estop_holds_what_the_pins_show_and_drops_a_width_not_shown_yet(uno):
+    """ESTOP 1 holds the pulses the servos are being shown. A command stored just before
+    it, not on the pins yet, is dropped: no pulse after the e-stop shows a position the
+    servo had not been given (the next frame, up to 22.5 ms later, used to carry it). The
+    STATE answering the e-stop reports the held widths, and they go on after the release.
+    Each round writes a command and an ESTOP in one write: the ESTOP's 5 bytes take
+    0.43 ms, and every pulse here is 1.5 ms or longer, so at most one pulse starts between
+    the two and at least three channels had a width that was not shown yet."""
+    for r in range(3):
+        seq = 10 * r + 1
+        a = [3000 + 100 * i + 40 * r for i in range(4)]
+        b = [t + 500 for t in a]
+        uno.send(set_pulses(seq, a))
+        state_reply(uno, seq)
+        run_for(uno, 60)  # a on every pin
+        uno.send(set_pulses(seq + 1, b) + frame(ESTOP, seq + 2, b"\x01"))
+        st = state_reply(uno, seq + 2)
+        stop = last_rx_cycle(uno)  # the ESTOP's last byte
+        held = st["ticks"]
+        assert st["state"] == "estop"
+        uno.send(frame(ESTOP, seq + 3, b"\x00"))
+        assert state_reply(uno, seq + 3)["state"] == "running"
+        run_to(uno, stop + 100 * CYCLES_PER_MS)
+        edges, _ = uno.events()
+        dropped = 0
+        for pin in range(4):
+            shown_b = [c for c, w in pulses(edges, pin, stop - 40 * CYCLES_PER_MS) if abs(w - b[pin] / 2) <= 1]
+            after = [w for _, w in pulses(edges, pin, stop)]
+            assert len(after) >= 4, f"round {r}, pin {8 + pin}: {len(after)} pulses after the e-stop"
+            # every pulse from the e-stop on, through the release, has the held width
+            assert all(abs(w - held[pin] / 2) <= 1 for w in after), (r, pin, held, after)
+            if held[pin] == b[pin]:
+                # held b: its pulse had started before the e-stop was handled
+                assert shown_b and shown_b[0] < stop + CYCLES_PER_MS, (r, pin, shown_b, stop)
+            else:
+                assert held[pin] == a[pin] and not shown_b, (r, pin, held, a, b, shown_b)
+                dropped += 1
+        assert dropped >= 3, (r, held, a, b)
+
+
 def test_a_detaching_estop_stops_the_pulses_until_a_new_command(uno):
     """ESTOP 2 stops the pulses at once; after the release nothing goes out (idle,
     reporting the last command as the pose to start from) until a new command."""

@@ -130,7 +130,16 @@ static void handle(const Frame *f) {
       if (role == ROLE_LEADER) break;  // no pulses to hold or stop
       if (f->payload[0] == 1 || f->payload[0] == 2) {
         state = STATE_ESTOP;  // ignore commands; 1: hold the pulses, 2: stop them
-        if (f->payload[0] == 2) output_pulses(false);
+        if (f->payload[0] == 2) {
+          output_pulses(false);
+        } else if (output) {
+          // hold what the pins show: a command not on them yet is dropped, so the servos
+          // get no new position from here on (not the next frame's)
+          servo_pwm_hold();
+          for (uint8_t i = 0; i < SERVO_COUNT; i++) {
+            if (servo_pwm_get(i)) applied[i] = servo_pwm_get(i);
+          }
+        }
       } else if (f->payload[0] == 0 && state == STATE_ESTOP) {
         // held pulses go on; stopped ones wait for a new command
         state = output ? STATE_RUNNING : STATE_IDLE;

@@ -19,6 +19,8 @@
 
 static const uint8_t MASK[SERVO_COUNT] = {_BV(0), _BV(1), _BV(2), _BV(3)};
 static volatile uint16_t width[SERVO_COUNT];
+// The width of each channel's last pulse (0: none, or none since its pulses stopped).
+static volatile uint16_t shown[SERVO_COUNT];
 // Channels whose width changed since their pulse of the current frame read it: they
 // have something new to show.
 static volatile uint8_t fresh;
@@ -81,6 +83,16 @@ void servo_pwm_sync() {
 #endif
 }
 
+void servo_pwm_hold() {
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    for (uint8_t i = 0; i < SERVO_COUNT; i++) {
+      if (shown[i] == 0) continue;
+      width[i] = shown[i];
+      fresh &= ~MASK[i];
+    }
+  }
+}
+
 uint16_t servo_pwm_get(uint8_t i) {
   uint16_t w;
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { w = width[i]; }
@@ -105,6 +117,7 @@ ISR(TIMER1_COMPA_vect) {
   }
   PORTB = (PORTB & 0xF0) | out;  // end the previous pulse, start this slot's
   if (s < SERVO_COUNT) {
+    shown[s] = w;
     if (s == 0) {
       frame_start = due;
       synced = next_synced;

@@ -25,3 +25,8 @@ void servo_pwm_set(uint8_t i, uint16_t ticks);
 // timing allows (see above); nothing changes if none did.
 void servo_pwm_sync();
 uint16_t servo_pwm_get(uint8_t i);
+// Each channel keeps the width its pulses show now: a width set since the channel's last
+// pulse began, and not in it, is dropped, so no pulse after the call shows a width the
+// servo was not already being shown (the e-stop's hold). A channel without pulses yet
+// keeps what was set.
+void servo_pwm_hold();

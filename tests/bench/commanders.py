@@ -51,15 +51,20 @@ once serial_node reports the board in e-stop, the commander's input stops (the l
 samples, its deadman released) and the e-stop is released. Timed at the board as
 tests/bench/estop_hotplug.py times it (serial_node's default estop_action, hold):
   to_board  t_pub -> the board has the whole ESTOP frame;
-  to_pins   t_pub -> the rise of the first pulse after that frame; every pulse from the
-            board's answer to the next command has the held width (checked). With `hold`
-            the widths stop changing once the board has the frame; what to_pins adds to
-            to_board is the wait for the next pulse, up to a servo frame (20 ms): its phase.
-            The random delay spreads the e-stop over every phase of the frame (the
-            commanders step at 50 Hz, and with the firmware's frame sync every step starts
-            a frame: a fixed delay would meet one phase only, a different one for each
-            commander). `phase` is the time from the start of the frame in progress (the
-            last rise on pin 8) to the ESTOP frame.
+  to_held   t_pub -> the servos are held: the last change of a pulse width on any pin
+            (safety_rig.last_width_change), or the ESTOP frame if none came after it; from
+            there no servo is given a new position, and every pulse from the board's
+            answer to the next command has the held width (checked). The firmware holds
+            what its pins show (PROTOCOL.md), so to_held is to_board unless a pulse that
+            had read a new width before the e-stop was handled starts after its last byte;
+            before it held the command it had, which the next frame showed.
+  to_pins   t_pub -> the rise of the first pulse after that frame: to_board plus the wait
+            for the next pulse, up to a servo frame (20 ms), the frame's phase (a pulse
+            that repeats the held width). The random delay spreads the e-stop over every
+            phase of the frame (the commanders step at 50 Hz, and with the firmware's
+            frame sync every step starts a frame: a fixed delay would meet one phase only,
+            a different one for each commander). `phase` is the time from the start of
+            the frame in progress (the last rise on pin 8) to the ESTOP frame.
   cut      the e-stop cut the move short: the moving servo's held pulse (the base's;
             the claw's for gripper_controller) lies between its width before the first
             servo_angles and the width of the commander's goal, more than 2 us from the
@@ -98,7 +103,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E
 from benchkit import Launcher, stats  # noqa: E402
 from calibration_rig import GRIPPER_OPEN_RAD, WsWizard  # noqa: E402
 from conftest import COMMANDS, EVERY, REPO, DomainLease, Observer  # noqa: E402
-from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, Rig, engaged_estop_frames, estop_held, pulse_us, sent_ticks  # noqa: E402
+from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, Rig, engaged_estop_frames, estop_held, last_width_change, pulse_us, sent_ticks  # noqa: E402
 from test_gui_bridge import free_port  # noqa: E402
 
 ORDER = ["calibration", "leader_follower", "gripper_controller", "arm_controller", "teleop"]
@@ -497,7 +502,9 @@ def estop_figures(ev, sends, rec):
     cut = bool(start) and abs(now - goal) > 2.0 and min(start[0], goal) - 1.0 <= now <= max(start[0], goal) + 1.0
     frame_start = max((c for c, _ in ev.pulses(0) if c <= c_stop), default=None)
     phase = (c_stop - frame_start) / CYCLES_PER_S * 1e3 if frame_start is not None else None
-    return {"to_board_ms": ms(t_pub, ev.wall_ns(c_stop)), "to_pins_ms": ms(t_pub, ev.wall_ns(first)),
+    held_at = last_width_change(ev, c_stop, nxt)
+    return {"to_board_ms": ms(t_pub, ev.wall_ns(c_stop)), "to_held_ms": ms(t_pub, ev.wall_ns(held_at)),
+            "to_pins_ms": ms(t_pub, ev.wall_ns(first)),
             "frame_to_pins_ms": (first - c_stop) / CYCLES_PER_S * 1e3, "phase_ms": phase, "cut": cut,
             "pin": pin, "start_us": start[0] if start else None, "held_us": now, "goal_us": goal}
 
@@ -552,6 +559,7 @@ def run(domain, trials, tmp, seed=33, progress=print):
             "taken_to_first_ms": summary(f.get("taken_to_first_ms") for f in sw),
             "call_to_taken_ms": summary(f.get("call_to_taken_ms") for f in sw),
             "estop_to_board_ms": summary(e["to_board_ms"] for e in es),
+            "estop_to_held_ms": summary(e["to_held_ms"] for e in es),
             "estop_to_pins_ms": summary(e["to_pins_ms"] for e in es),
             "estop_frame_to_pins_ms": summary(e["frame_to_pins_ms"] for e in es),
             "estop_cut": sum(e["cut"] for e in es),
@@ -578,12 +586,14 @@ def table(out):
             call = fmt(r["call_to_first_ms"])
         lines.append(f"| `{name}` | {frm} | {r['n']} | {fmt(r['call_to_answer_ms'])} | {call} | "
                      f"{fmt(r['taken_to_first_ms'])} |")
-    lines += ["", "| e-stop during | n | → ESTOP frame at the board | → pulses held | of which the ESTOP frame → "
-              "next pulse | cut the move short |", "|---|---|---|---|---|---|"]
+    lines += ["", "| e-stop during | n | → ESTOP frame at the board | → servos held (last width change) | "
+              "→ next pulse | of which the ESTOP frame → next pulse | cut the move short |",
+              "|---|---|---|---|---|---|---|"]
     for name in ORDER:
         r = out[name]
-        lines.append(f"| `{name}` | {r['estop_n']} | {fmt(r['estop_to_board_ms'])} | {fmt(r['estop_to_pins_ms'])} | "
-                     f"{fmt(r['estop_frame_to_pins_ms'])} | {r['estop_cut']}/{r['estop_n']} |")
+        lines.append(f"| `{name}` | {r['estop_n']} | {fmt(r['estop_to_board_ms'])} | {fmt(r['estop_to_held_ms'])} | "
+                     f"{fmt(r['estop_to_pins_ms'])} | {fmt(r['estop_frame_to_pins_ms'])} | "
+                     f"{r['estop_cut']}/{r['estop_n']} |")
     return "\n".join(lines)
 
 

@@ -13,9 +13,14 @@ a move of 0.3 s):
   to_board   time.time_ns() just before rclpy publishes `estop` -> the board has the whole
              ESTOP frame (its last byte's cycle, tied to wall time by the harness's `w`
              events): from here no command moves a servo.
+  to_held    hold: -> the servos are held, the last change of a pulse width on any pin
+             (safety_rig.last_width_change), or the ESTOP frame if none came after it:
+             the firmware holds what its pins show, so no servo gets a new position
+             after its frame unless a pulse that had read one starts meanwhile.
   to_pins    -> the pin shows it: hold, the rise of the first pulse after that (every
-             pulse from then on has the held width, checked); detach, the first 20 ms
-             servo frame with no pulse (the last pulse's rise + 20 ms).
+             pulse from then on has the held width, checked; the wait for it is the
+             servo frame's phase); detach, the first 20 ms servo frame with no pulse
+             (the last pulse's rise + 20 ms).
 Hot-plug, --cycles of each kind (the cable pulled for 0.3 s mid-move, the board reset):
   reconnect  plugged back (time.time_ns() after the pty is there again) -> the board has
              the first SET_PULSES of the new session.
@@ -34,7 +39,7 @@ os.environ.setdefault("EEZYBOT_BIN_DIR", str(HERE.parents[1] / "target" / "relea
 
 from benchkit import Launcher, stats  # noqa: E402
 from conftest import DomainLease, Observer  # noqa: E402
-from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, A, Rig, engaged_estop_frames, estop_held, reconnect_ms, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
+from safety_rig import CYCLES_PER_S, SERVO_PERIOD_S, A, Rig, engaged_estop_frames, estop_held, last_width_change, reconnect_ms, sent_ticks, velocity_limits_us_per_s, velocity_violations  # noqa: E402
 
 
 def estop_trials(domain, action, trials, tmp):
@@ -61,7 +66,7 @@ def estop_trials(domain, action, trials, tmp):
     engaged = [next(s for s in stops if ev.wall_ns(s[1]) >= t_pub) for t_pub in published]
     assert len(set(engaged)) == trials, (len(stops), trials)
     sends = sent_ticks(ev)
-    to_board, to_pins = [], []
+    to_board, to_held, to_pins = [], [], []
     for t_pub, (seq, c_stop) in zip(published, engaged):
         to_board.append((ev.wall_ns(c_stop) - t_pub) / 1e6)
         # what the board answered it holds, and from when the pins show it
@@ -72,11 +77,13 @@ def estop_trials(domain, action, trials, tmp):
                 nxt = next(c for c, _ in sends if c > c_held)
                 assert all(abs(w - held[pin] / 2) <= 1.0 for c, w in ev.pulses(pin) if c_held < c < nxt)
             to_pins.append((ev.wall_ns(first) - t_pub) / 1e6)
+            to_held.append((ev.wall_ns(last_width_change(ev, c_stop, nxt)) - t_pub) / 1e6)
         else:
             last = max([c for pin in range(4) for c, _ in ev.pulses(pin) if c < c_stop + SERVO_PERIOD_S * CYCLES_PER_S])
             gone = last + int(SERVO_PERIOD_S * CYCLES_PER_S)
             to_pins.append((ev.wall_ns(gone) - t_pub) / 1e6)
     return {"to_board_ms": stats(to_board), "to_pins_ms": stats(to_pins),
+            **({"to_held_ms": stats(to_held)} if to_held else {}),
             "velocity_violations": len(velocity_violations(ev, velocity_limits_us_per_s()))}
 
 
@@ -107,7 +114,8 @@ def main():
             with tempfile.TemporaryDirectory() as tmp:
                 out[f"estop_{action}"] = r = estop_trials(lease.id, action, args.trials, tmp)
             print(f"e-stop ({action}), {args.trials} trials: publish -> board {r['to_board_ms']} ms, "
-                  f"-> pins {r['to_pins_ms']} ms; velocity-limit violations {r['velocity_violations']}")
+                  f"-> servos held {r.get('to_held_ms', '-')} ms, -> pins {r['to_pins_ms']} ms; "
+                  f"velocity-limit violations {r['velocity_violations']}")
         for kind in ("cable", "reset"):
             with tempfile.TemporaryDirectory() as tmp:
                 out[f"hotplug_{kind}"] = r = hotplug_cycles(lease.id, kind, args.cycles, tmp)

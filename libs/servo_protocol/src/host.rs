@@ -646,7 +646,9 @@ impl<T: Clone> HostLink<T> {
                 }
                 // the pose the device reports is where the next pulses start, until we
                 // have sent pulses of our own this session
-                if self.last_pulses_sent.is_none() {
+                // and under an e-stop the pose it holds: it drops a command it had not
+                // shown yet (PROTOCOL.md), and the first after the release ramps from there
+                if self.last_pulses_sent.is_none() || state == DeviceState::Estop {
                     replan |= self.at != Some(ticks);
                     self.at = Some(ticks);
                 }
@@ -1295,6 +1297,45 @@ mod tests {
         r.link.command([3100; 4], 3, r.now);
         r.run_until(700);
         assert_eq!(r.device.pulses(), [3100; 4]);
+    }
+
+    #[test]
+    fn after_a_holding_estop_the_next_command_ramps_from_the_pose_the_device_holds() {
+        // The firmware holds what its pins show and drops a command not shown yet
+        // (PROTOCOL.md): its STATE under the e-stop says so, and the ramp after the
+        // release starts there, not from the dropped command.
+        let mut r = Rig::new(ramping(500.0));
+        r.link.command(HOLD_TICKS, 1, r.now);
+        r.run_until(100);
+        r.link.set_estop(true);
+        r.run_until(120);
+        let sent = r.pulses_sent().last().unwrap().1;
+        let held = sent.map(|t| t - 10);
+        r.link.received(
+            Frame {
+                seq: 200,
+                msg: Message::State {
+                    ack_seq: 0,
+                    state: DeviceState::Estop,
+                    clamped: false,
+                    rx_errors: 0,
+                    ticks: held,
+                },
+            },
+            r.now,
+        );
+        r.link.set_estop(false);
+        r.run_until(200);
+        let n = r.pulses_sent().len();
+        r.link.command(sent.map(|t| t + 1000), 2, r.now);
+        r.run_until(260);
+        let first = r.pulses_sent()[n].1;
+        let step = (500.0 * SERVO_FRAME.as_secs_f64()) as u16;
+        assert_eq!(
+            first,
+            held.map(|t| t + step),
+            "must start where the device holds"
+        );
     }
 
     #[test]
