@@ -325,16 +325,21 @@ def test_page_is_small_local_and_shows_the_live_arm(launch, observer, browser):
 
 
 def test_panel_lists_the_nodes_under_the_names_they_run_under(launch, observer, browser):
-    """compute_ik run as `ik2` shows as ik2, up, in place of compute_ik; the nodes not
-    running show as missing; the page logs nothing to the console."""
+    """compute_ik run as `ik2` and named so to gui_bridge (`ik_node`) shows as ik2, up, in
+    place of compute_ik; the nodes not running show as missing. A node whose status calls
+    itself "inverse kinematics" under another name is just another node: nodes are found
+    by name, not by the text of their status. The page logs nothing to the console."""
     launch("compute_ik", "--ros-args", "-r", "__node:=ik2")
-    p = Panel(launch, observer, browser)
+    launch("compute_ik", "--ros-args", "-r", "__node:=impostor")
+    p = Panel(launch, observer, browser, args=("-p", "ik_node:=ik2"))
     try:
-        p.page.wait_for_function("() => { const d = document.querySelector('#status-ik2 .dot'); return d && d.className.includes('up'); }",
-                                 timeout=60000)
+        for name in ("ik2", "impostor"):
+            p.page.wait_for_function(
+                f"() => {{ const d = document.querySelector('#status-{name} .dot'); return d && d.className.includes('up'); }}",
+                timeout=60000)
         assert p.page.query_selector("#status-compute_ik") is None
         names = p.page.eval_on_selector_all("#nodes > span", "els => els.map(e => e.id)")
-        assert names == ["status-ik2", "status-state_publisher", "status-serial_node"], names
+        assert names == ["status-ik2", "status-state_publisher", "status-serial_node", "status-impostor"], names
         assert "down" in p.page.get_attribute("#status-serial_node .dot", "class")
         assert "inverse kinematics" in p.page.get_attribute("#status-ik2", "title")
         p.assert_quiet_console()

@@ -86,6 +86,7 @@ param_type!(bool, Boolean, "bool");
 param_type!(i64, Integer, "integer");
 param_type!(f64, Double, "double");
 param_type!(String, String, "string");
+param_type!(Vec<String>, StringArray, "string array");
 
 #[cfg(test)]
 mod tests {

@@ -170,8 +170,9 @@ pub async fn calibrate(
         &params.string("calibration_file").unwrap_or_default(),
         &arm_config,
     );
+    let names = crate::NodeNames::from_params(&params);
     let node = std::cell::RefCell::new(node);
-    let control = RosCalibration::new(&node, path, "compute_ik");
+    let control = RosCalibration::new(&node, path, &names.ik);
     println!(
         "calibrating the {} arm; the result goes to {}\n{HELP}",
         if leader { "leader" } else { "follower" },
@@ -181,9 +182,9 @@ pub async fn calibrate(
     if !leader {
         // compute_ik must go silent before anything moves: its parameter services first
         tokio::select! {
-            r = control.wait_ready("compute_ik", Duration::from_secs(10)) => r.map_err(|e| {
+            r = control.wait_ready(&names.ik, Duration::from_secs(10)) => r.map_err(|e| {
                 NotDelivered::NotCalibrated(format!(
-                    "calibration not started: compute_ik's parameters do not answer ({e}): is compute_ik running?"
+                    "calibration not started: {0}'s parameters do not answer ({e}): is {0} running (ik_node)?", names.ik
                 ))
             })?,
             _ = &mut shutdown => {
@@ -191,7 +192,15 @@ pub async fn calibrate(
             }
         }
     }
-    let mut heard: BTreeMap<String, (String, Instant)> = BTreeMap::new();
+    // the nodes heard on diagnostics, by name: when last
+    let mut heard: BTreeMap<String, Instant> = BTreeMap::new();
+    let running = |heard: &BTreeMap<String, Instant>, within: Duration| -> Vec<String> {
+        names
+            .calibrated()
+            .filter(|n| heard.get(*n).is_some_and(|at| at.elapsed() < within))
+            .map(str::to_string)
+            .collect()
+    };
     let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
     let mut servo_state = servo_state.async_stream().boxed_local();
     let mut diagnostics = diagnostics.async_stream().boxed_local();
@@ -259,7 +268,7 @@ pub async fn calibrate(
                 Some(Ok((msg, _))) = diagnostics.next() => {
                     for f in feedback::decode(&msg) {
                         if let Some(n) = f.node {
-                            heard.insert(n, (f.task, Instant::now()));
+                            heard.insert(n, Instant::now());
                         }
                     }
                     if let Some(counts) = crate::panel::leader_counts(&msg) {
@@ -290,15 +299,7 @@ pub async fn calibrate(
                 }
                 cal::Effect::ServoAngles(deg) => control.servo_angles(deg, Time::now()),
                 cal::Effect::Save(mut job) => {
-                    let now = Instant::now();
-                    job.nodes = heard
-                        .iter()
-                        .filter(|(_, (task, at))| {
-                            (task == "inverse kinematics" || task == "servo link")
-                                && now.duration_since(*at) < Duration::from_secs(3)
-                        })
-                        .map(|(n, _)| n.clone())
-                        .collect();
+                    job.nodes = running(&heard, Duration::from_secs(3));
                     for name in &job.nodes {
                         // matched before the save sets their arm_config (made when heard)
                         if let Err(e) = control.wait_ready(name, Duration::from_secs(3)).await {
@@ -329,22 +330,8 @@ pub async fn calibrate(
                 cal::Effect::Log(level, text) => log::log!(level, "{text}"),
             }
         }
-        if !leader {
-            // let the heard nodes' parameter clients match before a save
-            let names: Vec<String> = heard
-                .iter()
-                .filter(|(_, (task, _))| task == "inverse kinematics" || task == "servo link")
-                .map(|(n, _)| n.clone())
-                .collect();
-            control.prepare(&names);
-        } else {
-            let names: Vec<String> = heard
-                .iter()
-                .filter(|(_, (task, _))| task == "servo link")
-                .map(|(n, _)| n.clone())
-                .collect();
-            control.prepare(&names);
-        }
+        // let the parameter clients of the nodes heard match before a save
+        control.prepare(&running(&heard, Duration::MAX));
     }
 }
 

@@ -4,7 +4,8 @@
 //! calibrating), `servo_angles` while calibrating (the publisher exists only then, so
 //! that serial_node and `ros2 topic info` see one commander the rest of the time), and
 //! saving: the file written atomically ([`arm_config_file::write_calibration`], off the
-//! event loop), then `arm_config` set on compute_ik and every serial_node heard.
+//! event loop), then `arm_config` set on compute_ik and every serial_node running, by name
+//! (`ik_node`, `servo_nodes`).
 
 use crate::calibrate::SaveOutcome;
 use crate::{CalibrationControl, SaveJob};

@@ -73,9 +73,29 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new(
                 "calibration_file",
                 ParameterValue::String(String::new()),
-                "where the calibration wizard saves (atomically, the previous file kept as FILE.bak), then sets arm_config to it on compute_ik and every serial_node heard; empty = arm_config if set, else $XDG_CONFIG_HOME/eezybot/arm.yaml (~/.config/eezybot/arm.yaml), made from the shipped config",
+                "where the calibration wizard saves (atomically, the previous file kept as FILE.bak), then sets arm_config to it on the nodes ik_node and servo_nodes name, those running; empty = arm_config if set, else $XDG_CONFIG_HOME/eezybot/arm.yaml (~/.config/eezybot/arm.yaml), made from the shipped config",
             )
             .read_only(),
+            ParamSpec::new(
+                "ik_node",
+                ParameterValue::String(NodeNames::IK.into()),
+                "the node running the inverse kinematics, by name (as `-r __node:=` named it): the panel lists it first, and a saved calibration sets its arm_config",
+            )
+            .read_only()
+            .validator(|v| match v {
+                ParameterValue::String(n) => check_node_names(std::slice::from_ref(n)),
+                _ => Ok(()),
+            }),
+            ParamSpec::new(
+                "servo_nodes",
+                ParameterValue::StringArray(NodeNames::SERVOS.iter().map(|s| s.to_string()).collect()),
+                "the serial_nodes, follower and leader, by name: the panel lists the first, and a saved calibration sets arm_config on each one running",
+            )
+            .read_only()
+            .validator(|v| match v {
+                ParameterValue::StringArray(n) => check_node_names(n),
+                _ => Ok(()),
+            }),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
             ParamSpec::new(
                 "program_dir",
@@ -110,6 +130,58 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             .read_only(),
         ],
     }
+}
+
+/// The graph's nodes the panel and the calibration wizard work with, found by their
+/// names (parameters `ik_node` and `servo_nodes`), never by what their `diagnostics`
+/// say they do: a node renamed with `-r __node:=` is named here too.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NodeNames {
+    /// The node running the inverse kinematics (and the arbiter).
+    pub ik: String,
+    /// The serial_nodes, follower and leader.
+    pub servos: Vec<String>,
+}
+
+impl NodeNames {
+    /// `ik_node`'s default: the contract's name.
+    pub const IK: &'static str = "compute_ik";
+    /// `servo_nodes`' default: the follower's contract name and the leader's documented
+    /// one (docs/nodes.md).
+    pub const SERVOS: [&'static str; 2] = ["serial_node", "leader_arm"];
+
+    /// The names the node's parameters give.
+    pub fn from_params(params: &Params) -> NodeNames {
+        let mut names = NodeNames::default();
+        if let Some(ik) = params.string("ik_node") {
+            names.ik = ik;
+        }
+        if let Some(servos) = params.get_as::<Vec<String>>("servo_nodes") {
+            names.servos = servos;
+        }
+        names
+    }
+
+    /// The nodes a saved calibration sets `arm_config` on: the IK node and every
+    /// serial_node.
+    pub fn calibrated(&self) -> impl Iterator<Item = &str> {
+        std::iter::once(self.ik.as_str()).chain(self.servos.iter().map(String::as_str))
+    }
+}
+
+impl Default for NodeNames {
+    fn default() -> NodeNames {
+        NodeNames {
+            ik: NodeNames::IK.into(),
+            servos: NodeNames::SERVOS.iter().map(|s| s.to_string()).collect(),
+        }
+    }
+}
+
+fn check_node_names(names: &[String]) -> Result<(), String> {
+    names
+        .iter()
+        .try_for_each(|n| ros_plumbing::names::check_node_name(n).map_err(|e| e.to_string()))
 }
 
 /// The arm model from an `arm_config` path (empty: the shipped configuration).

@@ -10,7 +10,7 @@ use crate::message::{
 };
 use crate::teleop::{xyz_topic, Command, Event, Teleop};
 use crate::web::{self, ClientRequest, WebStats};
-use crate::Input;
+use crate::{Input, NodeNames};
 use eezybot_kinematics::envelope::Envelope;
 use eezybot_kinematics::urdf::RobotModel;
 use eezybot_kinematics::{Arm, ArmJoints, ACTUATED_JOINTS};
@@ -110,20 +110,21 @@ const NODE_NAME_MAX: usize = ros_plumbing::diagnostics::NODE_NAME_MAX;
 pub const MAX_TRACKED_NODES: usize = 16;
 /// A node heard within this is up.
 const UP_WITHIN: Duration = Duration::from_secs(3);
-/// A node not heard for this long is forgotten (its task's placeholder shows again).
+/// A node not heard for this long is forgotten (an expected one shows as missing again).
 const FORGET_AFTER: Duration = Duration::from_secs(60);
 /// How long a refused client keeps the panel's diagnostics at WARN.
 pub const REFUSAL_WARN_FOR: Duration = Duration::from_secs(60);
 /// The most joints a URDF may have for the 3D view to get its workspace envelope.
 pub const ENVELOPE_MAX_JOINTS: usize = 64;
 
-/// The graph's other nodes the panel always shows: (default node name, the task their
-/// `diagnostics` entry names). Until a node reporting that task is heard, the default
-/// name shows as missing; any node reporting it, under whatever name, takes its place.
+/// The graph's other nodes the panel always shows, by default name, with what they do
+/// (shown for a node not heard yet). The IK node and the serial_node go by the names
+/// [`NodeNames`] gives (`ik_node`, the first of `servo_nodes`); until a node of that
+/// name is heard it shows as missing.
 pub const EXPECTED_NODES: [(&str, &str); 3] = [
-    ("compute_ik", "inverse kinematics"),
+    (NodeNames::IK, "inverse kinematics"),
     ("state_publisher", "robot state"),
-    ("serial_node", "servo link"),
+    (NodeNames::SERVOS[0], "servo link"),
 ];
 
 /// Samples that could not be read, for `diagnostics` and the (throttled) log.
@@ -172,6 +173,7 @@ struct Heard {
 /// it reports (so under any remap or namespace), besides this one.
 struct NodeHealth {
     own: String,
+    names: NodeNames,
     seen: BTreeMap<String, Heard>,
     last_rejection: Option<String>,
     /// who moves the arm (compute_ik's active controllers), and its last switch
@@ -183,6 +185,7 @@ impl NodeHealth {
     fn new(own: &str) -> Self {
         NodeHealth {
             own: own.to_string(),
+            names: NodeNames::default(),
             seen: BTreeMap::new(),
             last_rejection: None,
             controllers: None,
@@ -190,15 +193,27 @@ impl NodeHealth {
         }
     }
 
-    /// The nodes up now whose task is one of `tasks`.
-    fn nodes_doing(&self, tasks: &[&str], now: Instant) -> Vec<String> {
-        self.seen
-            .iter()
-            .filter(|(_, h)| {
-                tasks.contains(&h.task.as_str()) && now.duration_since(h.at) < UP_WITHIN
+    /// Those of `names` heard within [`UP_WITHIN`] of `now`.
+    fn up<'a>(&self, names: impl Iterator<Item = &'a str>, now: Instant) -> Vec<String> {
+        names
+            .filter(|n| {
+                self.seen
+                    .get(*n)
+                    .is_some_and(|h| now.duration_since(h.at) < UP_WITHIN)
             })
-            .map(|(n, _)| n.clone())
+            .map(str::to_string)
             .collect()
+    }
+
+    /// The expected nodes' names, under [`NodeNames`].
+    fn expected(&self) -> [(&str, &'static str); 3] {
+        let [ik, state, servo] = EXPECTED_NODES;
+        let first_servo = self.names.servos.first().map_or(servo.0, String::as_str);
+        [
+            (self.names.ik.as_str(), ik.1),
+            state,
+            (first_servo, servo.1),
+        ]
     }
 
     fn update(&mut self, heard: &[Feedback], now: Instant) {
@@ -247,8 +262,8 @@ impl NodeHealth {
         }
     }
 
-    /// The expected tasks first (each node heard reporting it, or its default name as
-    /// missing), then every other node heard, by name.
+    /// The expected nodes first (as heard, or as missing), then every other node heard,
+    /// by name.
     fn status(&self, now: Instant) -> ToClient {
         let entry = |name: &str, h: &Heard| {
             let age = now.saturating_duration_since(h.at);
@@ -264,29 +279,23 @@ impl NodeHealth {
         };
         let mut nodes = vec![];
         let mut listed: Vec<&str> = vec![];
-        for (default, task) in EXPECTED_NODES {
-            let mut doing = self
-                .seen
-                .iter()
-                .filter(|(n, h)| h.task == task || n.as_str() == default)
-                .peekable();
-            if doing.peek().is_none() {
-                nodes.push(NodeEntry {
-                    name: default.into(),
+        for (name, task) in self.expected() {
+            if listed.contains(&name) {
+                continue;
+            }
+            listed.push(name);
+            nodes.push(match self.seen.get(name) {
+                Some(h) => entry(name, h),
+                None => NodeEntry {
+                    name: name.into(),
                     task: task.into(),
                     hardware_id: String::new(),
                     up: false,
                     level: DiagnosticStatus::STALE,
                     message: "not seen".into(),
                     age_s: None,
-                });
-            }
-            for (n, h) in doing {
-                if !listed.contains(&n.as_str()) {
-                    listed.push(n);
-                    nodes.push(entry(n, h));
-                }
-            }
+                },
+            });
         }
         for (n, h) in &self.seen {
             if !listed.contains(&n.as_str()) {
@@ -433,11 +442,17 @@ impl Panel {
         self.wizard.as_ref().is_some_and(|w| w.holds_compute_ik())
     }
 
-    /// The nodes whose `arm_config` a saved calibration goes to: compute_ik and every
-    /// serial_node (follower or leader) heard on `diagnostics`.
+    /// The nodes whose `arm_config` a saved calibration goes to: the IK node and the
+    /// serial_nodes [`NodeNames`] names, those heard on `diagnostics` now.
     pub fn calibration_nodes(&self) -> Vec<String> {
         self.health
-            .nodes_doing(&["inverse kinematics", "servo link"], Instant::now())
+            .up(self.health.names.calibrated(), Instant::now())
+    }
+
+    /// Find the graph's nodes by these names (the default: the contract's).
+    pub fn with_node_names(mut self, names: NodeNames) -> Panel {
+        self.health.names = names;
+        self
     }
 
     /// The last panel client left: a calibration it was running is cancelled, so the
@@ -1161,12 +1176,66 @@ mod tests {
     }
 
     #[test]
-    fn nodes_show_under_the_names_they_run_under() {
+    fn nodes_are_found_by_name_not_by_what_their_status_says() {
+        // a node calling itself "inverse kinematics" is not compute_ik, nor a
+        // calibration target: only the names NodeNames gives are
         let mut h = NodeHealth::new("gui_bridge");
+        h.update(
+            &array(&[
+                ("impostor: inverse kinematics", 0, &[]),
+                ("serial_node: servo link", 0, &[]),
+                ("leader_arm: servo link", 0, &[]),
+            ]),
+            Instant::now(),
+        );
         assert_eq!(
             names(&h),
             [
                 ("compute_ik".into(), false),
+                ("state_publisher".into(), false),
+                ("serial_node".into(), true),
+                ("impostor".into(), true),
+                ("leader_arm".into(), true)
+            ]
+        );
+        assert_eq!(
+            h.up(h.names.calibrated(), Instant::now()),
+            ["serial_node", "leader_arm"]
+        );
+        // renamed with -r __node:=ik2, named by ik_node and servo_nodes
+        h.names = NodeNames {
+            ik: "ik2".into(),
+            servos: vec!["arm_link".into()],
+        };
+        h.update(
+            &array(&[
+                ("ik2: inverse kinematics", 0, &[]),
+                ("arm_link: servo link", 0, &[]),
+            ]),
+            Instant::now(),
+        );
+        assert_eq!(
+            names(&h)[..3],
+            [
+                ("ik2".into(), true),
+                ("state_publisher".into(), false),
+                ("arm_link".into(), true)
+            ]
+        );
+        assert_eq!(
+            h.up(h.names.calibrated(), Instant::now()),
+            ["ik2", "arm_link"]
+        );
+    }
+
+    #[test]
+    fn nodes_show_under_the_names_they_run_under() {
+        let mut h = NodeHealth::new("gui_bridge");
+        h.names.ik = "ik2".into();
+        assert_eq!(
+            names(&h),
+            [
+                ("ik2".into(), false),
                 ("state_publisher".into(), false),
                 ("serial_node".into(), false)
             ]

@@ -60,7 +60,9 @@ pub async fn serve(
         &params.string("program_dir").unwrap_or_default(),
     ));
     log::info!("waypoint programs in {}", desk.dir().display());
-    let mut panel = crate::panel::Panel::new(arm, rate, desk, node.resolver().node_name());
+    let names = crate::NodeNames::from_params(&params);
+    let mut panel = crate::panel::Panel::new(arm, rate, desk, node.resolver().node_name())
+        .with_node_names(names.clone());
     let arm_config = params.string("arm_config").unwrap_or_default();
     match eezybot_kinematics::ArmConfig::load_or_shipped(&arm_config) {
         Ok(config) => {
@@ -152,7 +154,7 @@ pub async fn serve(
         },
     };
     let calibration =
-        crate::calibration_ros::RosCalibration::new(&node, calibration_path, "compute_ik");
+        crate::calibration_ros::RosCalibration::new(&node, calibration_path, &names.ik);
     log::info!(
         "the calibration wizard saves to {}",
         calibration.path().display()

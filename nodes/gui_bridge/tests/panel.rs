@@ -249,7 +249,11 @@ fn a_program_sends_each_point_on_its_kinds_topic_in_order_and_an_estop_stops_it(
 
 #[test]
 fn compute_iks_refusal_of_the_players_target_stops_it_and_shows_on_the_status() {
-    let mut p = panel("refusal");
+    // compute_ik runs as ik2 here (refusal_of), and the panel is told so (ik_node)
+    let mut p = panel("refusal").with_node_names(gui_bridge::NodeNames {
+        ik: "ik2".into(),
+        ..Default::default()
+    });
     let t0 = Instant::now();
     p.on_request(ClientRequest::Program(ProgramOp::Teach), at(t0, 0));
     p.on_request(
