@@ -116,10 +116,9 @@ pub const PARAMETER_SERVICES: &[&str] = &[
 ];
 
 /// Which node calls which other node's parameter services
-/// ([`crate::remote_params::RemoteParameters`]): gui_bridge switches compute_ik's
-/// `motion` for `play --line` and reads and sets its parameters from the web panel; its
-/// calibration wizard sets, on saving, `arm_config` on
-/// compute_ik and serial_node.
+/// ([`crate::remote_params::RemoteParameters`]): gui_bridge reads and sets compute_ik's
+/// parameters from the web panel, and its calibration wizard sets, on saving,
+/// `arm_config` on compute_ik and serial_node.
 pub const REMOTE_PARAMETER_CALLS: &[(&str, &str, &[&str])] = &[
     (
         "gui_bridge",
