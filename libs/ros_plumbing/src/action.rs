@@ -23,6 +23,7 @@ use ros2_client::{ActionTypeName, Message, Name, Node, ServiceMapping};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
+use tokio::sync::Notify;
 
 /// ros2-client's goal id (a `unique_identifier_msgs/UUID`): the wire's, kept inside
 /// this module.
@@ -341,7 +342,8 @@ enum Answer<R> {
 /// reader its request names (`Server::response_reader_matched`): a client that sees
 /// the server ready asks at once, and we may learn of its response reader after the
 /// request; written before that match, the answer would go to nobody. Such answers
-/// are sent from [`ActionServer::next`] once the match comes (or after `ANSWER_WAIT`).
+/// are sent from [`ActionServer::next`] once the match comes (or after `ANSWER_WAIT`),
+/// also from a `next()` already pending when the answer was given.
 pub struct ActionServer<G, R, F>
 where
     G: Message + Clone,
@@ -351,6 +353,8 @@ where
     server: ros2_client::action::ActionServer<G, R, F>,
     table: Mutex<GoalTable<R, RmwRequestId>>,
     waiting: Mutex<Vec<(RmwRequestId, Answer<R>, Instant)>>,
+    /// An answer began to wait: a pending [`ActionServer::next`] looks again.
+    deferred: Notify,
     goal_requests: Mutex<GoalRequests>,
     name: String,
 }
@@ -394,6 +398,7 @@ where
             server,
             table: Mutex::new(GoalTable::default()),
             waiting: Mutex::new(Vec::new()),
+            deferred: Notify::new(),
             goal_requests: Mutex::new(GoalRequests::default()),
             name: resolved,
         };
@@ -448,6 +453,7 @@ where
             let result = self.server.result_server_ref().async_receive_request();
             tokio::select! {
                 _ = tokio::time::sleep(ANSWER_RECHECK), if waiting => {}
+                _ = self.deferred.notified() => {}
                 r = goal => match r {
                     Ok((request, g)) => return self.goal_request(request, g),
                     Err(e) => return ActionRequest::Unreadable(format!("send_goal: {e:?}")),
@@ -559,6 +565,8 @@ where
                 self.name
             );
             self.waiting().push((request, answer, Instant::now()));
+            // the `next()` awaiting a request may be pending with no answer to look at
+            self.deferred.notify_one();
         }
     }
 

@@ -6,7 +6,8 @@
 //! sees the service ready asks at once, and we may learn of its response reader after
 //! the request; written before that match, the answer would go to nobody. Waiting
 //! answers are sent from [`ServiceServer::next`] once the match comes (or after
-//! `ANSWER_WAIT`).
+//! `ANSWER_WAIT`), also from a `next()` already pending when the answer was given: a
+//! node awaits its next request while it answers the last one.
 
 use crate::error::PlumbingError;
 use crate::names::Resolver;
@@ -16,6 +17,7 @@ use ros2_client::{Message, Name, Node, Server, ServiceMapping, ServiceTypeName};
 use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
+use tokio::sync::Notify;
 
 /// How long an answer waits for its client's response reader to match.
 const ANSWER_WAIT: Duration = Duration::from_secs(10);
@@ -51,6 +53,8 @@ struct State<Resp> {
 pub struct ServiceServer<Req: Message, Resp: Message> {
     server: Server<Req, Resp>,
     state: Mutex<State<Resp>>,
+    /// An answer began to wait: a pending [`ServiceServer::next`] looks again.
+    deferred: Notify,
     name: String,
 }
 
@@ -89,6 +93,7 @@ where
                 open: HashMap::new(),
                 waiting: Vec::new(),
             }),
+            deferred: Notify::new(),
             name: resolved,
         })
     }
@@ -110,6 +115,7 @@ where
             let waiting = self.send_waiting();
             tokio::select! {
                 _ = tokio::time::sleep(ANSWER_RECHECK), if waiting => {}
+                _ = self.deferred.notified() => {}
                 r = self.server.async_receive_request() => {
                     let (id, request) = r.map_err(|e| format!("{}: {e:?}", self.name))?;
                     let mut prefix = [0u8; 12];
@@ -138,6 +144,8 @@ where
                 self.name
             );
             self.state().waiting.push((id, response, Instant::now()));
+            // the `next()` awaiting a request may be pending with no answer to look at
+            self.deferred.notify_one();
         }
     }
 
