@@ -121,14 +121,6 @@ def test_list_controllers_prints_the_five_commanders_as_the_service_lists_them(l
     assert rows["leader_follower"][2]["required command interfaces"] == ARM + CLAW
 
 
-# OPEN DEFECT (issue 33, not resolved): in 2 of the last 5 fresh-clone runs (X4, X5 in
-# BENCHMARKS.md) one `ros2 control switch_controllers` process got no answer from
-# compute_ik within rcl's 10 s although the switch was made; its retry was then refused
-# as not active. A fresh client's answer is lost or late (the defect patches 10 and 11
-# of ros2-client reduced, not removed). Marked so that it is reported on every run
-# (XFAIL / XPASS) without failing the test command, until it is found and fixed.
-@pytest.mark.xfail(reason="open defect: a just-started client's switch_controller answer is sometimes "
-                          "not received within 10 s (BENCHMARKS.md, fresh-clone runs X4 and X5)", strict=False)
 def test_switch_controllers_switches_and_list_controllers_shows_it(launch, cli):
     launch("compute_ik")
     cli.connect()
