@@ -77,6 +77,8 @@ void servo_pwm_set(uint8_t i, uint16_t ticks) {
   width[i] = ticks;
 }
 void servo_pwm_sync() {}  // frame timing only: no width changes
+// every width set is on the pins at once in this model: nothing waits to be shown
+void servo_pwm_hold() {}
 uint16_t servo_pwm_get(uint8_t i) { return i < SERVO_COUNT ? width[i] : 0; }
 
 void leader_adc_begin() {
