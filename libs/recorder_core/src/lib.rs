@@ -22,6 +22,8 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+pub mod episode;
+
 /// How many samples an input keeps: enough for a second at 200 Hz; a flood of samples
 /// pushes out the oldest, never grows memory.
 pub const HISTORY: usize = 256;
