@@ -1,0 +1,77 @@
+"""Loads a dataset written by libs/lerobot_dataset with lerobot 0.6.1's own loader,
+offline: every frame, the tasks, the stats, and action chunks through `delta_timestamps`.
+Not in the test command (lerobot's venv is 5.4 GB): run it by hand in that venv.
+
+    python3.12 -m venv ~/.cache/eezybot/lerobot-venv
+    ~/.cache/eezybot/lerobot-venv/bin/pip install "lerobot[dataset]==0.6.1"
+    cargo build -p lerobot_dataset --examples
+    ~/.cache/eezybot/lerobot-venv/bin/python tests/lerobot_load.py [DIR]
+
+Without DIR it writes one with `write_demo` (target/debug/examples, or
+EEZYBOT_BIN_DIR/examples) in a temporary folder. Exits non-zero on any mismatch.
+"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+os.environ["HF_HUB_OFFLINE"] = "1"
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
+
+CHUNK = 10
+
+
+def main():
+    if len(sys.argv) > 1:
+        root = Path(sys.argv[1])
+    else:
+        bin_dir = Path(os.environ.get("EEZYBOT_BIN_DIR", Path(__file__).resolve().parents[1] / "target" / "debug"))
+        root = Path(tempfile.mkdtemp()) / "ds"
+        subprocess.run([str(bin_dir / "examples" / "write_demo"), str(root)], check=True)
+    info = json.loads((root / "meta/info.json").read_text())
+    fps = info["fps"]
+
+    ds = LeRobotDataset("local/eezybot_demo", root=root)
+    print(ds)
+    assert ds.num_frames == info["total_frames"], (ds.num_frames, info["total_frames"])
+    assert ds.num_episodes == info["total_episodes"]
+    assert ds.fps == fps
+    tasks = set()
+    for i in range(len(ds)):
+        item = ds[i]
+        assert item["index"].item() == i
+        assert item["observation.state"].shape == (4,) and item["action"].shape == (4,)
+        assert abs(item["timestamp"].item() - item["frame_index"].item() / fps) < 1e-6
+        assert isinstance(item["task"], str) and item["task"] != "0", item["task"]
+        tasks.add(item["task"])
+    print("frames", len(ds), "tasks", sorted(tasks))
+    stats = ds.meta.stats
+    for k in ("observation.state", "action"):
+        assert set(stats[k]) >= {"min", "max", "mean", "std", "count", "q01", "q99"}, stats[k].keys()
+    print("stats mean action", np.asarray(stats["action"]["mean"]))
+
+    # action chunks as ACT asks for them
+    chunked = LeRobotDataset("local/eezybot_demo", root=root,
+                             delta_timestamps={"action": [t / fps for t in range(CHUNK)]})
+    ep = chunked.meta.episodes[0]
+    last = ep["dataset_to_index"] - 1
+    first = chunked[0]
+    assert first["action"].shape == (CHUNK, 4), first["action"].shape
+    assert not first["action_is_pad"].any()
+    # the chunk is the next CHUNK frames' actions
+    for j in range(CHUNK):
+        assert torch.equal(first["action"][j], ds[j]["action"])
+    end = chunked[last]
+    assert end["action_is_pad"][1:].all() and not end["action_is_pad"][0]
+    print("action chunks ok: shape", tuple(first["action"].shape), "padding at the episode's end",
+          end["action_is_pad"].tolist())
+    print("LOADED OK")
+
+
+if __name__ == "__main__":
+    main()
