@@ -55,6 +55,31 @@ def main():
         assert set(stats[k]) >= {"min", "max", "mean", "std", "count", "q01", "q99"}, stats[k].keys()
     print("stats mean action", np.asarray(stats["action"]["mean"]))
 
+    # every per-episode stat (the episodes table) against lerobot's own get_feature_stats
+    # on the frames it loaded. It computes float32 features in float32: the same
+    # histogram (our bin edges are float32 too), so the quantiles agree to 1e-6; its std,
+    # sqrt(E[x²] - E[x]²) in float32, loses digits to cancellation where ours (float64)
+    # does not: 1e-5 for std
+    import pyarrow.parquet as pq
+    from lerobot.datasets.compute_stats import get_feature_stats
+
+    table = pq.read_table(sorted(str(p) for p in (root / "meta/episodes").glob("*/*.parquet")))
+    worst = {}
+    for e in range(ds.num_episodes):
+        ep = ds.meta.episodes[e]
+        rows = [ds.hf_dataset[i] for i in range(ep["dataset_from_index"], ep["dataset_to_index"])]
+        for key in ("observation.state", "action", "timestamp", "frame_index", "index"):
+            values = np.stack([np.asarray(r[key]) for r in rows])
+            ours_dtype = np.float32 if key in ("observation.state", "action", "timestamp") else np.int64
+            theirs = get_feature_stats(values.astype(ours_dtype), axis=0, keepdims=values.ndim == 1)
+            for k, v in theirs.items():
+                stored = np.asarray(table.column(f"stats/{key}/{k}")[e].as_py(), dtype=np.float64)
+                diff = float(np.max(np.abs(stored - np.asarray(v, dtype=np.float64))))
+                worst[k] = max(worst.get(k, 0.0), diff)
+                assert diff < (1e-5 if k == "std" else 1e-6), (e, key, k, stored, v)
+    print("per-episode stats equal lerobot's get_feature_stats; largest differences:",
+          {k: f"{v:.1e}" for k, v in worst.items()})
+
     # action chunks as ACT asks for them
     chunked = LeRobotDataset("local/eezybot_demo", root=root,
                              delta_timestamps={"action": [t / fps for t in range(CHUNK)]})

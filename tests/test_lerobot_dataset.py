@@ -27,14 +27,19 @@ def demo(*args, timeout=30):
 
 
 def lerobot_feature_stats(x):
-    """lerobot's get_feature_stats(x, axis=0) for x of shape (frames, dims), in float64."""
+    """lerobot's get_feature_stats(x, axis=0) for x of shape (frames, dims): the moments in
+    float64; the histogram quantiles in x's own precision, as lerobot (float32 features get
+    float32 bin edges: NumPy 2 keeps `float32 - 1e-10` in float32), int64 in float64."""
+    if x.dtype != np.float32:
+        x = x.astype(np.float64)
     n = x.shape[0]
-    out = {"min": x.min(0), "max": x.max(0), "mean": x.mean(0)}
+    x64 = x.astype(np.float64)
+    out = {"min": x64.min(0), "max": x64.max(0), "mean": x64.mean(0)}
     if n < 2:
-        out["std"] = x.std(0)
+        out["std"] = x64.std(0)
         out.update({k: out["mean"].copy() for _, k in QUANTILES})
     else:
-        out["std"] = np.sqrt(np.maximum(0, (x ** 2).mean(0) - out["mean"] ** 2))
+        out["std"] = np.sqrt(np.maximum(0, (x64 ** 2).mean(0) - out["mean"] ** 2))
         for q, k in QUANTILES:
             vals = []
             for d in range(x.shape[1]):
@@ -71,14 +76,14 @@ def aggregate(parts):
 
 
 def columns(table):
-    """Each feature as a float64 array of shape (frames, dims)."""
+    """Each feature as an array of its stored dtype, shape (frames, dims)."""
     out = {}
     for name in FEATURES:
         col = table.column(name).combine_chunks()
         if name in ("observation.state", "action"):
-            out[name] = np.asarray(col.flatten(), dtype=np.float64).reshape(len(col), -1)
+            out[name] = np.asarray(col.flatten()).reshape(len(col), -1)
         else:
-            out[name] = np.asarray(col, dtype=np.float64).reshape(-1, 1)
+            out[name] = np.asarray(col).reshape(-1, 1)
     return out
 
 
@@ -108,6 +113,7 @@ def check_dataset(root, lengths, tasks_by_episode):
     assert data.num_rows == n
     cols = columns(data)
     assert (cols["index"][:, 0] == np.arange(n)).all()
+    assert cols["observation.state"].dtype == np.float32 and cols["index"].dtype == np.int64
     ep = cols["episode_index"][:, 0].astype(int)
     fi = cols["frame_index"][:, 0].astype(int)
     starts = np.cumsum([0] + lengths)
@@ -146,8 +152,8 @@ def check_dataset(root, lengths, tasks_by_episode):
         for k, v in agg.items():
             assert np.allclose(np.array(stats[name][k]), v, rtol=0, atol=1e-6), (name, k, stats[name][k], v)
         # and the moments equal those of the whole data
-        assert np.allclose(stats[name]["mean"], cols[name].mean(0), atol=1e-6)
-        assert np.allclose(stats[name]["std"], cols[name].std(0), atol=1e-6)
+        assert np.allclose(stats[name]["mean"], cols[name].astype(np.float64).mean(0), atol=1e-6)
+        assert np.allclose(stats[name]["std"], cols[name].astype(np.float64).std(0), atol=1e-6)
     return data
 
 

@@ -66,7 +66,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use json::Ordered;
-use stats::FeatureStats;
+use stats::{FeatureStats, Precision};
 use tables::{DataRows, EpisodeRow};
 
 /// lerobot's `CODEBASE_VERSION`.
@@ -845,8 +845,20 @@ impl DatasetWriter {
             i64s(&rows.task_index),
         ];
         let mut ep_stats = Vec::new();
-        for (name, col) in self.spec.feature_names().iter().zip(columns.iter()) {
-            let s = FeatureStats::compute(col)
+        for (i, (name, col)) in self
+            .spec
+            .feature_names()
+            .iter()
+            .zip(columns.iter())
+            .enumerate()
+        {
+            // observation.state, action and timestamp are float32
+            let p = if i < 3 {
+                Precision::F32
+            } else {
+                Precision::F64
+            };
+            let s = FeatureStats::compute(col, p)
                 .ok_or_else(|| Error::Table(format!("stats of {name}")))?;
             ep_stats.push((name.to_string(), s));
         }

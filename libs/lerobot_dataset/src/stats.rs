@@ -13,8 +13,15 @@
 //!   (`Σ count·(std² + (mean - total_mean)²) / Σ count`), and each quantile the
 //!   count-weighted mean of the episodes' quantiles (not a quantile of the whole data).
 //!
-//! lerobot computes in float32 for float32 features (numpy's promotion); this computes
-//! in f64 throughout, so the values agree to float32 precision, not bit for bit.
+//! - Images (`compute_episode_stats` for image/video features, [`image_stats`]): the
+//!   frames at lerobot's `sample_indices`, downsampled, per channel, divided by 255.
+//!
+//! Precision: lerobot computes float32 features (and uint8 images) in float32 (numpy's
+//! promotion). The histogram is computed as it does, with float32 bin edges
+//! ([`Precision`]), so the quantiles are lerobot's own (tests/lerobot_load.py: equal to
+//! lerobot's `get_feature_stats`). The moments are computed in f64: lerobot's float32
+//! `E[x²] - E[x]²` loses digits to cancellation, so its std differs from ours by up to
+//! about 1e-6 (2e-6 seen for a joint with std 0.02), its mean by about 1e-7.
 
 use serde_json::Value;
 
@@ -78,8 +85,68 @@ fn histogram(values: &[f64], edges: &[f64]) -> Vec<f64> {
     hist
 }
 
-/// lerobot's `_compute_single_quantile`.
-fn single_quantile(hist: &[f64], edges: &[f64], target: f64) -> f64 {
+/// [`histogram`] of distinct `values` each seen `weights[i]` times.
+fn histogram_weighted(values: &[f64], weights: &[f64], edges: &[f64]) -> Vec<f64> {
+    let bins = edges.len() - 1;
+    let mut hist = vec![0.0; bins];
+    let (first, last) = (edges[0], edges[bins]);
+    for (&x, &w) in values.iter().zip(weights) {
+        if !(x >= first && x <= last) {
+            continue;
+        }
+        let i = edges.partition_point(|&e| e <= x);
+        let bin = if i > bins { bins - 1 } else { i - 1 };
+        hist[bin.min(bins - 1)] += w;
+    }
+    hist
+}
+
+/// The floating point type numpy computes a feature's histogram in: lerobot's
+/// `RunningQuantileStats` promotes with `np.result_type(dtype, np.float32)`, so float32
+/// features (and uint8 images) get float32 bin edges, int64 features float64 ones. The
+/// quantiles depend on it: a value near an edge falls in one bin or the next.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    /// float32 features and images.
+    F32,
+    /// int64 (and float64) features.
+    F64,
+}
+
+/// lerobot's bin edges, `np.linspace(min - 1e-10, max + 1e-10, bins + 1)`, computed in
+/// `p` as numpy does (NumPy 2 keeps a float32 minus a Python float in float32):
+/// `arange(num) * step + start` with `step = (stop - start) / bins`, the last edge
+/// exactly `stop`; with a zero step, `arange(num) / bins * delta + start`.
+fn quantile_edges(min: f64, max: f64, p: Precision) -> Vec<f64> {
+    match p {
+        Precision::F64 => linspace(min - 1e-10, max + 1e-10, QUANTILE_BINS + 1),
+        Precision::F32 => {
+            let start = min as f32 - 1e-10f32;
+            let stop = max as f32 + 1e-10f32;
+            let div = QUANTILE_BINS as f32;
+            let delta = stop - start;
+            let step = delta / div;
+            let mut v: Vec<f64> = (0..=QUANTILE_BINS)
+                .map(|i| {
+                    let y = i as f32;
+                    f64::from(if step == 0.0 {
+                        y / div * delta + start
+                    } else {
+                        y * step + start
+                    })
+                })
+                .collect();
+            if let Some(last) = v.last_mut() {
+                *last = f64::from(stop);
+            }
+            v
+        }
+    }
+}
+
+/// lerobot's `_compute_single_quantile` (its bin width `edges[idx + 1] - edges[idx]` is
+/// taken in the edges' precision, the rest in float64).
+fn single_quantile(hist: &[f64], edges: &[f64], target: f64, p: Precision) -> f64 {
     let mut cumsum = Vec::with_capacity(hist.len());
     let mut acc = 0.0;
     for &h in hist {
@@ -100,14 +167,18 @@ fn single_quantile(hist: &[f64], edges: &[f64], target: f64) -> f64 {
         return edges[idx];
     }
     let fraction = (target - before) / in_bin;
-    edges[idx] + fraction * (edges[idx + 1] - edges[idx])
+    let width = match p {
+        Precision::F32 => f64::from(edges[idx + 1] as f32 - edges[idx] as f32),
+        Precision::F64 => edges[idx + 1] - edges[idx],
+    };
+    edges[idx] + fraction * width
 }
 
 impl FeatureStats {
     /// The statistics of `rows` (frames × dimensions), as lerobot's
     /// `get_feature_stats(array, axis=0, …)` computes them. `None` without rows or with
-    /// rows of different lengths.
-    pub fn compute(rows: &[Vec<f64>]) -> Option<Self> {
+    /// rows of different lengths. `p`: the feature's [`Precision`].
+    pub fn compute(rows: &[Vec<f64>], p: Precision) -> Option<Self> {
         let n = rows.len();
         let dims = rows.first()?.len();
         if rows.iter().any(|r| r.len() != dims) {
@@ -142,11 +213,11 @@ impl FeatureStats {
                     q.push(mean);
                 }
             } else {
-                let edges = linspace(min - 1e-10, max + 1e-10, QUANTILE_BINS + 1);
+                let edges = quantile_edges(min, max, p);
                 let values: Vec<f64> = column(d).collect();
                 let hist = histogram(&values, &edges);
                 for (qi, (q, _)) in QUANTILES.iter().enumerate() {
-                    s.quantiles[qi].push(single_quantile(&hist, &edges, q * n as f64));
+                    s.quantiles[qi].push(single_quantile(&hist, &edges, q * n as f64, p));
                 }
             }
         }
@@ -221,6 +292,22 @@ impl FeatureStats {
         }))
     }
 
+    /// As stats.json holds an image feature's stats: each value nested as shape
+    /// (channels, 1, 1), `count` as `[n]`.
+    pub fn to_json_image(&self) -> Ordered {
+        Ordered::obj(self.entries().into_iter().map(|(k, v)| {
+            let val = match v {
+                StatValue::Floats(f) => Ordered::val(
+                    f.iter()
+                        .map(|&x| serde_json::json!([[x]]))
+                        .collect::<Vec<_>>(),
+                ),
+                StatValue::Count(c) => Ordered::val(vec![c]),
+            };
+            (k, val)
+        }))
+    }
+
     /// Reads what [`FeatureStats::to_json`] writes (and lerobot's stats.json).
     pub fn from_json(v: &Value) -> Option<Self> {
         let floats = |k: &str| -> Option<Vec<f64>> {
@@ -240,6 +327,132 @@ impl FeatureStats {
             quantiles,
         })
     }
+}
+
+/// lerobot's `estimate_num_samples` (defaults: 100 to 10 000 samples, power 0.75): how
+/// many frames of an episode its image statistics sample.
+pub fn estimate_num_samples(len: usize) -> usize {
+    let min = 100.min(len);
+    let pow = (len as f64).powf(0.75) as usize;
+    min.max(pow.min(10_000))
+}
+
+/// lerobot's `sample_indices`: `round(linspace(0, len - 1, n))`, numpy's rounding (half
+/// to even), `n` from [`estimate_num_samples`].
+pub fn sample_indices(len: usize) -> Vec<usize> {
+    let n = estimate_num_samples(len);
+    if n == 0 {
+        return Vec::new();
+    }
+    if n == 1 {
+        return vec![0];
+    }
+    linspace(0.0, (len - 1) as f64, n)
+        .into_iter()
+        .map(|x| x.round_ties_even() as usize)
+        .collect()
+}
+
+/// lerobot's `auto_downsample_height_width` step for an image of `height` × `width`:
+/// 1 below 300 pixels on the long side, else `int(long side / 150)`.
+pub fn downsample_step(height: usize, width: usize) -> usize {
+    if width.max(height) < 300 {
+        1
+    } else if width > height {
+        (width / 150).max(1)
+    } else {
+        (height / 150).max(1)
+    }
+}
+
+/// The statistics of a camera's frames in one episode, as lerobot's
+/// `compute_episode_stats` computes them for an image or video feature: the frames at
+/// [`sample_indices`], each downsampled by [`downsample_step`] (every step-th row and
+/// column), per channel over all their pixels, divided by 255; `count` is the number of
+/// frames sampled. `frame(i)` gives frame `i` of the `len` as RGB bytes, row-major
+/// (`height × width × 3`); `None` if a frame is missing or of another size.
+///
+/// The pixels are counted per value (256 per channel), which gives numpy's histogram
+/// exactly and takes no memory per pixel. In stats.json each value is nested as lerobot's
+/// shape (3, 1, 1): see [`FeatureStats::to_json_image`].
+pub fn image_stats(
+    len: usize,
+    height: usize,
+    width: usize,
+    mut frame: impl FnMut(usize) -> Option<Vec<u8>>,
+) -> Option<FeatureStats> {
+    let step = downsample_step(height, width);
+    let idx = sample_indices(len);
+    let mut counts = [[0u64; 256]; 3];
+    for &i in &idx {
+        let f = frame(i)?;
+        if f.len() != height * width * 3 {
+            return None;
+        }
+        for y in (0..height).step_by(step) {
+            for x in (0..width).step_by(step) {
+                let p = (y * width + x) * 3;
+                for (c, count) in counts.iter_mut().enumerate() {
+                    count[usize::from(f[p + c])] += 1;
+                }
+            }
+        }
+    }
+    let pixels: u64 = counts[0].iter().sum();
+    if pixels == 0 {
+        return None;
+    }
+    let n = pixels as f64;
+    let mut s = FeatureStats {
+        min: Vec::new(),
+        max: Vec::new(),
+        mean: Vec::new(),
+        std: Vec::new(),
+        count: idx.len() as u64,
+        quantiles: Default::default(),
+    };
+    for count in &counts {
+        let values: Vec<f64> = (0..256)
+            .filter(|&v| count[v] > 0)
+            .map(|v| v as f64)
+            .collect();
+        let weights: Vec<f64> = (0..256)
+            .filter(|&v| count[v] > 0)
+            .map(|v| count[v] as f64)
+            .collect();
+        let min = values[0];
+        let max = values[values.len() - 1];
+        let mean = values.iter().zip(&weights).map(|(v, w)| v * w).sum::<f64>() / n;
+        let std = if pixels < 2 {
+            0.0
+        } else {
+            let mean_sq = values
+                .iter()
+                .zip(&weights)
+                .map(|(v, w)| v * v * w)
+                .sum::<f64>()
+                / n;
+            (mean_sq - mean * mean).max(0.0).sqrt()
+        };
+        s.min.push(min / 255.0);
+        s.max.push(max / 255.0);
+        s.mean.push(mean / 255.0);
+        s.std.push(std / 255.0);
+        if pixels < 2 {
+            for q in s.quantiles.iter_mut() {
+                q.push(mean / 255.0);
+            }
+        } else {
+            // uint8 pixels are promoted to float32
+            let edges = quantile_edges(min, max, Precision::F32);
+            let hist = histogram_weighted(&values, &weights, &edges);
+            for (qi, (q, _)) in QUANTILES.iter().enumerate() {
+                let v = single_quantile(&hist, &edges, q * n, Precision::F32);
+                s.quantiles[qi].push(v / 255.0);
+            }
+        }
+    }
+    Some(s)
 }
 
 /// One stat's value: per-dimension floats, or the frame count.
@@ -262,7 +475,7 @@ mod tests {
     #[test]
     fn basic_stats_by_hand() {
         // 1, 2, 3, 4: mean 2.5, E[x²] = 7.5, var = 1.25
-        let s = FeatureStats::compute(&rows(&[1.0, 2.0, 3.0, 4.0])).unwrap();
+        let s = FeatureStats::compute(&rows(&[1.0, 2.0, 3.0, 4.0]), Precision::F64).unwrap();
         assert_eq!(s.min, vec![1.0]);
         assert_eq!(s.max, vec![4.0]);
         assert_eq!(s.mean, vec![2.5]);
@@ -276,7 +489,7 @@ mod tests {
         // floor(k / w). q50: target 50 frames; the cumulative count reaches 50 at the
         // bin of value 49, so q50 = left edge of that bin + (50 - 49) / 1 · width.
         let values: Vec<f64> = (0..100).map(f64::from).collect();
-        let s = FeatureStats::compute(&rows(&values)).unwrap();
+        let s = FeatureStats::compute(&rows(&values), Precision::F64).unwrap();
         let lo: f64 = -1e-10;
         let w = (99.0 + 2e-10) / 5000.0;
         let bin49 = ((49.0 - lo) / w).floor();
@@ -295,7 +508,7 @@ mod tests {
 
     #[test]
     fn one_frame_quantiles_are_the_mean() {
-        let s = FeatureStats::compute(&[vec![3.0, -1.0]]).unwrap();
+        let s = FeatureStats::compute(&[vec![3.0, -1.0]], Precision::F32).unwrap();
         assert_eq!(s.std, vec![0.0, 0.0]);
         for q in &s.quantiles {
             assert_eq!(q, &vec![3.0, -1.0]);
@@ -304,7 +517,7 @@ mod tests {
 
     #[test]
     fn constant_feature() {
-        let s = FeatureStats::compute(&rows(&[7.0; 10])).unwrap();
+        let s = FeatureStats::compute(&rows(&[7.0; 10]), Precision::F32).unwrap();
         assert_eq!(s.std, vec![0.0]);
         for q in &s.quantiles {
             assert!((q[0] - 7.0).abs() < 1e-9, "{q:?}");
@@ -315,10 +528,10 @@ mod tests {
     fn aggregate_equals_whole_for_moments() {
         let a: Vec<f64> = vec![1.0, 5.0, 2.0];
         let b: Vec<f64> = vec![10.0, -3.0, 4.0, 8.0, 0.5];
-        let sa = FeatureStats::compute(&rows(&a)).unwrap();
-        let sb = FeatureStats::compute(&rows(&b)).unwrap();
+        let sa = FeatureStats::compute(&rows(&a), Precision::F64).unwrap();
+        let sb = FeatureStats::compute(&rows(&b), Precision::F64).unwrap();
         let all: Vec<f64> = a.iter().chain(&b).copied().collect();
-        let sall = FeatureStats::compute(&rows(&all)).unwrap();
+        let sall = FeatureStats::compute(&rows(&all), Precision::F64).unwrap();
         let agg = FeatureStats::aggregate(&[&sa, &sb]).unwrap();
         assert_eq!(agg.count, 8);
         assert_eq!(agg.min, sall.min);
@@ -331,8 +544,81 @@ mod tests {
     }
 
     #[test]
+    fn sampling_as_lerobot() {
+        // the docstring of lerobot's estimate_num_samples
+        assert_eq!(estimate_num_samples(1), 1);
+        assert_eq!(estimate_num_samples(500), 105);
+        assert_eq!(estimate_num_samples(1000), 177);
+        assert_eq!(estimate_num_samples(2000), 299);
+        assert_eq!(estimate_num_samples(5000), 594);
+        assert_eq!(estimate_num_samples(10_000), 1000);
+        assert_eq!(estimate_num_samples(20_000), 1681);
+        assert_eq!(sample_indices(50), (0..50).collect::<Vec<_>>());
+        // np.round(np.linspace(0, 150, 100)): 150/99 steps, halves to even
+        let idx = sample_indices(151);
+        assert_eq!(idx.len(), 100);
+        assert_eq!(&idx[..6], &[0, 2, 3, 5, 6, 8]);
+        assert_eq!(idx[99], 150);
+        assert_eq!(downsample_step(480, 640), 4);
+        assert_eq!(downsample_step(120, 160), 1);
+        assert_eq!(downsample_step(720, 405), 4);
+    }
+
+    #[test]
+    fn image_stats_by_hand() {
+        // 4 frames of 2 × 2 (no downsampling, every frame sampled): red 0 and 255 in
+        // equal numbers, green all 51, blue 0..=15 over the 16 pixels
+        let frames: Vec<Vec<u8>> = (0..4u8)
+            .map(|f| {
+                (0..4u8)
+                    .flat_map(|p| [if (f + p) % 2 == 0 { 0 } else { 255 }, 51, f * 4 + p])
+                    .collect()
+            })
+            .collect();
+        let s = image_stats(4, 2, 2, |i| frames.get(i).cloned()).unwrap();
+        assert_eq!(s.count, 4);
+        assert_eq!(s.min, vec![0.0, 0.2, 0.0]);
+        assert_eq!(s.max, vec![1.0, 0.2, 15.0 / 255.0]);
+        assert!((s.mean[0] - 0.5).abs() < 1e-12 && (s.std[0] - 0.5).abs() < 1e-12);
+        assert!((s.mean[2] - 7.5 / 255.0).abs() < 1e-12);
+        let var_blue = (0..16).map(|v| (f64::from(v) - 7.5).powi(2)).sum::<f64>() / 16.0;
+        assert!((s.std[2] - var_blue.sqrt() / 255.0).abs() < 1e-12);
+        // green: one value → every quantile within 1e-10 of it
+        for q in &s.quantiles {
+            assert!((q[1] - 0.2).abs() < 1e-9);
+        }
+        // lerobot 0.6.1's get_feature_stats(frames, axis=(0, 2, 3), keepdims=True) / 255
+        // on the same frames (the same float32 bin edges: the same quantiles)
+        let lerobot = [
+            [-3.921568679809537e-13, 0.2, -3.921568679809537e-13],
+            [-3.921568679809537e-13, 0.2, 0.003924705841962029],
+            [-3.921568679809537e-13, 0.2, 0.027458822960947073],
+            [0.999959992053462, 0.2, 0.054898824504777496],
+            [0.9999959992053462, 0.2, 0.05882164689606312],
+        ];
+        for (qi, want) in lerobot.iter().enumerate() {
+            for (c, w) in want.iter().enumerate() {
+                assert!((s.quantiles[qi][c] - w).abs() < 1e-9, "{qi} {c}: {s:?}");
+            }
+        }
+        assert!((s.std[2] - 0.018077537417411804).abs() < 1e-7);
+        // the weighted histogram equals the per-pixel one
+        let blue: Vec<Vec<f64>> = (0..16).map(|v| vec![f64::from(v)]).collect();
+        let per_pixel = FeatureStats::compute(&blue, Precision::F32).unwrap();
+        for qi in 0..5 {
+            assert!((s.quantiles[qi][2] - per_pixel.quantiles[qi][0] / 255.0).abs() < 1e-12);
+        }
+        let j = String::from_utf8(s.to_json_image().to_pretty()).unwrap();
+        let v: Value = serde_json::from_str(&j).unwrap();
+        assert_eq!(v["max"][0], serde_json::json!([[1.0]]));
+        assert_eq!(v["count"], serde_json::json!([4]));
+        // a frame of the wrong size is refused
+        assert!(image_stats(4, 2, 3, |i| frames.get(i).cloned()).is_none());
+    }
+
+    #[test]
     fn json_round_trip() {
-        let s = FeatureStats::compute(&[vec![1.0, 2.0], vec![3.0, 5.0]]).unwrap();
+        let s = FeatureStats::compute(&[vec![1.0, 2.0], vec![3.0, 5.0]], Precision::F64).unwrap();
         let text = String::from_utf8(s.to_json().to_pretty()).unwrap();
         let keys: Vec<usize> = ["min", "max", "mean", "std", "count", "q01", "q99"]
             .iter()
