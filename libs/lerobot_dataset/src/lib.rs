@@ -51,6 +51,28 @@
 //!   the spec, is refused by [`DatasetWriter::open_resume`] before anything in it is
 //!   touched, with every difference named ([`Error::Mismatch`]).
 //!
+//! # Not yet: cameras (what lerobot 0.6.1 does, for the video step)
+//! - The feature `observation.images.<name>`: dtype `video`, shape `[h, w, 3]`, names
+//!   `["height", "width", "channels"]`, `info` `{"is_depth_map": false}` at creation,
+//!   then after the first episode what `get_video_info` probes from the file
+//!   (`video.height`, `video.width`, `video.codec` `av1`, `video.pix_fmt` `yuv420p`,
+//!   `video.fps`, `video.channels` 3, `has_audio` false) plus the encoder's settings
+//!   (`video.g` 2, `video.crf` 30, `video.preset` 12 for libsvtav1, `video.fast_decode`
+//!   0, `video.extra_options` {}, `video.video_backend` `pyav`); info.json's `video_path`
+//!   becomes `videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4`.
+//! - Each episode is encoded to an mp4 of its own (libsvtav1, yuv420p, GOP 2, CRF 30),
+//!   then appended to the camera's current file by a remux, or starts the next file when
+//!   the current one's size plus the episode's reaches `video_files_size_in_mb` (200).
+//!   The episodes table gets `videos/<key>/chunk_index`, `file_index`, `from_timestamp`
+//!   (the file's duration before the episode) and `to_timestamp` after
+//!   `dataset_to_index`; the per-episode stats come from [`stats::image_stats`] (shape
+//!   (3, 1, 1): nested lists in the episodes table, [`stats::FeatureStats::to_json_image`]
+//!   in stats.json). With this crate's commit, the remuxed file is one more temporary.
+//! - Decoding on this machine: lerobot's default, torchcodec, does not load (it needs
+//!   FFmpeg's shared libraries, `libavutil.so.56`–`59`, not installed); lerobot falls back
+//!   to PyAV (15.1.0 in its wheel set), which has libdav1d. Debian's ffmpeg 5.1 is not
+//!   installed yet; `libsvtav1enc1` 1.4.1 is.
+//!
 //! The data and episodes files are rewritten whole at each save (their finished rows are
 //! kept in memory until the file rolls): a file of 100 MB is about 1.5 million frames
 //! (14 hours at 30 fps), so a save writes at most that.
