@@ -109,6 +109,7 @@ const TMP_SUFFIX: &str = ".tmp-commit";
 
 /// Why the writer refused or failed.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// The folder is not a LeRobot v3.0 dataset; nothing in it was touched.
     #[error("{path} is not a LeRobot v3.0 dataset: {reason}")]

@@ -161,7 +161,7 @@ pub struct EpisodeRow {
 }
 
 /// The episodes file's bytes: columns in lerobot's order (episode_index, tasks, length,
-/// data/…, dataset_from/to_index, stats/<feature>/<stat>…, meta/episodes/…).
+/// data/…, dataset_from/to_index, `stats/<feature>/<stat>`…, meta/episodes/…).
 pub fn episodes_parquet(rows: &[EpisodeRow]) -> Result<Vec<u8>, TableError> {
     let first = rows.first().ok_or("no episode rows")?;
     let mut fields = Vec::new();
