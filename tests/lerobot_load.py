@@ -9,6 +9,11 @@ Not in the test command (lerobot's venv is 5.4 GB): run it by hand in that venv.
 
 Without DIR it writes one with `write_demo` (target/debug/examples, or
 EEZYBOT_BIN_DIR/examples) in a temporary folder. Exits non-zero on any mismatch.
+The stats tolerances (absolute) are for joint angles in radians: for values near 1e6
+lerobot's float32 mean is itself off by more than 1e-6.
+
+On this machine lerobot prints a long torchcodec traceback (FFmpeg's shared libraries
+are not installed) and falls back to PyAV: harmless without cameras.
 """
 import json
 import os
