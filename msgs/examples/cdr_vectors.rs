@@ -19,7 +19,7 @@ use eezybot_msgs::geometry_msgs::Twist;
 use eezybot_msgs::geometry_msgs::{
     Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3,
 };
-use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::sensor_msgs::{CameraInfo, CompressedImage, JointState, RegionOfInterest};
 use eezybot_msgs::std_msgs::{Bool, Float64, Header, String as StringMsg};
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::trajectory_msgs::{
@@ -265,6 +265,40 @@ fn cases() -> Vec<Case> {
                 position: vec![nan, -0.0, inf],
                 velocity: vec![],
                 effort: vec![f64::MAX],
+            },
+        ),
+        case("compressed_image_empty", CompressedImage::default()),
+        case(
+            "compressed_image",
+            CompressedImage {
+                header: header(1_700_000_000, 33_333_333, "camera"),
+                format: "jpeg".into(),
+                data: vec![0xff, 0xd8, 0xff, 0x00, 0x7f, 0xff, 0xd9],
+            },
+        ),
+        case("camera_info_empty", CameraInfo::default()),
+        case(
+            "camera_info",
+            CameraInfo {
+                header: header(7, 999_999_999, "wrist"),
+                height: 480,
+                width: 640,
+                distortion_model: "plumb_bob".into(),
+                d: vec![-0.25, 0.125, nan, -0.0, 1e-300],
+                k: [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0],
+                r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                p: [
+                    500.0, 0.0, 320.0, 0.0, 0.0, 500.0, 240.0, 0.0, 0.0, 0.0, 1.0, inf,
+                ],
+                binning_x: 1,
+                binning_y: u32::MAX,
+                roi: RegionOfInterest {
+                    x_offset: 1,
+                    y_offset: 2,
+                    height: 3,
+                    width: 4,
+                    do_rectify: true,
+                },
             },
         ),
         case("tf_message_empty", TFMessage { transforms: vec![] }),

@@ -280,6 +280,69 @@ pub mod sensor_msgs {
     }
 
     ros_message!(JointState, "sensor_msgs", "JointState");
+
+    /// [sensor_msgs/msg/CompressedImage](https://github.com/ros2/common_interfaces/blob/rolling/sensor_msgs/msg/CompressedImage.msg)
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct CompressedImage {
+        /// Acquisition time of the image; `frame_id` is the camera's optical frame.
+        pub header: Header,
+        /// The encoding: `jpeg` or `png` (image_transport's compressed plugin also
+        /// writes e.g. `rgb8; jpeg compressed bgr8`).
+        pub format: String,
+        /// The compressed image, a whole JPEG or PNG file.
+        pub data: Vec<u8>,
+    }
+
+    ros_message!(CompressedImage, "sensor_msgs", "CompressedImage");
+
+    /// [sensor_msgs/msg/RegionOfInterest](https://github.com/ros2/common_interfaces/blob/rolling/sensor_msgs/msg/RegionOfInterest.msg):
+    /// a window of an image, px; all zero = the full image.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct RegionOfInterest {
+        /// Leftmost pixel of the window.
+        pub x_offset: u32,
+        /// Topmost pixel of the window.
+        pub y_offset: u32,
+        /// Height of the window.
+        pub height: u32,
+        /// Width of the window.
+        pub width: u32,
+        /// Whether a rectified image is wanted of this window.
+        pub do_rectify: bool,
+    }
+
+    ros_message!(RegionOfInterest, "sensor_msgs", "RegionOfInterest");
+
+    /// [sensor_msgs/msg/CameraInfo](https://github.com/ros2/common_interfaces/blob/rolling/sensor_msgs/msg/CameraInfo.msg):
+    /// a camera's calibration, published beside each of its images with the same header.
+    /// All zero `k`, `r`, `p` = uncalibrated.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct CameraInfo {
+        /// The stamp and frame of the image this describes.
+        pub header: Header,
+        /// Image height the camera was calibrated at, px.
+        pub height: u32,
+        /// Image width the camera was calibrated at, px.
+        pub width: u32,
+        /// `plumb_bob`, `rational_polynomial`, … (empty: uncalibrated).
+        pub distortion_model: String,
+        /// Distortion parameters of `distortion_model`.
+        pub d: Vec<f64>,
+        /// Intrinsic matrix, 3×3 row-major.
+        pub k: [f64; 9],
+        /// Rectification matrix, 3×3 row-major.
+        pub r: [f64; 9],
+        /// Projection matrix, 3×4 row-major.
+        pub p: [f64; 12],
+        /// Horizontal binning (0 or 1: none).
+        pub binning_x: u32,
+        /// Vertical binning (0 or 1: none).
+        pub binning_y: u32,
+        /// The window of the image published.
+        pub roi: RegionOfInterest,
+    }
+
+    ros_message!(CameraInfo, "sensor_msgs", "CameraInfo");
 }
 
 /// `tf2_msgs`: <https://github.com/ros2/geometry2/tree/rolling/tf2_msgs/msg>

@@ -11,7 +11,7 @@ from control_msgs.msg import GripperCommand as GripperCommandMsg
 from control_msgs.msg import JointComponentTolerance, JointTolerance, JointTrajectoryControllerState
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import CameraInfo, CompressedImage, JointState, RegionOfInterest
 from geometry_msgs.msg import Twist
 from std_msgs.msg import Bool, Float64, Header, String
 from trajectory_msgs.msg import (JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectory,
@@ -25,6 +25,7 @@ INF = math.inf
 I32_MAX = 2**31 - 1
 I32_MIN = -(2**31)
 F64_MAX = 1.7976931348623157e308
+U32_MAX = 2**32 - 1
 
 
 def header(sec, nanosec, frame):
@@ -129,6 +130,18 @@ def cases():
         (
             "joint_state_full",
             JointState(header=header(1_700_000_000, 5, ""), name=["base_joint", UNICODE, ""], position=[NAN, -0.0, INF], velocity=[], effort=[F64_MAX]),
+        ),
+        ("compressed_image_empty", CompressedImage()),
+        ("compressed_image", CompressedImage(header=header(1_700_000_000, 33_333_333, "camera"), format="jpeg",
+                                             data=bytes([0xFF, 0xD8, 0xFF, 0x00, 0x7F, 0xFF, 0xD9]))),
+        ("camera_info_empty", CameraInfo()),
+        (
+            "camera_info",
+            CameraInfo(header=header(7, 999_999_999, "wrist"), height=480, width=640, distortion_model="plumb_bob",
+                       d=[-0.25, 0.125, NAN, -0.0, 1e-300], k=[500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0],
+                       r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                       p=[500.0, 0.0, 320.0, 0.0, 0.0, 500.0, 240.0, 0.0, 0.0, 0.0, 1.0, INF], binning_x=1,
+                       binning_y=U32_MAX, roi=RegionOfInterest(x_offset=1, y_offset=2, height=3, width=4, do_rectify=True)),
         ),
         ("tf_message_empty", idl.TFMessage(transforms=[])),
         (

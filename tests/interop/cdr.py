@@ -64,6 +64,10 @@ def padding_mask(msg):
             pos[0] += 4
             for item in value:
                 walk(item, inner)
+        elif typ.endswith("]"):  # a fixed-size array, e.g. double[9]: no length
+            inner = typ[:typ.index("[")]
+            for item in value:
+                walk(float(item) if inner == "double" else item, inner)
         elif typ.startswith("string"):
             align(4)
             pos[0] += 4 + len(value.encode("utf-8")) + 1
@@ -85,7 +89,7 @@ def canonical(value):
         return ("f64", struct.pack("<d", value))
     if isinstance(value, (bytes, bytearray)):
         return ("bytes", bytes(value))
-    if isinstance(value, (list, tuple)) or type(value).__name__ == "array":
+    if isinstance(value, (list, tuple)) or type(value).__name__ in ("array", "ndarray"):
         return [canonical(v) for v in value]
     if isinstance(value, (str, int, bool)) or value is None:
         return value
