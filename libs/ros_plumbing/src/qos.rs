@@ -36,6 +36,15 @@ pub const TF_STATIC: QosProfile = latched(1);
 pub const ROBOT_DESCRIPTION: QosProfile = latched(1);
 /// `estop`: reliable, transient-local, keep last 1: a late joiner learns the stop.
 pub const ESTOP: QosProfile = latched(1);
+/// `camera/image_raw/compressed`, `camera/camera_info`: ROS's sensor-data profile
+/// (rclcpp `SensorDataQoS`, rclpy `qos_profile_sensor_data`, what image pipelines and
+/// camera drivers such as usb_cam publish with): best effort, volatile, keep last 5. A
+/// lost frame is not sent again (the next one is newer), and a slow reader never holds
+/// the camera back. A reliable subscriber does not match it; a best-effort one does.
+pub const SENSOR_DATA: QosProfile = QosProfile::publisher_default()
+    .reliability(Reliability::BestEffort)
+    .durability(Durability::Volatile)
+    .history(History::KeepLast { depth: 5 });
 /// Service requests and replies (rmw's default for services: reliable, volatile, keep
 /// last 10).
 pub const SERVICES: QosProfile = reliable(10);

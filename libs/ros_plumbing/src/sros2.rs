@@ -97,8 +97,9 @@ pub const MAX_DOMAIN_ID: u32 = 232;
 
 /// The nodes of the operator's PC (`launch_scripts/pc.sh`).
 pub const PC_NODES: &[&str] = &["gui_bridge", "compute_ik", "state_publisher"];
-/// The nodes of the Raspberry Pi (`launch_scripts/pi.sh`).
-pub const PI_NODES: &[&str] = &["serial_node"];
+/// The nodes of the Raspberry Pi (`launch_scripts/pi.sh`; camera_node is in its bundle,
+/// for a camera on the arm).
+pub const PI_NODES: &[&str] = &["serial_node", "camera_node"];
 /// The operator PC's enclave.
 pub const PC_ENCLAVE: &str = "/eezybot/pc";
 /// The Raspberry Pi's enclave.

@@ -26,7 +26,7 @@ use crate::qos;
 use eezybot_msgs::control_msgs::JointTrajectoryControllerState;
 use eezybot_msgs::diagnostic_msgs::DiagnosticArray;
 use eezybot_msgs::geometry_msgs::{PointStamped, PoseStamped};
-use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::sensor_msgs::{CameraInfo, CompressedImage, JointState};
 use eezybot_msgs::std_msgs::{Bool, Float64, String as StringMsg};
 use eezybot_msgs::tf2_msgs::TFMessage;
 use eezybot_msgs::trajectory_msgs::JointTrajectory;
@@ -169,6 +169,7 @@ const GUI: &str = "gui_bridge";
 const IK: &str = "compute_ik";
 const SERIAL: &str = "serial_node";
 const STATE: &str = "state_publisher";
+const CAMERA: &str = "camera_node";
 /// `gui_bridge record` subscribes what it saves (the targets; with an MCAP file also
 /// what replays and views the session).
 const RECORD: &str = "gui_bridge (record)";
@@ -225,7 +226,7 @@ pub const TF_STATIC: Topic<TFMessage> =
 pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
     "diagnostics",
     qos::DIAGNOSTICS,
-    &[GUI, IK, SERIAL, STATE],
+    &[GUI, IK, SERIAL, STATE, CAMERA],
     &[GUI],
 );
 
@@ -254,6 +255,22 @@ pub const LEADER_DEADMAN: Topic<Bool> = Topic::new(
     &[IK, GUI],
 )
 .off_foxglove();
+
+/// A camera's images, JPEG (`format` `jpeg`), stamped when the frame was taken, with
+/// `frame_id` the camera's frame; several cameras by node namespace
+/// (`-r __ns:=/wrist`: `/wrist/camera/image_raw/compressed`). Sensor-data QoS
+/// ([`qos::SENSOR_DATA`]). No Foxglove channel: images are not forwarded to the web panel.
+pub const CAMERA_IMAGE: Topic<CompressedImage> = Topic::new(
+    "camera/image_raw/compressed",
+    qos::SENSOR_DATA,
+    &[CAMERA],
+    &[],
+)
+.off_foxglove();
+/// The camera's [`CameraInfo`] for each image, with the image's header (size; an
+/// uncalibrated camera's zero matrices).
+pub const CAMERA_INFO: Topic<CameraInfo> =
+    Topic::new("camera/camera_info", qos::SENSOR_DATA, &[CAMERA], &[]).off_foxglove();
 
 /// One action or service of the contract: its name, its type, the nodes of ours that
 /// serve it and those that call it.
@@ -370,7 +387,9 @@ pub fn visit_all(v: &mut impl TopicVisitor) {
         JOINT_TRAJECTORY,
         CONTROLLER_STATE,
         LEADER_JOINT_STATES,
-        LEADER_DEADMAN
+        LEADER_DEADMAN,
+        CAMERA_IMAGE,
+        CAMERA_INFO
     );
 }
 
@@ -556,7 +575,11 @@ mod tests {
         for e in &all {
             for n in e.publishers.iter().chain(e.subscribers) {
                 let node = n.split(' ').next().unwrap_or_default();
-                assert!([GUI, IK, SERIAL, STATE].contains(&node), "{}: {n}", e.name);
+                assert!(
+                    [GUI, IK, SERIAL, STATE, CAMERA].contains(&node),
+                    "{}: {n}",
+                    e.name
+                );
             }
         }
         let mut callables: Vec<_> = CALLABLES.iter().map(|c| c.name).collect();
@@ -572,7 +595,11 @@ mod tests {
             assert!(!names.contains(&c.name), "{} is a topic too", c.name);
             for n in c.servers.iter().chain(c.clients) {
                 let node = n.split(' ').next().unwrap_or_default();
-                assert!([GUI, IK, SERIAL, STATE].contains(&node), "{}: {n}", c.name);
+                assert!(
+                    [GUI, IK, SERIAL, STATE, CAMERA].contains(&node),
+                    "{}: {n}",
+                    c.name
+                );
             }
         }
     }

@@ -223,8 +223,9 @@ const WRITTEN: &[Written] = &[
 ];
 
 /// The topics of [`topics::all`] besides [`WRITTEN`], with their types: the trajectory
-/// topics (which the written contract names outside its QoS table) and the leader
-/// arm's (whose names it leaves to the implementation).
+/// topics (which the written contract names outside its QoS table), the leader
+/// arm's (whose names it leaves to the implementation) and the camera's (named with their
+/// types under "Cameras"; their QoS is ROS's sensor-data profile, `qos::SENSOR_DATA`).
 const WRITTEN_WITHOUT_QOS: &[(&str, &str)] = &[
     (
         "arm_controller/joint_trajectory",
@@ -236,6 +237,11 @@ const WRITTEN_WITHOUT_QOS: &[(&str, &str)] = &[
     ),
     ("leader/joint_states", "sensor_msgs/msg/JointState"),
     ("leader/deadman", "std_msgs/msg/Bool"),
+    (
+        "camera/image_raw/compressed",
+        "sensor_msgs/msg/CompressedImage",
+    ),
+    ("camera/camera_info", "sensor_msgs/msg/CameraInfo"),
 ];
 
 #[test]
