@@ -36,8 +36,15 @@ SERVICES = {s["name"]: s for s in CONTRACT["services"]}
 
 
 def topic_entry(topic):
-    """Our topic `topic` (`/arm2/estop` or `estop`) in the contract, or None."""
-    return TOPICS.get(topic.rsplit("/", 1)[-1])
+    """Our topic `topic` (`/arm2/estop`, `estop`, `/arm2/camera/camera_info`) in the
+    contract, or None: the longest tail of its name that the contract has (names with a
+    slash, such as `leader/deadman`, included)."""
+    parts = topic.strip("/").split("/")
+    for i in range(len(parts)):
+        t = TOPICS.get("/".join(parts[i:]))
+        if t is not None:
+            return t
+    return None
 
 
 def qos(topic):

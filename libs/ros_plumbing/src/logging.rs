@@ -14,6 +14,7 @@ const OWN_TARGETS: &[&str] = &[
     "compute_ik",
     "serial_node",
     "state_publisher",
+    "camera_node",
     "gui_bridge",
     "ros_plumbing",
     "eezybot_",
