@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Cross-builds the Raspberry Pi half of the graph (serial_node and virtual_arduino) on this
-# PC, so the Pi needs no Rust toolchain:
+# Cross-builds the Raspberry Pi half of the graph (serial_node, virtual_arduino and
+# camera_node) on this PC, so the Pi needs no Rust toolchain:
 #
 #   launch_scripts/cross_build.sh [aarch64|armv7|all] [--wan]     (default all)
 #
@@ -75,7 +75,7 @@ qemu() {
 [ "$wan" = 0 ] || export EEZYBOT_CROSS_WAN=1  # setup_cross.sh: cmake, libclang, cross g++
 . launch_scripts/setup_cross.sh
 
-bins=(serial_node virtual_arduino)
+bins=(serial_node virtual_arduino camera_node)
 profile=${EEZYBOT_PI_PROFILE:-pi}
 case "$profile" in
   pi) built_as="profile pi (release: fat LTO, stripped)" ;;
@@ -109,7 +109,7 @@ for arch in "${arches[@]}"; do
   # CC_<triple>/AR_<triple>: what the cc crate would guess for these triples, said
   # explicitly, so OpenSSL is never configured with the host's gcc
   env "CC_${t//-/_}=$(cc_of "$arch")" "AR_${t//-/_}=$(ar_of "$arch")" "${openssl_env[@]}" \
-    cargo build -q --profile "$profile" --target "$t" -p serial_node --bins --features ros_plumbing/vendored-openssl
+    cargo build -q --profile "$profile" --target "$t" -p serial_node -p camera_node --bins --features ros_plumbing/vendored-openssl
   out="$target_dir/$t/$profile"
   if [ "$openssl_cache" != off ] && [ ${#openssl_env[@]} = 0 ]; then
     for built in "$out"/build/openssl-sys-*/out/openssl-build/install; do
@@ -125,6 +125,9 @@ for arch in "${arches[@]}"; do
   # The binaries start on the target's CPU and name no file of this build tree.
   if ! help=$($(qemu "$arch") "$out/serial_node" --help 2>&1) || ! grep -q "^serial_node" <<<"$help"; then
     _say "$out/serial_node --help under qemu: $help"; exit 1
+  fi
+  if ! help=$($(qemu "$arch") "$out/camera_node" --help 2>&1) || ! grep -q "^camera_node" <<<"$help"; then
+    _say "$out/camera_node --help under qemu: $help"; exit 1
   fi
   code=0; $(qemu "$arch") "$out/virtual_arduino" 2>/dev/null || code=$?
   [ "$code" = 2 ] || { _say "$out/virtual_arduino under qemu exited $code, not 2 (usage)"; exit 1; }
@@ -190,7 +193,7 @@ for arch in "${arches[@]}"; do
   cp -r deploy "$bundle/deploy"
   install -m 0644 docs/raspberry_pi.md "$bundle/raspberry_pi.md"
   cat >"$bundle/README.txt" <<EOF
-EezyBot teleop: the Raspberry Pi half (serial_node), prebuilt for $t
+EezyBot teleop: the Raspberry Pi half (serial_node, camera_node), prebuilt for $t
 (version $version, $built_as). No Rust toolchain is needed on the Pi; the binaries need glibc
 $glibc or later (\`ldd --version\`: Raspberry Pi OS bookworm, Ubuntu 22.04 and later).
 
@@ -200,6 +203,9 @@ $glibc or later (\`ldd --version\`: Raspberry Pi OS bookworm, Ubuntu 22.04 and l
                          the Pi's enclave with deploy/install.sh --keystore DIR
                          (raspberry_pi.md, "SROS2: the Pi's enclave")
   bin/virtual_arduino    a virtual Arduino behind a pseudo-terminal (tests without a board)
+  bin/camera_node        a V4L2 webcam as camera/image_raw/compressed (JPEG) and
+                         camera/camera_info (raspberry_pi.md, "6. A camera"; not started by
+                         pi.sh: bin/camera_node --ros-args -p device:=/dev/video0)
   launch_scripts/pi.sh   starts serial_node (SERIAL_PORT, ROS_DOMAIN_ID; Ctrl-C stops it)
   deploy/                systemd unit, udev rule (/dev/eezybot), env file, install.sh
 

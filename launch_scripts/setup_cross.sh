@@ -24,8 +24,10 @@ fi
 
 # Debian packages: cross linkers and C libraries, qemu-user (provides qemu-aarch64 and
 # qemu-arm, the cargo runners), perl and make (OpenSSL's own build, which openssl-src runs
-# for the target: the Pi binaries link OpenSSL statically for DDS Security).
-EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu libc6-dev-arm64-cross gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user perl make}
+# for the target: the Pi binaries link OpenSSL statically for DDS Security), libclang-dev
+# (camera_node's v4l2-sys-mit runs bindgen on the target's linux/videodev2.h, which
+# linux-libc-dev-*-cross brings with the cross C libraries).
+EEZYBOT_CROSS_APT_PACKAGES=${EEZYBOT_CROSS_APT_PACKAGES:-gcc-aarch64-linux-gnu libc6-dev-arm64-cross gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user perl make libclang-dev}
 . "$(dirname "${BASH_SOURCE[0]}")/apt_missing.sh"
 # shellcheck disable=SC2086 # a list of words
 apt_missing setup_cross $EEZYBOT_CROSS_APT_PACKAGES
