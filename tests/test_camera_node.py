@@ -43,9 +43,10 @@ def read_code(img):
 
 
 def test_the_test_source_publishes_jpeg_frames_whose_pixels_carry_their_stamps(launch, observer):
-    launch("camera_node", "--ros-args", "-p", "device:=test", "-p", "fps:=30")
+    launch("camera_node", "--ros-args", "-p", "device:=test", "-p", "fps:=30", "-p", "diagnostics_period:=0.2")
     images = observer.sub(IMAGE, CompressedImage)
     infos = observer.sub(INFO, CameraInfo)
+    diags = observer.sub("/diagnostics", DiagnosticArray)
     assert qos(IMAGE).reliability.name == "BEST_EFFORT"
     observer.wait_publisher(f"/{IMAGE}")
     assert observer.spin_until(lambda: len(images) >= 30 and len(infos) >= 30, timeout=15), \
@@ -72,6 +73,12 @@ def test_the_test_source_publishes_jpeg_frames_whose_pixels_carry_their_stamps(l
             matched += 1
     # best effort: an info may come without its image, but on one host nearly all pair
     assert matched >= 20, f"{matched} of {len(infos)} camera infos have their image's stamp"
+    assert observer.spin_until(lambda: latest_status(diags, "camera_node: camera") is not None, timeout=5)
+    s = latest_status(diags, "camera_node: camera")
+    values = status_values(s)
+    assert s.level == DiagnosticStatus.OK, s.message
+    assert values["device"] == "test" and values["size"] == "640x480" and values["format"].startswith("test pattern")
+    assert int(values["frames_published"]) >= 30
 
 
 def test_a_missing_camera_is_a_diagnostics_error_and_the_node_stays_up(launch, observer):

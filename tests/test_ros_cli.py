@@ -11,8 +11,10 @@ from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from conftest import TOPICS, bin_path, latest_status
 
-ROS_NODES = ["compute_ik", "serial_node", "state_publisher"]
-NODE_ARGS = {"serial_node": ["--ros-args", "-p", "port:=mock"]}
+ROS_NODES = ["compute_ik", "serial_node", "state_publisher", "camera_node"]
+# camera_node: its test source, small and slow (no camera here; the topics are what counts)
+NODE_ARGS = {"serial_node": ["--ros-args", "-p", "port:=mock"],
+             "camera_node": ["--ros-args", "-p", "device:=test", "-p", "width:=160", "-p", "height:=128", "-p", "fps:=5"]}
 
 
 def call(observer, client, request, timeout=10):
@@ -44,12 +46,15 @@ RANGES = {
     "serial_node": {"baud": (1200, 4_000_000), "send_rate": (1.0, 500.0), "watchdog_ms": (20, 60_000),
                     "heartbeat_period": (0.01, 10.0), "diagnostics_period": (0.05, 60.0)},
     "state_publisher": {"publish_frequency": (0.0, 10_000.0), "diagnostics_period": (0.05, 60.0)},
+    "camera_node": {"width": (144, 4096), "height": (128, 4096), "fps": (1, 120), "jpeg_quality": (1, 100),
+                    "diagnostics_period": (0.05, 60.0)},
 }
 CONSTRAINTS = {
     "compute_ik": {"solver": "one of: analytic, jacobian, dls, newton", "motion": "one of: joint, line",
                    "feedback_layout": "one of: any, kilted, jazzy"},
     "serial_node": {"watchdog_action": "one of: hold, detach", "estop_action": "one of: hold, detach"},
     "state_publisher": {"urdf": "a URDF file that loads"},
+    "camera_node": {"device": "a device path, or test"},
 }
 
 

@@ -57,24 +57,35 @@ pub fn encode_rgb(
 }
 
 /// YUYV 4:2:2 (V4L2's `YUYV`: Y0 U Y1 V for each two pixels, BT.601 limited range, as
-/// UVC webcams send it) to RGB.
-pub fn yuyv_to_rgb(yuyv: &[u8], width: usize, height: usize) -> Result<Vec<u8>, EncodeError> {
-    if width % 2 != 0 || yuyv.len() < width * height * 2 {
-        return Err(EncodeError::WrongLength {
-            len: yuyv.len(),
-            width,
-            height,
-            format: "YUYV",
-        });
+/// UVC webcams send it) to RGB. `stride`: bytes from one row to the next (V4L2's
+/// `bytesperline`, at least `width * 2`; some drivers pad rows).
+pub fn yuyv_to_rgb(
+    yuyv: &[u8],
+    width: usize,
+    height: usize,
+    stride: usize,
+) -> Result<Vec<u8>, EncodeError> {
+    let wrong = || EncodeError::WrongLength {
+        len: yuyv.len(),
+        width,
+        height,
+        format: "YUYV",
+    };
+    let stride = stride.max(width * 2);
+    if width % 2 != 0 || height == 0 || yuyv.len() < stride * (height - 1) + width * 2 {
+        return Err(wrong());
     }
     let mut rgb = Vec::with_capacity(width * height * 3);
-    for q in yuyv[..width * height * 2].chunks_exact(4) {
-        let (u, v) = (i32::from(q[1]) - 128, i32::from(q[3]) - 128);
-        for y in [q[0], q[2]] {
-            let c = 298 * (i32::from(y) - 16);
-            rgb.push(((c + 409 * v + 128) >> 8).clamp(0, 255) as u8);
-            rgb.push(((c - 100 * u - 208 * v + 128) >> 8).clamp(0, 255) as u8);
-            rgb.push(((c + 516 * u + 128) >> 8).clamp(0, 255) as u8);
+    for row in 0..height {
+        let start = row * stride;
+        for q in yuyv[start..start + width * 2].chunks_exact(4) {
+            let (u, v) = (i32::from(q[1]) - 128, i32::from(q[3]) - 128);
+            for y in [q[0], q[2]] {
+                let c = 298 * (i32::from(y) - 16);
+                rgb.push(((c + 409 * v + 128) >> 8).clamp(0, 255) as u8);
+                rgb.push(((c - 100 * u - 208 * v + 128) >> 8).clamp(0, 255) as u8);
+                rgb.push(((c + 516 * u + 128) >> 8).clamp(0, 255) as u8);
+            }
         }
     }
     Ok(rgb)
@@ -88,17 +99,25 @@ mod tests {
     fn yuyv_limited_range_black_white_and_red_convert_to_rgb() {
         // black, white (Y 16, 235, no chroma), then a red pair (BT.601: Y 81, U 90, V 240)
         let px = [16, 128, 235, 128, 81, 90, 81, 240];
-        let rgb = yuyv_to_rgb(&px, 4, 1).unwrap();
+        let rgb = yuyv_to_rgb(&px, 4, 1, 8).unwrap();
         assert_eq!(rgb[..6], [0, 0, 0, 255, 255, 255]);
         assert!(rgb[6] > 250 && rgb[7] < 5 && rgb[8] < 5, "{:?}", &rgb[6..]);
         assert!(matches!(
-            yuyv_to_rgb(&px, 3, 1),
+            yuyv_to_rgb(&px, 3, 1, 8),
             Err(EncodeError::WrongLength { .. })
         ));
         assert!(matches!(
-            yuyv_to_rgb(&px, 4, 2),
+            yuyv_to_rgb(&px, 4, 2, 8),
             Err(EncodeError::WrongLength { .. })
         ));
+    }
+
+    #[test]
+    fn padded_yuyv_rows_skip_their_padding() {
+        // two rows of one black-white pair, each padded with 4 bytes of grey
+        let px = [16, 128, 235, 128, 99, 99, 99, 99, 235, 128, 16, 128];
+        let rgb = yuyv_to_rgb(&px, 2, 2, 8).unwrap();
+        assert_eq!(rgb, [0, 0, 0, 255, 255, 255, 255, 255, 255, 0, 0, 0]);
     }
 
     #[test]

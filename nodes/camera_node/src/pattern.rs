@@ -12,18 +12,24 @@ pub fn frame_rgb(
     index: u64,
     stamp: Time,
 ) -> Result<Vec<u8>, code::CodeError> {
-    let mut rgb = vec![0u8; width * height * 3];
     let k = index as usize;
+    // one row of red and blue gradients (scrolling with k) and the black bar; each row
+    // is a copy of it with its own green (scrolling down)
     let bar = (k * 8) % width.max(1);
+    let mut template = vec![0u8; width * 3];
+    for (x, px) in template.chunks_exact_mut(3).enumerate() {
+        if !(bar..bar + 16).contains(&x) {
+            px[0] = ((x + 4 * k) & 0xff) as u8;
+            px[2] = ((x / 2 + k) & 0xff) as u8;
+        }
+    }
+    let mut rgb = vec![0u8; width * height * 3];
     for (y, row) in rgb.chunks_exact_mut(width * 3).enumerate() {
+        row.copy_from_slice(&template);
         let g = ((y + 2 * k) & 0xff) as u8;
         for (x, px) in row.chunks_exact_mut(3).enumerate() {
-            if x >= bar && x < bar + 16 {
-                px.fill(0);
-            } else {
-                px[0] = ((x + 4 * k) & 0xff) as u8;
+            if !(bar..bar + 16).contains(&x) {
                 px[1] = g;
-                px[2] = (((x + y) / 2 + k) & 0xff) as u8;
             }
         }
     }

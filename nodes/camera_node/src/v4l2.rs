@@ -36,6 +36,8 @@ struct Streaming {
     kind: Kind,
     width: u32,
     height: u32,
+    /// bytes a row (V4L2's bytesperline)
+    stride: u32,
     last_sequence: Option<u32>,
 }
 
@@ -125,6 +127,7 @@ impl Camera for V4l2Camera {
             kind,
             width: got.width,
             height: got.height,
+            stride: got.stride,
             last_sequence: None,
         });
         Ok(Opened {
@@ -163,7 +166,7 @@ impl Camera for V4l2Camera {
                 }
                 data.to_vec()
             }
-            Kind::Yuyv => jpeg::yuyv_to_rgb(data, w, h)
+            Kind::Yuyv => jpeg::yuyv_to_rgb(data, w, h, s.stride as usize)
                 .and_then(|rgb| jpeg::encode_rgb(&rgb, w, h, quality))
                 .map_err(|source| CameraError::Encode {
                     device: device.clone(),
