@@ -486,18 +486,32 @@ fn remove_temporaries(dir: &Path, root: &Path, out: &mut Vec<PathBuf>) -> Result
     Ok(())
 }
 
+/// The first line of the episode in progress's log.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct LogHeader {
+    episode_index: u64,
+    task: String,
+}
+
+/// Each further line of that log: one frame.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct LogFrame<S> {
+    state: S,
+    action: S,
+}
+
 fn read_interrupted(path: &Path) -> Option<Interrupted> {
     let f = File::open(path).ok()?;
     let mut lines = BufReader::new(f).lines();
-    let header: Value = serde_json::from_str(&lines.next()?.ok()?).ok()?;
+    let header: LogHeader = serde_json::from_str(&lines.next()?.ok()?).ok()?;
     // only whole lines are frames (a kill may cut the last one)
     let frames = lines
         .map_while(|l| l.ok())
-        .filter(|l| serde_json::from_str::<Value>(l).is_ok())
+        .filter(|l| serde_json::from_str::<LogFrame<Vec<f32>>>(l).is_ok())
         .count();
     Some(Interrupted {
-        episode_index: header.get("episode_index")?.as_u64()?,
-        task: header.get("task")?.as_str()?.to_string(),
+        episode_index: header.episode_index,
+        task: header.task,
         frames,
     })
 }
@@ -756,7 +770,11 @@ impl DatasetWriter {
         let path = self.root.join(RECORDING_DIR).join(IN_PROGRESS);
         let file = File::create(&path).map_err(io(format!("creating {}", path.display())))?;
         let mut log = BufWriter::new(file);
-        let header = serde_json::json!({"episode_index": self.total_episodes, "task": task});
+        let header = serde_json::to_string(&LogHeader {
+            episode_index: self.total_episodes,
+            task: task.to_string(),
+        })
+        .map_err(|e| Error::BadFrame(e.to_string()))?;
         writeln!(log, "{header}")
             .and_then(|_| log.flush())
             .map_err(io(format!("writing {}", path.display())))?;
@@ -792,7 +810,11 @@ impl DatasetWriter {
         {
             return Err(Error::BadFrame(format!("a value is not finite: {v}")));
         }
-        let line = serde_json::json!({"state": frame.state, "action": frame.action});
+        let line = serde_json::to_string(&LogFrame {
+            state: frame.state,
+            action: frame.action,
+        })
+        .map_err(|e| Error::BadFrame(e.to_string()))?;
         writeln!(cur.log, "{line}")
             .and_then(|_| cur.log.flush())
             .map_err(io("writing the episode in progress"))?;

@@ -297,11 +297,9 @@ impl FeatureStats {
     pub fn to_json_image(&self) -> Ordered {
         Ordered::obj(self.entries().into_iter().map(|(k, v)| {
             let val = match v {
-                StatValue::Floats(f) => Ordered::val(
-                    f.iter()
-                        .map(|&x| serde_json::json!([[x]]))
-                        .collect::<Vec<_>>(),
-                ),
+                StatValue::Floats(f) => {
+                    Ordered::val(f.iter().map(|&x| vec![vec![x]]).collect::<Vec<_>>())
+                }
                 StatValue::Count(c) => Ordered::val(vec![c]),
             };
             (k, val)
