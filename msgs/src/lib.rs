@@ -295,6 +295,28 @@ pub mod sensor_msgs {
 
     ros_message!(CompressedImage, "sensor_msgs", "CompressedImage");
 
+    /// [sensor_msgs/msg/Image](https://github.com/ros2/common_interfaces/blob/rolling/sensor_msgs/msg/Image.msg):
+    /// an uncompressed image.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct Image {
+        /// Acquisition time of the image; `frame_id` is the camera's optical frame.
+        pub header: Header,
+        /// Rows, px.
+        pub height: u32,
+        /// Columns, px.
+        pub width: u32,
+        /// Pixel encoding (`rgb8`, `bgr8`, `mono8`, … as in sensor_msgs/image_encodings.hpp).
+        pub encoding: String,
+        /// Whether multi-byte values are big-endian.
+        pub is_bigendian: u8,
+        /// Bytes of one row (with any padding).
+        pub step: u32,
+        /// The pixels, `step * height` bytes.
+        pub data: Vec<u8>,
+    }
+
+    ros_message!(Image, "sensor_msgs", "Image");
+
     /// [sensor_msgs/msg/RegionOfInterest](https://github.com/ros2/common_interfaces/blob/rolling/sensor_msgs/msg/RegionOfInterest.msg):
     /// a window of an image, px; all zero = the full image.
     #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -831,4 +853,29 @@ pub mod controller_manager_msgs {
     ros2_client_message!(ListControllersResponse);
     ros2_client_message!(SwitchControllerRequest);
     ros2_client_message!(SwitchControllerResponse);
+}
+
+/// `std_srvs`: <https://github.com/ros2/common_interfaces/tree/rolling/std_srvs/srv>
+pub mod std_srvs {
+    use serde::{Deserialize, Serialize};
+
+    /// [std_srvs/srv/Trigger](https://github.com/ros2/common_interfaces/blob/rolling/std_srvs/srv/Trigger.srv)'s
+    /// request: empty (the one-byte placeholder every empty ROS 2 structure has).
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct TriggerRequest {
+        /// Always 0.
+        pub structure_needs_at_least_one_member: u8,
+    }
+
+    /// Trigger's response.
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    pub struct TriggerResponse {
+        /// Whether it was done.
+        pub success: bool,
+        /// What was done, or why not.
+        pub message: String,
+    }
+
+    ros2_client_message!(TriggerRequest);
+    ros2_client_message!(TriggerResponse);
 }

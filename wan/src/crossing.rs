@@ -31,6 +31,7 @@ pub enum Side {
 /// | `robot_description` | PC (state_publisher) | other PCs (RViz2, their panels) | reliable, transient-local (latched) |
 /// | `servo_state` | Pi (serial_node) | PCs (gui_bridge, compute_ik, tools) | reliable, volatile |
 /// | `diagnostics` | Pi (serial_node) | PCs (gui_bridge, tools); the PC's own stay on its LAN | reliable, volatile |
+/// | `camera/image_raw/compressed` | Pi (camera_node) | PCs (recorder) | best effort, volatile (sensor data) |
 ///
 /// PC to PC: a second operator PC whose bridge joins later gets the latched
 /// `robot_description` and the current `estop` from the first (the plugin's
@@ -59,6 +60,11 @@ pub const CROSSING: &[Crossing] = &[
     },
     Crossing {
         topic: "diagnostics",
+        from: Side::Pi,
+        to: &[Side::Pc],
+    },
+    Crossing {
+        topic: "camera/image_raw/compressed",
         from: Side::Pi,
         to: &[Side::Pc],
     },

@@ -340,11 +340,20 @@ mod tests {
             Side::Pc.outgoing(),
             ["servo_angles", "estop", "robot_description"]
         );
-        assert_eq!(Side::Pi.outgoing(), ["servo_state", "diagnostics"]);
+        assert_eq!(
+            Side::Pi.outgoing(),
+            ["servo_state", "diagnostics", "camera/image_raw/compressed"]
+        );
         assert_eq!(Side::Pi.incoming(), ["servo_angles", "estop"]);
         assert_eq!(
             Side::Pc.incoming(),
-            ["estop", "robot_description", "servo_state", "diagnostics"]
+            [
+                "estop",
+                "robot_description",
+                "servo_state",
+                "diagnostics",
+                "camera/image_raw/compressed"
+            ]
         );
         // what the Pi sends, only the PCs take; the Pi never takes its own kind's topics
         for topic in Side::Pi.outgoing() {

@@ -112,6 +112,8 @@ pub struct Episodes {
     last_task: String,
     saved: u64,
     discarded: u64,
+    /// A save failed and its episode is still in the writer (save it again or discard it).
+    unsaved: bool,
 }
 
 impl Episodes {
@@ -125,7 +127,28 @@ impl Episodes {
             last_task: default_task.to_string(),
             saved: 0,
             discarded: 0,
+            unsaved: false,
         }
+    }
+
+    /// The task of the episodes started without one (the `task` parameter, changed at
+    /// run time); the running episode keeps its own.
+    pub fn set_default_task(&mut self, task: &str) {
+        self.default_task = task.to_string();
+        if !matches!(self.phase, Phase::Recording { .. } | Phase::Saving) {
+            self.last_task = task.to_string();
+        }
+    }
+
+    /// Whether the leader's deadman runs episodes.
+    pub fn deadman_episodes(&self) -> bool {
+        self.deadman_episodes
+    }
+
+    /// Let the leader's deadman run episodes, or not (an episode it runs goes on until
+    /// saved or discarded otherwise).
+    pub fn set_deadman_episodes(&mut self, on: bool) {
+        self.deadman_episodes = on;
     }
 
     /// The phase now.
@@ -136,6 +159,25 @@ impl Episodes {
     /// A user's request at `now_ns`.
     pub fn request(&mut self, r: Request, now_ns: i64) -> Result<Vec<Effect>, Refused> {
         match (r, &self.phase) {
+            // the episode whose save failed: save it again (room was made) or discard it
+            (Request::Save, Phase::Stopped(_)) if self.unsaved => {
+                self.phase = Phase::Saving;
+                Ok(vec![Effect::Save])
+            }
+            (Request::Discard, Phase::Stopped(_)) if self.unsaved => {
+                self.phase = Phase::Idle;
+                self.unsaved = false;
+                self.discarded += 1;
+                Ok(vec![Effect::Discard])
+            }
+            (Request::Start { .. }, Phase::Stopped(why)) if self.unsaved => Err(Refused::Stopped(
+                format!("{why} (save or discard the episode not saved first)"),
+            )),
+            // asking to record again after a stop is the user's go-ahead (the disk has room)
+            (Request::Start { task }, Phase::Stopped(_)) => {
+                let task = task.unwrap_or_else(|| self.default_task.clone());
+                self.begin(task, now_ns, false)
+            }
             (_, Phase::Stopped(why)) => Err(Refused::Stopped(why.clone())),
             (Request::Start { task }, Phase::Idle) => {
                 let task = task.unwrap_or_else(|| self.default_task.clone());
@@ -189,9 +231,13 @@ impl Episodes {
         match outcome {
             Ok(_) => {
                 self.saved += 1;
+                self.unsaved = false;
                 self.phase = Phase::Idle;
             }
-            Err(why) => self.phase = Phase::Stopped(why),
+            Err(why) => {
+                self.unsaved = true;
+                self.phase = Phase::Stopped(why);
+            }
         }
     }
 
@@ -296,8 +342,15 @@ mod tests {
             (saving, start(), Err(Refused::Busy("being saved"))),
             (saving, Save, Err(Refused::NotRecording)),
             (saving, Discard, Err(Refused::NotRecording)),
-            (stopped, start(), Err(Refused::Stopped("disk full".into()))),
-            (stopped, Save, Err(Refused::Stopped("disk full".into()))),
+            (
+                stopped,
+                start(),
+                Err(Refused::Stopped(
+                    "disk full (save or discard the episode not saved first)".into(),
+                )),
+            ),
+            (stopped, Save, Ok(vec![Effect::Save])),
+            (stopped, Discard, Ok(vec![Effect::Discard])),
         ];
         for (make, request, expect) in cases {
             let mut e = make();
@@ -380,9 +433,16 @@ mod tests {
             "the saved one stays counted"
         );
         assert_eq!(s.stopped.as_deref(), Some("No space left on device"));
-        assert!(e.request(Request::Start { task: None }, 3).is_err());
-        e.resume();
+        assert!(e.request(Request::Save, 3).is_err(), "nothing left to save");
+        // asking to record again is the go-ahead
         assert!(e.request(Request::Start { task: None }, 4).is_ok());
         assert_eq!(e.status().since_ns, Some(4));
+        // a save that fails keeps its episode: saved again once there is room
+        e.request(Request::Save, 5).unwrap();
+        e.saved(Err("No space left on device".into()));
+        assert!(e.request(Request::Start { task: None }, 6).is_err());
+        assert_eq!(e.request(Request::Save, 7), Ok(vec![Effect::Save]));
+        e.saved(Ok(3));
+        assert_eq!(e.status().episodes, 2);
     }
 }

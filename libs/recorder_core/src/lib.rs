@@ -35,6 +35,9 @@ pub enum Need {
     Required,
     /// Too old or missing: the frame has `None` for it.
     Optional,
+    /// A command, which stands until the next one: the newest sample at or before the
+    /// instant whatever its age (`None` before the first).
+    Held,
 }
 
 /// The sampler's settings.
@@ -275,11 +278,11 @@ impl<V: Clone> Sampler<V> {
             let newest = i.samples.iter().rev().find(|(s, _)| *s <= t);
             let age = newest.map(|(s, _)| t - s);
             match newest {
-                Some((_, v)) if age.is_some_and(|a| a <= max_age) => {
+                Some((_, v)) if i.need == Need::Held || age.is_some_and(|a| a <= max_age) => {
                     values.push(Some(v.clone()));
                     ages.push(age);
                 }
-                _ if i.need == Need::Optional => {
+                _ if i.need != Need::Required => {
                     values.push(None);
                     ages.push(None);
                 }
@@ -360,6 +363,32 @@ mod tests {
                 Tick::Dropped(_) => None,
             })
             .collect()
+    }
+
+    #[test]
+    fn a_held_input_stands_however_old_and_is_none_before_the_first() {
+        let config = SamplerConfig {
+            fps: 10,
+            ..SamplerConfig::default()
+        };
+        let mut s = Sampler::new(
+            config,
+            &[("state", Need::Required), ("command", Need::Held)],
+        )
+        .unwrap();
+        s.start(0);
+        s.offer(0, -MS, 1);
+        let first = s.poll(50 * MS);
+        assert_eq!(frames(&first)[0].values, [Some(1), None]);
+        s.offer(1, 10 * MS, 7); // one command, then none for 10 s
+        for k in 1..100 {
+            s.offer(0, k * 100 * MS, 1);
+        }
+        let ticks = s.poll(10_000 * MS);
+        let f = frames(&ticks);
+        assert_eq!(f.len(), 99, "no frame dropped for an old command");
+        assert!(f.iter().all(|f| f.values[1] == Some(7)));
+        assert_eq!(f.last().unwrap().ages_ns[1], Some(9_890 * MS));
     }
 
     #[test]

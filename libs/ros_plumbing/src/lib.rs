@@ -7,6 +7,7 @@ pub mod burst;
 pub mod controller_manager;
 pub mod diagnostics;
 pub mod docs;
+pub mod episodes;
 mod error;
 pub mod feedback;
 pub mod logging;

@@ -15,6 +15,8 @@ const OWN_TARGETS: &[&str] = &[
     "serial_node",
     "state_publisher",
     "camera_node",
+    "recorder",
+    "lerobot_dataset",
     "gui_bridge",
     "ros_plumbing",
     "eezybot_",

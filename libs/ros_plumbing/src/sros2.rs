@@ -96,7 +96,7 @@ pub enum Sros2Error {
 pub const MAX_DOMAIN_ID: u32 = 232;
 
 /// The nodes of the operator's PC (`launch_scripts/pc.sh`).
-pub const PC_NODES: &[&str] = &["gui_bridge", "compute_ik", "state_publisher"];
+pub const PC_NODES: &[&str] = &["gui_bridge", "compute_ik", "state_publisher", "recorder"];
 /// The nodes of the Raspberry Pi (`launch_scripts/pi.sh`; camera_node is in its bundle,
 /// for a camera on the arm).
 pub const PI_NODES: &[&str] = &["serial_node", "camera_node"];

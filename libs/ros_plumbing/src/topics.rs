@@ -170,6 +170,8 @@ const IK: &str = "compute_ik";
 const SERIAL: &str = "serial_node";
 const STATE: &str = "state_publisher";
 const CAMERA: &str = "camera_node";
+/// The `recorder` node (LeRobot datasets from the running graph).
+const RECORDER: &str = "recorder";
 /// `gui_bridge record` subscribes what it saves (the targets; with an MCAP file also
 /// what replays and views the session).
 const RECORD: &str = "gui_bridge (record)";
@@ -198,8 +200,12 @@ pub const JOINT_TARGET: Topic<JointState> = Topic::new_target("joint_target", &[
 /// Emergency stop, latched: `true` = no servo moves until `false`.
 pub const ESTOP: Topic<Bool> = Topic::new("estop", qos::ESTOP, &[GUI], &[IK, SERIAL, GUI]);
 /// Every non-fixed URDF joint, rad.
-pub const JOINT_STATES: Topic<JointState> =
-    Topic::new("joint_states", qos::COMMANDS, &[IK], &[STATE, GUI, RECORD]);
+pub const JOINT_STATES: Topic<JointState> = Topic::new(
+    "joint_states",
+    qos::COMMANDS,
+    &[IK],
+    &[STATE, GUI, RECORD, RECORDER],
+);
 /// Servo horn angles after calibration, rad.
 pub const SERVO_ANGLES: Topic<JointState> = Topic::new(
     "servo_angles",
@@ -208,8 +214,12 @@ pub const SERVO_ANGLES: Topic<JointState> = Topic::new(
     &[SERIAL, FOXGLOVE],
 );
 /// What the Arduino reports it applied, rad.
-pub const SERVO_STATE: Topic<JointState> =
-    Topic::new("servo_state", qos::COMMANDS, &[SERIAL], &[GUI, IK, RECORD]);
+pub const SERVO_STATE: Topic<JointState> = Topic::new(
+    "servo_state",
+    qos::COMMANDS,
+    &[SERIAL],
+    &[GUI, IK, RECORD, RECORDER],
+);
 /// The URDF text, latched.
 pub const ROBOT_DESCRIPTION: Topic<StringMsg> = Topic::new(
     "robot_description",
@@ -226,7 +236,7 @@ pub const TF_STATIC: Topic<TFMessage> =
 pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new(
     "diagnostics",
     qos::DIAGNOSTICS,
-    &[GUI, IK, SERIAL, STATE, CAMERA],
+    &[GUI, IK, SERIAL, STATE, CAMERA, RECORDER],
     &[GUI],
 );
 
@@ -244,7 +254,7 @@ pub const LEADER_JOINT_STATES: Topic<JointState> = Topic::new(
     "leader/joint_states",
     qos::COMMANDS,
     &[LEADER_READER],
-    &[IK, GUI],
+    &[IK, GUI, RECORDER],
 )
 .off_foxglove();
 /// The leader arm's deadman button: `true` while held, with every leader sample.
@@ -252,7 +262,7 @@ pub const LEADER_DEADMAN: Topic<Bool> = Topic::new(
     "leader/deadman",
     qos::COMMANDS,
     &[LEADER_READER],
-    &[IK, GUI],
+    &[IK, GUI, RECORDER],
 )
 .off_foxglove();
 
@@ -264,7 +274,7 @@ pub const CAMERA_IMAGE: Topic<CompressedImage> = Topic::new(
     "camera/image_raw/compressed",
     qos::SENSOR_DATA,
     &[CAMERA],
-    &[],
+    &[RECORDER],
 )
 .off_foxglove();
 /// The camera's [`CameraInfo`] for each image, with the image's header (size; an
@@ -349,6 +359,35 @@ pub const SWITCH_CONTROLLER: Callable = Callable {
     clients: &[CALIBRATION],
 };
 
+/// The recorder's episode services (std_srvs/srv/Trigger): start an episode of the
+/// `task` parameter's task.
+pub const START_EPISODE: Callable = Callable {
+    kind: CallableKind::Service,
+    name: "recorder/start_episode",
+    package: "std_srvs",
+    type_name: "Trigger",
+    servers: &[RECORDER],
+    clients: &[GUI],
+};
+/// End the episode and keep it (written to the dataset).
+pub const SAVE_EPISODE: Callable = Callable {
+    kind: CallableKind::Service,
+    name: "recorder/save_episode",
+    package: "std_srvs",
+    type_name: "Trigger",
+    servers: &[RECORDER],
+    clients: &[GUI],
+};
+/// End the episode and throw it away.
+pub const DISCARD_EPISODE: Callable = Callable {
+    kind: CallableKind::Service,
+    name: "recorder/discard_episode",
+    package: "std_srvs",
+    type_name: "Trigger",
+    servers: &[RECORDER],
+    clients: &[GUI],
+};
+
 /// Every action and service of the contract (besides the parameter services every node
 /// has), in the order of the docs' table.
 pub const CALLABLES: &[Callable] = &[
@@ -356,6 +395,9 @@ pub const CALLABLES: &[Callable] = &[
     GRIPPER_CMD,
     LIST_CONTROLLERS,
     SWITCH_CONTROLLER,
+    START_EPISODE,
+    SAVE_EPISODE,
+    DISCARD_EPISODE,
 ];
 
 /// Something done with each typed topic of the contract ([`visit_all`]): for code that
@@ -576,7 +618,7 @@ mod tests {
             for n in e.publishers.iter().chain(e.subscribers) {
                 let node = n.split(' ').next().unwrap_or_default();
                 assert!(
-                    [GUI, IK, SERIAL, STATE, CAMERA].contains(&node),
+                    [GUI, IK, SERIAL, STATE, CAMERA, RECORDER].contains(&node),
                     "{}: {n}",
                     e.name
                 );
@@ -596,7 +638,7 @@ mod tests {
             for n in c.servers.iter().chain(c.clients) {
                 let node = n.split(' ').next().unwrap_or_default();
                 assert!(
-                    [GUI, IK, SERIAL, STATE, CAMERA].contains(&node),
+                    [GUI, IK, SERIAL, STATE, CAMERA, RECORDER].contains(&node),
                     "{}: {n}",
                     c.name
                 );

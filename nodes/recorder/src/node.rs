@@ -1,0 +1,667 @@
+//! The node's loop: its inputs offered to the sampler, the frames due written, the
+//! episode requests (services, the deadman) through [`Episodes`], the writer's results
+//! answered and reported.
+
+use crate::compose::{self, FIRST_CAMERA, INPUTS};
+use crate::inputs::{self, Picture, Sample};
+use crate::report::{self, State, View};
+use crate::writer::{self, Done, Job, Opened};
+use crate::{Config, ROBOT_TYPE};
+use eezybot_kinematics::{ArmConfig, ACTUATED_JOINTS};
+use eezybot_msgs::diagnostic_msgs::DiagnosticStatus;
+use eezybot_msgs::std_srvs::TriggerResponse;
+use lerobot_dataset::DatasetSpec;
+use recorder_core::episode::{Effect, Episodes, Phase, Request};
+use recorder_core::{Sampler, SamplerConfig, Tick};
+use ros_plumbing::service::Ticket;
+use ros_plumbing::Params;
+use std::sync::{mpsc, Arc};
+use std::time::Duration;
+
+/// How often the entry goes out while recording (and at once on every change).
+pub const REPORT_RECORDING: Duration = Duration::from_millis(500);
+/// How often the entry goes out otherwise.
+pub const REPORT_IDLE: Duration = Duration::from_secs(2);
+
+/// An episode service.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Call {
+    /// `recorder/start_episode`
+    Start,
+    /// `recorder/save_episode`
+    Save,
+    /// `recorder/discard_episode`
+    Discard,
+}
+
+/// What the loop takes in.
+#[derive(Debug)]
+pub enum Input {
+    /// `servo_state`
+    ServoState(eezybot_msgs::sensor_msgs::JointState),
+    /// compute_ik's `joint_states`
+    Command(eezybot_msgs::sensor_msgs::JointState),
+    /// `leader/joint_states`
+    Leader(eezybot_msgs::sensor_msgs::JointState),
+    /// `leader/deadman`
+    Deadman(bool),
+    /// camera `k`'s image (or why it cannot be recorded), stamped
+    Image(usize, eezybot_msgs::Time, Result<Picture, String>),
+    /// a request to an episode service
+    Call(Call, Ticket),
+    /// a sample that could not be read, on this topic
+    Unreadable(String, String),
+}
+
+/// Where results go.
+pub trait Outputs {
+    /// Publish the `diagnostics` entry.
+    fn diagnostics(&self, status: DiagnosticStatus);
+    /// Answer a service request.
+    fn answer(&self, call: Call, ticket: Ticket, response: TriggerResponse);
+}
+
+struct Running {
+    index: u64,
+    task: String,
+    t0_ns: i64,
+    rows: u64,
+    dropped: u64,
+    started: bool,
+}
+
+/// The recorder's state between events.
+pub struct Recorder {
+    node: String,
+    config: Config,
+    arm: Arc<ArmConfig>,
+    sampler: Sampler<Sample>,
+    episodes: Episodes,
+    /// each camera's image size, once heard
+    sizes: Vec<Option<(u32, u32)>>,
+    opened: Option<Opened>,
+    opening: bool,
+    refused: Option<String>,
+    running: Option<Running>,
+    pending: Vec<(Call, Ticket)>,
+    jobs: mpsc::SyncSender<Job>,
+    dropped_total: u64,
+    last_drop: Option<String>,
+    last: String,
+    warning: Option<String>,
+    rejected: u64,
+    last_rejection: Option<String>,
+    task_param: String,
+}
+
+fn trigger(success: bool, message: impl Into<String>) -> TriggerResponse {
+    TriggerResponse {
+        success,
+        message: message.into(),
+    }
+}
+
+impl Recorder {
+    /// A recorder named `node` with `config`, its writer taking `jobs`.
+    pub fn new(
+        node: &str,
+        config: Config,
+        arm: Arc<ArmConfig>,
+        task: &str,
+        deadman_episodes: bool,
+        jobs: mpsc::SyncSender<Job>,
+    ) -> Result<Recorder, String> {
+        let mut names: Vec<(String, recorder_core::Need)> =
+            INPUTS.iter().map(|(n, k)| (n.to_string(), *k)).collect();
+        for (topic, _) in &config.cameras {
+            names.push((topic.clone(), recorder_core::Need::Required));
+        }
+        let refs: Vec<(&str, recorder_core::Need)> =
+            names.iter().map(|(n, k)| (n.as_str(), *k)).collect();
+        let sampler = Sampler::new(
+            SamplerConfig {
+                fps: config.fps,
+                max_staleness: config.max_staleness,
+                wait: Duration::from_millis(50).min(config.max_staleness),
+            },
+            &refs,
+        )
+        .map_err(|e| e.to_string())?;
+        Ok(Recorder {
+            node: node.to_string(),
+            sizes: vec![None; config.cameras.len()],
+            config,
+            arm,
+            sampler,
+            episodes: Episodes::new(task, deadman_episodes),
+            opened: None,
+            opening: false,
+            refused: None,
+            running: None,
+            pending: vec![],
+            jobs,
+            dropped_total: 0,
+            last_drop: None,
+            last: String::new(),
+            warning: None,
+            rejected: 0,
+            last_rejection: None,
+            task_param: task.to_string(),
+        })
+    }
+
+    /// The dataset's spec once every camera's size is known.
+    fn dataset_spec(&self) -> Option<DatasetSpec> {
+        let spec = DatasetSpec::new(
+            self.config.fps,
+            ROBOT_TYPE,
+            &ACTUATED_JOINTS,
+            &ACTUATED_JOINTS,
+        );
+        // VIDEO: the cameras join the spec with the writer's video step
+        for size in &self.sizes {
+            (*size)?;
+        }
+        Some(spec)
+    }
+
+    /// Ask the writer to open the dataset once every camera's size is known.
+    pub fn open_when_ready(&mut self) {
+        if self.opened.is_some() || self.opening || self.refused.is_some() {
+            return;
+        }
+        if let Some(spec) = self.dataset_spec() {
+            self.opening = true;
+            self.send(Job::Open {
+                root: self.config.root.clone(),
+                spec,
+                resume: self.config.resume,
+            });
+        }
+    }
+
+    fn send(&mut self, job: Job) {
+        if self.jobs.send(job).is_err() {
+            self.refused = Some("the dataset writer stopped".into());
+        }
+    }
+
+    fn reject(&mut self, what: &str, why: String) {
+        self.rejected += 1;
+        if self.rejected == 1 || self.rejected % 100 == 0 {
+            log::warn!("{what} not recorded ({} so far): {why}", self.rejected);
+        }
+        self.last_rejection = Some(format!("{what}: {why}"));
+    }
+
+    /// Parameters changed: the task of the next episodes, deadman episodes, the
+    /// calibration.
+    pub fn params(&mut self, p: &Params) {
+        if let Some(task) = p.string("task") {
+            self.task_param = task.trim().to_string();
+            self.episodes.set_default_task(&self.task_param);
+        }
+        if let Some(config) = p.loaded::<ArmConfig>("arm_config") {
+            self.arm = config;
+        }
+        let deadman = p.bool("deadman_episodes").unwrap_or(false);
+        if deadman != self.episodes.deadman_episodes() {
+            self.episodes.set_deadman_episodes(deadman);
+            log::info!("deadman episodes {}", if deadman { "on" } else { "off" });
+        }
+    }
+
+    /// An input, at `now`.
+    pub fn input(&mut self, input: Input, now: i64, out: &impl Outputs) {
+        match input {
+            Input::ServoState(m) => match inputs::follower_joints(&m, &self.arm) {
+                Ok(q) => {
+                    self.sampler
+                        .offer(compose::STATE, m.header.stamp.to_nanos(), Sample::Joints(q))
+                }
+                Err(e) => self.reject("servo_state", e),
+            },
+            Input::Command(m) => match inputs::actuated_joints(&m) {
+                Ok(q) => self.sampler.offer(
+                    compose::COMMAND,
+                    m.header.stamp.to_nanos(),
+                    Sample::Joints(q),
+                ),
+                Err(e) => self.reject("joint_states", e),
+            },
+            Input::Leader(m) => match inputs::actuated_joints(&m) {
+                Ok(q) => self.sampler.offer(
+                    compose::LEADER,
+                    m.header.stamp.to_nanos(),
+                    Sample::Joints(q),
+                ),
+                Err(e) => self.reject("leader/joint_states", e),
+            },
+            Input::Deadman(held) => {
+                // std_msgs/Bool has no stamp: the time it came
+                self.sampler
+                    .offer(compose::DEADMAN, now, Sample::Deadman(held));
+                let fx = self.episodes.deadman(held, now);
+                if !fx.is_empty() {
+                    self.carry_out(fx, None);
+                    self.report(now, out);
+                }
+            }
+            Input::Image(k, stamp, picture) => match picture {
+                Ok(p) => {
+                    let Some(size) = picture_size(&p) else {
+                        let topic = self.config.cameras[k].0.clone();
+                        self.reject(&topic, "a JPEG without a frame header".into());
+                        return;
+                    };
+                    match self.sizes[k] {
+                        None => {
+                            self.sizes[k] = Some(size);
+                            self.open_when_ready();
+                        }
+                        Some(s) if s != size => {
+                            let topic = self.config.cameras[k].0.clone();
+                            self.reject(
+                                &topic,
+                                format!(
+                                    "{}x{} while the dataset's camera is {}x{}",
+                                    size.0, size.1, s.0, s.1
+                                ),
+                            );
+                            return;
+                        }
+                        Some(_) => {}
+                    }
+                    self.sampler.offer(
+                        FIRST_CAMERA + k,
+                        stamp.to_nanos(),
+                        Sample::Image(Arc::new(p)),
+                    );
+                }
+                Err(e) => {
+                    let topic = self.config.cameras[k].0.clone();
+                    self.reject(&topic, e);
+                }
+            },
+            Input::Call(call, ticket) => self.call(call, ticket, now, out),
+            Input::Unreadable(topic, e) => self.reject(&topic, format!("unreadable: {e}")),
+        }
+    }
+
+    fn call(&mut self, call: Call, ticket: Ticket, now: i64, out: &impl Outputs) {
+        let request = match call {
+            Call::Start => {
+                if let Some(why) = &self.refused {
+                    let why = why.clone();
+                    out.answer(
+                        call,
+                        ticket,
+                        trigger(false, format!("not recording: {why}")),
+                    );
+                    return;
+                }
+                if self.opened.is_none() {
+                    let why = self.waiting_for();
+                    out.answer(call, ticket, trigger(false, why));
+                    return;
+                }
+                Request::Start { task: None }
+            }
+            Call::Save => Request::Save,
+            Call::Discard => Request::Discard,
+        };
+        match self.episodes.request(request, now) {
+            Ok(fx) => self.carry_out(fx, Some((call, ticket))),
+            Err(e) => out.answer(call, ticket, trigger(false, e.to_string())),
+        }
+        self.report(now, out);
+    }
+
+    fn waiting_for(&self) -> String {
+        let missing: Vec<&str> = self
+            .config
+            .cameras
+            .iter()
+            .zip(&self.sizes)
+            .filter(|(_, s)| s.is_none())
+            .map(|((t, _), _)| t.as_str())
+            .collect();
+        if missing.is_empty() {
+            "the dataset is being opened".into()
+        } else {
+            format!(
+                "waiting for the first image of {} (its size makes the dataset's)",
+                missing.join(", ")
+            )
+        }
+    }
+
+    fn carry_out(&mut self, fx: Vec<Effect>, ticket: Option<(Call, Ticket)>) {
+        for e in fx {
+            match e {
+                Effect::Begin { task, t0_ns } => {
+                    self.sampler.start(t0_ns);
+                    self.running = Some(Running {
+                        index: self.opened.as_ref().map_or(0, |o| o.episodes),
+                        task: task.clone(),
+                        t0_ns,
+                        rows: 0,
+                        dropped: 0,
+                        started: false,
+                    });
+                    self.send(Job::Begin(task));
+                }
+                Effect::Save => {
+                    self.sampler.stop();
+                    self.send(Job::Save);
+                }
+                Effect::Discard => {
+                    self.sampler.stop();
+                    self.send(Job::Discard);
+                }
+            }
+        }
+        if let Some(t) = ticket {
+            self.pending.push(t);
+        }
+    }
+
+    fn answer_pending(&mut self, call: Call, success: bool, message: &str, out: &impl Outputs) {
+        if let Some(k) = self.pending.iter().position(|(c, _)| *c == call) {
+            let (c, t) = self.pending.remove(k);
+            out.answer(c, t, trigger(success, message));
+        }
+    }
+
+    /// The frames due by `now`, written.
+    pub fn tick(&mut self, now: i64) {
+        let ticks = self.sampler.poll(now);
+        for t in ticks {
+            let Some(run) = self.running.as_mut() else {
+                break;
+            };
+            match t {
+                Tick::Frame(f) => match compose::compose(&f, self.config.cameras.len()) {
+                    Some(row) => {
+                        run.rows += 1;
+                        if self.jobs.try_send(Job::Row(Box::new(row))).is_err() {
+                            run.rows -= 1;
+                            run.dropped += 1;
+                            self.dropped_total += 1;
+                            self.last_drop = Some("the writer fell behind".into());
+                        }
+                    }
+                    None => {
+                        run.dropped += 1;
+                        self.dropped_total += 1;
+                    }
+                },
+                Tick::Dropped(d) => {
+                    run.dropped += 1;
+                    self.dropped_total += 1;
+                    let why: Vec<String> = d
+                        .stale
+                        .iter()
+                        .map(|(name, age)| match age {
+                            Some(a) => format!("{name} {:.3} s old", *a as f64 * 1e-9),
+                            None => format!("nothing on {name} yet"),
+                        })
+                        .collect();
+                    let why = why.join(", ");
+                    if run.dropped == 1 || run.dropped % 30 == 0 {
+                        log::warn!(
+                            "episode {}: frame {} dropped ({} so far): {why}",
+                            run.index,
+                            d.index,
+                            run.dropped
+                        );
+                    }
+                    self.last_drop = Some(why);
+                }
+            }
+        }
+    }
+
+    /// When the next frame is due, ns.
+    pub fn next_due(&self) -> Option<i64> {
+        self.sampler.next_due()
+    }
+
+    /// What the writer did.
+    pub fn done(&mut self, d: Done, now: i64, out: &impl Outputs) {
+        match d {
+            Done::Opened(Ok(o)) => {
+                self.opening = false;
+                let what = if o.created { "created" } else { "opened" };
+                log::info!(
+                    "dataset {what}: {} ({} episodes, {} frames)",
+                    self.config.root.display(),
+                    o.episodes,
+                    o.frames
+                );
+                if let Some(r) = &o.recovered {
+                    log::warn!("recovered after a crash: {r}");
+                    self.warning = Some(format!("recovered after a crash: {r}"));
+                    self.last = format!("recovered after a crash: {r}");
+                }
+                self.opened = Some(o);
+            }
+            Done::Opened(Err(e)) => {
+                self.opening = false;
+                log::error!("{e}: nothing is recorded (nothing in the folder was touched)");
+                self.refused = Some(e);
+            }
+            Done::Began(Ok(index)) => {
+                if let Some(r) = self.running.as_mut() {
+                    r.index = index;
+                    r.started = true;
+                    log::info!("recording episode {index}: {:?}", r.task);
+                    let msg = format!("recording episode {index}: {}", r.task);
+                    self.answer_pending(Call::Start, true, &msg, out);
+                }
+            }
+            Done::Began(Err(e)) => {
+                self.sampler.stop();
+                self.running = None;
+                log::error!("cannot begin an episode: {e}");
+                // nothing began, so there is nothing to discard
+                self.episodes.failed(&e);
+                self.answer_pending(Call::Start, false, &e, out);
+            }
+            Done::RowFailed(e) => {
+                log::error!("recording stopped: {e} (the finished episodes are intact)");
+                let fx = self.episodes.failed(&e);
+                self.carry_out(fx, None);
+            }
+            Done::Saved(Ok((s, took))) => {
+                let seconds = s.frames as f64 / f64::from(self.config.fps);
+                let dropped = self.running.as_ref().map_or(0, |r| r.dropped);
+                let msg = format!(
+                    "saved episode {} ({} frames, {seconds:.1} s, {dropped} dropped) in {:.0} ms",
+                    s.episode_index,
+                    s.frames,
+                    took.as_secs_f64() * 1e3
+                );
+                log::info!("{msg}");
+                self.episodes.saved(Ok(s.frames as u64));
+                if let Some(o) = self.opened.as_mut() {
+                    o.episodes = s.episode_index + 1;
+                    o.frames += s.frames as u64;
+                }
+                self.running = None;
+                self.warning = None;
+                self.last = msg.clone();
+                self.answer_pending(Call::Save, true, &msg, out);
+            }
+            Done::Saved(Err(e)) => {
+                let msg = format!(
+                    "episode not saved: {e} (kept: save again once there is room, or discard it)"
+                );
+                log::error!("{msg}");
+                self.episodes.saved(Err(e));
+                self.last = msg.clone();
+                self.answer_pending(Call::Save, false, &msg, out);
+            }
+            Done::Discarded(r) => {
+                let index = self.running.as_ref().map_or(0, |r| r.index);
+                let msg = match &r {
+                    Ok(frames) => format!("discarded episode {index} ({frames} frames)"),
+                    Err(e) => format!("discarding episode {index}: {e}"),
+                };
+                log::info!("{msg}");
+                self.running = None;
+                self.last = msg.clone();
+                self.answer_pending(Call::Discard, r.is_ok(), &msg, out);
+            }
+        }
+        self.report(now, out);
+    }
+
+    /// The view the entry shows at `now`.
+    pub fn view(&self, now: i64) -> View {
+        let state = if let Some(why) = &self.refused {
+            State::Stopped(why.clone())
+        } else {
+            match self.episodes.phase() {
+                Phase::Stopped(why) => State::Stopped(why.clone()),
+                Phase::Recording { .. } => State::Recording,
+                Phase::Saving => State::Saving,
+                Phase::Idle if self.opened.is_none() => State::Waiting(self.waiting_for()),
+                Phase::Idle => State::Idle,
+            }
+        };
+        let episodes = self.opened.as_ref().map_or(0, |o| o.episodes);
+        let (task, episode, frames, elapsed_s, dropped) = match &self.running {
+            Some(r) => (
+                r.task.clone(),
+                r.index,
+                r.rows,
+                (now - r.t0_ns).max(0) as f64 * 1e-9,
+                r.dropped,
+            ),
+            None => (self.task_param.clone(), episodes, 0, 0.0, 0),
+        };
+        View {
+            state,
+            task,
+            episode,
+            episodes,
+            frames,
+            elapsed_s,
+            dropped,
+            dropped_total: self.dropped_total,
+            last_drop: self.last_drop.clone(),
+            fps: self.config.fps,
+            root: self.config.root.display().to_string(),
+            cameras: self
+                .config
+                .cameras
+                .iter()
+                .map(|(_, n)| format!("observation.images.{n}"))
+                .collect(),
+            last: self.last.clone(),
+            warning: self.warning.clone(),
+        }
+    }
+
+    /// Publish the entry.
+    pub fn report(&self, now: i64, out: &impl Outputs) {
+        let mut s = report::report(&self.node, &self.view(now));
+        if let Some(r) = &self.last_rejection {
+            s.values.push(eezybot_msgs::diagnostic_msgs::KeyValue {
+                key: "rejected".into(),
+                value: self.rejected.to_string(),
+            });
+            s.values.push(eezybot_msgs::diagnostic_msgs::KeyValue {
+                key: ros_plumbing::diagnostics::LAST_REJECTION_KEY.into(),
+                value: r.clone(),
+            });
+        }
+        out.diagnostics(s);
+    }
+
+    /// Whether an episode is recording (the entry goes out more often).
+    pub fn recording(&self) -> bool {
+        self.running.is_some()
+    }
+
+    /// At shutdown: an episode in progress is saved (a clean stop keeps the
+    /// demonstration; a crash leaves it for the next start to discard).
+    pub fn shutdown(&mut self, now: i64) -> bool {
+        match self.episodes.request(Request::Save, now) {
+            Ok(fx) => {
+                log::info!("stopping: saving the episode in progress");
+                self.carry_out(fx, None);
+                true
+            }
+            Err(_) => false,
+        }
+    }
+}
+
+/// An image's size (width, height): a JPEG's from its frame header.
+pub fn picture_size(p: &Picture) -> Option<(u32, u32)> {
+    match p {
+        Picture::Raw { width, height, .. } => Some((*width, *height)),
+        Picture::Jpeg(data) => jpeg_size(data),
+    }
+}
+
+/// A JPEG's size from its first SOF marker.
+pub fn jpeg_size(data: &[u8]) -> Option<(u32, u32)> {
+    if !data.starts_with(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let mut i = 2;
+    while i + 4 <= data.len() {
+        if data[i] != 0xFF {
+            return None;
+        }
+        let marker = data[i + 1];
+        if marker == 0xFF {
+            i += 1;
+            continue;
+        }
+        let len = usize::from(u16::from_be_bytes([data[i + 2], data[i + 3]]));
+        // SOF0..SOF15 except DHT (C4), JPG (C8), DAC (CC)
+        if (0xC0..=0xCF).contains(&marker) && ![0xC4, 0xC8, 0xCC].contains(&marker) {
+            let s = data.get(i + 5..i + 9)?;
+            let h = u32::from(u16::from_be_bytes([s[0], s[1]]));
+            let w = u32::from(u16::from_be_bytes([s[2], s[3]]));
+            return (w > 0 && h > 0).then_some((w, h));
+        }
+        i += 2 + len;
+    }
+    None
+}
+
+/// Start the writer thread; its results come through `done`.
+pub fn start_writer(
+    done: tokio::sync::mpsc::UnboundedSender<Done>,
+) -> std::io::Result<(mpsc::SyncSender<Job>, std::thread::JoinHandle<()>)> {
+    let (tx, rx) = mpsc::sync_channel(writer::QUEUE);
+    let handle = std::thread::Builder::new()
+        .name("dataset writer".into())
+        .spawn(move || {
+            writer::run(rx, |d| {
+                let _ = done.send(d);
+            })
+        })?;
+    Ok((tx, handle))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_jpeg_says_its_size() {
+        // SOI, APP0 (len 4), SOF0 (len 17): 8 bits, 480 rows, 640 columns
+        let mut j = vec![0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x04, 0, 0];
+        j.extend([0xFF, 0xC0, 0x00, 0x11, 0x08, 0x01, 0xE0, 0x02, 0x80]);
+        j.extend([0u8; 12]);
+        assert_eq!(jpeg_size(&j), Some((640, 480)));
+        assert_eq!(jpeg_size(&j[..10]), None);
+        assert_eq!(jpeg_size(&[0x89, b'P']), None);
+    }
+}
