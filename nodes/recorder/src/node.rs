@@ -455,8 +455,14 @@ impl Recorder {
                 if let Some(r) = self.running.as_mut() {
                     r.index = index;
                     r.started = true;
-                    log::info!("recording episode {index}: {:?}", r.task);
-                    let msg = format!("recording episode {index}: {}", r.task);
+                    // frame 0's instant, for aligning the episode with other records (bags)
+                    let t0 = format!(
+                        "{}.{:09}",
+                        r.t0_ns.div_euclid(1_000_000_000),
+                        r.t0_ns.rem_euclid(1_000_000_000)
+                    );
+                    log::info!("recording episode {index}: {:?} (frame 0 at {t0})", r.task);
+                    let msg = format!("recording episode {index}: {} (frame 0 at {t0})", r.task);
                     self.answer_pending(Call::Start, true, &msg, out);
                 }
             }
