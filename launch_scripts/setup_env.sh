@@ -17,7 +17,7 @@ _log() { echo "[setup] $*" >&2; }
 # and libclang-dev (the cyclors crate builds Cyclone DDS and binds it with bindgen); for
 # control_msgs in the test venvs (launch_scripts/gen_control_msgs.sh): cmake, gcc, g++
 # and Python 3.11's headers (python3.11-dev, when the venvs use Debian's Python).
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump cmake libclang-dev gcc python3.11-dev}
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump cmake libclang-dev gcc python3.11-dev ffmpeg}
 . "$_here/launch_scripts/apt_missing.sh"
 # shellcheck disable=SC2086 # a list of words
 apt_missing setup $EEZYBOT_APT_PACKAGES

@@ -40,6 +40,7 @@ fn episode(w: &mut DatasetWriter, task: &str, frames: usize, phase: f64) -> Resu
         w.add_frame(Frame {
             state: &state,
             action: &action,
+            images: &[],
         })
         .map_err(|e| e.to_string())?;
     }

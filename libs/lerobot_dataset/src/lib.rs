@@ -80,6 +80,7 @@
 pub mod json;
 pub mod stats;
 pub mod tables;
+pub mod video;
 
 use std::fs::{self, File};
 use std::io::{BufRead, BufReader, BufWriter, Write};
@@ -88,8 +89,10 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use json::Ordered;
-use stats::{FeatureStats, Precision};
-use tables::{DataRows, EpisodeRow};
+use stats::{FeatureStats, PixelCounts, Precision};
+use tables::{DataRows, EpisodeRow, VideoLocation};
+use video::{Encoder, EpisodeFiles, InputKind};
+pub use video::{Image, RawEncoding};
 
 /// lerobot's `CODEBASE_VERSION`.
 pub const CODEBASE_VERSION: &str = "v3.0";
@@ -101,6 +104,10 @@ pub const DEFAULT_DATA_FILE_SIZE_IN_MB: u64 = 100;
 pub const DEFAULT_VIDEO_FILE_SIZE_IN_MB: u64 = 200;
 /// lerobot's `DEFAULT_DATA_PATH`.
 pub const DATA_PATH: &str = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet";
+/// lerobot's `DEFAULT_VIDEO_PATH` (info.json's `video_path` when there are cameras).
+pub const VIDEO_PATH: &str = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4";
+/// A camera's feature is this prefix and its name.
+pub const IMAGE_FEATURE_PREFIX: &str = "observation.images.";
 /// The folder of an episode in progress and of the commit journal.
 pub const RECORDING_DIR: &str = ".recording";
 const IN_PROGRESS: &str = "episode.jsonl";
@@ -150,6 +157,16 @@ pub enum Error {
     /// A table could not be built or read.
     #[error("{0}")]
     Table(String),
+    /// A camera's video could not be encoded or placed (ffmpeg missing, stopped or
+    /// failed): the finished episodes are intact; the episode in progress cannot be
+    /// saved if its encoder stopped (discard it).
+    #[error("camera {camera}: {reason}")]
+    Video {
+        /// The camera's feature, `observation.images.<name>`.
+        camera: String,
+        /// What happened (with ffmpeg's last messages).
+        reason: String,
+    },
 }
 
 /// Result of this crate.
@@ -158,6 +175,24 @@ pub type Result<T> = std::result::Result<T, Error>;
 fn io(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> Error {
     let context = context.into();
     move |source| Error::Io { context, source }
+}
+
+/// A camera: its frames are the feature `observation.images.<name>`, a video.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Camera {
+    /// `<name>` of `observation.images.<name>` (no `/`).
+    pub name: String,
+    /// Pixels per row of every frame.
+    pub width: u32,
+    /// Rows of every frame.
+    pub height: u32,
+}
+
+impl Camera {
+    /// Its feature name, `observation.images.<name>`.
+    pub fn feature(&self) -> String {
+        format!("{IMAGE_FEATURE_PREFIX}{}", self.name)
+    }
 }
 
 /// What the dataset holds besides lerobot's default features.
@@ -175,6 +210,13 @@ pub struct DatasetSpec {
     pub chunks_size: u64,
     /// Size at which data and episodes files roll (lerobot's default 100 MB).
     pub data_files_size_in_mb: u64,
+    /// The cameras, in the order of [`Frame::images`] (none by default).
+    pub cameras: Vec<Camera>,
+    /// Size at which a camera's video file rolls (lerobot's default 200 MB).
+    pub video_files_size_in_mb: u64,
+    /// The ffmpeg program (default `ffmpeg` on the PATH; `ffprobe` is taken beside it),
+    /// needed only with cameras.
+    pub ffmpeg: PathBuf,
 }
 
 impl DatasetSpec {
@@ -187,14 +229,30 @@ impl DatasetSpec {
             action_names: action_names.iter().map(|s| s.to_string()).collect(),
             chunks_size: DEFAULT_CHUNK_SIZE,
             data_files_size_in_mb: DEFAULT_DATA_FILE_SIZE_IN_MB,
+            cameras: Vec::new(),
+            video_files_size_in_mb: DEFAULT_VIDEO_FILE_SIZE_IN_MB,
+            ffmpeg: PathBuf::from("ffmpeg"),
         }
+    }
+
+    /// Adds a camera `observation.images.<name>` of `width` × `height` pixels.
+    pub fn with_camera(mut self, name: &str, width: u32, height: u32) -> Self {
+        self.cameras.push(Camera {
+            name: name.to_string(),
+            width,
+            height,
+        });
+        self
     }
 
     fn check(&self) -> Result<()> {
         if self.fps == 0 {
             return Err(Error::BadSpec("fps must be positive".into()));
         }
-        if self.chunks_size == 0 || self.data_files_size_in_mb == 0 {
+        if self.chunks_size == 0
+            || self.data_files_size_in_mb == 0
+            || self.video_files_size_in_mb == 0
+        {
             return Err(Error::BadSpec(
                 "chunk and file sizes must be positive".into(),
             ));
@@ -213,24 +271,56 @@ impl DatasetSpec {
                 return Err(Error::BadSpec(format!("{what} names repeat: {names:?}")));
             }
         }
+        for (i, c) in self.cameras.iter().enumerate() {
+            let bad_char = |ch: char| !(ch.is_ascii_alphanumeric() || "_-.".contains(ch));
+            if c.name.is_empty() || c.name.starts_with('.') || c.name.contains(bad_char) {
+                return Err(Error::BadSpec(format!(
+                    "camera name {:?}: use letters, digits, _, - and . (not first)",
+                    c.name
+                )));
+            }
+            if self.cameras[..i].iter().any(|o| o.name == c.name) {
+                return Err(Error::BadSpec(format!("camera {} appears twice", c.name)));
+            }
+            // SVT-AV1 1.4 encodes frames from 64x64, yuv420p needs even sizes
+            if c.width < 64 || c.height < 64 || c.width % 2 == 1 || c.height % 2 == 1 {
+                return Err(Error::BadSpec(format!(
+                    "camera {}: {}x{} (the encoder needs even sizes of at least 64x64)",
+                    c.name, c.width, c.height
+                )));
+            }
+        }
         Ok(())
     }
 
-    /// The feature names in info.json's order.
-    pub fn feature_names(&self) -> [&'static str; 7] {
-        [
-            "observation.state",
-            "action",
-            "timestamp",
-            "frame_index",
-            "episode_index",
-            "index",
-            "task_index",
-        ]
+    /// The feature names in info.json's order: `observation.state`, `action`, the
+    /// cameras', then lerobot's defaults.
+    pub fn feature_names(&self) -> Vec<String> {
+        let mut v = vec!["observation.state".to_string(), "action".to_string()];
+        v.extend(self.cameras.iter().map(Camera::feature));
+        v.extend(
+            [
+                "timestamp",
+                "frame_index",
+                "episode_index",
+                "index",
+                "task_index",
+            ]
+            .map(String::from),
+        );
+        v
     }
 
-    /// info.json's `features`, as lerobot writes them (`{**features, **DEFAULT_FEATURES}`).
+    /// info.json's `features`, as lerobot writes them (`{**features, **DEFAULT_FEATURES}`),
+    /// a camera's `info` as at creation (`{"is_depth_map": false}`).
     pub fn features(&self) -> Ordered {
+        let created =
+            vec![Ordered::obj([("is_depth_map", Ordered::val(false))]); self.cameras.len()];
+        self.features_with(&created)
+    }
+
+    /// [`DatasetSpec::features`] with each camera's `info` given.
+    fn features_with(&self, camera_info: &[Ordered]) -> Ordered {
         let vector = |names: &[String]| {
             Ordered::obj([
                 ("dtype", Ordered::val("float32")),
@@ -245,15 +335,31 @@ impl DatasetSpec {
                 ("names", Ordered::Val(Value::Null)),
             ])
         };
-        Ordered::obj([
-            ("observation.state", vector(&self.state_names)),
-            ("action", vector(&self.action_names)),
-            ("timestamp", scalar("float32")),
-            ("frame_index", scalar("int64")),
-            ("episode_index", scalar("int64")),
-            ("index", scalar("int64")),
-            ("task_index", scalar("int64")),
-        ])
+        let mut f = vec![
+            ("observation.state".to_string(), vector(&self.state_names)),
+            ("action".to_string(), vector(&self.action_names)),
+        ];
+        for (c, info) in self.cameras.iter().zip(camera_info) {
+            f.push((
+                c.feature(),
+                Ordered::obj([
+                    ("dtype", Ordered::val("video")),
+                    ("shape", Ordered::val(vec![c.height, c.width, 3])),
+                    ("names", Ordered::val(vec!["height", "width", "channels"])),
+                    ("info", info.clone()),
+                ]),
+            ));
+        }
+        for (name, dtype) in [
+            ("timestamp", "float32"),
+            ("frame_index", "int64"),
+            ("episode_index", "int64"),
+            ("index", "int64"),
+            ("task_index", "int64"),
+        ] {
+            f.push((name.to_string(), scalar(dtype)));
+        }
+        Ordered::Obj(f)
     }
 
     fn features_value(&self) -> Value {
@@ -261,13 +367,17 @@ impl DatasetSpec {
     }
 }
 
-/// One frame: the follower's joints and what was commanded.
+/// One frame: the follower's joints, what was commanded, and each camera's image.
 #[derive(Debug, Clone, Copy)]
 pub struct Frame<'a> {
     /// `observation.state`, in the spec's order.
     pub state: &'a [f32],
     /// `action`, in the spec's order.
     pub action: &'a [f32],
+    /// One image per camera, in the spec's camera order (`&[]` without cameras). A
+    /// camera's first frame in an episode fixes how its frames reach ffmpeg (JPEG or raw):
+    /// a frame of the other kind in the same episode is refused.
+    pub images: &'a [Image<'a>],
 }
 
 /// An episode found interrupted (not saved) and discarded.
@@ -290,6 +400,9 @@ pub struct Recovery {
     pub removed_temporaries: Vec<PathBuf>,
     /// An episode in progress when the writer stopped, discarded.
     pub interrupted: Option<Interrupted>,
+    /// The files of that episode's cameras (its videos being encoded, their pixel
+    /// counts, ffmpeg's logs) under `.recording/`, removed.
+    pub removed_episode_files: Vec<PathBuf>,
 }
 
 impl Recovery {
@@ -316,6 +429,32 @@ struct InProgress {
     action: Vec<f32>,
     frames: usize,
     log: BufWriter<File>,
+    /// One per camera.
+    encoders: Vec<Encoding>,
+}
+
+/// A camera's encoding in the episode in progress.
+enum Encoding {
+    /// No frame yet (ffmpeg starts at the first).
+    NotStarted,
+    Running(Encoder),
+    /// ffmpeg finished the episode's file with these frames (a save that failed later
+    /// can be retried).
+    Finished(u64),
+    /// ffmpeg stopped or failed: the episode cannot be saved.
+    Failed(String),
+}
+
+/// Where a camera's next episode goes.
+#[derive(Debug, Clone)]
+struct CameraFiles {
+    /// info.json's `info` of the feature.
+    info: Ordered,
+    /// The file that takes the next episode if it fits, and its duration so far; `None`
+    /// after creation or resume (lerobot starts a new file).
+    current: Option<((u64, u64), f64)>,
+    /// The file a new file would be.
+    next_new: (u64, u64),
 }
 
 /// Writes episodes into a LeRobot v3.0 dataset folder.
@@ -330,6 +469,7 @@ pub struct DatasetWriter {
     data_rows: DataRows,
     episodes_at: (u64, u64),
     episode_rows: Vec<EpisodeRow>,
+    cameras: Vec<CameraFiles>,
     current: Option<InProgress>,
 }
 
@@ -346,8 +486,8 @@ fn next_file((chunk, file): (u64, u64), chunks_size: u64) -> (u64, u64) {
     }
 }
 
-/// The largest `(chunk, file)` of `dir/chunk-CCC/file-FFF.parquet`, if any.
-fn last_file(dir: &Path) -> Result<Option<(u64, u64)>> {
+/// The largest `(chunk, file)` of `dir/chunk-CCC/file-FFF.<ext>`, if any.
+fn last_file(dir: &Path, ext: &str) -> Result<Option<(u64, u64)>> {
     let mut best = None;
     let Ok(chunks) = fs::read_dir(dir) else {
         return Ok(None);
@@ -366,7 +506,8 @@ fn last_file(dir: &Path) -> Result<Option<(u64, u64)>> {
             let fname = f.file_name().to_string_lossy().to_string();
             let Some(fi) = fname
                 .strip_prefix("file-")
-                .and_then(|s| s.strip_suffix(".parquet"))
+                .and_then(|s| s.strip_suffix(ext))
+                .and_then(|s| s.strip_suffix('.'))
                 .and_then(|s| s.parse::<u64>().ok())
             else {
                 continue;
@@ -401,19 +542,24 @@ fn tmp_of(path: &Path) -> PathBuf {
     PathBuf::from(s)
 }
 
-/// Writes `files` (paths relative to `root`) as one atomic change: temporaries,
+/// Writes `files` (paths relative to `root`) as one atomic change with the `staged`
+/// ones, whose temporaries are already written and fsynced (the videos): temporaries,
 /// journal, renames (see the crate docs). On an error before the journal, the
 /// temporaries are removed and nothing changed.
-fn commit(root: &Path, files: &[(String, Vec<u8>)]) -> Result<()> {
-    let mut written = Vec::new();
-    let staged = (|| {
+fn commit(root: &Path, files: &[(String, Vec<u8>)], staged: &[String]) -> Result<()> {
+    let mut written: Vec<PathBuf> = staged.iter().map(|rel| tmp_of(&root.join(rel))).collect();
+    let result = (|| {
         for (rel, bytes) in files {
             let tmp = tmp_of(&root.join(rel));
             written.push(tmp.clone());
             write_synced(&tmp, bytes)?;
         }
         let rec = root.join(RECORDING_DIR);
-        let journal: Vec<&str> = files.iter().map(|(rel, _)| rel.as_str()).collect();
+        let journal: Vec<&str> = staged
+            .iter()
+            .map(String::as_str)
+            .chain(files.iter().map(|(rel, _)| rel.as_str()))
+            .collect();
         let body = serde_json::to_vec(&journal).unwrap_or_default();
         let jtmp = tmp_of(&rec.join(JOURNAL));
         written.push(jtmp.clone());
@@ -421,7 +567,7 @@ fn commit(root: &Path, files: &[(String, Vec<u8>)]) -> Result<()> {
         fs::rename(&jtmp, rec.join(JOURNAL)).map_err(io("renaming the commit journal"))?;
         fsync_dir(&rec)
     })();
-    if let Err(e) = staged {
+    if let Err(e) = result {
         for t in &written {
             let _ = fs::remove_file(t);
         }
@@ -525,9 +671,24 @@ pub fn recover(root: &Path) -> Result<Recovery> {
         rolled_forward: roll_forward(root)?,
         ..Default::default()
     };
-    for sub in ["meta", "data", RECORDING_DIR] {
+    for sub in ["meta", "data", "videos", RECORDING_DIR] {
         remove_temporaries(&root.join(sub), root, &mut r.removed_temporaries)?;
     }
+    // what an episode's cameras left (the journal and the episode's log aside)
+    let rec = root.join(RECORDING_DIR);
+    if let Ok(entries) = fs::read_dir(&rec) {
+        for e in entries {
+            let e = e.map_err(io(format!("listing {}", rec.display())))?;
+            let name = e.file_name();
+            if name == JOURNAL || name == IN_PROGRESS || !e.path().is_file() {
+                continue;
+            }
+            fs::remove_file(e.path()).map_err(io(format!("removing {}", e.path().display())))?;
+            r.removed_episode_files
+                .push(Path::new(RECORDING_DIR).join(name));
+        }
+    }
+    r.removed_episode_files.sort();
     let ip = root.join(RECORDING_DIR).join(IN_PROGRESS);
     if ip.exists() {
         r.interrupted = Some(read_interrupted(&ip).unwrap_or(Interrupted {
@@ -538,6 +699,85 @@ pub fn recover(root: &Path) -> Result<Recovery> {
         fs::remove_file(&ip).map_err(io(format!("removing {}", ip.display())))?;
     }
     Ok(r)
+}
+
+/// The keys of a video feature's `info` in lerobot's order (`{"is_depth_map": false}` at
+/// creation, then `get_video_info`'s probed fields and the encoder's settings).
+const VIDEO_INFO_ORDER: [&str; 14] = [
+    "is_depth_map",
+    "video.height",
+    "video.width",
+    "video.codec",
+    "video.pix_fmt",
+    "video.fps",
+    "video.channels",
+    "has_audio",
+    "video.g",
+    "video.crf",
+    "video.preset",
+    "video.fast_decode",
+    "video.video_backend",
+    "video.extra_options",
+];
+
+/// A video feature's `info` read back, in lerobot's key order (serde_json's map sorts
+/// keys): the known keys first, any others after.
+fn video_info_ordered(info: &Value) -> Ordered {
+    let Some(map) = info.as_object() else {
+        return Ordered::Val(info.clone());
+    };
+    let mut pairs: Vec<(String, Ordered)> = VIDEO_INFO_ORDER
+        .iter()
+        .filter_map(|k| {
+            map.get(*k)
+                .map(|v| (k.to_string(), Ordered::Val(v.clone())))
+        })
+        .collect();
+    for (k, v) in map {
+        if !VIDEO_INFO_ORDER.contains(&k.as_str()) {
+            pairs.push((k.clone(), Ordered::Val(v.clone())));
+        }
+    }
+    Ordered::Obj(pairs)
+}
+
+/// What lerobot's `update_video_info` writes after the first episode: the probed
+/// stream, then the encoder's settings ([`video`]'s constants).
+fn video_info_probed(p: &video::Probe) -> Ordered {
+    Ordered::obj([
+        ("is_depth_map", Ordered::val(false)),
+        ("video.height", Ordered::val(p.height)),
+        ("video.width", Ordered::val(p.width)),
+        ("video.codec", Ordered::val(p.codec.clone())),
+        ("video.pix_fmt", Ordered::val(p.pix_fmt.clone())),
+        ("video.fps", Ordered::val(p.fps)),
+        // get_pix_fmt_channels: yuv420p has 3 components
+        ("video.channels", Ordered::val(3)),
+        ("has_audio", Ordered::val(false)),
+        ("video.g", Ordered::val(video::GOP)),
+        ("video.crf", Ordered::val(video::CRF)),
+        ("video.preset", Ordered::val(video::PRESET)),
+        ("video.fast_decode", Ordered::val(0)),
+        ("video.video_backend", Ordered::val("pyav")),
+        ("video.extra_options", Ordered::Obj(Vec::new())),
+    ])
+}
+
+fn kind_name(k: InputKind) -> &'static str {
+    match k {
+        InputKind::Jpeg => "JPEG",
+        InputKind::Rgb24 => "raw",
+    }
+}
+
+fn check_ffmpeg(spec: &DatasetSpec) -> Result<()> {
+    match spec.cameras.first() {
+        None => Ok(()),
+        Some(c) => video::check_ffmpeg(&spec.ffmpeg).map_err(|reason| Error::Video {
+            camera: c.feature(),
+            reason,
+        }),
+    }
 }
 
 fn load_json(path: &Path) -> std::result::Result<Value, String> {
@@ -584,6 +824,20 @@ fn differences(info: &Value, spec: &DatasetSpec) -> Vec<String> {
             d.push(format!("the dataset has feature {k}, not recorded here"));
         }
     }
+    // a video file takes episodes of one codec only
+    for c in &spec.cameras {
+        let codec = have
+            .get(&c.feature())
+            .and_then(|f| f.get("info"))
+            .and_then(|i| i.get("video.codec"))
+            .and_then(Value::as_str);
+        if let Some(codec) = codec.filter(|c| *c != "av1") {
+            d.push(format!(
+                "feature {}: its videos are {codec}, av1 here",
+                c.feature()
+            ));
+        }
+    }
     d
 }
 
@@ -599,8 +853,18 @@ impl DatasetWriter {
                 return Err(Error::NotEmpty(root));
             }
         }
+        check_ffmpeg(&spec)?;
         fs::create_dir_all(root.join(RECORDING_DIR))
             .map_err(io(format!("creating {}", root.display())))?;
+        let cameras = spec
+            .cameras
+            .iter()
+            .map(|_| CameraFiles {
+                info: Ordered::obj([("is_depth_map", Ordered::val(false))]),
+                current: None,
+                next_new: (0, 0),
+            })
+            .collect();
         let w = DatasetWriter {
             root,
             spec,
@@ -612,9 +876,14 @@ impl DatasetWriter {
             data_rows: DataRows::default(),
             episodes_at: (0, 0),
             episode_rows: Vec::new(),
+            cameras,
             current: None,
         };
-        commit(&w.root, &[("meta/info.json".into(), w.info_json(0, 0, 0))])?;
+        commit(
+            &w.root,
+            &[("meta/info.json".into(), w.info_json(0, 0, 0, &w.cameras))],
+            &[],
+        )?;
         Ok(w)
     }
 
@@ -632,6 +901,7 @@ impl DatasetWriter {
         if !root.is_dir() {
             return Err(not("no such folder".into()));
         }
+        check_ffmpeg(&spec)?;
         let info = load_json(&root.join("meta/info.json")).map_err(not)?;
         let version = info.get("codebase_version").and_then(Value::as_str);
         if version != Some(CODEBASE_VERSION) {
@@ -660,6 +930,9 @@ impl DatasetWriter {
         spec.data_files_size_in_mb = num("data_files_size_in_mb")
             .unwrap_or(DEFAULT_DATA_FILE_SIZE_IN_MB)
             .max(1);
+        spec.video_files_size_in_mb = num("video_files_size_in_mb")
+            .unwrap_or(DEFAULT_VIDEO_FILE_SIZE_IN_MB)
+            .max(1);
         let tasks_path = root.join("meta/tasks.parquet");
         let tasks = if tasks_path.exists() {
             tables::read_tasks(&tasks_path).map_err(Error::Table)?
@@ -671,19 +944,37 @@ impl DatasetWriter {
             let mut v = Vec::new();
             for name in spec.feature_names() {
                 let fs = s
-                    .get(name)
+                    .get(&name)
                     .and_then(FeatureStats::from_json)
                     .ok_or_else(|| not(format!("stats.json has no usable stats for {name}")))?;
-                v.push((name.to_string(), fs));
+                v.push((name, fs));
             }
             Some(v)
         } else {
             None
         };
         let cs = spec.chunks_size;
-        let data_at = last_file(&root.join("data"))?.map_or((0, 0), |l| next_file(l, cs));
+        let data_at =
+            last_file(&root.join("data"), "parquet")?.map_or((0, 0), |l| next_file(l, cs));
         let episodes_at =
-            last_file(&root.join("meta/episodes"))?.map_or((0, 0), |l| next_file(l, cs));
+            last_file(&root.join("meta/episodes"), "parquet")?.map_or((0, 0), |l| next_file(l, cs));
+        let mut cameras = Vec::new();
+        for c in &spec.cameras {
+            let key = c.feature();
+            let info = info
+                .get("features")
+                .and_then(|f| f.get(&key))
+                .and_then(|f| f.get("info"))
+                .cloned()
+                .unwrap_or(serde_json::json!({"is_depth_map": false}));
+            let next_new = last_file(&root.join("videos").join(&key), "mp4")?
+                .map_or((0, 0), |l| next_file(l, cs));
+            cameras.push(CameraFiles {
+                info: video_info_ordered(&info),
+                current: None,
+                next_new,
+            });
+        }
         Ok((
             DatasetWriter {
                 root,
@@ -696,6 +987,7 @@ impl DatasetWriter {
                 data_rows: DataRows::default(),
                 episodes_at,
                 episode_rows: Vec::new(),
+                cameras,
                 current: None,
             },
             recovery,
@@ -727,7 +1019,13 @@ impl DatasetWriter {
         self.current.as_ref().map(|c| c.frames)
     }
 
-    fn info_json(&self, episodes: u64, frames: u64, tasks: usize) -> Vec<u8> {
+    fn info_json(
+        &self,
+        episodes: u64,
+        frames: u64,
+        tasks: usize,
+        cameras: &[CameraFiles],
+    ) -> Vec<u8> {
         let splits = if episodes > 0 {
             Ordered::obj([("train", Ordered::val(format!("0:{episodes}")))])
         } else {
@@ -736,7 +1034,11 @@ impl DatasetWriter {
         Ordered::obj([
             ("codebase_version", Ordered::val(CODEBASE_VERSION)),
             ("fps", Ordered::val(self.spec.fps)),
-            ("features", self.spec.features()),
+            (
+                "features",
+                self.spec
+                    .features_with(&cameras.iter().map(|c| c.info.clone()).collect::<Vec<_>>()),
+            ),
             ("total_episodes", Ordered::val(episodes)),
             ("total_frames", Ordered::val(frames)),
             ("total_tasks", Ordered::val(tasks)),
@@ -747,10 +1049,17 @@ impl DatasetWriter {
             ),
             (
                 "video_files_size_in_mb",
-                Ordered::val(DEFAULT_VIDEO_FILE_SIZE_IN_MB),
+                Ordered::val(self.spec.video_files_size_in_mb),
             ),
             ("data_path", Ordered::val(DATA_PATH)),
-            ("video_path", Ordered::Val(Value::Null)),
+            (
+                "video_path",
+                if self.spec.cameras.is_empty() {
+                    Ordered::Val(Value::Null)
+                } else {
+                    Ordered::val(VIDEO_PATH)
+                },
+            ),
             ("robot_type", Ordered::val(self.spec.robot_type.clone())),
             ("splits", splits),
         ])
@@ -784,8 +1093,58 @@ impl DatasetWriter {
             action: Vec::new(),
             frames: 0,
             log,
+            encoders: self
+                .spec
+                .cameras
+                .iter()
+                .map(|_| Encoding::NotStarted)
+                .collect(),
         });
         Ok(())
+    }
+
+    fn episode_files(&self, camera: usize) -> EpisodeFiles {
+        EpisodeFiles::new(
+            &self.root.join(RECORDING_DIR),
+            &self.spec.cameras[camera].feature(),
+        )
+    }
+
+    /// Checks a frame's images against the cameras and the episode's encoders; returns
+    /// how each reaches ffmpeg.
+    fn check_images(&self, cur: &InProgress, images: &[Image<'_>]) -> Result<Vec<InputKind>> {
+        if images.len() != self.spec.cameras.len() {
+            return Err(Error::BadFrame(format!(
+                "{} images, expected one per camera ({})",
+                images.len(),
+                self.spec.cameras.len()
+            )));
+        }
+        let mut kinds = Vec::new();
+        for ((c, img), enc) in self.spec.cameras.iter().zip(images).zip(&cur.encoders) {
+            let kind = img
+                .check(c.width, c.height)
+                .map_err(|e| Error::BadFrame(format!("camera {}: {e}", c.feature())))?;
+            match enc {
+                Encoding::Running(e) if e.kind() != kind => {
+                    return Err(Error::BadFrame(format!(
+                        "camera {}: a {} frame in an episode whose frames are {}",
+                        c.feature(),
+                        kind_name(kind),
+                        kind_name(e.kind())
+                    )))
+                }
+                Encoding::Failed(reason) => {
+                    return Err(Error::Video {
+                        camera: c.feature(),
+                        reason: reason.clone(),
+                    })
+                }
+                _ => {}
+            }
+            kinds.push(kind);
+        }
+        Ok(kinds)
     }
 
     /// Adds the next frame (on the fps grid: its timestamp is `frame_index / fps`).
@@ -793,7 +1152,7 @@ impl DatasetWriter {
         let (ns, na) = (self.spec.state_names.len(), self.spec.action_names.len());
         let cur = self
             .current
-            .as_mut()
+            .as_ref()
             .ok_or_else(|| Error::State("no episode in progress".into()))?;
         if frame.state.len() != ns || frame.action.len() != na {
             return Err(Error::BadFrame(format!(
@@ -810,6 +1169,58 @@ impl DatasetWriter {
         {
             return Err(Error::BadFrame(format!("a value is not finite: {v}")));
         }
+        let kinds = self.check_images(cur, frame.images)?;
+        if cur
+            .encoders
+            .iter()
+            .any(|e| matches!(e, Encoding::Finished(_)))
+        {
+            return Err(Error::State(
+                "the episode is being saved: save or discard it first".into(),
+            ));
+        }
+        // each camera's image to its ffmpeg (started at the episode's first frame)
+        for (i, (img, kind)) in frame.images.iter().zip(kinds).enumerate() {
+            let cam = &self.spec.cameras[i];
+            let files = EpisodeFiles::new(&self.root.join(RECORDING_DIR), &cam.feature());
+            let cur = self
+                .current
+                .as_mut()
+                .ok_or_else(|| Error::State("no episode in progress".into()))?;
+            let slot = &mut cur.encoders[i];
+            if matches!(slot, Encoding::NotStarted) {
+                match Encoder::start(
+                    &self.spec.ffmpeg,
+                    &files,
+                    kind,
+                    cam.width,
+                    cam.height,
+                    self.spec.fps,
+                ) {
+                    Ok(e) => *slot = Encoding::Running(e),
+                    Err(reason) => {
+                        *slot = Encoding::Failed(reason.clone());
+                        return Err(Error::Video {
+                            camera: cam.feature(),
+                            reason,
+                        });
+                    }
+                }
+            }
+            if let Encoding::Running(e) = slot {
+                if let Err(reason) = e.push(*img) {
+                    *slot = Encoding::Failed(reason.clone());
+                    return Err(Error::Video {
+                        camera: cam.feature(),
+                        reason,
+                    });
+                }
+            }
+        }
+        let cur = self
+            .current
+            .as_mut()
+            .ok_or_else(|| Error::State("no episode in progress".into()))?;
         let line = serde_json::to_string(&LogFrame {
             state: frame.state,
             action: frame.action,
@@ -830,25 +1241,174 @@ impl DatasetWriter {
             .current
             .take()
             .ok_or_else(|| Error::State("no episode in progress".into()))?;
-        drop(cur.log);
+        let frames = cur.frames;
+        // kills the cameras' ffmpeg, then their files go
+        drop(cur);
+        for i in 0..self.spec.cameras.len() {
+            self.episode_files(i).remove();
+        }
         let path = self.root.join(RECORDING_DIR).join(IN_PROGRESS);
         fs::remove_file(&path).map_err(io(format!("removing {}", path.display())))?;
-        Ok(cur.frames)
+        Ok(frames)
+    }
+
+    /// Ends each camera's encoding of the episode in progress (once: a save that fails
+    /// later keeps the finished files) and checks that ffmpeg took every frame.
+    fn finish_encoders(&mut self, frames: usize) -> Result<()> {
+        let Some(cur) = self.current.as_mut() else {
+            return Err(Error::State("no episode in progress".into()));
+        };
+        for (slot, cam) in cur.encoders.iter_mut().zip(&self.spec.cameras) {
+            let taken = std::mem::replace(slot, Encoding::NotStarted);
+            *slot = match taken {
+                Encoding::Running(e) => match e.finish() {
+                    Ok(n) => Encoding::Finished(n),
+                    Err(reason) => Encoding::Failed(reason),
+                },
+                other => other,
+            };
+            let fail = |reason: String| Error::Video {
+                camera: cam.feature(),
+                reason,
+            };
+            match slot {
+                Encoding::Finished(n) if *n == frames as u64 => {}
+                Encoding::Finished(n) => {
+                    return Err(fail(format!(
+                        "ffmpeg decoded {n} frames of the episode's {frames}: discard it"
+                    )))
+                }
+                Encoding::Failed(reason) => {
+                    return Err(fail(format!("{reason}: discard the episode")))
+                }
+                _ => return Err(fail("no frame reached ffmpeg".into())),
+            }
+        }
+        Ok(())
+    }
+
+    /// The image statistics of camera `i`'s episode of `frames` frames: the sampled
+    /// frames' pixel counts, kept by its encoder.
+    fn camera_stats(&self, i: usize, frames: usize) -> Result<FeatureStats> {
+        let files = self.episode_files(i);
+        let feature = self.spec.cameras[i].feature();
+        let fail = |reason: String| Error::Video {
+            camera: feature.clone(),
+            reason,
+        };
+        let all = fs::read(&files.counts)
+            .map_err(|e| fail(format!("{}: {e}", files.counts.display())))?;
+        let idx = stats::sample_indices(frames);
+        let mut sum = PixelCounts::default();
+        for &f in &idx {
+            let rec = all
+                .get(f * PixelCounts::RECORD_BYTES..(f + 1) * PixelCounts::RECORD_BYTES)
+                .and_then(PixelCounts::from_record)
+                .ok_or_else(|| fail(format!("no pixel counts for frame {f}")))?;
+            sum.add(&rec);
+        }
+        sum.stats(idx.len() as u64)
+            .ok_or_else(|| fail("no pixels to count".into()))
+    }
+
+    /// Places camera `i`'s episode video as lerobot's `_save_episode_video` does: the
+    /// camera's current file with the episode appended (a remux), or, when that would
+    /// reach `video_files_size_in_mb` (or after creation or a resume), a new file. The
+    /// result is written as the target's commit temporary; returns its path (relative to
+    /// the root), where the episode is, and the camera's files afterwards.
+    fn place_video(&self, i: usize, frames: usize) -> Result<(String, VideoLocation, CameraFiles)> {
+        let cam = &self.spec.cameras[i];
+        let key = cam.feature();
+        let fail = |reason: String| Error::Video {
+            camera: key.clone(),
+            reason,
+        };
+        let files = self.episode_files(i);
+        let probe = video::probe(&self.spec.ffmpeg, &files.video).map_err(&fail)?;
+        if probe.frames != frames as u64 {
+            return Err(fail(format!(
+                "the episode's video has {} frames, {frames} expected",
+                probe.frames
+            )));
+        }
+        let mb = |p: &Path| fs::metadata(p).map(|m| m.len() as f64 / (1024.0 * 1024.0));
+        let ep_mb = mb(&files.video).map_err(io(format!("size of {}", files.video.display())))?;
+        let state = &self.cameras[i];
+        let rel_of = |(c, f): (u64, u64)| format!("videos/{key}/chunk-{c:03}/file-{f:03}.mp4");
+        let (target, from, append_to) = match state.current {
+            None => (state.next_new, 0.0, None),
+            Some((at, to)) => {
+                let path = self.root.join(rel_of(at));
+                let size = mb(&path).map_err(io(format!("size of {}", path.display())))?;
+                if size + ep_mb >= self.spec.video_files_size_in_mb as f64 {
+                    (next_file(at, self.spec.chunks_size), 0.0, None)
+                } else {
+                    (at, to, Some(path))
+                }
+            }
+        };
+        let rel = rel_of(target);
+        let tmp = tmp_of(&self.root.join(&rel));
+        if let Some(parent) = tmp.parent() {
+            fs::create_dir_all(parent).map_err(io(format!("creating {}", parent.display())))?;
+        }
+        let _ = fs::remove_file(&tmp);
+        match append_to {
+            // a second name for the episode's file: a failed save keeps the original
+            None => fs::hard_link(&files.video, &tmp)
+                .or_else(|_| fs::copy(&files.video, &tmp).map(|_| ()))
+                .map_err(io(format!("placing {}", tmp.display())))?,
+            Some(current) => {
+                let list = self
+                    .root
+                    .join(RECORDING_DIR)
+                    .join(format!("{key}.ffconcat"));
+                video::concatenate(&self.spec.ffmpeg, &current, &files.video, &tmp, &list)
+                    .map_err(&fail)?
+            }
+        }
+        File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .map_err(io(format!("fsync {}", tmp.display())))?;
+        let to = from + probe.duration_s;
+        let location = VideoLocation {
+            key: key.clone(),
+            chunk_index: target.0 as i64,
+            file_index: target.1 as i64,
+            from_timestamp: from,
+            to_timestamp: to,
+        };
+        let after = CameraFiles {
+            // lerobot probes the first episode's video for info.json
+            info: if self.total_episodes == 0 {
+                video_info_probed(&probe)
+            } else {
+                state.info.clone()
+            },
+            current: Some((target, to)),
+            next_new: next_file(target, self.spec.chunks_size),
+        };
+        Ok((rel, location, after))
     }
 
     /// Saves the episode in progress atomically (see the crate docs). On an error,
     /// nothing changed and the episode is still in progress.
     pub fn save_episode(&mut self) -> Result<SavedEpisode> {
-        let cur = self
+        let n = self
             .current
             .as_ref()
-            .ok_or_else(|| Error::State("no episode in progress".into()))?;
-        let n = cur.frames;
+            .ok_or_else(|| Error::State("no episode in progress".into()))?
+            .frames;
         if n == 0 {
             return Err(Error::State(
                 "the episode has no frames: add frames or discard it".into(),
             ));
         }
+        self.finish_encoders(n)?;
+        let cur = self
+            .current
+            .as_ref()
+            .ok_or_else(|| Error::State("no episode in progress".into()))?;
         let (ns, na) = (self.spec.state_names.len(), self.spec.action_names.len());
         let ep = self.total_episodes as i64;
         let mut tasks = self.tasks.clone();
@@ -880,32 +1440,37 @@ impl DatasetWriter {
         };
         let scalar = |v: Vec<f64>| -> Vec<Vec<f64>> { v.into_iter().map(|x| vec![x]).collect() };
         let i64s = |v: &[i64]| scalar(v.iter().map(|&x| x as f64).collect());
+        // observation.state, action and timestamp are float32
+        let f32s = Precision::F32;
         let columns = [
-            vec_rows(&rows.state, ns),
-            vec_rows(&rows.action, na),
-            scalar(rows.timestamp.iter().map(|&t| f64::from(t)).collect()),
-            i64s(&rows.frame_index),
-            i64s(&rows.episode_index),
-            i64s(&rows.index),
-            i64s(&rows.task_index),
+            ("observation.state", vec_rows(&rows.state, ns), f32s),
+            ("action", vec_rows(&rows.action, na), f32s),
+            (
+                "timestamp",
+                scalar(rows.timestamp.iter().map(|&t| f64::from(t)).collect()),
+                f32s,
+            ),
+            ("frame_index", i64s(&rows.frame_index), Precision::F64),
+            ("episode_index", i64s(&rows.episode_index), Precision::F64),
+            ("index", i64s(&rows.index), Precision::F64),
+            ("task_index", i64s(&rows.task_index), Precision::F64),
         ];
         let mut ep_stats = Vec::new();
-        for (i, (name, col)) in self
-            .spec
-            .feature_names()
-            .iter()
-            .zip(columns.iter())
-            .enumerate()
-        {
-            // observation.state, action and timestamp are float32
-            let p = if i < 3 {
-                Precision::F32
-            } else {
-                Precision::F64
+        for name in self.spec.feature_names() {
+            let s = match columns.iter().find(|c| c.0 == name) {
+                Some((_, col, p)) => FeatureStats::compute(col, *p)
+                    .ok_or_else(|| Error::Table(format!("stats of {name}")))?,
+                None => {
+                    let i = self
+                        .spec
+                        .cameras
+                        .iter()
+                        .position(|c| c.feature() == name)
+                        .ok_or_else(|| Error::Table(format!("no feature {name}")))?;
+                    self.camera_stats(i, n)?
+                }
             };
-            let s = FeatureStats::compute(col, p)
-                .ok_or_else(|| Error::Table(format!("stats of {name}")))?;
-            ep_stats.push((name.to_string(), s));
+            ep_stats.push((name, s));
         }
         let stats: Vec<(String, FeatureStats)> = match &self.stats {
             None => ep_stats.clone(),
@@ -937,6 +1502,26 @@ impl DatasetWriter {
         }
         data_rows.extend(&rows);
 
+        // each camera's video: its commit temporary made now (removed on any error)
+        let mut staged: Vec<String> = Vec::new();
+        let mut videos = Vec::new();
+        let mut cameras_after = Vec::new();
+        for i in 0..self.spec.cameras.len() {
+            match self.place_video(i, n) {
+                Ok((rel, location, after)) => {
+                    staged.push(rel);
+                    videos.push(location);
+                    cameras_after.push(after);
+                }
+                Err(e) => {
+                    for rel in &staged {
+                        let _ = fs::remove_file(tmp_of(&self.root.join(rel)));
+                    }
+                    return Err(e);
+                }
+            }
+        }
+
         // the episodes table, rolled by lerobot's own estimate (bytes per episode_index)
         let mut episodes_at = self.episodes_at;
         let mut episode_rows = self.episode_rows.clone();
@@ -963,35 +1548,55 @@ impl DatasetWriter {
             data_file_index: data_at.1 as i64,
             dataset_from_index: first_index,
             dataset_to_index: first_index + n as i64,
+            videos,
             stats: ep_stats,
             meta_chunk_index: episodes_at.0 as i64,
             meta_file_index: episodes_at.1 as i64,
         });
 
-        let mut files = Vec::new();
-        if new_task {
-            files.push((
-                "meta/tasks.parquet".to_string(),
-                tables::tasks_parquet(&tasks).map_err(Error::Table)?,
-            ));
-        }
-        files.push((
-            chunk_file("data", data_at.0, data_at.1),
-            tables::data_parquet(&data_rows, ns, na).map_err(Error::Table)?,
-        ));
-        files.push((
-            chunk_file("meta/episodes", episodes_at.0, episodes_at.1),
-            tables::episodes_parquet(&episode_rows).map_err(Error::Table)?,
-        ));
-        let stats_json = Ordered::obj(stats.iter().map(|(name, s)| (name.clone(), s.to_json())));
-        files.push(("meta/stats.json".to_string(), stats_json.to_pretty()));
         let total_episodes = self.total_episodes + 1;
         let total_frames = self.total_frames + n as u64;
-        files.push((
-            "meta/info.json".to_string(),
-            self.info_json(total_episodes, total_frames, tasks.len()),
-        ));
-        commit(&self.root, &files)?;
+        let files = (|| -> Result<Vec<(String, Vec<u8>)>> {
+            let mut files = Vec::new();
+            if new_task {
+                files.push((
+                    "meta/tasks.parquet".to_string(),
+                    tables::tasks_parquet(&tasks).map_err(Error::Table)?,
+                ));
+            }
+            files.push((
+                chunk_file("data", data_at.0, data_at.1),
+                tables::data_parquet(&data_rows, ns, na).map_err(Error::Table)?,
+            ));
+            files.push((
+                chunk_file("meta/episodes", episodes_at.0, episodes_at.1),
+                tables::episodes_parquet(&episode_rows).map_err(Error::Table)?,
+            ));
+            let stats_json = Ordered::obj(stats.iter().map(|(name, s)| {
+                let json = if name.starts_with(IMAGE_FEATURE_PREFIX) {
+                    s.to_json_image()
+                } else {
+                    s.to_json()
+                };
+                (name.clone(), json)
+            }));
+            files.push(("meta/stats.json".to_string(), stats_json.to_pretty()));
+            files.push((
+                "meta/info.json".to_string(),
+                self.info_json(total_episodes, total_frames, tasks.len(), &cameras_after),
+            ));
+            Ok(files)
+        })();
+        let files = match files {
+            Ok(f) => f,
+            Err(e) => {
+                for rel in &staged {
+                    let _ = fs::remove_file(tmp_of(&self.root.join(rel)));
+                }
+                return Err(e);
+            }
+        };
+        commit(&self.root, &files, &staged)?;
 
         // committed: the episode is part of the dataset
         self.total_episodes = total_episodes;
@@ -1002,8 +1607,12 @@ impl DatasetWriter {
         self.data_rows = data_rows;
         self.episodes_at = episodes_at;
         self.episode_rows = episode_rows;
+        self.cameras = cameras_after;
         if let Some(cur) = self.current.take() {
             drop(cur.log);
+        }
+        for i in 0..self.spec.cameras.len() {
+            self.episode_files(i).remove();
         }
         let ip = self.root.join(RECORDING_DIR).join(IN_PROGRESS);
         fs::remove_file(&ip).map_err(io(format!("removing {}", ip.display())))?;

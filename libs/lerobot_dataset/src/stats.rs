@@ -306,10 +306,23 @@ impl FeatureStats {
         }))
     }
 
-    /// Reads what [`FeatureStats::to_json`] writes (and lerobot's stats.json).
+    /// Reads what [`FeatureStats::to_json`] and [`FeatureStats::to_json_image`] write
+    /// (and lerobot's stats.json).
     pub fn from_json(v: &Value) -> Option<Self> {
+        // image stats nest each value as (channels, 1, 1): flattened
+        fn flat(v: &Value, out: &mut Vec<f64>) -> Option<()> {
+            match v {
+                Value::Array(items) => items.iter().try_for_each(|x| flat(x, out)),
+                x => {
+                    out.push(x.as_f64()?);
+                    Some(())
+                }
+            }
+        }
         let floats = |k: &str| -> Option<Vec<f64>> {
-            v.get(k)?.as_array()?.iter().map(|x| x.as_f64()).collect()
+            let mut out = Vec::new();
+            flat(v.get(k)?, &mut out)?;
+            Some(out)
         };
         let count = v.get("count")?.as_array()?.first()?.as_u64()?;
         let mut quantiles: [Vec<f64>; 5] = Default::default();
@@ -363,6 +376,135 @@ pub fn downsample_step(height: usize, width: usize) -> usize {
     }
 }
 
+/// One channel's (or a frame's) pixels counted per value: lerobot's image statistics
+/// need only these. A frame adds its pixels after lerobot's downsampling
+/// ([`downsample_step`]); summing the counts of the sampled frames gives their
+/// statistics ([`PixelCounts::stats`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PixelCounts(pub [[u64; 256]; 3]);
+
+impl Default for PixelCounts {
+    fn default() -> Self {
+        PixelCounts([[0; 256]; 3])
+    }
+}
+
+impl PixelCounts {
+    /// Bytes of one frame's counts on disk ([`PixelCounts::to_record`]).
+    pub const RECORD_BYTES: usize = 3 * 256 * 4;
+
+    /// Adds an RGB frame (`height × width × 3` bytes, row-major), downsampled as lerobot
+    /// does (every [`downsample_step`]-th row and column). `false` if the frame has
+    /// another size (nothing added).
+    pub fn add_frame(&mut self, rgb: &[u8], height: usize, width: usize) -> bool {
+        if rgb.len() != height * width * 3 {
+            return false;
+        }
+        let step = downsample_step(height, width);
+        for y in (0..height).step_by(step) {
+            for x in (0..width).step_by(step) {
+                let p = (y * width + x) * 3;
+                for (c, count) in self.0.iter_mut().enumerate() {
+                    count[usize::from(rgb[p + c])] += 1;
+                }
+            }
+        }
+        true
+    }
+
+    /// Adds another's counts.
+    pub fn add(&mut self, other: &PixelCounts) {
+        for (a, b) in self.0.iter_mut().zip(&other.0) {
+            for (x, y) in a.iter_mut().zip(b) {
+                *x += y;
+            }
+        }
+    }
+
+    /// One frame's counts as little-endian u32 (a downsampled frame has fewer than
+    /// 300 × 300 pixels), [`PixelCounts::RECORD_BYTES`] bytes.
+    pub fn to_record(&self) -> Vec<u8> {
+        self.0
+            .iter()
+            .flatten()
+            .flat_map(|&c| (c.min(u64::from(u32::MAX)) as u32).to_le_bytes())
+            .collect()
+    }
+
+    /// Reads what [`PixelCounts::to_record`] wrote.
+    pub fn from_record(record: &[u8]) -> Option<Self> {
+        if record.len() != Self::RECORD_BYTES {
+            return None;
+        }
+        let mut out = PixelCounts::default();
+        for (i, b) in record.chunks_exact(4).enumerate() {
+            out.0[i / 256][i % 256] = u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        }
+        Some(out)
+    }
+
+    /// lerobot's per-channel statistics of these pixels (`get_feature_stats` over
+    /// axes (0, 2, 3), divided by 255), for `frames` sampled frames (the `count`).
+    /// `None` without pixels.
+    pub fn stats(&self, frames: u64) -> Option<FeatureStats> {
+        let pixels: u64 = self.0[0].iter().sum();
+        if pixels == 0 {
+            return None;
+        }
+        let n = pixels as f64;
+        let mut s = FeatureStats {
+            min: Vec::new(),
+            max: Vec::new(),
+            mean: Vec::new(),
+            std: Vec::new(),
+            count: frames,
+            quantiles: Default::default(),
+        };
+        for count in &self.0 {
+            let values: Vec<f64> = (0..256)
+                .filter(|&v| count[v] > 0)
+                .map(|v| v as f64)
+                .collect();
+            let weights: Vec<f64> = (0..256)
+                .filter(|&v| count[v] > 0)
+                .map(|v| count[v] as f64)
+                .collect();
+            let min = values[0];
+            let max = values[values.len() - 1];
+            let mean = values.iter().zip(&weights).map(|(v, w)| v * w).sum::<f64>() / n;
+            let std = if pixels < 2 {
+                0.0
+            } else {
+                let mean_sq = values
+                    .iter()
+                    .zip(&weights)
+                    .map(|(v, w)| v * v * w)
+                    .sum::<f64>()
+                    / n;
+                (mean_sq - mean * mean).max(0.0).sqrt()
+            };
+            s.min.push(min / 255.0);
+            s.max.push(max / 255.0);
+            s.mean.push(mean / 255.0);
+            s.std.push(std / 255.0);
+            if pixels < 2 {
+                for q in s.quantiles.iter_mut() {
+                    q.push(mean / 255.0);
+                }
+            } else {
+                // uint8 pixels are promoted to float32
+                let edges = quantile_edges(min, max, Precision::F32);
+                let hist = histogram_weighted(&values, &weights, &edges);
+                for (qi, (q, _)) in QUANTILES.iter().enumerate() {
+                    let v = single_quantile(&hist, &edges, q * n, Precision::F32);
+                    s.quantiles[qi].push(v / 255.0);
+                }
+            }
+        }
+        Some(s)
+    }
+}
+
 /// The statistics of a camera's frames in one episode, as lerobot's
 /// `compute_episode_stats` computes them for an image or video feature: the frames at
 /// [`sample_indices`], each downsampled by [`downsample_step`] (every step-th row and
@@ -370,7 +512,7 @@ pub fn downsample_step(height: usize, width: usize) -> usize {
 /// frames sampled. `frame(i)` gives frame `i` of the `len` as RGB bytes, row-major
 /// (`height × width × 3`); `None` if a frame is missing or of another size.
 ///
-/// The pixels are counted per value (256 per channel), which gives numpy's histogram
+/// The pixels are counted per value ([`PixelCounts`]), which gives numpy's histogram
 /// exactly and takes no memory per pixel. In stats.json each value is nested as lerobot's
 /// shape (3, 1, 1): see [`FeatureStats::to_json_image`].
 pub fn image_stats(
@@ -379,78 +521,14 @@ pub fn image_stats(
     width: usize,
     mut frame: impl FnMut(usize) -> Option<Vec<u8>>,
 ) -> Option<FeatureStats> {
-    let step = downsample_step(height, width);
     let idx = sample_indices(len);
-    let mut counts = [[0u64; 256]; 3];
+    let mut counts = PixelCounts::default();
     for &i in &idx {
-        let f = frame(i)?;
-        if f.len() != height * width * 3 {
+        if !counts.add_frame(&frame(i)?, height, width) {
             return None;
         }
-        for y in (0..height).step_by(step) {
-            for x in (0..width).step_by(step) {
-                let p = (y * width + x) * 3;
-                for (c, count) in counts.iter_mut().enumerate() {
-                    count[usize::from(f[p + c])] += 1;
-                }
-            }
-        }
     }
-    let pixels: u64 = counts[0].iter().sum();
-    if pixels == 0 {
-        return None;
-    }
-    let n = pixels as f64;
-    let mut s = FeatureStats {
-        min: Vec::new(),
-        max: Vec::new(),
-        mean: Vec::new(),
-        std: Vec::new(),
-        count: idx.len() as u64,
-        quantiles: Default::default(),
-    };
-    for count in &counts {
-        let values: Vec<f64> = (0..256)
-            .filter(|&v| count[v] > 0)
-            .map(|v| v as f64)
-            .collect();
-        let weights: Vec<f64> = (0..256)
-            .filter(|&v| count[v] > 0)
-            .map(|v| count[v] as f64)
-            .collect();
-        let min = values[0];
-        let max = values[values.len() - 1];
-        let mean = values.iter().zip(&weights).map(|(v, w)| v * w).sum::<f64>() / n;
-        let std = if pixels < 2 {
-            0.0
-        } else {
-            let mean_sq = values
-                .iter()
-                .zip(&weights)
-                .map(|(v, w)| v * v * w)
-                .sum::<f64>()
-                / n;
-            (mean_sq - mean * mean).max(0.0).sqrt()
-        };
-        s.min.push(min / 255.0);
-        s.max.push(max / 255.0);
-        s.mean.push(mean / 255.0);
-        s.std.push(std / 255.0);
-        if pixels < 2 {
-            for q in s.quantiles.iter_mut() {
-                q.push(mean / 255.0);
-            }
-        } else {
-            // uint8 pixels are promoted to float32
-            let edges = quantile_edges(min, max, Precision::F32);
-            let hist = histogram_weighted(&values, &weights, &edges);
-            for (qi, (q, _)) in QUANTILES.iter().enumerate() {
-                let v = single_quantile(&hist, &edges, q * n, Precision::F32);
-                s.quantiles[qi].push(v / 255.0);
-            }
-        }
-    }
-    Some(s)
+    counts.stats(idx.len() as u64)
 }
 
 /// One stat's value: per-dimension floats, or the frame count.
@@ -610,6 +688,17 @@ mod tests {
         let v: Value = serde_json::from_str(&j).unwrap();
         assert_eq!(v["max"][0], serde_json::json!([[1.0]]));
         assert_eq!(v["count"], serde_json::json!([4]));
+        assert_eq!(FeatureStats::from_json(&v).unwrap(), s);
+        // per-frame records summed give the same
+        let mut sum = PixelCounts::default();
+        for f in &frames {
+            let mut c = PixelCounts::default();
+            assert!(c.add_frame(f, 2, 2));
+            let rec = c.to_record();
+            assert_eq!(rec.len(), PixelCounts::RECORD_BYTES);
+            sum.add(&PixelCounts::from_record(&rec).unwrap());
+        }
+        assert_eq!(sum.stats(4).unwrap(), s);
         // a frame of the wrong size is refused
         assert!(image_stats(4, 2, 3, |i| frames.get(i).cloned()).is_none());
     }

@@ -3,7 +3,9 @@
 //!   `fixed_size_list<item: float32>[n]`, `timestamp` float32, the indices int64;
 //! - episodes (`_flush_metadata_buffer`: `pa.Table.from_pydict` of the episode dicts):
 //!   int64 scalars, `tasks` as `list<item: string>`, each stat as `list<item: double>`
-//!   (`count` as `list<item: int64>`);
+//!   (`count` as `list<item: int64>`), an image's as `list<list<list<double>>>` (its
+//!   shape (3, 1, 1)); each camera's `videos/<key>/chunk_index`, `file_index` (int64),
+//!   `from_timestamp`, `to_timestamp` (double);
 //! - tasks (`DataFrame.to_parquet` of a frame indexed by the task string): `task_index`
 //!   int64 then `task` string, with pandas' schema metadata naming `task` the index
 //!   (without it pandas reads a RangeIndex and every task becomes 0).
@@ -16,7 +18,8 @@ use std::sync::Arc;
 
 use arrow_array::builder::{Float64Builder, Int64Builder, ListBuilder, StringBuilder};
 use arrow_array::{
-    Array, ArrayRef, FixedSizeListArray, Float32Array, Int64Array, RecordBatch, StringArray,
+    Array, ArrayRef, FixedSizeListArray, Float32Array, Float64Array, Int64Array, RecordBatch,
+    StringArray,
 };
 use arrow_schema::{DataType, Field, Metadata, Schema};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
@@ -152,7 +155,10 @@ pub struct EpisodeRow {
     pub dataset_from_index: i64,
     /// One past its last frame's `index`.
     pub dataset_to_index: i64,
-    /// Its statistics, feature by feature in the order of info.json's features.
+    /// Where each camera's frames are, in the spec's camera order.
+    pub videos: Vec<VideoLocation>,
+    /// Its statistics, feature by feature in the order of info.json's features (an
+    /// image feature's, `observation.images.*`, nested as shape (3, 1, 1)).
     pub stats: Vec<(String, FeatureStats)>,
     /// Where this row is: `meta/episodes/chunk-{chunk}/file-{file}.parquet`.
     pub meta_chunk_index: i64,
@@ -160,8 +166,25 @@ pub struct EpisodeRow {
     pub meta_file_index: i64,
 }
 
+/// Where one camera's frames of an episode are: `videos/<key>/chunk-{chunk}/file-{file}.mp4`
+/// from `from_timestamp` to `to_timestamp` seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VideoLocation {
+    /// The feature, `observation.images.<name>`.
+    pub key: String,
+    /// The chunk of its file.
+    pub chunk_index: i64,
+    /// Its file in the chunk.
+    pub file_index: i64,
+    /// The file's duration before this episode.
+    pub from_timestamp: f64,
+    /// `from_timestamp` plus the episode's duration.
+    pub to_timestamp: f64,
+}
+
 /// The episodes file's bytes: columns in lerobot's order (episode_index, tasks, length,
-/// data/…, dataset_from/to_index, `stats/<feature>/<stat>`…, meta/episodes/…).
+/// data/…, dataset_from/to_index, `videos/<key>/…` per camera, `stats/<feature>/<stat>`…,
+/// meta/episodes/…).
 pub fn episodes_parquet(rows: &[EpisodeRow]) -> Result<Vec<u8>, TableError> {
     let first = rows.first().ok_or("no episode rows")?;
     let mut fields = Vec::new();
@@ -194,6 +217,29 @@ pub fn episodes_parquet(rows: &[EpisodeRow]) -> Result<Vec<u8>, TableError> {
     push(int_col("data/file_index", &|r| r.data_file_index));
     push(int_col("dataset_from_index", &|r| r.dataset_from_index));
     push(int_col("dataset_to_index", &|r| r.dataset_to_index));
+    for (vi, v) in first.videos.iter().enumerate() {
+        let key = &v.key;
+        let at = |r: &EpisodeRow| r.videos.get(vi).cloned();
+        push(int_col(&format!("videos/{key}/chunk_index"), &|r| {
+            at(r).map_or(0, |v| v.chunk_index)
+        }));
+        push(int_col(&format!("videos/{key}/file_index"), &|r| {
+            at(r).map_or(0, |v| v.file_index)
+        }));
+        for (name, f) in [
+            (
+                "from_timestamp",
+                (|v: &VideoLocation| v.from_timestamp) as fn(&VideoLocation) -> f64,
+            ),
+            ("to_timestamp", |v: &VideoLocation| v.to_timestamp),
+        ] {
+            let col: Vec<f64> = rows.iter().map(|r| at(r).map_or(0.0, |v| f(&v))).collect();
+            push((
+                Field::new(format!("videos/{key}/{name}"), DataType::Float64, true),
+                Arc::new(Float64Array::from(col)),
+            ));
+        }
+    }
     for (fi, (feature, fstats)) in first.stats.iter().enumerate() {
         for (si, (stat, _)) in fstats.entries().iter().enumerate() {
             let name = format!("stats/{feature}/{stat}");
@@ -201,6 +247,21 @@ pub fn episodes_parquet(rows: &[EpisodeRow]) -> Result<Vec<u8>, TableError> {
                 let mut b = ListBuilder::new(Int64Builder::new());
                 for r in rows {
                     b.values().append_value(r.stats[fi].1.count as i64);
+                    b.append(true);
+                }
+                Arc::new(b.finish())
+            } else if feature.starts_with(crate::IMAGE_FEATURE_PREFIX) {
+                // lerobot: the (3, 1, 1) array's tolist(): list<list<list<double>>>
+                let mut b =
+                    ListBuilder::new(ListBuilder::new(ListBuilder::new(Float64Builder::new())));
+                for r in rows {
+                    if let StatValue::Floats(v) = r.stats[fi].1.entries()[si].1 {
+                        for &x in v {
+                            b.values().values().values().append_value(x);
+                            b.values().values().append(true);
+                            b.values().append(true);
+                        }
+                    }
                     b.append(true);
                 }
                 Arc::new(b.finish())

@@ -39,6 +39,7 @@ fn frames(w: &mut DatasetWriter, n: usize) {
         w.add_frame(Frame {
             state: &v,
             action: &v,
+            images: &[],
         })
         .unwrap();
     }

@@ -42,6 +42,7 @@ fn add_frames(w: &mut DatasetWriter, n: usize, rng: &mut Lcg) -> Vec<[f32; 8]> {
         w.add_frame(Frame {
             state: &v[..4],
             action: &v[4..],
+            images: &[],
         })
         .unwrap();
         out.push(v);
@@ -398,6 +399,7 @@ fn bad_frames_and_order_are_errors() {
         .add_frame(Frame {
             state: &v,
             action: &v,
+            images: &[],
         })
         .err()
         .unwrap();
@@ -409,7 +411,8 @@ fn bad_frames_and_order_are_errors() {
     assert!(matches!(
         w.add_frame(Frame {
             state: &short,
-            action: &v
+            action: &v,
+            images: &[],
         }),
         Err(Error::BadFrame(_))
     ));
@@ -417,7 +420,8 @@ fn bad_frames_and_order_are_errors() {
     assert!(matches!(
         w.add_frame(Frame {
             state: &v,
-            action: &nan
+            action: &nan,
+            images: &[],
         }),
         Err(Error::BadFrame(_))
     ));
