@@ -8,12 +8,16 @@ Not in the test command (lerobot's venv is 5.4 GB): run it by hand in that venv.
     ~/.cache/eezybot/lerobot-venv/bin/python tests/lerobot_load.py [DIR]
 
 Without DIR it writes one with `write_demo` (target/debug/examples, or
-EEZYBOT_BIN_DIR/examples) in a temporary folder. Exits non-zero on any mismatch.
+EEZYBOT_BIN_DIR/examples) in a temporary folder; `--cameras` (with or without DIR) has it
+write the demo's two cameras too. With cameras, every frame's decoded images are checked
+against the demo's pattern (four quadrants of `colour(index, quadrant, camera)`, as
+write_demo draws them). Exits non-zero on any mismatch.
 The stats tolerances (absolute) are for joint angles in radians: for values near 1e6
 lerobot's float32 mean is itself off by more than 1e-6.
 
 On this machine lerobot prints a long torchcodec traceback (FFmpeg's shared libraries
-are not installed) and falls back to PyAV: harmless without cameras.
+are not installed) and falls back to PyAV, which decodes the AV1 videos (its wheel
+bundles libdav1d).
 """
 import json
 import os
@@ -29,24 +33,53 @@ import torch  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 CHUNK = 10
+# the demo's cameras: feature -> (camera number in colour(), height, width)
+DEMO_CAMERAS = {"observation.images.front": (0, 240, 320), "observation.images.wrist": (1, 120, 160)}
+# JPEG (front) and AV1 at CRF 30 on solid quadrants: the centre of a quadrant within this
+# many levels of 255
+COLOUR_TOLERANCE = 8
+
+
+def colour(index, q, camera):
+    """write_demo's colour of quadrant q of the frame with dataset index `index`."""
+    k = index * 4 + q + camera * 2
+    return np.array([(37 * k + 40) % 216 + 20, (91 * k + 10) % 216 + 20, (53 * k + 90) % 216 + 20])
+
+
+def check_image(key, index, img):
+    """img: lerobot's decoded frame, float (3, h, w) in [0, 1]."""
+    camera, h, w = DEMO_CAMERAS[key]
+    assert tuple(img.shape) == (3, h, w), (key, img.shape)
+    worst = 0.0
+    for q, (y, x) in enumerate([(h // 4, w // 4), (h // 4, 3 * w // 4), (3 * h // 4, w // 4), (3 * h // 4, 3 * w // 4)]):
+        got = img[:, y, x].numpy() * 255
+        diff = float(np.max(np.abs(got - colour(index, q, camera))))
+        assert diff <= COLOUR_TOLERANCE, (key, index, q, got, colour(index, q, camera))
+        worst = max(worst, diff)
+    return worst
 
 
 def main():
-    if len(sys.argv) > 1:
-        root = Path(sys.argv[1])
+    args = [a for a in sys.argv[1:] if a != "--cameras"]
+    if args:
+        root = Path(args[0])
     else:
         bin_dir = Path(os.environ.get("EEZYBOT_BIN_DIR", Path(__file__).resolve().parents[1] / "target" / "debug"))
         root = Path(tempfile.mkdtemp()) / "ds"
-        subprocess.run([str(bin_dir / "examples" / "write_demo"), str(root)], check=True)
+        extra = ["--cameras"] if "--cameras" in sys.argv else []
+        subprocess.run([str(bin_dir / "examples" / "write_demo"), str(root), *extra], check=True)
     info = json.loads((root / "meta/info.json").read_text())
     fps = info["fps"]
+    video_keys = [k for k, f in info["features"].items() if f["dtype"] == "video"]
 
     ds = LeRobotDataset("local/eezybot_demo", root=root)
     print(ds)
     assert ds.num_frames == info["total_frames"], (ds.num_frames, info["total_frames"])
     assert ds.num_episodes == info["total_episodes"]
     assert ds.fps == fps
+    assert ds.meta.video_keys == video_keys, (ds.meta.video_keys, video_keys)
     tasks = set()
+    worst_colour = 0.0
     for i in range(len(ds)):
         item = ds[i]
         assert item["index"].item() == i
@@ -54,10 +87,17 @@ def main():
         assert abs(item["timestamp"].item() - item["frame_index"].item() / fps) < 1e-6
         assert isinstance(item["task"], str) and item["task"] != "0", item["task"]
         tasks.add(item["task"])
+        for key in video_keys:
+            worst_colour = max(worst_colour, check_image(key, i, item[key]))
     print("frames", len(ds), "tasks", sorted(tasks))
+    if video_keys:
+        print(f"decoded {len(ds)} frames of {video_keys}: every quadrant within {worst_colour:.1f} levels of its colour")
     stats = ds.meta.stats
-    for k in ("observation.state", "action"):
+    for k in ("observation.state", "action", *video_keys):
         assert set(stats[k]) >= {"min", "max", "mean", "std", "count", "q01", "q99"}, stats[k].keys()
+    for k in video_keys:
+        assert tuple(np.asarray(stats[k]["mean"]).shape) == (3, 1, 1), np.asarray(stats[k]["mean"]).shape
+        print(k, "stats mean", np.asarray(stats[k]["mean"]).ravel())
     print("stats mean action", np.asarray(stats["action"]["mean"]))
 
     # every per-episode stat (the episodes table) against lerobot's own get_feature_stats

@@ -1,17 +1,26 @@
-"""libs/lerobot_dataset's files read by an independent reader (pyarrow and numpy, no
-lerobot): the dataset written by its `write_demo` example (2 episodes saved, 1
+"""libs/lerobot_dataset's files read by an independent reader (pyarrow, numpy and PyAV,
+no lerobot): the dataset written by its `write_demo` example (2 episodes saved, 1
 discarded), then the example killed with SIGKILL in the middle of an episode and the
-dataset resumed. Checked: info.json's totals and features, the frames (count, indices,
-timestamps on the 1/fps grid), tasks.parquet's pandas index metadata and tasks, the
-episodes table, and every statistic recomputed with numpy as lerobot 0.6.1 computes it
-(`compute_stats.py`: histogram quantiles per episode, count-weighted aggregation)."""
+dataset resumed; each without and with the demo's two cameras (a JPEG one and a raw bgr8
+one). Checked: info.json's totals and features, the frames (count, indices, timestamps
+on the 1/fps grid), tasks.parquet's pandas index metadata and tasks, the episodes table,
+and every statistic recomputed with numpy as lerobot 0.6.1 computes it
+(`compute_stats.py`: histogram quantiles per episode, count-weighted aggregation). With
+cameras: every video frame decoded by PyAV (count == rows, pts == the episode's
+from_timestamp + timestamp, each quadrant the colour write_demo drew), info.json's video
+features, the episodes table's video columns, the image stats recomputed from the frames
+given."""
 import json
+import os
 import signal
 import subprocess
+import time
 from pathlib import Path
 
+import av
 import numpy as np
 import pyarrow.parquet as pq
+import pytest
 
 from conftest import bin_path
 
@@ -24,6 +33,130 @@ QUANTILES = [(0.01, "q01"), (0.10, "q10"), (0.50, "q50"), (0.90, "q90"), (0.99, 
 def demo(*args, timeout=30):
     return subprocess.run([str(bin_path("examples/write_demo")), *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, check=True).stdout
+
+
+# write_demo's cameras: key -> (camera number in colour(), height, width)
+CAMERAS = {"observation.images.front": (0, 240, 320), "observation.images.wrist": (1, 120, 160)}
+VIDEO_INFO = {"is_depth_map": False, "video.codec": "av1", "video.pix_fmt": "yuv420p", "video.fps": FPS,
+              "video.channels": 3, "has_audio": False, "video.g": 2, "video.crf": 30, "video.preset": 12,
+              "video.fast_decode": 0, "video.video_backend": "pyav", "video.extra_options": {}}
+# JPEG (front) and AV1 at CRF 30, solid quadrants: a quadrant's centre within 8 levels
+COLOUR_TOLERANCE = 8
+
+
+def colour(index, q, camera):
+    """write_demo's colour of quadrant q (0 top left … 3 bottom right) of the frame with
+    dataset index `index`."""
+    k = index * 4 + q + camera * 2
+    return np.array([(37 * k + 40) % 216 + 20, (91 * k + 10) % 216 + 20, (53 * k + 90) % 216 + 20])
+
+
+def pattern(index, camera, h, w):
+    """The frame write_demo gave, (h, w, 3) uint8."""
+    img = np.empty((h, w, 3), dtype=np.uint8)
+    for q, (ys, xs) in enumerate([(slice(0, h // 2), slice(0, w // 2)), (slice(0, h // 2), slice(w // 2, w)),
+                                  (slice(h // 2, h), slice(0, w // 2)), (slice(h // 2, h), slice(w // 2, w))]):
+        img[ys, xs] = colour(index, q, camera)
+    return img
+
+
+def sample_indices(n):
+    """lerobot's estimate_num_samples and sample_indices."""
+    num = max(min(100, n), min(int(n ** 0.75), 10_000))
+    return np.round(np.linspace(0, n - 1, num)).astype(int).tolist()
+
+
+def downsample(img_chw):
+    """lerobot's auto_downsample_height_width."""
+    _, h, w = img_chw.shape
+    if max(w, h) < 300:
+        return img_chw
+    f = int(w / 150) if w > h else int(h / 150)
+    return img_chw[:, ::f, ::f]
+
+
+def image_stats(frames):
+    """lerobot's compute_episode_stats for a video feature: the sampled frames,
+    downsampled, per channel, / 255; count = frames sampled."""
+    idx = sample_indices(len(frames))
+    imgs = np.stack([downsample(frames[i].transpose(2, 0, 1)) for i in idx])
+    pixels = imgs.transpose(0, 2, 3, 1).reshape(-1, 3).astype(np.float32)  # uint8 promoted
+    st = lerobot_feature_stats(pixels)
+    out = {k: v / 255 for k, v in st.items() if k != "count"}
+    out["count"] = np.array([len(idx)])
+    return out
+
+
+def check_videos(root, lengths):
+    """The cameras' videos decoded with PyAV against the rows and write_demo's frames."""
+    info, data, episodes, _, stats = read_dataset(root)
+    assert info["video_path"] == "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
+    assert list(info["features"])[2:4] == list(CAMERAS)
+    starts = np.cumsum([0] + lengths)
+    index = data.column("index").to_numpy()
+    timestamps = data.column("timestamp").to_numpy()
+    for key, (camera, h, w) in CAMERAS.items():
+        feature = info["features"][key]
+        assert {k: feature[k] for k in ("dtype", "shape", "names")} == {
+            "dtype": "video", "shape": [h, w, 3], "names": ["height", "width", "channels"]}
+        assert feature["info"] == {**VIDEO_INFO, "video.height": h, "video.width": w}, feature["info"]
+        col = lambda name: episodes.column(f"videos/{key}/{name}").to_pylist()  # noqa: E731
+        assert str(episodes.schema.field(f"videos/{key}/from_timestamp").type) == "double"
+        # decode every file of the camera once
+        decoded = {}
+        for chunk, file in sorted(set(zip(col("chunk_index"), col("file_index")))):
+            path = root / f"videos/{key}/chunk-{chunk:03d}/file-{file:03d}.mp4"
+            with av.open(str(path)) as container:
+                stream = container.streams.video[0]
+                assert stream.codec_context.name in ("libdav1d", "av1", "libaom-av1"), stream.codec_context.name
+                decoded[(chunk, file)] = [(float(f.pts * stream.time_base), f.to_ndarray(format="rgb24"))
+                                          for f in container.decode(stream)]
+        per_episode = []
+        for e, length in enumerate(lengths):
+            frames = decoded[(col("chunk_index")[e], col("file_index")[e])]
+            start, end = col("from_timestamp")[e], col("to_timestamp")[e]
+            assert abs(end - start - length / FPS) < 1e-9, (key, e, start, end)
+            mine = [(t, img) for t, img in frames if start - 1e-6 <= t < end - 1e-6]
+            assert len(mine) == length, (key, e, len(mine), length)
+            given = []
+            for k, (t, img) in enumerate(mine):
+                row = starts[e] + k
+                # the frame lerobot asks for: from_timestamp + the row's timestamp
+                assert abs(t - (start + float(timestamps[row]))) < 1e-6, (key, e, k, t, start, timestamps[row])
+                assert img.shape == (h, w, 3)
+                for q, (y, x) in enumerate([(h // 4, w // 4), (h // 4, 3 * w // 4),
+                                            (3 * h // 4, w // 4), (3 * h // 4, 3 * w // 4)]):
+                    want = colour(int(index[row]), q, camera)
+                    diff = np.abs(img[y, x].astype(int) - want).max()
+                    assert diff <= COLOUR_TOLERANCE, (key, e, k, q, img[y, x], want)
+                given.append(pattern(int(index[row]), camera, h, w))
+            # the image stats from the frames given: exact for the raw camera (its pixels
+            # reach the counts unchanged), within the JPEG's loss for the other
+            mine = image_stats(given)
+            per_episode.append(mine)
+            tol = 1e-6 if key.endswith("wrist") else 3 / 255
+            for k, v in mine.items():
+                stored = np.array(episodes.column(f"stats/{key}/{k}")[e].as_py())
+                want_shape = (1,) if k == "count" else (3, 1, 1)
+                assert stored.shape == want_shape, (key, k, stored.shape)
+                assert np.allclose(stored.ravel(), v, rtol=0, atol=tol), (key, e, k, stored.ravel(), v)
+        agg = aggregate(per_episode)
+        tol = 1e-6 if key.endswith("wrist") else 3 / 255
+        for k, v in agg.items():
+            assert np.allclose(np.array(stats[key][k]).ravel(), v, rtol=0, atol=tol), (key, k, stats[key][k], v)
+
+
+def ffmpeg_running(root):
+    """ffmpeg processes working on `root` (their command line names it)."""
+    found = []
+    for pid in os.listdir("/proc"):
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if cmd and cmd[0].endswith(b"ffmpeg") and any(str(root).encode() in a for a in cmd):
+            found.append(int(pid))
+    return found
 
 
 def lerobot_feature_stats(x):
@@ -40,12 +173,12 @@ def lerobot_feature_stats(x):
         out.update({k: out["mean"].copy() for _, k in QUANTILES})
     else:
         out["std"] = np.sqrt(np.maximum(0, (x64 ** 2).mean(0) - out["mean"] ** 2))
-        for q, k in QUANTILES:
-            vals = []
-            for d in range(x.shape[1]):
-                edges = np.linspace(x[:, d].min() - 1e-10, x[:, d].max() + 1e-10, 5001)
-                hist, _ = np.histogram(x[:, d], bins=edges)
-                cumsum = np.cumsum(hist)
+        vals = {k: [] for _, k in QUANTILES}
+        for d in range(x.shape[1]):
+            edges = np.linspace(x[:, d].min() - 1e-10, x[:, d].max() + 1e-10, 5001)
+            hist, _ = np.histogram(x[:, d], bins=edges)
+            cumsum = np.cumsum(hist)
+            for q, k in QUANTILES:
                 target = q * n
                 idx = np.searchsorted(cumsum, target)
                 if idx == 0:
@@ -55,8 +188,8 @@ def lerobot_feature_stats(x):
                 else:
                     before, in_bin = cumsum[idx - 1], cumsum[idx] - cumsum[idx - 1]
                     v = edges[idx] if in_bin == 0 else edges[idx] + (target - before) / in_bin * (edges[idx + 1] - edges[idx])
-                vals.append(v)
-            out[k] = np.array(vals)
+                vals[k].append(v)
+        out.update({k: np.array(v) for k, v in vals.items()})
     out["count"] = np.array([n])
     return out
 
@@ -157,18 +290,31 @@ def check_dataset(root, lengths, tasks_by_episode):
     return data
 
 
-def test_written_dataset_reads(tmp_path):
+@pytest.mark.parametrize("cameras", [False, True], ids=["no_camera", "cameras"])
+def test_written_dataset_reads(tmp_path, cameras):
     root = tmp_path / "ds"
-    out = demo(root)
+    flags = ["--cameras"] if cameras else []
+    out = demo(root, *flags)
     assert "WROTE 2 episodes, 135 frames" in out, out
     check_dataset(root, [90, 45], ["pick up the cube", "wave"])
+    if cameras:
+        check_videos(root, [90, 45])
+        # both episodes appended to one file per camera
+        assert sorted(p.relative_to(root).as_posix() for p in (root / "videos").rglob("*") if p.is_file()) == [
+            f"videos/{k}/chunk-000/file-000.mp4" for k in CAMERAS]
+    else:
+        assert not (root / "videos").exists()
+    assert sorted((root / ".recording").iterdir()) == []
 
 
-def test_kill_mid_episode_then_resume(tmp_path):
+@pytest.mark.parametrize("cameras", [False, True], ids=["no_camera", "cameras"])
+def test_kill_mid_episode_then_resume(tmp_path, cameras):
     root = tmp_path / "ds"
-    demo(root)
+    flags = ["--cameras"] if cameras else []
+    demo(root, *flags)
     finished = {p: p.read_bytes() for p in (root / "data").rglob("*.parquet")}
-    proc = subprocess.Popen([str(bin_path("examples/write_demo")), str(root), "--stop-mid-episode"],
+    finished_videos = {p: p.read_bytes() for p in (root / "videos").rglob("*.mp4")}
+    proc = subprocess.Popen([str(bin_path("examples/write_demo")), str(root), "--stop-mid-episode", *flags],
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "IN_EPISODE"
@@ -176,16 +322,34 @@ def test_kill_mid_episode_then_resume(tmp_path):
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     assert proc.returncode == -signal.SIGKILL
+    if cameras:
+        # the killed writer's ffmpeg see their input end and exit by themselves
+        deadline = time.monotonic() + 10
+        while ffmpeg_running(root) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert ffmpeg_running(root) == []
+        assert any(p.name.startswith("observation.images.") for p in (root / ".recording").iterdir())
     # killed mid-episode: the dataset is the two finished episodes, as they were
     check_dataset(root, [90, 45], ["pick up the cube", "wave"])
     assert {p: p.read_bytes() for p in (root / "data").rglob("*.parquet")} == finished
+    assert {p: p.read_bytes() for p in (root / "videos").rglob("*.mp4")} == finished_videos
 
-    out = demo(root, "--resume")
+    out = demo(root, "--resume", *flags)
     recovery = json.loads(next(line for line in out.splitlines() if line.startswith("RECOVERY"))[len("RECOVERY "):])
     assert recovery["interrupted"] == {"episode_index": 2, "task": "interrupted", "frames": 20}, recovery
+    if cameras:
+        # the interrupted episode's camera files, removed and named
+        assert {f".recording/{k}.counts" for k in CAMERAS} <= set(recovery["removed_episode_files"]), recovery
+    else:
+        assert recovery["removed_episode_files"] == []
     assert "WROTE 3 episodes, 195 frames" in out, out
     data = check_dataset(root, [90, 45, 60], ["pick up the cube", "wave", "pick up the cube"])
     # resumed into a new data file, as lerobot's resume does
     assert sorted(p.name for p in (root / "data/chunk-000").iterdir()) == ["file-000.parquet", "file-001.parquet"]
     assert data.num_rows == 195
-    assert not Path(root / ".recording/episode.jsonl").exists()
+    assert sorted((root / ".recording").iterdir()) == []
+    if cameras:
+        # and each camera into a new video file
+        for k in CAMERAS:
+            assert sorted(p.name for p in (root / f"videos/{k}/chunk-000").iterdir()) == ["file-000.mp4", "file-001.mp4"]
+        check_videos(root, [90, 45, 60])

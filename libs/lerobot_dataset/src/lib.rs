@@ -999,6 +999,11 @@ impl DatasetWriter {
         &self.root
     }
 
+    /// The spec (for a resumed dataset, with its chunk and file sizes).
+    pub fn spec(&self) -> &DatasetSpec {
+        &self.spec
+    }
+
     /// Finished episodes.
     pub fn total_episodes(&self) -> u64 {
         self.total_episodes
