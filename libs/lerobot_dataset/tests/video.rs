@@ -493,3 +493,101 @@ fn a_missing_or_dying_ffmpeg_is_an_error() {
     assert_eq!(w.total_episodes(), 0);
     assert_eq!(files_under(&root.join(".recording")), Vec::<PathBuf>::new());
 }
+
+#[test]
+fn video_files_roll_at_their_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("ds");
+    let mut spec = DatasetSpec::new(30, "eezybot_mk2", &J, &J).with_camera("noise", 256, 256);
+    spec.video_files_size_in_mb = 1;
+    let mut w = DatasetWriter::create(&root, spec).unwrap();
+    // noise compresses badly: each episode is a good part of a megabyte
+    let mut seed = 7u64;
+    let mut sizes = Vec::new();
+    for e in 0..4 {
+        w.start_episode("noise").unwrap();
+        for _ in 0..12 {
+            let px: Vec<u8> = (0..256 * 256 * 3)
+                .map(|_| {
+                    seed = seed
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    (seed >> 56) as u8
+                })
+                .collect();
+            let v = [0.0f32; 4];
+            let img = Image::Raw {
+                encoding: RawEncoding::Rgb8,
+                width: 256,
+                height: 256,
+                step: 768,
+                data: &px,
+            };
+            w.add_frame(Frame {
+                state: &v,
+                action: &v,
+                images: &[img],
+            })
+            .unwrap();
+        }
+        w.save_episode().unwrap();
+        let dir = root.join("videos/observation.images.noise/chunk-000");
+        sizes.push(
+            files_under(&dir)
+                .iter()
+                .map(|p| fs::metadata(p).unwrap().len())
+                .collect::<Vec<_>>(),
+        );
+        assert!(sizes[e].len() <= e + 1);
+    }
+    let e = read(&root.join("meta/episodes/chunk-000/file-000.parquet"));
+    let col = |s: &str| {
+        e.column_by_name(&format!("videos/observation.images.noise/{s}"))
+            .unwrap()
+            .clone()
+    };
+    let files = col("file_index");
+    let files = files
+        .as_any()
+        .downcast_ref::<Int64Array>()
+        .unwrap()
+        .values()
+        .to_vec();
+    let from = col("from_timestamp");
+    let from = from
+        .as_any()
+        .downcast_ref::<Float64Array>()
+        .unwrap()
+        .values()
+        .to_vec();
+    // both cases happened (here: [0, 0, 1, 1] for episodes of about 0.45 MB)
+    assert!(
+        files.windows(2).any(|p| p[0] == p[1]) && files.windows(2).any(|p| p[0] != p[1]),
+        "{files:?} {sizes:?}"
+    );
+    let mb = 1024.0 * 1024.0;
+    let last = sizes.last().unwrap();
+    assert!(last.len() >= 2, "the file rolled: {sizes:?}");
+    for k in 1..4 {
+        if files[k] == files[k - 1] {
+            // appended: it fitted under 1 MB, and starts where the file ended
+            assert!((from[k] - from[k - 1] - 12.0 / 30.0).abs() < 1e-9);
+        } else {
+            // a new file: the next index, from 0, because the old file plus this episode
+            // reached 1 MB
+            assert_eq!(files[k], files[k - 1] + 1);
+            assert_eq!(from[k], 0.0);
+            let old = sizes[k - 1][files[k - 1] as usize] as f64;
+            let this = sizes[k][files[k] as usize] as f64;
+            assert!(old + this >= mb, "{sizes:?}");
+        }
+    }
+    // every file holds the frames of its episodes
+    for (i, f) in files_under(&root.join("videos/observation.images.noise/chunk-000"))
+        .iter()
+        .enumerate()
+    {
+        let eps = files.iter().filter(|&&x| x == i as i64).count();
+        assert_eq!(decode(f, 256, 256).len(), 12 * eps, "{sizes:?}");
+    }
+}
