@@ -81,8 +81,9 @@
 //!   Debian 12's ffmpeg 5.1 has libsvtav1 (SVT-AV1 1.4.1): measured at 30 fps 640x480
 //!   (examples/video_bench.rs, release, JPEG frames of a moving noisy scene) it took
 //!   38–41 % of one of this machine's 2 cores, so AV1 is kept (no need for libx264).
-//!   The frames go to ffmpeg through a queue of one second and a thread, so `add_frame`
-//!   waits only when ffmpeg is more than a second behind. ffmpeg writes
+//!   The frames go to ffmpeg through a queue of one second and a thread: `add_frame`
+//!   never waits for ffmpeg; when a camera's queue is full the frame is refused whole
+//!   ([`Error::EncoderBehind`]: no camera and no row takes it; count it as dropped). ffmpeg writes
 //!   `.recording/<feature>.mp4` and, as a second output, every frame decoded to RGB,
 //!   which a thread counts ([`stats::PixelCounts`], lerobot's downsampling) into
 //!   `.recording/<feature>.counts` (3 KiB per frame). Its messages go to
@@ -203,6 +204,15 @@ pub enum Error {
     /// A table could not be built or read.
     #[error("{0}")]
     Table(String),
+    /// A camera's ffmpeg is a second of frames behind: this frame was not recorded (for
+    /// any camera nor in the table); the episode goes on (count it as dropped).
+    #[error("camera {camera}: ffmpeg is {frames} frames behind: the frame was not recorded")]
+    EncoderBehind {
+        /// The camera's feature.
+        camera: String,
+        /// Frames waiting for it.
+        frames: usize,
+    },
     /// A camera's video could not be encoded or placed (ffmpeg missing, stopped or
     /// failed): the finished episodes are intact; the episode in progress cannot be
     /// saved if its encoder stopped (discard it).
@@ -965,12 +975,20 @@ impl DatasetWriter {
         // from here on the folder is ours to repair
         fs::create_dir_all(root.join(RECORDING_DIR))
             .map_err(io(format!("creating {}", root.display())))?;
-        let recovery = recover(&root)?;
+        let mut recovery = recover(&root)?;
         let info = load_json(&root.join("meta/info.json")).map_err(not)?;
         let num = |k: &str| info.get(k).and_then(Value::as_u64);
         let total_episodes =
             num("total_episodes").ok_or_else(|| not("no total_episodes".into()))?;
         let total_frames = num("total_frames").ok_or_else(|| not("no total_frames".into()))?;
+        // the log of an episode whose save committed just before the crash: it is saved
+        if recovery
+            .interrupted
+            .as_ref()
+            .is_some_and(|i| i.episode_index < total_episodes && !i.task.is_empty())
+        {
+            recovery.interrupted = None;
+        }
         let mut spec = spec;
         spec.chunks_size = num("chunks_size").unwrap_or(DEFAULT_CHUNK_SIZE).max(1);
         spec.data_files_size_in_mb = num("data_files_size_in_mb")
@@ -1221,6 +1239,17 @@ impl DatasetWriter {
             return Err(Error::BadFrame(format!("a value is not finite: {v}")));
         }
         let kinds = self.check_images(cur, frame.images)?;
+        // never wait for ffmpeg: a frame no camera can take now is refused whole
+        for (enc, cam) in cur.encoders.iter().zip(&self.spec.cameras) {
+            if let Encoding::Running(e) = enc {
+                if !e.has_room() {
+                    return Err(Error::EncoderBehind {
+                        camera: cam.feature(),
+                        frames: e.behind(),
+                    });
+                }
+            }
+        }
         if cur
             .encoders
             .iter()
@@ -1662,11 +1691,11 @@ impl DatasetWriter {
         if let Some(cur) = self.current.take() {
             drop(cur.log);
         }
+        let ip = self.root.join(RECORDING_DIR).join(IN_PROGRESS);
+        fs::remove_file(&ip).map_err(io(format!("removing {}", ip.display())))?;
         for i in 0..self.spec.cameras.len() {
             self.episode_files(i).remove();
         }
-        let ip = self.root.join(RECORDING_DIR).join(IN_PROGRESS);
-        fs::remove_file(&ip).map_err(io(format!("removing {}", ip.display())))?;
         Ok(SavedEpisode {
             episode_index: ep as u64,
             frames: n,

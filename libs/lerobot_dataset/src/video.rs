@@ -2,8 +2,9 @@
 //! per camera that encodes an episode live as lerobot 0.6.1 encodes it (see the crate
 //! docs, "Cameras").
 //!
-//! An [`Encoder`] owns the child: a writer thread feeds its stdin from a bounded queue
-//! (so [`Encoder::push`] does not wait for ffmpeg unless it falls a second behind), and a
+//! An [`Encoder`] owns the child: a writer thread feeds its stdin from a queue of one
+//! second of frames ([`Encoder::push`] never waits for ffmpeg: a full queue is refused
+//! before any camera takes the frame, see [`Encoder::has_room`]), and a
 //! reader thread takes ffmpeg's second output, every frame decoded to RGB, and appends
 //! each frame's pixel counts ([`crate::stats::PixelCounts`], lerobot's downsampling) to a
 //! file: the episode's image statistics are then a sum over the sampled frames at save.
@@ -13,7 +14,9 @@ use std::fs::{self, File};
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::{sync_channel, SyncSender};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use serde_json::Value;
@@ -135,6 +138,15 @@ pub fn jpeg_size(jpeg: &[u8]) -> Result<(u32, u32), String> {
 }
 
 impl Image<'_> {
+    /// The image's `(width, height)`: a JPEG's from its header (an error if it is not a
+    /// JPEG), a raw image's as given. A camera's spec can be made from its first image.
+    pub fn size(&self) -> Result<(u32, u32), String> {
+        match *self {
+            Image::Jpeg(bytes) => jpeg_size(bytes),
+            Image::Raw { width, height, .. } => Ok((width, height)),
+        }
+    }
+
     /// Checks the image against the camera's size; returns how it reaches ffmpeg.
     pub(crate) fn check(&self, width: u32, height: u32) -> Result<InputKind, String> {
         match *self {
@@ -282,17 +294,25 @@ impl EpisodeFiles {
 pub(crate) struct Encoder {
     child: Child,
     queue: Option<SyncSender<Vec<u8>>>,
+    /// Frames pushed and not yet written to ffmpeg.
+    queued: Arc<AtomicUsize>,
+    capacity: usize,
     writer: Option<JoinHandle<Result<(), String>>>,
     reader: Option<JoinHandle<Result<u64, String>>>,
     kind: InputKind,
     log: PathBuf,
 }
 
-fn feed(mut stdin: ChildStdin, frames: std::sync::mpsc::Receiver<Vec<u8>>) -> Result<(), String> {
+fn feed(
+    mut stdin: ChildStdin,
+    frames: Receiver<Vec<u8>>,
+    queued: Arc<AtomicUsize>,
+) -> Result<(), String> {
     for f in frames {
         stdin
             .write_all(&f)
             .map_err(|e| format!("writing to ffmpeg: {e}"))?;
+        queued.fetch_sub(1, Ordering::AcqRel);
     }
     Ok(())
 }
@@ -378,11 +398,15 @@ impl Encoder {
             let _ = child.wait();
             return Err("ffmpeg's pipes were not opened".into());
         };
-        // one second of frames may wait for ffmpeg before push blocks
-        let (tx, rx) = sync_channel::<Vec<u8>>(fps.max(1) as usize);
+        // one second of frames may wait for ffmpeg; push is refused beyond (has_room), so
+        // it never blocks
+        let capacity = fps.max(1) as usize;
+        let (tx, rx) = sync_channel::<Vec<u8>>(capacity);
+        let queued = Arc::new(AtomicUsize::new(0));
+        let q = queued.clone();
         let writer = std::thread::Builder::new()
             .name("ffmpeg-in".into())
-            .spawn(move || feed(stdin, rx));
+            .spawn(move || feed(stdin, rx, q));
         let counts = files.counts.clone();
         let (w, h) = (width as usize, height as usize);
         let reader = std::thread::Builder::new()
@@ -399,6 +423,8 @@ impl Encoder {
         Ok(Encoder {
             child,
             queue: Some(tx),
+            queued,
+            capacity,
             writer: Some(writer),
             reader: Some(reader),
             kind,
@@ -411,9 +437,21 @@ impl Encoder {
         self.kind
     }
 
-    /// Queues a frame; an error if ffmpeg has stopped.
+    /// Frames queued for ffmpeg and not yet written to it.
+    pub fn behind(&self) -> usize {
+        self.queued.load(Ordering::Acquire)
+    }
+
+    /// Whether [`Encoder::push`] can queue a frame (less than a second of frames waits).
+    pub fn has_room(&self) -> bool {
+        self.behind() < self.capacity
+    }
+
+    /// Queues a frame (call [`Encoder::has_room`] first: a full queue would block); an
+    /// error if ffmpeg has stopped.
     pub fn push(&mut self, image: Image<'_>) -> Result<(), String> {
         let q = self.queue.as_ref().ok_or("the encoder is closed")?;
+        self.queued.fetch_add(1, Ordering::AcqRel);
         if q.send(image.to_input()).is_err() {
             // the writer thread ended: ffmpeg stopped reading
             let why = self.stop_reason();

@@ -591,3 +591,43 @@ fn video_files_roll_at_their_size() {
         assert_eq!(decode(f, 256, 256).len(), 12 * eps, "{sizes:?}");
     }
 }
+
+#[test]
+fn a_frame_is_refused_whole_when_ffmpeg_is_a_second_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    // an "ffmpeg" that has the encoder but never reads its input
+    let fake = dir.path().join("ffmpeg");
+    fs::write(
+        &fake,
+        "#!/bin/sh\ncase \"$*\" in *-encoders*) echo ' V..... libsvtav1 SVT-AV1';; \
+         *) exec sleep 60;; esac\n",
+    )
+    .unwrap();
+    Command::new("chmod").arg("+x").arg(&fake).status().unwrap();
+    let mut spec = spec();
+    spec.ffmpeg = fake;
+    let mut w = DatasetWriter::create(dir.path().join("ds"), spec).unwrap();
+    w.start_episode("t").unwrap();
+    // the pipe takes some frames, the queue one second (30) more: then add_frame refuses
+    // instead of waiting
+    let mut refused = None;
+    for i in 0..2000 {
+        match add(&mut w, i) {
+            Ok(()) => {}
+            Err(e) => {
+                refused = Some((i, e));
+                break;
+            }
+        }
+    }
+    let (i, e) = refused.expect("refused once the queue is full");
+    assert!(matches!(e, Error::EncoderBehind { frames: 30, .. }), "{e}");
+    assert!(e.to_string().contains("the frame was not recorded"), "{e}");
+    // the refused frame is in no camera and not in the table
+    assert_eq!(w.episode_frames(), Some(i));
+    assert!(matches!(add(&mut w, i), Err(Error::EncoderBehind { .. })));
+    // discard kills the stuck encoder at once
+    let t = std::time::Instant::now();
+    assert_eq!(w.discard_episode().unwrap(), i);
+    assert!(t.elapsed() < std::time::Duration::from_secs(30));
+}

@@ -427,3 +427,25 @@ fn bad_frames_and_order_are_errors() {
     ));
     assert_eq!(w.episode_frames(), Some(0));
 }
+
+#[test]
+fn the_log_of_an_episode_saved_just_before_a_crash_is_not_an_interruption() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("ds");
+    let mut rng = Lcg(9);
+    let mut w = DatasetWriter::create(&root, spec()).unwrap();
+    w.start_episode("pick up the cube").unwrap();
+    add_frames(&mut w, 5, &mut rng);
+    w.save_episode().unwrap();
+    drop(w);
+    // the crash came between the save's commit and the removal of the episode's log
+    fs::write(
+        root.join(".recording/episode.jsonl"),
+        "{\"episode_index\":0,\"task\":\"pick up the cube\"}\n",
+    )
+    .unwrap();
+    let (w, rec) = DatasetWriter::open_resume(&root, spec()).unwrap();
+    assert_eq!(rec.interrupted, None);
+    assert!(!root.join(".recording/episode.jsonl").exists());
+    assert_eq!(w.total_episodes(), 1);
+}
