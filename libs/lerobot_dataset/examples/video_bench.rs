@@ -11,7 +11,7 @@
 
 use std::time::{Duration, Instant};
 
-use lerobot_dataset::{DatasetSpec, DatasetWriter, Frame, Image, RawEncoding};
+use lerobot_dataset::{DatasetSpec, DatasetWriter, Error, Frame, Image, RawEncoding};
 
 const W: u32 = 640;
 const H: u32 = 480;
@@ -101,6 +101,7 @@ fn run() -> Result<(), String> {
         w.start_episode("bench").map_err(|e| e.to_string())?;
         let t0 = Instant::now();
         let mut worst_add = Duration::ZERO;
+        let mut dropped = 0;
         for i in 0..n {
             let due = t0 + Duration::from_secs_f64(f64::from(i) / f64::from(FPS));
             if let Some(wait) = due.checked_duration_since(Instant::now()) {
@@ -119,12 +120,16 @@ fn run() -> Result<(), String> {
                 Image::Jpeg(f)
             };
             let a = Instant::now();
-            w.add_frame(Frame {
+            match w.add_frame(Frame {
                 state: &v,
                 action: &v,
                 images: &[img],
-            })
-            .map_err(|e| e.to_string())?;
+            }) {
+                Ok(()) => {}
+                // ffmpeg a second behind: a dropped frame, as a live recorder counts it
+                Err(Error::EncoderBehind { .. }) => dropped += 1,
+                Err(e) => return Err(e.to_string()),
+            }
             worst_add = worst_add.max(a.elapsed());
         }
         let recorded = t0.elapsed().as_secs_f64();
@@ -138,7 +143,8 @@ fn run() -> Result<(), String> {
         ));
         let size = std::fs::metadata(&mp4).map(|m| m.len()).unwrap_or(0);
         println!(
-            "episode {e}: {n} frames in {recorded:.1} s; stop -> saved {saved:.3} s; \
+            "episode {e}: {n} frames in {recorded:.1} s ({dropped} refused: ffmpeg behind); \
+             stop -> saved {saved:.3} s; \
              ffmpeg CPU {:.0} % of a core; writer CPU {:.0} %; slowest add_frame {:.1} ms; \
              video file now {:.2} MB ({:.2} MB per minute of video)",
             100.0 * (child1 - child0) / (recorded + saved),

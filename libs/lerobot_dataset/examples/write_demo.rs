@@ -18,7 +18,7 @@
 
 use std::io::Write;
 
-use lerobot_dataset::{DatasetSpec, DatasetWriter, Frame, Image, RawEncoding};
+use lerobot_dataset::{DatasetSpec, DatasetWriter, Error, Frame, Image, RawEncoding};
 
 const FRONT: (u32, u32) = (320, 240);
 const WRIST: (u32, u32) = (160, 120);
@@ -109,12 +109,21 @@ fn episode(w: &mut DatasetWriter, task: &str, frames: usize, phase: f64) -> Resu
                 data: &bgr,
             },
         ];
-        w.add_frame(Frame {
+        let frame = Frame {
             state: &state,
             action: &action,
             images: if cameras { &both } else { &[] },
-        })
-        .map_err(|e| e.to_string())?;
+        };
+        // offline, so wait for an ffmpeg that is a second behind (a live recorder would
+        // count the frame as dropped)
+        loop {
+            match w.add_frame(frame) {
+                Err(Error::EncoderBehind { .. }) => {
+                    std::thread::sleep(std::time::Duration::from_millis(5))
+                }
+                r => break r.map_err(|e| e.to_string())?,
+            }
+        }
     }
     Ok(())
 }

@@ -68,6 +68,11 @@ fn bgr(i: usize) -> Vec<u8> {
 }
 
 fn add(w: &mut DatasetWriter, i: usize) -> Result<(), Error> {
+    add_with(w, i, true)
+}
+
+/// Adds frame `i` of both cameras; `wait`: while ffmpeg is a second behind.
+fn add_with(w: &mut DatasetWriter, i: usize, wait: bool) -> Result<(), Error> {
     let v = [i as f32 * 0.01; 4];
     let j = jpeg(i);
     let b = bgr(i);
@@ -81,11 +86,32 @@ fn add(w: &mut DatasetWriter, i: usize) -> Result<(), Error> {
             data: &b,
         },
     ];
-    w.add_frame(Frame {
+    let frame = Frame {
         state: &v,
         action: &v,
         images: &images,
-    })
+    };
+    if wait {
+        add_waiting(w, frame)
+    } else {
+        w.add_frame(frame)
+    }
+}
+
+/// add_frame, waiting while ffmpeg is a second behind (these tests add frames faster
+/// than real time)
+fn add_waiting(w: &mut DatasetWriter, frame: Frame<'_>) -> Result<(), Error> {
+    let start = std::time::Instant::now();
+    loop {
+        match w.add_frame(frame) {
+            Err(Error::EncoderBehind { .. })
+                if start.elapsed() < std::time::Duration::from_secs(5) =>
+            {
+                std::thread::sleep(std::time::Duration::from_millis(5))
+            }
+            r => return r,
+        }
+    }
 }
 
 fn read(path: &Path) -> RecordBatch {
@@ -523,11 +549,14 @@ fn video_files_roll_at_their_size() {
                 step: 768,
                 data: &px,
             };
-            w.add_frame(Frame {
-                state: &v,
-                action: &v,
-                images: &[img],
-            })
+            add_waiting(
+                &mut w,
+                Frame {
+                    state: &v,
+                    action: &v,
+                    images: &[img],
+                },
+            )
             .unwrap();
         }
         w.save_episode().unwrap();
@@ -612,7 +641,7 @@ fn a_frame_is_refused_whole_when_ffmpeg_is_a_second_behind() {
     // instead of waiting
     let mut refused = None;
     for i in 0..2000 {
-        match add(&mut w, i) {
+        match add_with(&mut w, i, false) {
             Ok(()) => {}
             Err(e) => {
                 refused = Some((i, e));
@@ -625,7 +654,10 @@ fn a_frame_is_refused_whole_when_ffmpeg_is_a_second_behind() {
     assert!(e.to_string().contains("the frame was not recorded"), "{e}");
     // the refused frame is in no camera and not in the table
     assert_eq!(w.episode_frames(), Some(i));
-    assert!(matches!(add(&mut w, i), Err(Error::EncoderBehind { .. })));
+    assert!(matches!(
+        add_with(&mut w, i, false),
+        Err(Error::EncoderBehind { .. })
+    ));
     // discard kills the stuck encoder at once
     let t = std::time::Instant::now();
     assert_eq!(w.discard_episode().unwrap(), i);
