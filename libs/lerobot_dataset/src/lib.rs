@@ -80,7 +80,8 @@
 //!   row's timestamp (lerobot decodes `from_timestamp + timestamp`, tolerance 1e-4).
 //!   Debian 12's ffmpeg 5.1 has libsvtav1 (SVT-AV1 1.4.1): measured at 30 fps 640x480
 //!   (examples/video_bench.rs, release, JPEG frames of a moving noisy scene) it took
-//!   38–41 % of one of this machine's 2 cores, so AV1 is kept (no need for libx264).
+//!   38–43 % of one of this machine's 2 cores (32 % with raw rgb8 frames), so AV1 is
+//!   kept (no need for libx264); about 3 MB per minute of that scene.
 //!   The frames go to ffmpeg through a queue of one second and a thread: `add_frame`
 //!   never waits for ffmpeg; when a camera's queue is full the frame is refused whole
 //!   ([`Error::EncoderBehind`]: no camera and no row takes it; count it as dropped). ffmpeg writes
@@ -95,7 +96,9 @@
 //!   Counting every frame live costs a little CPU but makes the save instant and keeps
 //!   neither the pictures in memory nor a second decode of the episode at save (which
 //!   would take seconds, and measure the AV1 loss instead of the frames).
-//! - **Saving** (stop → saved 0.16–0.27 s for 20 s episodes at 30 fps 640x480 here):
+//! - **Saving** (stop → saved 0.16–0.30 s for 20 s episodes at 30 fps 640x480 here; the
+//!   remux rewrites the camera's current file, which near its 200 MB adds about a second:
+//!   0.84 s for 181 MB plus an episode):
 //!   close each pipe, wait for ffmpeg, check with ffprobe that it wrote every frame, then
 //!   lerobot's placement: the camera's current file with the episode appended by a remux
 //!   (ffmpeg's concat demuxer, `-c copy -movflags +faststart`, as
