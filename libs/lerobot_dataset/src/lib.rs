@@ -1262,7 +1262,21 @@ impl DatasetWriter {
                 "the episode is being saved: save or discard it first".into(),
             ));
         }
-        // each camera's image to its ffmpeg (started at the episode's first frame)
+        // the log first: a write error (a full disk) leaves nothing of the frame anywhere
+        let line = serde_json::to_string(&LogFrame {
+            state: frame.state,
+            action: frame.action,
+        })
+        .map_err(|e| Error::BadFrame(e.to_string()))?;
+        let cur = self
+            .current
+            .as_mut()
+            .ok_or_else(|| Error::State("no episode in progress".into()))?;
+        writeln!(cur.log, "{line}")
+            .and_then(|_| cur.log.flush())
+            .map_err(io("writing the episode in progress"))?;
+        // each camera's image to its ffmpeg (started at the episode's first frame); a
+        // failure here makes the episode unsaveable (Encoding::Failed)
         for (i, (img, kind)) in frame.images.iter().zip(kinds).enumerate() {
             let cam = &self.spec.cameras[i];
             let files = EpisodeFiles::new(&self.root.join(RECORDING_DIR), &cam.feature());
@@ -1304,14 +1318,6 @@ impl DatasetWriter {
             .current
             .as_mut()
             .ok_or_else(|| Error::State("no episode in progress".into()))?;
-        let line = serde_json::to_string(&LogFrame {
-            state: frame.state,
-            action: frame.action,
-        })
-        .map_err(|e| Error::BadFrame(e.to_string()))?;
-        writeln!(cur.log, "{line}")
-            .and_then(|_| cur.log.flush())
-            .map_err(io("writing the episode in progress"))?;
         cur.state.extend_from_slice(frame.state);
         cur.action.extend_from_slice(frame.action);
         cur.frames += 1;
