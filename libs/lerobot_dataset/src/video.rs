@@ -2,13 +2,13 @@
 //! per camera that encodes an episode live as lerobot 0.6.1 encodes it (see the crate
 //! docs, "Cameras").
 //!
-//! An [`Encoder`] owns the child: a writer thread feeds its stdin from a queue of one
-//! second of frames ([`Encoder::push`] never waits for ffmpeg: a full queue is refused
-//! before any camera takes the frame, see [`Encoder::has_room`]), and a
+//! An `Encoder` owns the child: a writer thread feeds its stdin from a queue of one
+//! second of frames (`Encoder::push` never waits for ffmpeg: a full queue is refused
+//! before any camera takes the frame, see `Encoder::has_room`), and a
 //! reader thread takes ffmpeg's second output, every frame decoded to RGB, and appends
 //! each frame's pixel counts ([`crate::stats::PixelCounts`], lerobot's downsampling) to a
 //! file: the episode's image statistics are then a sum over the sampled frames at save.
-//! Dropping an [`Encoder`] kills its child.
+//! Dropping an `Encoder` kills its child.
 
 use std::fs::{self, File};
 use std::io::{BufWriter, Read, Write};
