@@ -5,6 +5,7 @@
 use eezybot_kinematics::{ArmConfig, ServoId, ACTUATED_JOINTS};
 use eezybot_msgs::sensor_msgs::{CompressedImage, Image, JointState};
 use eezybot_msgs::Time;
+use lerobot_dataset::RawEncoding;
 use std::sync::Arc;
 
 /// One input's sample, as the sampler keeps it.
@@ -29,8 +30,8 @@ pub enum Picture {
         width: u32,
         /// Rows, px.
         height: u32,
-        /// `rgb8`, `bgr8` or `mono8`.
-        encoding: String,
+        /// The pixel layout.
+        encoding: RawEncoding,
         /// Bytes per row.
         step: u32,
         /// `step * height` bytes.
@@ -39,7 +40,7 @@ pub enum Picture {
 }
 
 /// The encodings of sensor_msgs/Image taken.
-pub const RAW_ENCODINGS: [&str; 3] = ["rgb8", "bgr8", "mono8"];
+pub const RAW_ENCODINGS: [&str; 5] = ["rgb8", "bgr8", "rgba8", "bgra8", "mono8"];
 
 /// A stamp in ns since the epoch.
 pub fn stamp_ns(t: Time) -> i64 {
@@ -121,17 +122,19 @@ pub fn compressed_picture(msg: CompressedImage) -> Result<Picture, String> {
     Ok(Picture::Jpeg(msg.data))
 }
 
-/// An Image as a picture: rgb8, bgr8 or mono8, whole rows.
+/// An Image as a picture: rgb8, bgr8, rgba8, bgra8 or mono8, whole rows.
 pub fn raw_picture(msg: Image) -> Result<Picture, String> {
-    let channels = match msg.encoding.as_str() {
-        "rgb8" | "bgr8" => 3u64,
-        "mono8" => 1,
-        e => {
-            return Err(format!(
-                "encoding {e:?} is not one of {}",
-                RAW_ENCODINGS.join(", ")
-            ))
-        }
+    let Some(encoding) = RawEncoding::from_ros(&msg.encoding) else {
+        return Err(format!(
+            "encoding {:?} is not one of {}",
+            msg.encoding,
+            RAW_ENCODINGS.join(", ")
+        ));
+    };
+    let channels: u64 = match encoding {
+        RawEncoding::Rgb8 | RawEncoding::Bgr8 => 3,
+        RawEncoding::Rgba8 | RawEncoding::Bgra8 => 4,
+        RawEncoding::Mono8 => 1,
     };
     let (w, h, step) = (
         u64::from(msg.width),
@@ -151,7 +154,7 @@ pub fn raw_picture(msg: Image) -> Result<Picture, String> {
     Ok(Picture::Raw {
         width: msg.width,
         height: msg.height,
-        encoding: msg.encoding,
+        encoding,
         step: msg.step,
         data: msg.data,
     })

@@ -152,15 +152,15 @@ impl Recorder {
 
     /// The dataset's spec once every camera's size is known.
     fn dataset_spec(&self) -> Option<DatasetSpec> {
-        let spec = DatasetSpec::new(
+        let mut spec = DatasetSpec::new(
             self.config.fps,
             ROBOT_TYPE,
             &ACTUATED_JOINTS,
             &ACTUATED_JOINTS,
         );
-        // VIDEO: the cameras join the spec with the writer's video step
-        for size in &self.sizes {
-            (*size)?;
+        for ((_, name), size) in self.config.cameras.iter().zip(&self.sizes) {
+            let (w, h) = (*size)?;
+            spec = spec.with_camera(name, w, h);
         }
         Some(spec)
     }
@@ -249,10 +249,13 @@ impl Recorder {
             }
             Input::Image(k, stamp, picture) => match picture {
                 Ok(p) => {
-                    let Some(size) = picture_size(&p) else {
-                        let topic = self.config.cameras[k].0.clone();
-                        self.reject(&topic, "a JPEG without a frame header".into());
-                        return;
+                    let size = match crate::writer::image(&p).size() {
+                        Ok(size) => size,
+                        Err(e) => {
+                            let topic = self.config.cameras[k].0.clone();
+                            self.reject(&topic, e);
+                            return;
+                        }
                     };
                     match self.sizes[k] {
                         None => {
@@ -474,6 +477,22 @@ impl Recorder {
                 self.episodes.failed(&e);
                 self.answer_pending(Call::Start, false, &e, out);
             }
+            Done::RowDropped(e) => {
+                if let Some(run) = self.running.as_mut() {
+                    run.rows = run.rows.saturating_sub(1);
+                    run.dropped += 1;
+                    self.dropped_total += 1;
+                    if run.dropped == 1 || run.dropped % 30 == 0 {
+                        log::warn!(
+                            "episode {}: a frame dropped ({} so far): {e}",
+                            run.index,
+                            run.dropped
+                        );
+                    }
+                }
+                self.last_drop = Some(e);
+                return;
+            }
             Done::RowFailed(e) => {
                 log::error!("recording stopped: {e} (the finished episodes are intact)");
                 let fx = self.episodes.failed(&e);
@@ -605,42 +624,6 @@ impl Recorder {
     }
 }
 
-/// An image's size (width, height): a JPEG's from its frame header.
-pub fn picture_size(p: &Picture) -> Option<(u32, u32)> {
-    match p {
-        Picture::Raw { width, height, .. } => Some((*width, *height)),
-        Picture::Jpeg(data) => jpeg_size(data),
-    }
-}
-
-/// A JPEG's size from its first SOF marker.
-pub fn jpeg_size(data: &[u8]) -> Option<(u32, u32)> {
-    if !data.starts_with(&[0xFF, 0xD8]) {
-        return None;
-    }
-    let mut i = 2;
-    while i + 4 <= data.len() {
-        if data[i] != 0xFF {
-            return None;
-        }
-        let marker = data[i + 1];
-        if marker == 0xFF {
-            i += 1;
-            continue;
-        }
-        let len = usize::from(u16::from_be_bytes([data[i + 2], data[i + 3]]));
-        // SOF0..SOF15 except DHT (C4), JPG (C8), DAC (CC)
-        if (0xC0..=0xCF).contains(&marker) && ![0xC4, 0xC8, 0xCC].contains(&marker) {
-            let s = data.get(i + 5..i + 9)?;
-            let h = u32::from(u16::from_be_bytes([s[0], s[1]]));
-            let w = u32::from(u16::from_be_bytes([s[2], s[3]]));
-            return (w > 0 && h > 0).then_some((w, h));
-        }
-        i += 2 + len;
-    }
-    None
-}
-
 /// Start the writer thread; its results come through `done`.
 pub fn start_writer(
     done: tokio::sync::mpsc::UnboundedSender<Done>,
@@ -654,20 +637,4 @@ pub fn start_writer(
             })
         })?;
     Ok((tx, handle))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_jpeg_says_its_size() {
-        // SOI, APP0 (len 4), SOF0 (len 17): 8 bits, 480 rows, 640 columns
-        let mut j = vec![0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x04, 0, 0];
-        j.extend([0xFF, 0xC0, 0x00, 0x11, 0x08, 0x01, 0xE0, 0x02, 0x80]);
-        j.extend([0u8; 12]);
-        assert_eq!(jpeg_size(&j), Some((640, 480)));
-        assert_eq!(jpeg_size(&j[..10]), None);
-        assert_eq!(jpeg_size(&[0x89, b'P']), None);
-    }
 }

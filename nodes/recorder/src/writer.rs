@@ -3,7 +3,8 @@
 //! on sampling its inputs and answering requests meanwhile.
 
 use crate::compose::Row;
-use lerobot_dataset::{DatasetSpec, DatasetWriter, Recovery, SavedEpisode};
+use crate::inputs::Picture;
+use lerobot_dataset::{DatasetSpec, DatasetWriter, Error, Image, Recovery, SavedEpisode};
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -55,7 +56,10 @@ pub enum Done {
     Opened(Result<Opened, String>),
     /// The episode began (its index), or why not.
     Began(Result<u64, String>),
-    /// A row could not be written: the episode cannot go on.
+    /// A row was not written (an image the encoder could not take now, or one that does
+    /// not fit the camera): counted as dropped, the episode goes on.
+    RowDropped(String),
+    /// A row could not be written (a full disk, the encoder gone): the episode cannot go on.
     RowFailed(String),
     /// The episode was saved (and how long it took), or why not.
     Saved(Result<(SavedEpisode, Duration), String>),
@@ -79,6 +83,12 @@ pub fn recovery_text(r: &Recovery) -> Option<String> {
         parts.push(format!(
             "a save interrupted after its journal was completed ({} files)",
             r.rolled_forward.len()
+        ));
+    }
+    if !r.removed_episode_files.is_empty() {
+        parts.push(format!(
+            "its video files were removed ({})",
+            r.removed_episode_files.len()
         ));
     }
     if !r.removed_temporaries.is_empty() {
@@ -125,6 +135,26 @@ fn open(root: PathBuf, spec: DatasetSpec, resume: bool) -> Result<(DatasetWriter
     }
 }
 
+/// A picture as the writer takes it (the encoding was checked when it came).
+pub fn image(p: &Picture) -> Image<'_> {
+    match p {
+        Picture::Jpeg(data) => Image::Jpeg(data),
+        Picture::Raw {
+            width,
+            height,
+            encoding,
+            step,
+            data,
+        } => Image::Raw {
+            encoding: *encoding,
+            width: *width,
+            height: *height,
+            step: *step,
+            data,
+        },
+    }
+}
+
 /// The writer thread: takes jobs until the sender goes, answering through `done`. A
 /// job needing the dataset before it opened is answered with why not.
 pub fn run(jobs: mpsc::Receiver<Job>, done: impl Fn(Done)) {
@@ -157,13 +187,21 @@ pub fn run(jobs: mpsc::Receiver<Job>, done: impl Fn(Done)) {
                     continue;
                 }
                 let Some(w) = writer.as_mut() else { continue };
+                let images: Vec<Image<'_>> = row.images.iter().map(|p| image(p)).collect();
                 let frame = lerobot_dataset::Frame {
                     state: &row.state,
                     action: &row.action,
+                    images: &images,
                 };
-                if let Err(e) = w.add_frame(frame) {
-                    row_failed = true;
-                    done(Done::RowFailed(e.to_string()));
+                match w.add_frame(frame) {
+                    Ok(()) => {}
+                    Err(e @ (Error::EncoderBehind { .. } | Error::BadFrame(_))) => {
+                        done(Done::RowDropped(e.to_string()))
+                    }
+                    Err(e) => {
+                        row_failed = true;
+                        done(Done::RowFailed(e.to_string()));
+                    }
                 }
             }
             Job::Save => {
