@@ -47,8 +47,13 @@ pub struct SamplerConfig {
     pub fps: u32,
     /// The oldest a sample may be at a frame's instant.
     pub max_staleness: Duration,
-    /// How long after a frame's instant it is decided (for samples still on their way).
+    /// How long after a frame's instant it is decided at the earliest (for samples still
+    /// on their way).
     pub wait: Duration,
+    /// How long after its instant a frame may wait for a live input's samples: a frame is
+    /// decided once every live input (one with a sample within `max_staleness` before the
+    /// instant) has a sample stamped after it, or at this at the latest.
+    pub max_wait: Duration,
 }
 
 impl Default for SamplerConfig {
@@ -57,6 +62,7 @@ impl Default for SamplerConfig {
             fps: 30,
             max_staleness: Duration::from_millis(100),
             wait: Duration::from_millis(50),
+            max_wait: Duration::from_millis(500),
         }
     }
 }
@@ -70,8 +76,9 @@ pub enum ConfigError {
     /// No inputs, or more than 64.
     #[error("{0} inputs: a recorder samples 1 to 64")]
     Inputs(usize),
-    /// A staleness limit under one frame, or a wait longer than the staleness limit.
-    #[error("max_staleness {max_staleness:?} must be at least one frame ({frame:?}) and at least wait ({wait:?})")]
+    /// A staleness limit under one frame, a wait longer than the staleness limit, or a
+    /// longest wait shorter than the wait.
+    #[error("max_staleness {max_staleness:?} must be at least one frame ({frame:?}) and at least wait ({wait:?}), and max_wait at least wait")]
     Staleness {
         /// The limit.
         max_staleness: Duration,
@@ -143,6 +150,8 @@ pub struct Sampler<V> {
     inputs: Vec<Input<V>>,
     /// The episode's start, ns (`None`: not started).
     t0: Option<i64>,
+    /// The episode's end, ns: no frame after it (`None`: not ending).
+    end: Option<i64>,
     /// The next frame to decide.
     next: u64,
     counters: Counters,
@@ -158,7 +167,10 @@ impl<V: Clone> Sampler<V> {
             return Err(ConfigError::Inputs(inputs.len()));
         }
         let frame = Duration::from_nanos(1_000_000_000 / u64::from(config.fps));
-        if config.max_staleness < frame || config.max_staleness < config.wait {
+        if config.max_staleness < frame
+            || config.max_staleness < config.wait
+            || config.max_wait < config.wait
+        {
             return Err(ConfigError::Staleness {
                 max_staleness: config.max_staleness,
                 frame,
@@ -176,6 +188,7 @@ impl<V: Clone> Sampler<V> {
                 })
                 .collect(),
             t0: None,
+            end: None,
             next: 0,
             counters: Counters {
                 dropped_by: vec![0; inputs.len()],
@@ -188,12 +201,30 @@ impl<V: Clone> Sampler<V> {
     /// stay (a frame may use one stamped before the start); the counters go on.
     pub fn start(&mut self, t0_ns: i64) {
         self.t0 = Some(t0_ns);
+        self.end = None;
         self.next = 0;
+    }
+
+    /// End the episode at `end_ns`: the frames up to it are still decided as they come
+    /// due; then [`Sampler::finished`].
+    pub fn end_at(&mut self, end_ns: i64) {
+        if self.t0.is_some() {
+            self.end = Some(end_ns);
+        }
+    }
+
+    /// Whether an ending episode has had all its frames decided.
+    pub fn finished(&self) -> bool {
+        match (self.end, self.instant(self.next)) {
+            (Some(end), Some(t)) => t > end,
+            _ => false,
+        }
     }
 
     /// End the episode: no more frames until the next [`Sampler::start`].
     pub fn stop(&mut self) {
         self.t0 = None;
+        self.end = None;
     }
 
     /// Whether an episode is running.
@@ -235,12 +266,21 @@ impl<V: Clone> Sampler<V> {
         Self::prune(i, horizon);
     }
 
-    /// The frames due by `now_ns` (each frame's instant plus the wait), in order.
+    /// The frames due by `now_ns`, in order: a frame is due from its instant plus the
+    /// wait, once every live input has a sample stamped after the instant (no sample
+    /// stamped before it is still to come: an input's stamps do not go back), or from its
+    /// instant plus `max_wait` whatever came.
     pub fn poll(&mut self, now_ns: i64) -> Vec<Tick<V>> {
         let wait = i64::try_from(self.config.wait.as_nanos()).unwrap_or(i64::MAX);
+        let max_wait = i64::try_from(self.config.max_wait.as_nanos()).unwrap_or(i64::MAX);
         let mut out = vec![];
         while let Some(t) = self.instant(self.next) {
-            if t.saturating_add(wait) > now_ns {
+            if self.end.is_some_and(|end| t > end) {
+                break;
+            }
+            if t.saturating_add(wait) > now_ns
+                || (t.saturating_add(max_wait) > now_ns && self.awaits_live_input(t))
+            {
                 break;
             }
             out.push(self.decide(self.next, t));
@@ -253,10 +293,31 @@ impl<V: Clone> Sampler<V> {
         out
     }
 
-    /// When the next frame is due (poll then), ns.
+    /// When the next frame may be due (poll then, and again after samples came), ns.
     pub fn next_due(&self) -> Option<i64> {
         let wait = i64::try_from(self.config.wait.as_nanos()).unwrap_or(i64::MAX);
-        self.instant(self.next).map(|t| t.saturating_add(wait))
+        let max_wait = i64::try_from(self.config.max_wait.as_nanos()).unwrap_or(i64::MAX);
+        let t = self.instant(self.next)?;
+        if self.end.is_some_and(|end| t > end) {
+            return None;
+        }
+        let earliest = t.saturating_add(wait);
+        if self.awaits_live_input(t) {
+            Some(t.saturating_add(max_wait).max(earliest))
+        } else {
+            Some(earliest)
+        }
+    }
+
+    /// Whether an input that is live at instant `t` (its newest sample within
+    /// `max_staleness` before it) has nothing stamped after `t` yet.
+    fn awaits_live_input(&self, t: i64) -> bool {
+        let max_age = i64::try_from(self.config.max_staleness.as_nanos()).unwrap_or(i64::MAX);
+        self.inputs.iter().any(|i| {
+            i.samples
+                .back()
+                .is_some_and(|(s, _)| *s <= t && t - *s <= max_age)
+        })
     }
 
     /// What the sampler did so far.
@@ -339,9 +400,12 @@ mod tests {
 
     const MS: i64 = 1_000_000;
 
+    /// A sampler that decides each frame at its instant plus the wait (max_wait = wait):
+    /// the rule of which sample, apart from how long a frame waits for live inputs.
     fn sampler(fps: u32) -> Sampler<i64> {
         let config = SamplerConfig {
             fps,
+            max_wait: SamplerConfig::default().wait,
             ..SamplerConfig::default()
         };
         Sampler::new(
@@ -369,6 +433,7 @@ mod tests {
     fn a_held_input_stands_however_old_and_is_none_before_the_first() {
         let config = SamplerConfig {
             fps: 10,
+            max_wait: SamplerConfig::default().wait,
             ..SamplerConfig::default()
         };
         let mut s = Sampler::new(
@@ -523,6 +588,7 @@ mod tests {
                     fps,
                     max_staleness: Duration::from_millis(stale_ms),
                     wait: Duration::from_millis(wait_ms),
+                    max_wait: Duration::from_millis(500),
                 },
                 &[("a", Need::Required)],
             )
@@ -542,6 +608,64 @@ mod tests {
             Sampler::<i64>::new(SamplerConfig::default(), &[]).err(),
             Some(ConfigError::Inputs(0))
         );
+    }
+
+    #[test]
+    fn a_frame_waits_for_every_live_input_to_pass_its_instant_up_to_max_wait() {
+        let config = SamplerConfig {
+            fps: 10,
+            ..SamplerConfig::default()
+        };
+        let inputs = [
+            ("state", Need::Required),
+            ("image", Need::Required),
+            ("leader", Need::Optional),
+        ];
+        let mut s = Sampler::new(config, &inputs).unwrap();
+        s.start(0);
+        // state and image live (samples just before frame 0), the leader silent
+        s.offer(0, -MS, 1);
+        s.offer(1, -MS, 1);
+        assert!(
+            s.poll(60 * MS).is_empty(),
+            "live inputs have not passed frame 0 yet"
+        );
+        assert_eq!(s.next_due(), Some(500 * MS));
+        // a late sample stamped before the instant still makes it in
+        s.offer(0, -MS / 2, 2);
+        s.offer(0, 5 * MS, 3);
+        assert!(
+            s.poll(70 * MS).is_empty(),
+            "the image has not passed it yet"
+        );
+        s.offer(1, 20 * MS, 3);
+        let t = s.poll(70 * MS);
+        assert_eq!(frames(&t)[0].values, [Some(2), Some(1), None]);
+        // a live input gone silent: frame 1 waits for it up to max_wait, then is decided
+        s.offer(0, 150 * MS, 4);
+        assert!(s.poll(599 * MS).is_empty());
+        let t = s.poll(600 * MS);
+        assert_eq!(frames(&t)[0].values, [Some(3), Some(3), None]);
+    }
+
+    #[test]
+    fn an_ending_episode_decides_its_last_frames_then_is_finished() {
+        let mut s = sampler(10);
+        s.start(0);
+        s.end_at(250 * MS);
+        assert!(!s.finished());
+        s.offer(0, 300 * MS, 1);
+        s.offer(1, 300 * MS, 1);
+        s.offer(0, -MS, 0);
+        s.offer(1, -MS, 0);
+        let t = s.poll(10_000 * MS);
+        assert_eq!(
+            t.len(),
+            3,
+            "frames at 0, 100 and 200 ms: none after the end"
+        );
+        assert!(s.finished());
+        assert_eq!(s.next_due(), None);
     }
 
     #[test]

@@ -22,6 +22,8 @@ use std::time::Duration;
 pub const REPORT_RECORDING: Duration = Duration::from_millis(500);
 /// How often the entry goes out otherwise.
 pub const REPORT_IDLE: Duration = Duration::from_secs(2);
+/// How long a frame may wait for a live input's samples (recorder_core's `max_wait`).
+pub const MAX_WAIT: Duration = Duration::from_millis(500);
 
 /// An episode service.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -68,6 +70,8 @@ struct Running {
     rows: u64,
     dropped: u64,
     started: bool,
+    /// Saving: the frames up to the request are still being decided.
+    ending: bool,
 }
 
 /// The recorder's state between events.
@@ -123,6 +127,7 @@ impl Recorder {
                 fps: config.fps,
                 max_staleness: config.max_staleness,
                 wait: Duration::from_millis(50).min(config.max_staleness),
+                max_wait: MAX_WAIT.max(config.max_staleness),
             },
             &refs,
         )
@@ -243,7 +248,8 @@ impl Recorder {
                     .offer(compose::DEADMAN, now, Sample::Deadman(held));
                 let fx = self.episodes.deadman(held, now);
                 if !fx.is_empty() {
-                    self.carry_out(fx, None);
+                    self.carry_out(fx, None, now);
+                    self.tick(now);
                     self.report(now, out);
                 }
             }
@@ -314,7 +320,10 @@ impl Recorder {
             Call::Discard => Request::Discard,
         };
         match self.episodes.request(request, now) {
-            Ok(fx) => self.carry_out(fx, Some((call, ticket))),
+            Ok(fx) => {
+                self.carry_out(fx, Some((call, ticket)), now);
+                self.tick(now);
+            }
             Err(e) => out.answer(call, ticket, trigger(false, e.to_string())),
         }
         self.report(now, out);
@@ -339,7 +348,7 @@ impl Recorder {
         }
     }
 
-    fn carry_out(&mut self, fx: Vec<Effect>, ticket: Option<(Call, Ticket)>) {
+    fn carry_out(&mut self, fx: Vec<Effect>, ticket: Option<(Call, Ticket)>, now: i64) {
         for e in fx {
             match e {
                 Effect::Begin { task, t0_ns } => {
@@ -351,13 +360,19 @@ impl Recorder {
                         rows: 0,
                         dropped: 0,
                         started: false,
+                        ending: false,
                     });
                     self.send(Job::Begin(task));
                 }
-                Effect::Save => {
-                    self.sampler.stop();
-                    self.send(Job::Save);
-                }
+                // the frames up to now are written first (they may wait for samples on
+                // their way); then the save ([`Recorder::tick`])
+                Effect::Save => match self.running.as_mut() {
+                    Some(run) => {
+                        run.ending = true;
+                        self.sampler.end_at(now);
+                    }
+                    None => self.send(Job::Save),
+                },
                 Effect::Discard => {
                     self.sampler.stop();
                     self.send(Job::Discard);
@@ -422,6 +437,13 @@ impl Recorder {
                     self.last_drop = Some(why);
                 }
             }
+        }
+        if self.running.as_ref().is_some_and(|r| r.ending) && self.sampler.finished() {
+            self.sampler.stop();
+            if let Some(run) = self.running.as_mut() {
+                run.ending = false;
+            }
+            self.send(Job::Save);
         }
     }
 
@@ -496,7 +518,7 @@ impl Recorder {
             Done::RowFailed(e) => {
                 log::error!("recording stopped: {e} (the finished episodes are intact)");
                 let fx = self.episodes.failed(&e);
-                self.carry_out(fx, None);
+                self.carry_out(fx, None, now);
             }
             Done::Saved(Ok((s, took))) => {
                 let seconds = s.frames as f64 / f64::from(self.config.fps);
@@ -616,7 +638,11 @@ impl Recorder {
         match self.episodes.request(Request::Save, now) {
             Ok(fx) => {
                 log::info!("stopping: saving the episode in progress");
-                self.carry_out(fx, None);
+                self.carry_out(fx, None, now);
+                // no more samples will be read: the last frames are decided with what came
+                let all_due =
+                    now.saturating_add(i64::try_from(MAX_WAIT.as_nanos()).unwrap_or(0) + 1);
+                self.tick(all_due);
                 true
             }
             Err(_) => false,
