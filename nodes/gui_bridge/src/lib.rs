@@ -14,6 +14,8 @@ pub mod message;
 pub mod panel;
 pub mod program;
 pub mod record;
+pub mod recorder_ros;
+pub mod recording;
 pub mod ros_outputs;
 pub mod serve;
 pub mod teleop;
@@ -96,6 +98,16 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::StringArray(n) => check_node_names(n),
                 _ => Ok(()),
             }),
+            ParamSpec::new(
+                "recorder_node",
+                ParameterValue::String(NodeNames::RECORDER.into()),
+                "the recorder node, by name (as `-r __node:=` named it): the panel's recording card shows its diagnostics, sets its task parameter and calls its services (NAME/start_episode, NAME/save_episode, NAME/discard_episode)",
+            )
+            .read_only()
+            .validator(|v| match v {
+                ParameterValue::String(n) => check_node_names(std::slice::from_ref(n)),
+                _ => Ok(()),
+            }),
             ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
             ParamSpec::new(
                 "program_dir",
@@ -141,6 +153,8 @@ pub struct NodeNames {
     pub ik: String,
     /// The serial_nodes, follower and leader.
     pub servos: Vec<String>,
+    /// The recorder, whose episodes the panel's recording card starts and ends.
+    pub recorder: String,
 }
 
 impl NodeNames {
@@ -149,6 +163,8 @@ impl NodeNames {
     /// `servo_nodes`' default: the follower's contract name and the leader's documented
     /// one (docs/nodes.md).
     pub const SERVOS: [&'static str; 2] = ["serial_node", "leader_arm"];
+    /// `recorder_node`'s default: the contract's name.
+    pub const RECORDER: &'static str = "recorder";
 
     /// The names the node's parameters give.
     pub fn from_params(params: &Params) -> NodeNames {
@@ -158,6 +174,9 @@ impl NodeNames {
         }
         if let Some(servos) = params.get_as::<Vec<String>>("servo_nodes") {
             names.servos = servos;
+        }
+        if let Some(recorder) = params.string("recorder_node") {
+            names.recorder = recorder;
         }
         names
     }
@@ -174,6 +193,7 @@ impl Default for NodeNames {
         NodeNames {
             ik: NodeNames::IK.into(),
             servos: NodeNames::SERVOS.iter().map(|s| s.to_string()).collect(),
+            recorder: NodeNames::RECORDER.into(),
         }
     }
 }
@@ -266,6 +286,22 @@ pub trait CalibrationControl {
     fn prepare(&self, nodes: &[String]);
 }
 
+/// The recording card's ROS side: the calls on the recorder node, each bounded in time
+/// (a call that gets no answer ends as a failure saying so).
+pub trait RecorderControl {
+    /// Do `work`: `Ok` with the recorder's message, or why not.
+    fn call(&self, work: recording::RecordWork) -> LocalBoxFuture<'_, Result<String, String>>;
+}
+
+/// No recorder side (tests of the loop): every call fails, saying so.
+pub struct NoRecorder;
+
+impl RecorderControl for NoRecorder {
+    fn call(&self, _work: recording::RecordWork) -> LocalBoxFuture<'_, Result<String, String>> {
+        Box::pin(async { Err("no recorder client in this bridge".to_string()) })
+    }
+}
+
 /// No ROS side (tests of the loop without calibration): every job fails with the reason.
 pub struct NoCalibration;
 
@@ -346,6 +382,8 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
     pub reporting: Reporting<F>,
     /// The calibration wizard's ROS side.
     pub calibration: &'a dyn CalibrationControl,
+    /// The recording card's ROS side.
+    pub recorder: &'a dyn RecorderControl,
     /// The loop ends when this resolves.
     pub shutdown: S,
 }
@@ -353,7 +391,8 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
 /// The loop between browsers and ROS, around `panel`; runs until `shutdown` resolves.
 ///
 /// Its work in order of priority: shutdown, e-stop requests, targets due, the jobs
-/// beside it finishing (a program file's, the calibration wizard's), the periodic
+/// beside it finishing (a program file's, the calibration wizard's, the recording
+/// card's call on the recorder), the periodic
 /// reports, a change of `rate`, ROS inputs, what happened to the web side's connections
 /// (counted in the loop's own [`WebStats`]: the server's tasks share no lock), then
 /// other browser requests; so a browser flooding requests delays neither an e-stop nor
@@ -388,6 +427,7 @@ where
             _ = async { if let Some(w) = wake { tokio::time::sleep_until(w.into()).await } }, if wake.is_some() => Event::Due,
             done = finished(&mut bridge.jobs.file), if bridge.jobs.file.is_some() => Event::FileDone(done),
             done = finished(&mut bridge.jobs.calibration), if bridge.jobs.calibration.is_some() => Event::CalibrationDone(done),
+            done = finished(&mut bridge.jobs.record), if bridge.jobs.record.is_some() => Event::RecordDone(done),
             _ = bridge.status_tick.tick() => Event::StatusTick,
             _ = bridge.diag_tick.tick() => Event::Report,
             _ = bridge.peer_poll.tick() => Event::PeerPoll,
@@ -417,6 +457,8 @@ enum Event {
     FileDone(FileDone),
     /// the calibration wizard's job is done
     CalibrationDone(panel::CalibrationDone),
+    /// the recording card's call is done
+    RecordDone(recording::RecordDone),
     /// the calibration's status (every 500 ms)
     StatusTick,
     /// the panel's `diagnostics` (every second)
@@ -466,6 +508,7 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
             params,
             reporting,
             calibration,
+            recorder,
             shutdown,
         } = io;
         snapshot.send_replace(panel.snapshot());
@@ -477,10 +520,12 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
                 snapshot,
                 web,
                 calibration,
+                recorder,
             },
             jobs: Jobs {
                 file: None,
                 calibration: None,
+                record: None,
             },
             requests,
             diag_tick: tokio::time::interval(Duration::from_secs(1)),
@@ -514,6 +559,10 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
             Event::CalibrationDone(done) => {
                 jobs.calibration = None;
                 sink.apply(panel.on_calibration_done(done, Clock::read()), None, jobs);
+            }
+            Event::RecordDone(done) => {
+                jobs.record = None;
+                sink.apply(panel.on_record_done(done, Clock::read()), None, jobs);
             }
             Event::StatusTick => {
                 sink.calibration.prepare(&panel.calibration_nodes());
@@ -574,11 +623,14 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
 
 /// Work of the loop's beside it, at most one of each kind: a program file's load or
 /// save (off the event loop: a FIFO, a hung mount; the loop goes on, the job times
-/// out), and the calibration wizard's ROS work.
+/// out), the calibration wizard's ROS work, and the recording card's call on the
+/// recorder (bounded in time by [`RecorderControl::call`]).
 struct Jobs<'m> {
     file: Option<BoxFuture<'static, FileDone>>,
     /// the arm taken from compute_ik or given back, or a calibration saved and applied
     calibration: Option<LocalBoxFuture<'m, panel::CalibrationDone>>,
+    /// a call on the recorder (the card takes one at a time)
+    record: Option<LocalBoxFuture<'m, recording::RecordDone>>,
 }
 
 /// The job's output once it is done (never, without one).
@@ -596,6 +648,7 @@ struct Sink<'a, 'm, O> {
     snapshot: watch::Sender<Snapshot>,
     web: WebStats,
     calibration: &'m dyn CalibrationControl,
+    recorder: &'m dyn RecorderControl,
 }
 
 impl<'m, O: Outputs> Sink<'_, 'm, O> {
@@ -658,6 +711,16 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                             }));
                         }
                     }
+                }
+                Effect::Record(work) => {
+                    let r = self.recorder;
+                    let op = work.op();
+                    jobs.record = Some(Box::pin(async move {
+                        recording::RecordDone {
+                            op,
+                            result: r.call(work).await,
+                        }
+                    }));
                 }
             }
         }

@@ -92,6 +92,75 @@ pub enum ToClient {
         /// the deadman is held (null: not heard yet)
         deadman: Option<bool>,
     },
+    /// The recording card: the recorder's state and the last episode call
+    /// ([`crate::recording::RecordCard::view`]).
+    Recorder(Box<RecordView>),
+}
+
+/// `{"t": "recorder", …}`: the recorder as its `diagnostics` report it (each value null
+/// until heard, or when unreadable), the call in flight, the last call's outcome and
+/// which buttons work now.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RecordView {
+    /// the recorder's node name (`recorder_node`)
+    pub node: String,
+    /// heard within the last 5 s
+    pub up: bool,
+    /// why the buttons are off: no recorder heard, or not any more
+    pub note: Option<String>,
+    /// idle, recording, saving, stopped (or what a newer recorder says)
+    pub state: Option<String>,
+    /// its status's level: 0 OK, 1 WARN (frames dropped), 2 ERROR (stopped)
+    pub level: Option<u8>,
+    /// its status's message
+    pub message: Option<String>,
+    /// the episode's task (recording), else the `task` parameter
+    pub task: Option<String>,
+    /// the episode being recorded (recording, saving), else the next one
+    pub episode: Option<u64>,
+    /// episodes saved in the dataset
+    pub episodes: Option<u64>,
+    /// frames of the episode in progress
+    pub frames: Option<u64>,
+    /// seconds since the episode started, when reported
+    pub elapsed_s: Option<f64>,
+    /// seconds since that report (the page adds it and its own time since)
+    pub age_s: Option<f64>,
+    /// frames dropped in the episode in progress
+    pub dropped: Option<u64>,
+    /// frames dropped since the recorder started
+    pub dropped_total: Option<u64>,
+    /// frames a second
+    pub fps: Option<f64>,
+    /// the dataset's folder
+    pub root: Option<String>,
+    /// the cameras' feature names, comma-separated
+    pub cameras: Option<String>,
+    /// the recorder's last episode action's outcome
+    pub last: Option<String>,
+    /// why recording stopped
+    pub reason: Option<String>,
+    /// the call in flight: start, save, discard
+    pub busy: Option<&'static str>,
+    /// Record works now
+    pub can_start: bool,
+    /// Save works now
+    pub can_save: bool,
+    /// Discard works now
+    pub can_discard: bool,
+    /// the last call's outcome
+    pub call: Option<RecordCallView>,
+}
+
+/// The outcome of the card's last call.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RecordCallView {
+    /// start, save, discard
+    pub op: &'static str,
+    /// the recorder did it
+    pub ok: bool,
+    /// its message, or why not (its refusal, a timeout)
+    pub text: String,
 }
 
 /// `{"t": "calibration", …}`: the wizard as the page shows it (the step list, the
@@ -469,6 +538,8 @@ pub struct Snapshot {
     pub urdf: Option<Arc<str>>,
     /// the latest `calibration` message (none: no wizard here)
     pub calibration: Option<Arc<ToClient>>,
+    /// the latest `recorder` message (the recording card)
+    pub recorder: Option<Arc<ToClient>>,
 }
 
 /// `{"t": "hello", …}`.
@@ -481,6 +552,7 @@ struct Hello<'a> {
     robot: &'a RobotInfo,
     program: &'a ToClient,
     calibration: Option<&'a ToClient>,
+    recorder: Option<&'a ToClient>,
     #[serde(flatten)]
     arm: &'a ArmFacts,
 }
@@ -495,6 +567,7 @@ impl Snapshot {
             robot: &self.robot,
             program: &self.program,
             calibration: self.calibration.as_deref(),
+            recorder: self.recorder.as_deref(),
             arm: &self.arm,
         })
         .unwrap_or_default()
@@ -709,8 +782,13 @@ mod tests {
             arm: Arc::new(ArmFacts::of(&arm)),
             urdf: None,
             calibration: None,
+            recorder: Some(Arc::new(ToClient::Recorder(Box::new(
+                crate::recording::RecordCard::new("recorder").view(std::time::Instant::now()),
+            )))),
         };
         let hello: serde_json::Value = serde_json::from_str(&snapshot.hello(50.0)).unwrap();
+        assert_eq!(hello["recorder"]["t"], "recorder");
+        assert_eq!(hello["recorder"]["up"], false);
         assert_eq!(hello["t"], "hello");
         assert_eq!(hello["rate"], 50.0);
         assert_eq!(hello["target"], json!([0.2, 0.0, 0.1]));
@@ -731,5 +809,47 @@ mod tests {
         );
         assert_eq!(hello["geometry"]["main_arm"], arm.geometry.main_arm_m);
         assert_eq!(hello["geometry"].as_object().unwrap().len(), 4);
+    }
+
+    /// The recording card's fields, as `web/panel.js`'s `showRecorder()` reads them.
+    #[test]
+    fn the_recording_card_is_the_message_the_page_reads() {
+        use crate::recording::{RecordCard, RecordDone, RecordOp};
+        use eezybot_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
+        let t0 = std::time::Instant::now();
+        let mut card = RecordCard::new("recorder");
+        let kv = |k: &str, v: &str| KeyValue {
+            key: k.into(),
+            value: v.into(),
+        };
+        card.on_status(
+            &DiagnosticStatus {
+                level: 0,
+                name: "recorder".into(),
+                message: "recording episode 3".into(),
+                hardware_id: "/d".into(),
+                values: vec![
+                    kv("state", "recording"),
+                    kv("episode", "3"),
+                    kv("elapsed_s", "1.5"),
+                ],
+            },
+            t0,
+        );
+        card.on_done(RecordDone {
+            op: RecordOp::Start,
+            result: Ok("recording episode 3: pick".into()),
+        });
+        let v = value(&ToClient::Recorder(Box::new(card.view(t0))));
+        assert_eq!(
+            v,
+            json!({"t": "recorder", "node": "recorder", "up": true, "note": null,
+                   "state": "recording", "level": 0, "message": "recording episode 3",
+                   "task": null, "episode": 3, "episodes": null, "frames": null,
+                   "elapsed_s": 1.5, "age_s": 0.0, "dropped": null, "dropped_total": null,
+                   "fps": null, "root": "/d", "cameras": null, "last": null, "reason": null,
+                   "busy": null, "can_start": false, "can_save": true, "can_discard": true,
+                   "call": {"op": "start", "ok": true, "text": "recording episode 3: pick"}})
+        );
     }
 }

@@ -8,6 +8,7 @@ use crate::desk::{Desk, DeskOutcome, FileDone, FileJob};
 use crate::message::{
     ArmFacts, ArmJointsMsg, NodeEntry, Pose, RobotInfo, Sent, Snapshot, ToClient, UrdfScene,
 };
+use crate::recording::{RecordCard, RecordDone, RecordWork};
 use crate::teleop::{xyz_topic, Command, Event, Teleop};
 use crate::web::{self, ClientRequest, WebStats};
 use crate::{Input, NodeNames};
@@ -81,6 +82,8 @@ pub enum Effect {
     /// The calibration wizard's work on ROS: take the arm from compute_ik, publish
     /// `servo_angles`, save and apply (then call [`Panel::on_calibration_done`]).
     Calibration(CalibrationWork),
+    /// A call on the recorder, off the loop (then call [`Panel::on_record_done`]).
+    Record(RecordWork),
 }
 
 /// What the calibration wizard needs done on ROS ([`crate::calibrate::Effect`]s the
@@ -379,6 +382,10 @@ pub struct Panel {
     calibration: Option<Arc<ToClient>>,
     /// the leader arm's latest joints and deadman, and when they were last sent
     leader: LeaderView,
+    /// the recording card
+    recorder: RecordCard,
+    /// its latest view
+    recorder_view: Arc<ToClient>,
 }
 
 /// A leader's deadman is shown only with joints heard this recently.
@@ -421,6 +428,10 @@ impl Panel {
             wizard: None,
             calibration: None,
             leader: LeaderView::default(),
+            recorder: RecordCard::new(NodeNames::RECORDER),
+            recorder_view: Arc::new(ToClient::Recorder(Box::new(
+                RecordCard::new(NodeNames::RECORDER).view(Instant::now()),
+            ))),
         }
     }
 
@@ -451,8 +462,39 @@ impl Panel {
 
     /// Find the graph's nodes by these names (the default: the contract's).
     pub fn with_node_names(mut self, names: NodeNames) -> Panel {
+        self.recorder = RecordCard::new(&names.recorder);
         self.health.names = names;
+        self.recorder_view = Arc::new(ToClient::Recorder(Box::new(
+            self.recorder.view(Instant::now()),
+        )));
         self
+    }
+
+    /// The recording card's view changed: to every browser, and to those that connect
+    /// later.
+    fn show_recorder(&mut self, now: Instant, effects: &mut Vec<Effect>) {
+        let view = Arc::new(ToClient::Recorder(Box::new(self.recorder.view(now))));
+        effects.push(Effect::Broadcast((*view).clone()));
+        self.recorder_view = view;
+        self.changed = true;
+    }
+
+    /// A call on the recorder ended ([`Effect::Record`]).
+    pub fn on_record_done(&mut self, done: RecordDone, clock: Clock) -> Vec<Effect> {
+        let mut effects = vec![];
+        let level = if done.result.is_ok() {
+            log::Level::Info
+        } else {
+            log::Level::Warn
+        };
+        let text = match &done.result {
+            Ok(t) => format!("record: {} done: {t}", done.op.name()),
+            Err(e) => format!("record: {} failed: {e}", done.op.name()),
+        };
+        effects.push(Effect::Log(level, text));
+        self.recorder.on_done(done);
+        self.show_recorder(clock.now, &mut effects);
+        self.finish(effects)
     }
 
     /// The last panel client left: a calibration it was running is cancelled, so the
@@ -555,6 +597,7 @@ impl Panel {
             arm: self.arm_facts.clone(),
             urdf: self.urdf.as_ref().map(|(text, _)| text.clone()),
             calibration: self.calibration.clone(),
+            recorder: Some(self.recorder_view.clone()),
         }
     }
 
@@ -631,6 +674,9 @@ impl Panel {
     /// timeouts.
     pub fn on_status_tick(&mut self, clock: Clock) -> Vec<Effect> {
         let mut effects = vec![Effect::Broadcast(self.health.status(clock.now))];
+        if self.recorder.up_changed(clock.now) {
+            self.show_recorder(clock.now, &mut effects);
+        }
         if let Some(w) = self.wizard.as_mut() {
             let fx = w.on_tick(clock.now);
             self.calibration_effects(fx, clock, &mut effects);
@@ -662,6 +708,22 @@ impl Panel {
             }
             ClientRequest::Calibrate(op) => {
                 self.calibrate(op.into_op(), clock, &mut effects);
+                return self.finish(effects);
+            }
+            ClientRequest::Record(r) => {
+                // no motion: taken while calibrating too
+                let (op, task) = r.op();
+                match self.recorder.request(op, task, clock.now) {
+                    Ok(work) => {
+                        effects.push(Effect::Log(
+                            log::Level::Info,
+                            format!("record: {} asked of {}", op.name(), self.recorder.node()),
+                        ));
+                        effects.push(Effect::Record(work));
+                        self.show_recorder(clock.now, &mut effects);
+                    }
+                    Err(reason) => refuse(&mut effects, "record", reason, None),
+                }
                 return self.finish(effects);
             }
             ClientRequest::Estop { on } => Event::Estop { engaged: on },
@@ -757,6 +819,14 @@ impl Panel {
             }
             Input::RobotDescription(text) => self.robot_description(text, &mut effects),
             Input::Diagnostics(d) => {
+                let recorder = d
+                    .status
+                    .iter()
+                    .filter(|s| self.recorder.on_status(s, clock.now))
+                    .count();
+                if recorder > 0 {
+                    self.show_recorder(clock.now, &mut effects);
+                }
                 let heard = feedback::decode(&d);
                 self.health.update(&heard, clock.now);
                 if let (Some(w), Some(counts)) = (self.wizard.as_mut(), leader_counts(&d)) {
@@ -1206,6 +1276,7 @@ mod tests {
         h.names = NodeNames {
             ik: "ik2".into(),
             servos: vec!["arm_link".into()],
+            ..NodeNames::default()
         };
         h.update(
             &array(&[

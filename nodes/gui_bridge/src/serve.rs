@@ -76,6 +76,12 @@ pub async fn serve(
         &params.string("calibration_file").unwrap_or_default(),
         &arm_config,
     );
+    // the recorder's clients now, so that they are matched before a button is pressed
+    let recorder = crate::recorder_ros::RosRecorder::new(node, &names.recorder);
+    log::info!(
+        "the recording card works with the recorder node `{}`",
+        names.recorder
+    );
     // what a browser that connects gets first: the bridge loop keeps it current
     let (snapshot, view) = tokio::sync::watch::channel(panel.snapshot());
     // from here on shared with the Foxglove server, which subscribes topics on demand
@@ -171,6 +177,7 @@ pub async fn serve(
             params,
             reporting,
             calibration: &calibration,
+            recorder: &recorder,
             shutdown,
         },
     );

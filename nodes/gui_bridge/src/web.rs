@@ -122,6 +122,36 @@ pub enum ClientRequest {
     Program(ProgramOp),
     /// The calibration wizard (`{"t": "calibrate", "op": …}`).
     Calibrate(CalibrateOp),
+    /// The recording card (`{"t": "record", "op": "start", "task": …}`, `save`,
+    /// `discard`): calls on the recorder node.
+    Record(RecordRequest),
+}
+
+/// What a browser asks of the recorder ([`crate::recording::RecordOp`]).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "op", rename_all = "snake_case")]
+pub enum RecordRequest {
+    /// Set the recorder's `task` parameter to `task`, then start an episode.
+    Start {
+        /// the task field's text
+        task: String,
+    },
+    /// Save the episode.
+    Save,
+    /// Discard the episode.
+    Discard,
+}
+
+impl RecordRequest {
+    /// The call and the task text of a start.
+    pub fn op(&self) -> (crate::recording::RecordOp, Option<&str>) {
+        use crate::recording::RecordOp;
+        match self {
+            RecordRequest::Start { task } => (RecordOp::Start, Some(task)),
+            RecordRequest::Save => (RecordOp::Save, None),
+            RecordRequest::Discard => (RecordOp::Discard, None),
+        }
+    }
 }
 
 /// What a browser asks of the calibration wizard ([`crate::calibrate::Op`]).

@@ -74,6 +74,7 @@ fn handles<'a, I, O, S>(
             counts: Vec::new,
         },
         calibration: &gui_bridge::NoCalibration,
+        recorder: &gui_bridge::NoRecorder,
         shutdown,
     }
 }

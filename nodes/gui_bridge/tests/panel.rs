@@ -376,3 +376,135 @@ fn an_unusable_robot_description_is_logged_and_changes_nothing() {
     );
     assert!(told(&e, false)[0]["reachable"].is_null());
 }
+
+/// A `diagnostics` report of the recorder's (a status named `name`) in `state`.
+fn recorder_report(name: &str, state: &str, episodes: u64) -> Input {
+    use eezybot_msgs::diagnostic_msgs::KeyValue;
+    let kv = |k: &str, v: String| KeyValue {
+        key: k.into(),
+        value: v,
+    };
+    Input::Diagnostics(DiagnosticArray {
+        header: Header::default(),
+        status: vec![DiagnosticStatus {
+            level: 0,
+            name: name.into(),
+            message: format!("{state}, {episodes} episodes"),
+            hardware_id: "/tmp/ds".into(),
+            values: vec![
+                kv("state", state.into()),
+                kv("episodes", episodes.to_string()),
+                kv("episode", episodes.to_string()),
+                kv("elapsed_s", "0.0".into()),
+            ],
+        }],
+    })
+}
+
+fn record(op: &str, task: Option<&str>) -> ClientRequest {
+    let mut m = serde_json::json!({"t": "record", "op": op});
+    if let Some(t) = task {
+        m["task"] = t.into();
+    }
+    serde_json::from_value(m).unwrap()
+}
+
+fn record_work(effects: &[Effect]) -> Vec<gui_bridge::recording::RecordWork> {
+    effects
+        .iter()
+        .filter_map(|e| match e {
+            Effect::Record(w) => Some(w.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn the_recording_card_calls_the_recorder_named_by_recorder_node_once_it_reports() {
+    use gui_bridge::recording::{RecordDone, RecordOp, RecordWork};
+    let mut p = panel("record").with_node_names(gui_bridge::NodeNames {
+        recorder: "rec2".into(),
+        ..Default::default()
+    });
+    let t0 = Instant::now();
+    // a browser that connects first: the card, saying no recorder runs
+    let hello: Value = serde_json::from_str(&p.snapshot().hello(50.0)).unwrap();
+    assert_eq!(hello["recorder"]["node"], "rec2");
+    assert_eq!(hello["recorder"]["up"], false);
+    assert_eq!(hello["recorder"]["can_start"], false);
+    // no recorder: refused, counted, nothing called
+    let e = p.on_request(record("start", Some("pick")), at(t0, 0));
+    assert!(record_work(&e).is_empty());
+    let answer = told(&e, false);
+    assert_eq!(answer[0]["t"], "refused");
+    assert!(answer[0]["reason"]
+        .as_str()
+        .unwrap()
+        .contains("no recorder running"));
+    assert!(e
+        .iter()
+        .any(|e| matches!(e, Effect::Rejected { kind: "record", .. })));
+    // a recorder of another name changes nothing; rec2's report shows on every page
+    let e = p.on_input(recorder_report("recorder", "idle", 0), at(t0, 10));
+    assert!(of_kind(&told(&e, true), "recorder").is_empty());
+    let e = p.on_input(recorder_report("rec2", "idle", 4), at(t0, 20));
+    let card = told(&e, true);
+    let card = of_kind(&card, "recorder")[0].clone();
+    assert_eq!(
+        (card["up"].clone(), card["episodes"].clone()),
+        (true.into(), 4.into())
+    );
+    assert_eq!(card["can_start"], true);
+    // start: the task set, then start_episode, off the loop; one call at a time
+    let e = p.on_request(record("start", Some(" pick the cube ")), at(t0, 30));
+    assert_eq!(
+        record_work(&e),
+        [RecordWork::Start {
+            task: "pick the cube".into()
+        }]
+    );
+    assert_eq!(of_kind(&told(&e, true), "recorder")[0]["busy"], "start");
+    let e = p.on_request(record("save", None), at(t0, 40));
+    assert!(record_work(&e).is_empty());
+    assert_eq!(told(&e, false)[0]["t"], "refused");
+    let e = p.on_record_done(
+        RecordDone {
+            op: RecordOp::Start,
+            result: Ok("recording episode 4: pick the cube".into()),
+        },
+        at(t0, 50),
+    );
+    let card = told(&e, true);
+    let card = of_kind(&card, "recorder")[0].clone();
+    assert_eq!(card["call"]["ok"], true);
+    assert_eq!(card["call"]["text"], "recording episode 4: pick the cube");
+    // what a browser that connects now gets
+    assert!(e.iter().any(|e| matches!(e, Effect::Snapshot(_))));
+    let e = p.on_input(recorder_report("rec2", "recording", 4), at(t0, 60));
+    let card = told(&e, true);
+    assert_eq!(of_kind(&card, "recorder")[0]["can_save"], true);
+    // the teleop goes on meanwhile (the call never holds the loop)
+    let e = p.on_request(target([0.2, 0.0, 0.15]), at(t0, 70));
+    assert_eq!(told(&e, false)[0]["t"], "ack");
+    assert_eq!(
+        record_work(&p.on_request(record("save", None), at(t0, 80))),
+        [RecordWork::Save]
+    );
+    // the recorder silent: the card says so on the next status tick, and refuses
+    let e = p.on_record_done(
+        RecordDone {
+            op: RecordOp::Save,
+            result: Err("no answer from /rec2/save_episode within 30 s".into()),
+        },
+        at(t0, 90),
+    );
+    assert_eq!(of_kind(&told(&e, true), "recorder")[0]["call"]["ok"], false);
+    let e = p.on_status_tick(at(t0, 6000));
+    let card = told(&e, true);
+    let card = of_kind(&card, "recorder")[0].clone();
+    assert_eq!(
+        (card["up"].clone(), card["can_save"].clone()),
+        (false.into(), false.into())
+    );
+    assert!(card["note"].as_str().unwrap().contains("not reporting"));
+}

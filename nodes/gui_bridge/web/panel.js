@@ -87,17 +87,20 @@ function handle(m) {
       if (m.program) showProgram(m.program);
       if (m.calibration) showCalibration(m.calibration);
       if (m.leader) showLeader(m.leader);
+      if (m.recorder) showRecorder(m.recorder);
       break;
     case "robot": applyRobot(m.robot); break;
     case "ack": reachable = true; target = m.target; showReach(true, ""); if (mode === "xyz") setSliders(target, true); break;
     case "refused":
       if (calRefusedNow()) { calRefusal = m.reason; renderCalibration(); break; }
+      if (recRefusedNow()) { recRefusal = m.reason; recSentAt = -1e9; renderRecorder(); break; }
       reachable = false; showReach(false, m.reason); break;
     case "check": showReach(m.reachable, m.reason || ""); break;
     case "pose": pose = m; draw(); showPose(m); posed3d(m); break;
     case "program": showProgram(m); break;
     case "calibration": showCalibration(m); break;
     case "leader": showLeader(m); break;
+    case "recorder": showRecorder(m); break;
     case "status": showStatus(m); break;
     case "latency": $("latency").textContent = m.ms.toFixed(1) + " ms (median " + m.median_ms.toFixed(1) + ")"; break;
     case "estop": setEstop(m.on); break;
@@ -197,6 +200,7 @@ $("release").onclick = () => { send({ t: "estop", on: false }); setEstop(false);
 const KEYS = { w: [1, 0, 0], arrowup: [1, 0, 0], s: [-1, 0, 0], arrowdown: [-1, 0, 0], a: [0, 1, 0], arrowleft: [0, 1, 0], d: [0, -1, 0], arrowright: [0, -1, 0], q: [0, 0, 1], e: [0, 0, -1] };
 document.addEventListener("keydown", (ev) => {
   if (ev.target.tagName === "INPUT" && ev.target.type === "number") return;
+  if (ev.target.id === "rec-task") { if (ev.key === "Enter") $("rec-start").click(); return; } // typing, not jogging
   const key = ev.key.toLowerCase();
   if (key === " ") { ev.preventDefault(); $("estop").click(); return; }
   if (calKey(ev)) return;
@@ -767,3 +771,77 @@ function showLeader(m) {
 
 connect();
 draw();
+
+// The recording card: the recorder node as gui_bridge reports it (`recorder` messages:
+// its diagnostics, the call in flight, the last call's outcome, which buttons work). The
+// elapsed time ticks here between the recorder's reports (2 a second while recording).
+let rec = null, recAt = 0, recSentAt = -1e9, recRefusal = null, recTaskEdited = false;
+const recRefusedNow = () => performance.now() - recSentAt < 2000;
+function showRecorder(m) {
+  rec = m; recAt = performance.now();
+  renderRecorder();
+}
+function recSend(op, extra) {
+  recRefusal = null; recSentAt = performance.now();
+  send(Object.assign({ t: "record", op }, extra || {}));
+  renderRecorder();
+}
+$("rec-task").addEventListener("input", () => { recTaskEdited = true; });
+$("rec-start").onclick = () => { if (rec && rec.can_start) recSend("start", { task: $("rec-task").value }); };
+$("rec-save").onclick = () => { if (rec && rec.can_save) recSend("save"); };
+$("rec-discard").onclick = () => { if (rec && rec.can_discard && confirm("Discard this episode?")) recSend("discard"); };
+// seconds since the episode started: the last report's, plus how old it was when sent, plus the time since
+function recElapsed() {
+  if (!rec || typeof rec.elapsed_s !== "number") return null;
+  if (rec.state !== "recording") return rec.elapsed_s;
+  return rec.elapsed_s + (rec.age_s || 0) + (performance.now() - recAt) / 1000;
+}
+function clock(s) {
+  if (s === null) return "–";
+  const m = Math.floor(s / 60);
+  return m + ":" + (s - 60 * m).toFixed(1).padStart(4, "0");
+}
+const recNum = (v) => (typeof v === "number" ? String(v) : "–");
+function renderRecorder() {
+  const m = rec, state = m && m.state, up = !!(m && m.up);
+  const recording = up && state === "recording", saving = up && state === "saving";
+  const stateEl = $("rec-state");
+  stateEl.textContent = !m || !up ? (m && m.state ? "not reporting" : "no recorder") : m.busy ? m.busy + "…" : state;
+  stateEl.className = "rec-state " + (!up ? "" : m.level === 1 && state !== "stopped" ? "warn " + state : state);
+  $("rec-note").textContent = (m && m.note) || "";
+  const task = $("rec-task");
+  task.disabled = !(m && m.can_start);
+  if (m && m.task && (!recTaskEdited || recording) && document.activeElement !== task) task.value = m.task;
+  $("rec-start").disabled = !(m && m.can_start);
+  $("rec-save").disabled = !(m && m.can_save);
+  $("rec-discard").disabled = !(m && m.can_discard);
+  $("rec-start").textContent = m && m.busy === "start" ? "● starting…" : "● Record";
+  $("rec-save").textContent = m && m.busy === "save" ? "saving…" : "Save";
+  $("rec-episodes").textContent = recNum(m && m.episodes);
+  $("rec-episode").textContent = recNum(m && m.episode);
+  $("rec-frames").textContent = recNum(m && m.frames);
+  const dropped = m && typeof m.dropped === "number" ? m.dropped : null;
+  $("rec-dropped").textContent = dropped === null ? "–" : dropped + (typeof m.dropped_total === "number" ? " (" + m.dropped_total + " in all)" : "");
+  $("rec-dropped").className = dropped ? "bad" : "";
+  const call = $("rec-call");
+  if (recRefusal) { call.textContent = recRefusal; call.className = "bad"; }
+  else if (m && m.call) { call.textContent = m.call.op + ": " + m.call.text; call.className = m.call.ok ? "ok" : "bad"; }
+  else { call.textContent = ""; call.className = ""; }
+  $("rec-reason").textContent = m && m.reason ? "stopped: " + m.reason : "";
+  $("rec-message").textContent = m && m.message ? m.message + (m.last ? " · last: " + m.last : "") : "";
+  $("rec-root").textContent = m && m.root ? "dataset " + m.root + (m.cameras ? " · cameras " + m.cameras : "") + (m.fps ? " · " + m.fps + " fps" : "") : "";
+  document.body.classList.toggle("recording", recording);
+  $("rec-banner").hidden = !(recording || saving);
+  $("rec-banner").className = saving ? "saving" : "";
+  tickRecorder();
+}
+function tickRecorder() {
+  if (!rec) return;
+  const e = clock(recElapsed());
+  $("rec-elapsed").textContent = e;
+  if (rec.up && (rec.state === "recording" || rec.state === "saving")) {
+    $("rec-banner-text").textContent = (rec.state === "saving" ? "saving episode " : "REC episode ") + recNum(rec.episode) + " · " + e + (rec.task ? " · " + rec.task : "");
+  }
+}
+setInterval(tickRecorder, 100);
+renderRecorder();
