@@ -365,7 +365,7 @@ impl RecordCard {
             ))
         } else {
             Some(format!(
-                "no recorder running: start the node `{}` (`recorder`, see the README's Recording demonstrations)",
+                "no recorder running: nothing heard from the node `{}` (README: Recording demonstrations)",
                 self.node
             ))
         };
