@@ -23,7 +23,6 @@ pub mod security;
 pub mod service;
 pub mod sros2;
 pub mod topics;
-pub mod trigger;
 mod value;
 
 pub use error::PlumbingError;

@@ -101,7 +101,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new(
                 "recorder_node",
                 ParameterValue::String(NodeNames::RECORDER.into()),
-                "the recorder node, by name (as `-r __node:=` named it): the panel's recording card shows its diagnostics, sets its task parameter and calls its services (NAME/start_episode, NAME/save_episode, NAME/discard_episode)",
+                "the recorder node, by name (as `-r __node:=` named it): the panel's recording card shows its diagnostics, sets its task parameter and calls its episode services (recorder/start_episode, save_episode, discard_episode, in its namespace)",
             )
             .read_only()
             .validator(|v| match v {

@@ -108,7 +108,7 @@ pub struct RecordView {
     pub up: bool,
     /// why the buttons are off: no recorder heard, or not any more
     pub note: Option<String>,
-    /// idle, recording, saving, stopped (or what a newer recorder says)
+    /// waiting, idle, recording, saving, stopped (or what a newer recorder says)
     pub state: Option<String>,
     /// its status's level: 0 OK, 1 WARN (frames dropped), 2 ERROR (stopped)
     pub level: Option<u8>,
@@ -138,7 +138,7 @@ pub struct RecordView {
     pub cameras: Option<String>,
     /// the recorder's last episode action's outcome
     pub last: Option<String>,
-    /// why recording stopped
+    /// why recording stopped, or what it waits for
     pub reason: Option<String>,
     /// the call in flight: start, save, discard
     pub busy: Option<&'static str>,

@@ -1,15 +1,17 @@
-//! The recording card's ROS side ([`crate::RecorderControl`]): the recorder node's
-//! `task` parameter set through its parameter services, and its Trigger services
-//! `<recorder>/start_episode`, `save_episode`, `discard_episode` called, by the node's
-//! name (`recorder_node`). The clients are made when the panel starts, so that they are
-//! matched long before a button is pressed (a request sent before would be lost, and
-//! end as a call without an answer). Every call is bounded in time.
+//! The Record card's ROS side ([`crate::RecorderControl`]): the recorder node's `task`
+//! parameter set through its parameter services, and its episode services
+//! (`recorder/start_episode`, `save_episode`, `discard_episode`, std_srvs Trigger, in the
+//! recorder node's namespace) called through [`EpisodeClient`], for the node the
+//! `recorder_node` parameter names. The clients are made when the panel starts, so that
+//! they are matched long before a button is pressed (the panel never waits for a match
+//! with the node borrowed: the Foxglove server borrows it too; a request sent before a
+//! match is lost, and ends as a call without an answer). Every call is bounded in time.
 
 use crate::recording::{RecordOp, RecordWork};
 use crate::RecorderControl;
 use futures::future::LocalBoxFuture;
+use ros_plumbing::episodes::{EpisodeCall, EpisodeClient};
 use ros_plumbing::remote_params::RemoteParameters;
-use ros_plumbing::trigger::TriggerClient;
 use ros_plumbing::{ParameterValue, RosNode};
 use std::time::Duration;
 
@@ -28,12 +30,19 @@ pub fn timeout(op: RecordOp) -> Duration {
     }
 }
 
+/// The service of `op`.
+pub fn call_of(op: RecordOp) -> EpisodeCall {
+    match op {
+        RecordOp::Start => EpisodeCall::Start,
+        RecordOp::Save => EpisodeCall::Save,
+        RecordOp::Discard => EpisodeCall::Discard,
+    }
+}
+
 /// The clients of one recorder node.
 pub struct RosRecorder {
-    node: String,
     params: Result<RemoteParameters, String>,
-    /// start, save, discard
-    services: [Result<TriggerClient, String>; 3],
+    episodes: Result<EpisodeClient, String>,
 }
 
 impl RosRecorder {
@@ -42,30 +51,15 @@ impl RosRecorder {
     pub fn new(ros: &mut RosNode, recorder: &str) -> RosRecorder {
         let params = RemoteParameters::new(ros, recorder)
             .map_err(|e| format!("no parameter client for {recorder}: {e}"));
-        let services = [RecordOp::Start, RecordOp::Save, RecordOp::Discard].map(|op| {
-            let name = format!("{recorder}/{}", op.service());
-            TriggerClient::new(ros, &name).map_err(|e| format!("no client of {name}: {e}"))
-        });
-        for e in services.iter().filter_map(|s| s.as_ref().err()) {
+        let episodes = EpisodeClient::new(ros, recorder)
+            .map_err(|e| format!("no client of {recorder}'s episode services: {e}"));
+        for e in [params.as_ref().err(), episodes.as_ref().err()]
+            .into_iter()
+            .flatten()
+        {
             log::warn!("record: {e}");
         }
-        if let Err(e) = &params {
-            log::warn!("record: {e}");
-        }
-        RosRecorder {
-            node: recorder.to_string(),
-            params,
-            services,
-        }
-    }
-
-    fn service(&self, op: RecordOp) -> Result<&TriggerClient, String> {
-        let i = match op {
-            RecordOp::Start => 0,
-            RecordOp::Save => 1,
-            RecordOp::Discard => 2,
-        };
-        self.services[i].as_ref().map_err(Clone::clone)
+        RosRecorder { params, episodes }
     }
 
     async fn set_task(&self, task: &str) -> Result<(), String> {
@@ -85,13 +79,17 @@ impl RosRecorder {
 impl RecorderControl for RosRecorder {
     fn call(&self, work: RecordWork) -> LocalBoxFuture<'_, Result<String, String>> {
         Box::pin(async move {
+            let episodes = self.episodes.as_ref().map_err(Clone::clone)?;
             let op = work.op();
             if let RecordWork::Start { task } = &work {
                 self.set_task(task).await?;
             }
-            let service = self.service(op)?;
-            log::debug!("record: calling {} ({})", service.name(), self.node);
-            service.call(timeout(op)).await
+            let answer = episodes.call(call_of(op), timeout(op)).await?;
+            if answer.success {
+                Ok(answer.message)
+            } else {
+                Err(answer.message)
+            }
         })
     }
 }

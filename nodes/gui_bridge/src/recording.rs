@@ -21,6 +21,9 @@ const TEXT_MAX: usize = 300;
 /// What the recorder does, from its status's `state`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum RecState {
+    /// the dataset is not open yet: waiting for the first image of each camera
+    /// (`reason` says which)
+    Waiting,
     /// no episode
     Idle,
     /// an episode runs
@@ -36,6 +39,7 @@ pub enum RecState {
 impl RecState {
     fn parse(s: &str) -> RecState {
         match s {
+            "waiting" => RecState::Waiting,
             "idle" => RecState::Idle,
             "recording" => RecState::Recording,
             "saving" => RecState::Saving,
@@ -47,6 +51,7 @@ impl RecState {
     /// As the recorder writes it.
     pub fn as_str(&self) -> &str {
         match self {
+            RecState::Waiting => "waiting",
             RecState::Idle => "idle",
             RecState::Recording => "recording",
             RecState::Saving => "saving",
@@ -88,7 +93,7 @@ pub struct RecorderReport {
     pub cameras: Option<String>,
     /// the last episode action's outcome line
     pub last: Option<String>,
-    /// why recording stopped
+    /// why recording stopped (or what it waits for)
     pub reason: Option<String>,
 }
 
@@ -312,6 +317,7 @@ impl RecordCard {
         }
         let why = match &state {
             RecState::Stopped => "recording is stopped (see the reason)".to_string(),
+            RecState::Waiting => "the recorder waits for its inputs (see the reason)".into(),
             RecState::Recording => "an episode is being recorded: save or discard it first".into(),
             RecState::Saving => "an episode is being saved".into(),
             RecState::Idle => "no episode is being recorded".into(),
@@ -532,6 +538,7 @@ mod tests {
         assert!(!v.up && v.note.unwrap().contains("no recorder running"));
         assert!(v.state.is_none());
         for (state, expected) in [
+            ("waiting", (false, false, false)),
             ("idle", (true, false, false)),
             ("recording", (false, true, true)),
             ("saving", (false, false, false)),

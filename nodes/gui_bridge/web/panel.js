@@ -827,7 +827,7 @@ function renderRecorder() {
   if (recRefusal) { call.textContent = recRefusal; call.className = "bad"; }
   else if (m && m.call) { call.textContent = m.call.op + ": " + m.call.text; call.className = m.call.ok ? "ok" : "bad"; }
   else { call.textContent = ""; call.className = ""; }
-  $("rec-reason").textContent = m && m.reason ? "stopped: " + m.reason : "";
+  $("rec-reason").textContent = m && m.reason ? (state === "waiting" ? "waiting: " : "stopped: ") + m.reason : "";
   $("rec-message").textContent = m && m.message ? m.message + (m.last ? " · last: " + m.last : "") : "";
   $("rec-root").textContent = m && m.root ? "dataset " + m.root + (m.cameras ? " · cameras " + m.cameras : "") + (m.fps ? " · " + m.fps + " fps" : "") : "";
   document.body.classList.toggle("recording", recording);
