@@ -259,7 +259,8 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
     assert covered == set(TOPICS)
     callables = [(f"{a}/_action/{s}", c) for a, c in ACTIONS.items() for s in ("send_goal", "cancel_goal", "get_result")]
     callables += list(SERVICES.items())
-    assert len(callables) == 3 * 2 + 2, callables  # two actions (the controllers'), the controller manager's two
+    # two actions (the controllers'), the controller manager's two services, the recorder's three
+    assert len(callables) == 3 * 2 + 2 + 3, callables
     for name, c in callables:
         for e, g in grants.items():
             serves = any(runs_in(r, nodes[e]) for r in c["servers"])
@@ -283,6 +284,12 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
         assert {"rt/leader/joint_states", "rt/leader/deadman"} <= g["publish"], e  # a leader's reader on either
         assert g["publish"] | g["subscribe"] <= contract | services | graph | actions, e
     pc = grants["/eezybot/pc"]
+    # the recorder's episode services: served by the recorder, called by gui_bridge's Record card (issue 34)
+    for s in ("start_episode", "save_episode", "discard_episode"):
+        assert {f"rq/recorder/{s}Request", f"rr/recorder/{s}Reply"} <= pc["subscribe"] | pc["publish"]
+        assert f"rq/recorder/{s}Request" in pc["publish"] and f"rq/recorder/{s}Request" in pc["subscribe"]
+    assert "rq/recorder/set_parametersRequest" in pc["publish"]  # the card sets the recorder's task
+    assert "rq/recorder/set_parametersRequest" not in grants["/eezybot/pi"]["publish"]
     assert "rq/compute_ik/set_parametersRequest" in pc["publish"]
     assert "rr/compute_ik/set_parametersReply" in pc["subscribe"]
     # the calibration wizard applies a saved calibration: serial_node's arm_config

@@ -95,7 +95,8 @@ pub enum Sros2Error {
 /// The highest ROS domain id (rcl's limit for the default port mapping).
 pub const MAX_DOMAIN_ID: u32 = 232;
 
-/// The nodes of the operator's PC (`launch_scripts/pc.sh`).
+/// The nodes of the operator's PC (`launch_scripts/pc.sh`; the recorder beside them,
+/// where the datasets are kept).
 pub const PC_NODES: &[&str] = &["gui_bridge", "compute_ik", "state_publisher", "recorder"];
 /// The nodes of the Raspberry Pi (`launch_scripts/pi.sh`; camera_node is in its bundle,
 /// for a camera on the arm).
@@ -118,8 +119,9 @@ pub const PARAMETER_SERVICES: &[&str] = &[
 
 /// Which node calls which other node's parameter services
 /// ([`crate::remote_params::RemoteParameters`]): gui_bridge reads and sets compute_ik's
-/// parameters from the web panel, and its calibration wizard sets, on saving,
-/// `arm_config` on compute_ik and serial_node.
+/// parameters from the web panel, its calibration wizard sets, on saving,
+/// `arm_config` on compute_ik and serial_node, and its Record card sets the recorder's
+/// `task` ([`crate::episodes::EpisodeClient`], as the recorder's command line does).
 pub const REMOTE_PARAMETER_CALLS: &[(&str, &str, &[&str])] = &[
     (
         "gui_bridge",
@@ -129,6 +131,11 @@ pub const REMOTE_PARAMETER_CALLS: &[(&str, &str, &[&str])] = &[
     (
         "gui_bridge",
         "serial_node",
+        &["get_parameters", "set_parameters"],
+    ),
+    (
+        "gui_bridge",
+        "recorder",
         &["get_parameters", "set_parameters"],
     ),
 ];
@@ -143,7 +150,7 @@ pub const GRAPH_SUBSCRIBE: &[&str] = &["ros_discovery_info", "rt/parameter_event
 /// What an enclave is for: it decides what its permissions allow.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Role {
-    /// The operator's PC: what gui_bridge, compute_ik and state_publisher use.
+    /// The operator's PC: what gui_bridge, compute_ik, state_publisher and the recorder use.
     Pc,
     /// The Raspberry Pi: what serial_node uses.
     Pi,
@@ -975,6 +982,47 @@ mod tests {
         }
         assert!(governance_xml(Domains::Id(3)).contains("<id>3</id>"));
         assert!(!xml.contains("NONE"));
+    }
+
+    #[test]
+    fn the_recorder_and_the_panel_s_record_card_are_granted_what_they_use() {
+        for ns in ["/", "/arm2"] {
+            let pc = rules(PC_NODES, ns).unwrap();
+            let pi = rules(PI_NODES, ns).unwrap();
+            let at = |s: &str| in_namespace(ns, s);
+            for t in [
+                "servo_state",
+                "joint_states",
+                "leader/joint_states",
+                "leader/deadman",
+                "camera/image_raw/compressed",
+            ] {
+                assert!(pc.subscribe.contains(&format!("rt/{}", at(t))), "{ns} {t}");
+            }
+            assert!(pc.publish.contains(&format!("rt/{}", at("diagnostics"))));
+            for s in ["start_episode", "save_episode", "discard_episode"] {
+                let request = format!("rq/{}Request", at(&format!("recorder/{s}")));
+                let reply = format!("rr/{}Reply", at(&format!("recorder/{s}")));
+                // the recorder's server and gui_bridge's client, in one enclave
+                assert!(
+                    pc.subscribe.contains(&request) && pc.publish.contains(&reply),
+                    "{s}"
+                );
+                assert!(
+                    pc.publish.contains(&request) && pc.subscribe.contains(&reply),
+                    "{s}"
+                );
+                assert!(!pi.publish.contains(&request) && !pi.subscribe.contains(&request));
+            }
+            for srv in PARAMETER_SERVICES {
+                let request = format!("rq/{}/{srv}Request", at("recorder"));
+                assert!(pc.subscribe.contains(&request), "{srv}");
+            }
+            // the Record card sets the recorder's task
+            let set = format!("rq/{}/set_parametersRequest", at("recorder"));
+            assert!(pc.publish.contains(&set));
+            assert!(!pi.publish.contains(&set));
+        }
     }
 
     #[test]
