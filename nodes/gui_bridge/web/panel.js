@@ -817,6 +817,7 @@ function renderRecorder() {
   $("rec-discard").disabled = !(m && m.can_discard);
   $("rec-start").textContent = m && m.busy === "start" ? "● starting…" : "● Record";
   $("rec-save").textContent = m && m.busy === "save" ? "saving…" : "Save";
+  document.querySelector("#record .rec-facts").hidden = !(m && m.state); // nothing heard yet: nothing to count
   $("rec-episodes").textContent = recNum(m && m.episodes);
   $("rec-episode").textContent = recNum(m && m.episode);
   $("rec-frames").textContent = recNum(m && m.frames);
