@@ -128,6 +128,7 @@
 //! (14 hours at 30 fps), so a save writes at most that.
 
 pub mod json;
+pub mod read;
 pub mod stats;
 pub mod tables;
 pub mod video;
