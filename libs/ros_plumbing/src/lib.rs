@@ -2,6 +2,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod action;
+pub mod action_client;
 pub mod args;
 pub mod burst;
 pub mod controller_manager;
