@@ -47,6 +47,39 @@ pub enum Command {
         #[arg(long, default_value = "recorder")]
         node: String,
     },
+    /// Play a recorded episode's `action` back through compute_ik: the arm as one
+    /// arm_controller/follow_joint_trajectory goal (a point per frame, after a lead-in
+    /// from where the arm is), the claw as gripper_target openings at their frames'
+    /// times. Exits 0 when the goal succeeded, 1 when it was rejected, aborted or
+    /// canceled (Ctrl-C cancels it).
+    Replay {
+        /// The dataset folder (default: the recorder's, $XDG_DATA_HOME/eezybot/datasets/eezybot_mk2).
+        #[arg(long)]
+        root: Option<std::path::PathBuf>,
+        /// The episode's index (0 is the first).
+        #[arg(long)]
+        episode: u64,
+        /// compute_ik's node name (the action is in its namespace).
+        #[arg(long, default_value = "compute_ik")]
+        node: String,
+        /// Playback speed: 2 is twice as fast (compute_ik refuses a replay its servos
+        /// cannot follow, naming the joint and limit: try a lower speed).
+        #[arg(long, default_value_t = 1.0, value_parser = speed)]
+        speed: f64,
+        /// The arm config whose geometry's gripper_open_rad turns gripper_joint (rad)
+        /// into the claw's opening (default: the shipped config/arm.yaml).
+        #[arg(long, default_value = "")]
+        arm_config: String,
+    },
+}
+
+fn speed(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 10.0 => Ok(v),
+        _ => Err(format!(
+            "{s} is not a speed between 0 and 10 (1 = as recorded)"
+        )),
+    }
 }
 
 /// Parse our arguments (without argv\[0\]; ROS arguments after `--ros-args` are left
@@ -69,8 +102,9 @@ pub fn parse(argv: &[String]) -> Result<Option<Command>, clap::Error> {
 }
 
 fn is_command(user: &[String]) -> bool {
-    user.first()
-        .is_some_and(|a| ["start-episode", "save-episode", "discard-episode"].contains(&a.as_str()))
+    user.first().is_some_and(|a| {
+        ["start-episode", "save-episode", "discard-episode", "replay"].contains(&a.as_str())
+    })
 }
 
 /// Run `command` against the recorder, printing its answer; an answer of "not done" is
@@ -88,12 +122,28 @@ pub async fn run(command: Command, argv: Vec<String>) -> anyhow::Result<()> {
         Some(i) => argv[i..].to_vec(),
         None => vec![],
     };
-    let mut ros = RosNode::start_with(&spec, ros_args, domain.as_deref())?;
     let (call, node, task) = match &command {
         Command::StartEpisode { task, node } => (EpisodeCall::Start, node, task.clone()),
         Command::SaveEpisode { node } => (EpisodeCall::Save, node, None),
         Command::DiscardEpisode { node } => (EpisodeCall::Discard, node, None),
+        Command::Replay {
+            root,
+            episode,
+            node,
+            speed,
+            arm_config,
+        } => {
+            let request = crate::replay::Request {
+                root: root.clone().unwrap_or_else(crate::default_root),
+                episode: *episode,
+                node: node.clone(),
+                speed: *speed,
+                arm_config: arm_config.clone(),
+            };
+            return crate::replay::run(request, ros_args).await;
+        }
     };
+    let mut ros = RosNode::start_with(&spec, ros_args, domain.as_deref())?;
     let client = EpisodeClient::new(&mut ros, node)?;
     let result = async {
         client.wait(&ros, call, CALL_TIMEOUT).await?;
@@ -150,6 +200,28 @@ mod tests {
                 node: "rec2".into()
             })
         );
+        assert_eq!(
+            parse(&args(&[
+                "replay",
+                "--root",
+                "/d",
+                "--episode",
+                "2",
+                "--speed",
+                "0.5"
+            ]))
+            .unwrap(),
+            Some(Command::Replay {
+                root: Some("/d".into()),
+                episode: 2,
+                node: "compute_ik".into(),
+                speed: 0.5,
+                arm_config: String::new(),
+            })
+        );
+        assert!(parse(&args(&["replay", "--root", "/d"])).is_err());
+        assert!(parse(&args(&["replay", "--episode", "0", "--speed", "0"])).is_err());
+        assert!(parse(&args(&["replay", "--help"])).is_err());
         assert!(parse(&args(&["stop"])).is_err());
     }
 }

@@ -5,6 +5,7 @@ pub mod cli;
 pub mod compose;
 pub mod inputs;
 pub mod node;
+pub mod replay;
 pub mod report;
 pub mod writer;
 
