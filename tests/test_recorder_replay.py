@@ -81,10 +81,14 @@ def test_replay_moves_the_follower_through_the_recorded_joints(launch, observer,
     assert observer.spin_until(lambda: joint_states and state, 15), "compute_ik and serial_node did not start"
 
     def go(pose):
-        """joint_target to `pose`; wait until compute_ik commands it, then hold it."""
-        target.publish(JointState(name=JOINTS, position=pose))
-        assert observer.spin_until(lambda: near(joints(joint_states[-1][1]), pose, 1e-6), 10), \
-            (pose, joints(joint_states[-1][1]))
+        """joint_target to `pose` until compute_ik commands it (a first sample may come
+        before compute_ik's reader has matched ours: sent again each 0.5 s), then hold it."""
+        reached = lambda: near(joints(joint_states[-1][1]), pose, 1e-6)  # noqa: E731
+        for _ in range(20):
+            target.publish(JointState(name=JOINTS, position=pose))
+            if observer.spin_until(reached, 0.5):
+                break
+        assert reached(), (pose, joints(joint_states[-1][1]))
         observer.spin_for(HOLD_S)
 
     # record A -> B -> C
