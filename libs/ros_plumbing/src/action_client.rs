@@ -153,3 +153,109 @@ fn ros_goal_id(id: GoalId) -> ros2_client::action::GoalId {
         uuid: uuid::Uuid::from_bytes(*id.as_bytes()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::action::{ActionRequest, ActionServer};
+    use crate::NodeSpec;
+
+    #[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+    struct Order {
+        order: i32,
+    }
+    impl Message for Order {}
+
+    fn node(name: &'static str, domain: &str) -> RosNode {
+        let spec = NodeSpec {
+            name,
+            description: "",
+            usage: "",
+            params: vec![],
+        };
+        RosNode::start_with(&spec, vec![], Some(domain)).unwrap()
+    }
+
+    /// A client in one participant, a server in another: a goal accepted and its
+    /// result, a goal rejected, a goal canceled.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn goals_are_answered_finished_and_canceled() {
+        // a domain of this process's own, and a name of its own in it
+        let domain = (120 + std::process::id() % 100).to_string();
+        let name: &'static str =
+            Box::leak(format!("action_client_test_{}", std::process::id()).into_boxed_str());
+        let callable: &'static Callable = Box::leak(Box::new(Callable {
+            kind: CallableKind::Action,
+            name,
+            package: "test_msgs",
+            type_name: "Fibonacci",
+            servers: &[],
+            clients: &[],
+        }));
+        let mut server_node = node("action_client_server", &domain);
+        let resolver = server_node.resolver().clone();
+        let server: ActionServer<Order, Order, Order> = ActionServer::new(
+            server_node.node_mut(),
+            &resolver,
+            name,
+            "test_msgs",
+            "Fibonacci",
+        )
+        .unwrap();
+        let mut client_node = node("action_client_client", &domain);
+        let client: ActionClient<Order, Order, Order> =
+            ActionClient::new(&mut client_node, "action_client_server", callable).unwrap();
+        assert_eq!(client.name(), format!("/{name}"));
+
+        // the server: a negative order is rejected, 0 runs until canceled, any other
+        // succeeds at once with twice the order
+        let serve = async {
+            loop {
+                match server.next().await {
+                    ActionRequest::Goal { ticket, id, goal } => {
+                        if goal.order < 0 {
+                            server.reject(ticket);
+                        } else {
+                            server.accept(ticket);
+                            if goal.order > 0 {
+                                let result = Order {
+                                    order: goal.order * 2,
+                                };
+                                server.finish(id, GoalEnd::Succeeded, result);
+                            }
+                        }
+                    }
+                    ActionRequest::Cancel(ids) => {
+                        for id in ids {
+                            server.finish(id, GoalEnd::Canceled, Order { order: -1 });
+                        }
+                    }
+                    ActionRequest::Unreadable(e) => panic!("{e}"),
+                }
+            }
+        };
+        let t = Duration::from_secs(20);
+        let asks = async {
+            client.wait(&client_node, t).await.unwrap();
+            let id = client.send_goal(Order { order: 21 }, t).await.unwrap();
+            let id = id.expect("accepted");
+            let (end, result) = client.result(id).await.unwrap();
+            assert_eq!((end, result.order), (GoalEnd::Succeeded, 42));
+
+            assert_eq!(
+                client.send_goal(Order { order: -1 }, t).await.unwrap(),
+                None
+            );
+
+            let id = client.send_goal(Order { order: 0 }, t).await.unwrap();
+            let id = id.expect("accepted");
+            assert!(client.cancel(id, t).await.unwrap());
+            let (end, result) = client.result(id).await.unwrap();
+            assert_eq!((end, result.order), (GoalEnd::Canceled, -1));
+        };
+        tokio::select! {
+            _ = serve => unreachable!(),
+            _ = asks => {}
+        }
+    }
+}
