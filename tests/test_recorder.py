@@ -46,6 +46,10 @@ FPS = 30
 GRIPPER_OPEN_RAD = yaml.safe_load(SHIPPED)["geometry"]["gripper_open_rad"]
 COUNT_RAD = [math.radians(45.0 / 256)] * 3 + [GRIPPER_OPEN_RAD / 800]
 CAMERA = "camera/image_raw/compressed"
+# a leader stall: no sample heard for this long (its samples come every 10 ms)
+STALL_NS = 150_000_000
+STALL_WINDOW_NS = 600_000_000  # how far back a frame in a stall may take its sample
+WAIT_NS = 500_000_000  # the recorder's longest wait for a live input (recorder_core max_wait)
 MAX_STALENESS_S = 0.25  # the recorder's default
 
 
@@ -208,17 +212,30 @@ def test_a_dataset_recorded_from_the_running_graph_reads_with_independent_reader
     assert set(rows["task_index"]) == {0}
     # the action is the leader's joints newest at each frame's instant, within an ADC count
     # (the deadman was held throughout: the follower followed)
+    # A leader stalled (its simavr starved of CPU on a busy host: no samples for a while,
+    # then a burst) may deliver a frame's sample after the recorder decided the frame: the
+    # frame then has the newest leader joints the recorder had, or compute_ik's command
+    # (the leader's joints it followed last). Those frames may take any leader sample of
+    # the stall; the others, the newest at their instant. Stalls must be rare, or the check
+    # would say little.
     leader = sorted(g.leader_samples)
+    stamps = [t for t, _ in leader]
+    stalled = 0
     for k, action in enumerate(rows["action"]):
         t_k = t0 + k * 1_000_000_000 // FPS
         heard = [v for t, v in leader if t <= t_k]
         assert heard, f"frame {k}: no leader sample before it"
-        err = [abs(a - b) / c for a, b, c in zip(action, heard[-1], COUNT_RAD)]
-        if max(err) > 1.0 + 1e-3:
+        window = [t for t in stamps if t_k - STALL_WINDOW_NS <= t <= t_k + WAIT_NS]
+        in_stall = any(b - a >= STALL_NS for a, b in zip(window, window[1:]))
+        candidates = [v for t, v in leader if t_k - STALL_WINDOW_NS <= t <= t_k] if in_stall else [heard[-1]]
+        err = min(max(abs(a - b) / c for a, b, c in zip(action, v, COUNT_RAD)) for v in candidates or [heard[-1]])
+        stalled += in_stall
+        if err > 1.0 + 1e-3:
             near = [(t - t_k, round(v[0], 4)) for t, v in leader if abs(t - t_k) < 600_000_000]
             acts = [round(a[0], 4) for a in rows["action"][max(0, k - 8):k + 8]]
-            raise AssertionError(f"frame {k}: action {list(action)} vs the leader's {heard[-1]}: {err} counts; "
-                                 f"actions {acts}; heard {near}")
+            raise AssertionError(f"frame {k}: action {list(action)} vs the leader's {heard[-1]}: {err} counts "
+                                 f"(in a stall: {in_stall}); actions {acts}; heard {near}")
+    assert stalled <= n // 4, f"the leader stalled around {stalled} of {n} frames"
     span = [(max(a[j] for a in rows["action"]) - min(a[j] for a in rows["action"])) / COUNT_RAD[j] for j in range(4)]
     assert min(span[0], span[1], span[3]) > 10, f"the leader hardly moved during the episode: {span} counts"
     # the follower's state follows (it lags by its motion limits; here only its range)

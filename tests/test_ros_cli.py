@@ -2,6 +2,7 @@
 (`ros2 param describe/list`, `ros2 topic list -t`), and the binaries' command lines."""
 import re
 import subprocess
+import tempfile
 
 import pytest
 from rcl_interfaces.msg import ParameterType
@@ -11,10 +12,13 @@ from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from conftest import TOPICS, bin_path, latest_status
 
-ROS_NODES = ["compute_ik", "serial_node", "state_publisher", "camera_node"]
-# camera_node: its test source, small and slow (no camera here; the topics are what counts)
+ROS_NODES = ["compute_ik", "serial_node", "state_publisher", "camera_node", "recorder"]
+# camera_node: its test source, small and slow (no camera here; the topics are what counts);
+# the recorder: its dataset in a folder of this run's, recording the camera
 NODE_ARGS = {"serial_node": ["--ros-args", "-p", "port:=mock"],
-             "camera_node": ["--ros-args", "-p", "device:=test", "-p", "width:=160", "-p", "height:=128", "-p", "fps:=5"]}
+             "camera_node": ["--ros-args", "-p", "device:=test", "-p", "width:=160", "-p", "height:=128", "-p", "fps:=5"],
+             "recorder": ["--ros-args", "-p", f"root:={tempfile.mkdtemp(prefix='eezybot-ros-cli-')}/dataset",
+                          "-p", "image_topics:=[camera/image_raw/compressed]"]}
 
 
 def call(observer, client, request, timeout=10):
@@ -48,6 +52,7 @@ RANGES = {
     "state_publisher": {"publish_frequency": (0.0, 10_000.0), "diagnostics_period": (0.05, 60.0)},
     "camera_node": {"width": (144, 4096), "height": (128, 4096), "fps": (1, 120), "jpeg_quality": (1, 100),
                     "diagnostics_period": (0.05, 60.0)},
+    "recorder": {"fps": (1, 200), "max_staleness": (0.01, 5.0)},
 }
 CONSTRAINTS = {
     "compute_ik": {"solver": "one of: analytic, jacobian, dls, newton", "motion": "one of: joint, line",
@@ -55,6 +60,8 @@ CONSTRAINTS = {
     "serial_node": {"watchdog_action": "one of: hold, detach", "estop_action": "one of: hold, detach"},
     "state_publisher": {"urdf": "a URDF file that loads"},
     "camera_node": {"device": "a device path, or test"},
+    "recorder": {"task": "1 to 500 characters, no control characters",
+                 "arm_config": "empty, or an arm_config YAML file that loads"},
 }
 
 

@@ -170,9 +170,11 @@ const IK: &str = "compute_ik";
 const SERIAL: &str = "serial_node";
 const STATE: &str = "state_publisher";
 const CAMERA: &str = "camera_node";
-/// The `recorder` node (LeRobot datasets from the running graph), and its command line
-/// (`recorder replay` plays an episode back: a trajectory goal, the claw's openings).
+/// The `recorder` node (LeRobot datasets from the running graph).
 const RECORDER: &str = "recorder";
+/// `recorder replay`, the recorder's command line playing an episode back (a trajectory
+/// goal, the claw's openings).
+const REPLAY: &str = "recorder (replay)";
 /// `gui_bridge record` subscribes what it saves (the targets; with an MCAP file also
 /// what replays and views the session).
 const RECORD: &str = "gui_bridge (record)";
@@ -195,8 +197,7 @@ pub const XYZ_LINE_TARGET: Topic<PointStamped> = Topic::new_target("xyz_line_tar
 /// Desired pose of the tip link (arms with orientation, `ros2 topic pub`).
 pub const POSE_TARGET: Topic<PoseStamped> = Topic::new_target("pose_target", &[]);
 /// Claw opening, 0.0 closed … 1.0 open.
-pub const GRIPPER_TARGET: Topic<Float64> =
-    Topic::new_target("gripper_target", &[GUI, RECORDER]);
+pub const GRIPPER_TARGET: Topic<Float64> = Topic::new_target("gripper_target", &[GUI, REPLAY]);
 /// Joint mode: positions of named actuated joints, rad.
 pub const JOINT_TARGET: Topic<JointState> = Topic::new_target("joint_target", &[GUI]);
 /// Emergency stop, latched: `true` = no servo moves until `false`.
@@ -330,7 +331,7 @@ pub const FOLLOW_JOINT_TRAJECTORY: Callable = Callable {
     package: "control_msgs",
     type_name: "FollowJointTrajectory",
     servers: &[IK],
-    clients: &[RECORDER],
+    clients: &[REPLAY],
 };
 /// gripper_controller's GripperCommand action.
 pub const GRIPPER_CMD: Callable = Callable {

@@ -85,16 +85,12 @@ fn speed(s: &str) -> Result<f64, String> {
 /// Parse our arguments (without argv\[0\]; ROS arguments after `--ros-args` are left
 /// for the node). `None`: run the node.
 pub fn parse(argv: &[String]) -> Result<Option<Command>, clap::Error> {
+    // anything but a command is the node's: its --help lists the parameters, and it
+    // refuses a bad argument or ROS argument in one line
     let user = match ros_plumbing::args::parse(argv.iter().cloned()) {
-        Ok((user, _)) => user,
-        Err(e) => {
-            return Err(Cli::command().error(clap::error::ErrorKind::InvalidValue, e.to_string()))
-        }
+        Ok((user, _)) if is_command(&user) => user,
+        _ => return Ok(None),
     };
-    // the node's own --help lists its parameters: leave it to the node
-    if user.is_empty() || user.iter().any(|a| a == "--help" || a == "-h") && !is_command(&user) {
-        return Ok(None);
-    }
     let matches = Cli::command().try_get_matches_from(
         std::iter::once("recorder".to_string()).chain(user.iter().cloned()),
     )?;
@@ -222,6 +218,8 @@ mod tests {
         assert!(parse(&args(&["replay", "--root", "/d"])).is_err());
         assert!(parse(&args(&["replay", "--episode", "0", "--speed", "0"])).is_err());
         assert!(parse(&args(&["replay", "--help"])).is_err());
-        assert!(parse(&args(&["stop"])).is_err());
+        // not a command: the node's (which refuses a stray argument in one line)
+        assert_eq!(parse(&args(&["stop"])).unwrap(), None);
+        assert!(parse(&args(&["save-episode", "--bogus"])).is_err());
     }
 }
