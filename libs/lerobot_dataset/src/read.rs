@@ -499,6 +499,7 @@ mod tests {
                 w.add_frame(Frame {
                     state: &s,
                     action: &a,
+                    images: &[],
                 })
                 .unwrap();
             }
