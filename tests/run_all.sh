@@ -48,20 +48,14 @@ cargo_target() {  # the target directory of build $1 (emptied first when it grew
 native_target=$(cargo_target native)
 export EEZYBOT_BIN_DIR=$native_target/debug
 
-stage "firmware (avr-gcc) and its simavr harness"
-make -s -C firmware/servo_control all sim
-stage "cargo build"
-CARGO_TARGET_DIR=$native_target cargo build --workspace --bins --examples
-stage "cargo test"
-CARGO_TARGET_DIR=$native_target cargo test --workspace
 # The patched crates' checks and tests (tests/check_patches.sh: a dependency tree and
 # target directory of their own), then wan/'s build (Zenoh and Cyclone DDS: about 11
 # CPU-minutes from nothing, about a minute in a fresh clone with the kept directory) and
-# its unit tests (ours and the patched zenoh-plugin-ros2dds'), run alongside the
-# Raspberry Pi stage, whose OpenSSL build and emulated tests leave a core idle much of the
-# time; their output follows it. tests/test_wan*.py run the WAN binaries
-# (EEZYBOT_WAN_BIN_DIR).
-stage "Raspberry Pi: cross-build (aarch64, profile pi-check), pure crates' tests under qemu-aarch64; alongside: the patched crates (tests/check_patches.sh), then wan/'s build and unit tests"
+# its unit tests (ours and the patched zenoh-plugin-ros2dds'), run in the background from
+# here, alongside the workspace's build and tests and the Raspberry Pi stage (whose
+# OpenSSL build and emulated tests leave a core idle much of the time): started after
+# them, it kept the integration tests waiting about 80 s in a fresh clone. Its output
+# follows the Pi stage. tests/test_wan*.py run the WAN binaries (EEZYBOT_WAN_BIN_DIR).
 wan_target=${EEZYBOT_WAN_TARGET:-$(cargo_target wan)}
 [ "$wan_target" != off ] || wan_target=$PWD/wan/target  # (as before EEZYBOT_CARGO_CACHE)
 export EEZYBOT_WAN_BIN_DIR=$wan_target/release
@@ -77,6 +71,13 @@ patches_pid=$!
 trap '[ -z "$patches_pid" ] || pkill -TERM -P "$patches_pid" cargo 2>/dev/null || true
       [ -z "$patches_pid" ] || kill "$patches_pid" 2>/dev/null || true
       rm -f "$patches_log"; stage ""; echo "== all stages: $SECONDS s"' EXIT
+stage "firmware (avr-gcc) and its simavr harness"
+make -s -C firmware/servo_control all sim
+stage "cargo build"
+CARGO_TARGET_DIR=$native_target cargo build --workspace --bins --examples
+stage "cargo test"
+CARGO_TARGET_DIR=$native_target cargo test --workspace
+stage "Raspberry Pi: cross-build (aarch64, profile pi-check), pure crates' tests under qemu-aarch64; alongside: the patched crates (tests/check_patches.sh), then wan/'s build and unit tests"
 . launch_scripts/setup_cross.sh
 pi_target=$(cargo_target pi)
 # pi-check (Cargo.toml): the release's toolchain, OpenSSL and checks in less time than
@@ -91,7 +92,7 @@ CARGO_TARGET_DIR=$pi_target EEZYBOT_PI_PROFILE=pi-check launch_scripts/cross_bui
 # of the stage), for CDR that cdr_encoding writes little-endian on every target.
 PROPTEST_CASES=10 CARGO_TARGET_DIR=$pi_target cargo test --profile pi-check --target aarch64-unknown-linux-gnu \
   -p eezybot_kinematics -p servo_protocol --lib --test properties
-stage "patched crates: resolved from patches/, and their unit tests (tests/check_patches.sh); wan/ built and its unit tests (started above)"
+stage "patched crates: resolved from patches/, and their unit tests (tests/check_patches.sh); wan/ built and its unit tests (started first)"
 patches_code=0
 wait "$patches_pid" || patches_code=$?
 patches_pid=
