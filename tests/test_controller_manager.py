@@ -12,6 +12,9 @@ from std_msgs.msg import Bool
 
 from conftest import COMMANDS, LATCHED, latest_status, status_values
 
+# in a process of its own beside the other tests (judged by order and content, not the wall clock)
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=55)]
+
 NAMES = ["teleop", "arm_controller", "gripper_controller", "leader_follower", "calibration"]
 ARM = ["base_joint/position", "shoulder_joint/position", "elbow_joint/position"]
 CLAW = ["gripper_joint/position"]

@@ -11,7 +11,8 @@ from conftest import REPO
 from interop.servo_link import HEARTBEAT, STATE, SimulatedUno, frame, parse_state, set_pulses
 
 # the fuzzers' build and runs have limits of their own (600 s each), above the default
-pytestmark = pytest.mark.timeout(1300)
+# in a process of its own beside the other tests (judged by order and content, not the wall clock)
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=25), pytest.mark.timeout(1300)]
 
 FIRMWARE = REPO / "firmware" / "servo_control"
 FUZZ_DIR = FIRMWARE / "build" / "fuzz"

@@ -24,6 +24,9 @@ import pytest
 
 from conftest import bin_path
 
+# in a process of its own beside the other tests (judged by order and content, not the wall clock)
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=15)]
+
 FPS = 30
 JOINTS = ["base_joint", "shoulder_joint", "elbow_joint", "gripper_joint"]
 FEATURES = ["observation.state", "action", "timestamp", "frame_index", "episode_index", "index", "task_index"]

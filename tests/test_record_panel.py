@@ -8,8 +8,13 @@ elapsed time ticking. Driven through the panel's WebSocket as the page drives it
 import signal
 import time
 
+import pytest
+
 from conftest import OUTPUT
 from test_gui_bridge import RawWs, start_panel
+
+# in a process of its own beside the other tests (judged by order and content, not the wall clock)
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=15)]
 
 TASK = "pick the cube"
 

@@ -6,10 +6,14 @@ import os
 import subprocess
 
 import pyarrow.parquet as pq
+import pytest
 from control_msgs.msg import JointTrajectoryControllerState
 from sensor_msgs.msg import JointState
 
 from conftest import EVERY, bin_path
+
+# in a process of its own beside the other tests (judged by order and content, not the wall clock)
+pytestmark = [pytest.mark.own_process, pytest.mark.background(seconds=12)]
 
 JOINTS = ["base_joint", "shoulder_joint", "elbow_joint", "gripper_joint"]
 ARM = JOINTS[:3]

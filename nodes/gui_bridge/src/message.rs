@@ -92,8 +92,8 @@ pub enum ToClient {
         /// the deadman is held (null: not heard yet)
         deadman: Option<bool>,
     },
-    /// The recording card: the recorder's state and the last episode call
-    /// ([`crate::recording::RecordCard::view`]).
+    /// The recording card: the recorder's state and the last episode call (made by
+    /// recording.rs's `RecordCard::view`).
     Recorder(Box<RecordView>),
 }
 
@@ -782,13 +782,10 @@ mod tests {
             arm: Arc::new(ArmFacts::of(&arm)),
             urdf: None,
             calibration: None,
-            recorder: Some(Arc::new(ToClient::Recorder(Box::new(
-                crate::recording::RecordCard::new("recorder").view(std::time::Instant::now()),
-            )))),
+            recorder: None,
         };
         let hello: serde_json::Value = serde_json::from_str(&snapshot.hello(50.0)).unwrap();
-        assert_eq!(hello["recorder"]["t"], "recorder");
-        assert_eq!(hello["recorder"]["up"], false);
+        assert!(hello["recorder"].is_null());
         assert_eq!(hello["t"], "hello");
         assert_eq!(hello["rate"], 50.0);
         assert_eq!(hello["target"], json!([0.2, 0.0, 0.1]));
@@ -809,47 +806,5 @@ mod tests {
         );
         assert_eq!(hello["geometry"]["main_arm"], arm.geometry.main_arm_m);
         assert_eq!(hello["geometry"].as_object().unwrap().len(), 4);
-    }
-
-    /// The recording card's fields, as `web/panel.js`'s `showRecorder()` reads them.
-    #[test]
-    fn the_recording_card_is_the_message_the_page_reads() {
-        use crate::recording::{RecordCard, RecordDone, RecordOp};
-        use eezybot_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
-        let t0 = std::time::Instant::now();
-        let mut card = RecordCard::new("recorder");
-        let kv = |k: &str, v: &str| KeyValue {
-            key: k.into(),
-            value: v.into(),
-        };
-        card.on_status(
-            &DiagnosticStatus {
-                level: 0,
-                name: "recorder".into(),
-                message: "recording episode 3".into(),
-                hardware_id: "/d".into(),
-                values: vec![
-                    kv("state", "recording"),
-                    kv("episode", "3"),
-                    kv("elapsed_s", "1.5"),
-                ],
-            },
-            t0,
-        );
-        card.on_done(RecordDone {
-            op: RecordOp::Start,
-            result: Ok("recording episode 3: pick".into()),
-        });
-        let v = value(&ToClient::Recorder(Box::new(card.view(t0))));
-        assert_eq!(
-            v,
-            json!({"t": "recorder", "node": "recorder", "up": true, "note": null,
-                   "state": "recording", "level": 0, "message": "recording episode 3",
-                   "task": null, "episode": 3, "episodes": null, "frames": null,
-                   "elapsed_s": 1.5, "age_s": 0.0, "dropped": null, "dropped_total": null,
-                   "fps": null, "root": "/d", "cameras": null, "last": null, "reason": null,
-                   "busy": null, "can_start": false, "can_save": true, "can_discard": true,
-                   "call": {"op": "start", "ok": true, "text": "recording episode 3: pick"}})
-        );
     }
 }

@@ -645,4 +645,47 @@ mod tests {
         assert_eq!(v.message.as_deref(), Some("recording episode 3"));
         assert_eq!(v.node, "recorder");
     }
+
+    /// The recording card's fields, as `web/panel.js`'s `showRecorder()` reads them.
+    #[test]
+    fn the_recording_card_is_the_message_the_page_reads() {
+        use crate::message::ToClient;
+        use serde_json::json;
+        let t0 = std::time::Instant::now();
+        let mut card = RecordCard::new("recorder");
+        let kv = |k: &str, v: &str| KeyValue {
+            key: k.into(),
+            value: v.into(),
+        };
+        card.on_status(
+            &DiagnosticStatus {
+                level: 0,
+                name: "recorder".into(),
+                message: "recording episode 3".into(),
+                hardware_id: "/d".into(),
+                values: vec![
+                    kv("state", "recording"),
+                    kv("episode", "3"),
+                    kv("elapsed_s", "1.5"),
+                ],
+            },
+            t0,
+        );
+        card.on_done(RecordDone {
+            op: RecordOp::Start,
+            result: Ok("recording episode 3: pick".into()),
+        });
+        let v: serde_json::Value =
+            serde_json::from_str(&ToClient::Recorder(Box::new(card.view(t0))).to_text()).unwrap();
+        assert_eq!(
+            v,
+            json!({"t": "recorder", "node": "recorder", "up": true, "note": null,
+                   "state": "recording", "level": 0, "message": "recording episode 3",
+                   "task": null, "episode": 3, "episodes": null, "frames": null,
+                   "elapsed_s": 1.5, "age_s": 0.0, "dropped": null, "dropped_total": null,
+                   "fps": null, "root": "/d", "cameras": null, "last": null, "reason": null,
+                   "busy": null, "can_start": false, "can_save": true, "can_discard": true,
+                   "call": {"op": "start", "ok": true, "text": "recording episode 3: pick"}})
+        );
+    }
 }

@@ -24,7 +24,7 @@ pub const DEFAULT_TASK: &str = "teleoperated demonstration";
 pub fn spec() -> ros_plumbing::NodeSpec {
     ros_plumbing::NodeSpec {
         name: "recorder",
-        description: "LeRobot v3.0 datasets recorded live from the running graph: observation.state (servo_state through the calibration), action (the leader's joints while following, else compute_ik's commanded joints), observation.images.<camera> (MP4); episodes through recorder/start_episode, save_episode, discard_episode (std_srvs/srv/Trigger). Commands for a running recorder: start-episode [--task T], save-episode, discard-episode (recorder COMMAND --help)",
+        description: "LeRobot v3.0 datasets recorded live from the running graph: observation.state (servo_state through the calibration), action (the leader's joints while following, else compute_ik's commanded joints), observation.images.<camera> (MP4); episodes through recorder/start_episode, save_episode, discard_episode (std_srvs/srv/Trigger). Commands: start-episode [--task T], save-episode, discard-episode (a running recorder), replay --episode N (an episode played back on the arm); recorder COMMAND --help",
         usage: "",
         params: params(),
     }
