@@ -31,7 +31,7 @@ from std_srvs.srv import Trigger
 from conftest import REPO, bin_path, latest_status, status_values
 from interop.servo_link import SimulatedUno, write_adc_file
 from safety_rig import FIRMWARE
-from test_camera_node import read_code
+from stamp_code import read_code
 from test_leader_arm import LEADER_SECTION, MV, record, stamp_ns
 
 # in a process of its own beside the other tests (the leader's simavr and the encoder

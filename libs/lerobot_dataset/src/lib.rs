@@ -1453,7 +1453,7 @@ impl DatasetWriter {
                     .root
                     .join(RECORDING_DIR)
                     .join(format!("{key}.ffconcat"));
-                video::concatenate(&self.spec.ffmpeg, &current, &files.video, &tmp, &list)
+                video::concatenate(&self.spec.ffmpeg, &current, from, &files.video, &tmp, &list)
                     .map_err(&fail)?
             }
         }

@@ -597,10 +597,15 @@ pub(crate) fn probe(ffmpeg: &Path, mp4: &Path) -> Result<Probe, String> {
 }
 
 /// lerobot's `concatenate_video_files`: `first` then `second` remuxed (no re-encoding)
-/// into `out` with `+faststart`, through ffmpeg's concat demuxer.
+/// into `out` with `+faststart`, through ffmpeg's concat demuxer. `second` starts at
+/// `first_duration_s`, `first`'s stream duration: without it the demuxer starts it at
+/// `first`'s container duration, which MP4 keeps in milliseconds (60.434 s for 1813
+/// frames at 30 fps, 60.4333 s), and the episode's frames would sit up to 1 ms off its
+/// `from_timestamp`, beyond lerobot's 1e-4 s tolerance.
 pub(crate) fn concatenate(
     ffmpeg: &Path,
     first: &Path,
+    first_duration_s: f64,
     second: &Path,
     out: &Path,
     list: &Path,
@@ -612,7 +617,11 @@ pub(crate) fn concatenate(
             abs.to_string_lossy().replace('\'', r"'\''")
         ))
     };
-    let body = format!("ffconcat version 1.0\n{}{}", quote(first)?, quote(second)?);
+    let body = format!(
+        "ffconcat version 1.0\n{}duration {first_duration_s:.6}\n{}",
+        quote(first)?,
+        quote(second)?
+    );
     fs::write(list, body).map_err(|e| format!("{}: {e}", list.display()))?;
     let out_run = Command::new(ffmpeg)
         .args(["-hide_banner", "-nostdin", "-loglevel", "error"])

@@ -663,3 +663,70 @@ fn a_frame_is_refused_whole_when_ffmpeg_is_a_second_behind() {
     assert_eq!(w.discard_episode().unwrap(), i);
     assert!(t.elapsed() < std::time::Duration::from_secs(30));
 }
+
+/// The pts of every frame of an MP4 (ffprobe), seconds.
+fn pts(mp4: &Path) -> Vec<f64> {
+    let out = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v",
+            "-show_entries",
+            "frame=pts_time",
+            "-of",
+            "csv=p=0",
+        ])
+        .arg(mp4)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| l.trim().trim_end_matches(',').parse().unwrap())
+        .collect()
+}
+
+/// An episode appended to a camera's file starts at its `from_timestamp` exactly, also
+/// when the file before it lasts no whole number of milliseconds (23 frames at 30 fps:
+/// 0.7667 s): lerobot finds each frame at `from_timestamp + timestamp` within 1e-4 s.
+#[test]
+fn an_appended_episode_starts_at_its_from_timestamp() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("ds");
+    let mut w = DatasetWriter::create(&root, spec()).unwrap();
+    for (e, n) in [(0, 23), (1, 23), (2, 10)] {
+        w.start_episode(&format!("episode {e}")).unwrap();
+        for i in 0..n {
+            add(&mut w, e * 100 + i).unwrap();
+        }
+        w.save_episode().unwrap();
+    }
+    drop(w);
+    let episodes = read(&root.join("meta/episodes/chunk-000/file-000.parquet"));
+    let from = episodes
+        .column_by_name("videos/observation.images.front/from_timestamp")
+        .unwrap()
+        .as_any()
+        .downcast_ref::<Float64Array>()
+        .unwrap()
+        .clone();
+    let t = pts(&root.join("videos/observation.images.front/chunk-000/file-000.mp4"));
+    assert_eq!(t.len(), 56);
+    for (e, first) in [(0usize, 0usize), (1, 23), (2, 46)] {
+        assert!(
+            (t[first] - from.value(e)).abs() < 1e-5
+                && (from.value(e) - first as f64 / 30.0).abs() < 1e-9,
+            "episode {e}: its first frame at {} s, from_timestamp {}",
+            t[first],
+            from.value(e)
+        );
+    }
+    for (k, p) in t.iter().enumerate() {
+        assert!((p - k as f64 / 30.0).abs() < 1e-4, "frame {k} at {p} s");
+    }
+}
