@@ -155,9 +155,16 @@ def main():
                     assert float(np.max(np.abs(stored - exact))) < 1e-5, (e, key, stored, exact)
                     cancel = np.sqrt(16 * np.finfo(np.float32).eps * np.mean(values.astype(np.float64) ** 2, axis=0))
                     assert np.all(np.abs(stored - np.asarray(v, dtype=np.float64)) <= 1e-5 + cancel), (e, key, stored, v)
+                if k == "mean":
+                    # lerobot's float32 mean of 1360 values of 1.5708 is 4e-6 off: ours is
+                    # checked against the float64 mean, theirs within float32's summation error
+                    exact = np.mean(values.astype(np.float64), axis=0, keepdims=values.ndim == 1)
+                    assert float(np.max(np.abs(stored - exact))) < 1e-6, (e, key, stored, exact)
+                    summed = 64 * np.finfo(np.float32).eps * np.max(np.abs(values.astype(np.float64)), axis=0)
+                    assert np.all(np.abs(stored - np.asarray(v, dtype=np.float64)) <= 1e-6 + summed), (e, key, stored, v)
                 diff = float(np.max(np.abs(stored - np.asarray(v, dtype=np.float64))))
                 worst[k] = max(worst.get(k, 0.0), diff)
-                assert k == "std" or diff < 1e-6, (e, key, k, stored, v)
+                assert k in ("std", "mean") or diff < 1e-6, (e, key, k, stored, v)
     print("per-episode stats equal lerobot's get_feature_stats; largest differences:",
           {k: f"{v:.1e}" for k, v in worst.items()})
 
