@@ -203,6 +203,13 @@ async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
             Some(d) = done_rx.recv() => rec.done(d, now(), &outputs),
             i = inputs.next() => match i {
                 Some(i) => {
+                    // a parameter set before this input was answered before it was sent
+                    // (the panel sets `task`, then starts): apply it first, whichever
+                    // branch select! would have taken first
+                    if param_changes.has_changed().unwrap_or(false) {
+                        param_changes.borrow_and_update();
+                        rec.params(&params);
+                    }
                     let was = rec.recording();
                     rec.input(i, now(), &outputs);
                     if rec.recording() != was {

@@ -22,6 +22,10 @@ use std::time::Duration;
 pub const REPORT_RECORDING: Duration = Duration::from_millis(500);
 /// How often the entry goes out otherwise.
 pub const REPORT_IDLE: Duration = Duration::from_secs(2);
+/// How many dropped frames an episode's save lists by their grid index (the rows are
+/// contiguous: the list tells which instants they skip).
+pub const DROPS_LISTED: usize = 100;
+
 /// How long a frame may wait for a live input's samples (recorder_core's `max_wait`).
 pub const MAX_WAIT: Duration = Duration::from_millis(500);
 
@@ -69,9 +73,33 @@ struct Running {
     t0_ns: i64,
     rows: u64,
     dropped: u64,
+    /// the grid's frames dropped, in order (the first [`DROPS_LISTED`])
+    dropped_at: Vec<u64>,
     started: bool,
     /// Saving: the frames up to the request are still being decided.
     ending: bool,
+}
+
+impl Running {
+    /// A frame of the grid dropped.
+    fn drop_at(&mut self, index: u64) {
+        self.dropped += 1;
+        if self.dropped_at.len() < DROPS_LISTED {
+            self.dropped_at.push(index);
+        }
+    }
+
+    /// `; dropped grid frames: 41, 42` (empty without drops; `…` past [`DROPS_LISTED`]).
+    fn dropped_text(&self) -> String {
+        if self.dropped_at.is_empty() {
+            return String::new();
+        }
+        let mut list: Vec<String> = self.dropped_at.iter().map(u64::to_string).collect();
+        if self.dropped > self.dropped_at.len() as u64 {
+            list.push("…".into());
+        }
+        format!("; dropped grid frames: {}", list.join(", "))
+    }
 }
 
 /// The recorder's state between events.
@@ -359,6 +387,7 @@ impl Recorder {
                         t0_ns,
                         rows: 0,
                         dropped: 0,
+                        dropped_at: vec![],
                         started: false,
                         ending: false,
                     });
@@ -402,20 +431,21 @@ impl Recorder {
                 Tick::Frame(f) => match compose::compose(&f, self.config.cameras.len()) {
                     Some(row) => {
                         run.rows += 1;
+                        let index = row.grid_index;
                         if self.jobs.try_send(Job::Row(Box::new(row))).is_err() {
                             run.rows -= 1;
-                            run.dropped += 1;
+                            run.drop_at(index);
                             self.dropped_total += 1;
                             self.last_drop = Some("the writer fell behind".into());
                         }
                     }
                     None => {
-                        run.dropped += 1;
+                        run.drop_at(f.index);
                         self.dropped_total += 1;
                     }
                 },
                 Tick::Dropped(d) => {
-                    run.dropped += 1;
+                    run.drop_at(d.index);
                     self.dropped_total += 1;
                     let why: Vec<String> = d
                         .stale
@@ -499,10 +529,10 @@ impl Recorder {
                 self.episodes.failed(&e);
                 self.answer_pending(Call::Start, false, &e, out);
             }
-            Done::RowDropped(e) => {
+            Done::RowDropped(index, e) => {
                 if let Some(run) = self.running.as_mut() {
                     run.rows = run.rows.saturating_sub(1);
-                    run.dropped += 1;
+                    run.drop_at(index);
                     self.dropped_total += 1;
                     if run.dropped == 1 || run.dropped % 30 == 0 {
                         log::warn!(
@@ -522,9 +552,12 @@ impl Recorder {
             }
             Done::Saved(Ok((s, took))) => {
                 let seconds = s.frames as f64 / f64::from(self.config.fps);
-                let dropped = self.running.as_ref().map_or(0, |r| r.dropped);
+                let (dropped, at) = self
+                    .running
+                    .as_ref()
+                    .map_or((0, String::new()), |r| (r.dropped, r.dropped_text()));
                 let msg = format!(
-                    "saved episode {} ({} frames, {seconds:.1} s, {dropped} dropped) in {:.0} ms",
+                    "saved episode {} ({} frames, {seconds:.1} s, {dropped} dropped) in {:.0} ms{at}",
                     s.episode_index,
                     s.frames,
                     took.as_secs_f64() * 1e3
@@ -663,4 +696,36 @@ pub fn start_writer(
             })
         })?;
     Ok((tx, handle))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn running() -> Running {
+        Running {
+            index: 0,
+            task: "t".into(),
+            t0_ns: 0,
+            rows: 0,
+            dropped: 0,
+            dropped_at: vec![],
+            started: true,
+            ending: false,
+        }
+    }
+
+    #[test]
+    fn a_save_lists_the_grid_frames_dropped() {
+        let mut r = running();
+        assert_eq!(r.dropped_text(), "");
+        r.drop_at(41);
+        r.drop_at(42);
+        assert_eq!(r.dropped_text(), "; dropped grid frames: 41, 42");
+        for k in 0..DROPS_LISTED as u64 {
+            r.drop_at(100 + k);
+        }
+        assert_eq!(r.dropped, DROPS_LISTED as u64 + 2);
+        assert!(r.dropped_text().ends_with(", …"), "{}", r.dropped_text());
+    }
 }

@@ -58,7 +58,7 @@ pub enum Done {
     Began(Result<u64, String>),
     /// A row was not written (an image the encoder could not take now, or one that does
     /// not fit the camera): counted as dropped, the episode goes on.
-    RowDropped(String),
+    RowDropped(u64, String),
     /// A row could not be written (a full disk, the encoder gone): the episode cannot go on.
     RowFailed(String),
     /// The episode was saved (and how long it took), or why not.
@@ -196,7 +196,7 @@ pub fn run(jobs: mpsc::Receiver<Job>, done: impl Fn(Done)) {
                 match w.add_frame(frame) {
                     Ok(()) => {}
                     Err(e @ (Error::EncoderBehind { .. } | Error::BadFrame(_))) => {
-                        done(Done::RowDropped(e.to_string()))
+                        done(Done::RowDropped(row.grid_index, e.to_string()))
                     }
                     Err(e) => {
                         row_failed = true;
