@@ -153,7 +153,8 @@ def main():
                     # frames, theirs only within its cancellation error
                     exact = np.std(values.astype(np.float64), axis=0, keepdims=values.ndim == 1)
                     assert float(np.max(np.abs(stored - exact))) < 1e-5, (e, key, stored, exact)
-                    cancel = np.sqrt(16 * np.finfo(np.float32).eps * np.mean(values.astype(np.float64) ** 2, axis=0))
+                    # (E[x²] - E[x]² off by tens of float32 ulps of E[x²]: 2.2e-3 seen)
+                    cancel = np.sqrt(64 * np.finfo(np.float32).eps * np.mean(values.astype(np.float64) ** 2, axis=0))
                     assert np.all(np.abs(stored - np.asarray(v, dtype=np.float64)) <= 1e-5 + cancel), (e, key, stored, v)
                 if k == "mean":
                     # lerobot's float32 mean of 1360 values of 1.5708 is 4e-6 off: ours is
