@@ -18,7 +18,16 @@
 
 use std::io::Write;
 
-use lerobot_dataset::{DatasetSpec, DatasetWriter, Error, Frame, Image, RawEncoding};
+use lerobot_dataset::{DatasetSpec, DatasetWriter, Error, Frame, Image, Interrupted, RawEncoding};
+
+/// What `--resume` prints after `RECOVERY` (tests/test_lerobot_dataset.py reads it).
+#[derive(serde::Serialize)]
+struct RecoveryReport<'a> {
+    interrupted: Option<&'a Interrupted>,
+    rolled_forward: usize,
+    removed_temporaries: usize,
+    removed_episode_files: &'a [std::path::PathBuf],
+}
 
 const FRONT: (u32, u32) = (320, 240);
 const WRIST: (u32, u32) = (160, 120);
@@ -172,17 +181,15 @@ fn run() -> Result<(), String> {
         }
         Some("--resume") => {
             let (mut w, r) = DatasetWriter::open_resume(dir, spec()).map_err(|e| e.to_string())?;
-            let interrupted = r.interrupted.as_ref().map(|i| {
-                serde_json::json!({"episode_index": i.episode_index, "task": i.task, "frames": i.frames})
-            });
+            let report = RecoveryReport {
+                interrupted: r.interrupted.as_ref(),
+                rolled_forward: r.rolled_forward.len(),
+                removed_temporaries: r.removed_temporaries.len(),
+                removed_episode_files: &r.removed_episode_files,
+            };
             println!(
                 "RECOVERY {}",
-                serde_json::json!({
-                    "interrupted": interrupted,
-                    "rolled_forward": r.rolled_forward.len(),
-                    "removed_temporaries": r.removed_temporaries.len(),
-                    "removed_episode_files": r.removed_episode_files,
-                })
+                serde_json::to_string(&report).map_err(|e| e.to_string())?
             );
             episode(&mut w, "pick up the cube", 60, 4.0)?;
             w.save_episode().map_err(|e| e.to_string())?;

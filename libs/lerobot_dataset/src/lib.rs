@@ -374,8 +374,7 @@ impl DatasetSpec {
     /// info.json's `features`, as lerobot writes them (`{**features, **DEFAULT_FEATURES}`),
     /// a camera's `info` as at creation (`{"is_depth_map": false}`).
     pub fn features(&self) -> Ordered {
-        let created =
-            vec![Ordered::obj([("is_depth_map", Ordered::val(false))]); self.cameras.len()];
+        let created = vec![video_info_created(); self.cameras.len()];
         self.features_with(&created)
     }
 
@@ -441,7 +440,7 @@ pub struct Frame<'a> {
 }
 
 /// An episode found interrupted (not saved) and discarded.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Interrupted {
     /// The index it would have had.
     pub episode_index: u64,
@@ -801,6 +800,11 @@ fn video_info_ordered(info: &Value) -> Ordered {
     Ordered::Obj(pairs)
 }
 
+/// A video feature's `info` at creation, before any episode was probed.
+fn video_info_created() -> Ordered {
+    Ordered::obj([("is_depth_map", Ordered::val(false))])
+}
+
 /// What lerobot's `update_video_info` writes after the first episode: the probed
 /// stream, then the encoder's settings ([`video`]'s constants).
 fn video_info_probed(p: &video::Probe) -> Ordered {
@@ -920,7 +924,7 @@ impl DatasetWriter {
             .cameras
             .iter()
             .map(|_| CameraFiles {
-                info: Ordered::obj([("is_depth_map", Ordered::val(false))]),
+                info: video_info_created(),
                 current: None,
                 next_new: (0, 0),
             })
@@ -1033,12 +1037,11 @@ impl DatasetWriter {
                 .get("features")
                 .and_then(|f| f.get(&key))
                 .and_then(|f| f.get("info"))
-                .cloned()
-                .unwrap_or(serde_json::json!({"is_depth_map": false}));
+                .map_or_else(video_info_created, video_info_ordered);
             let next_new = last_file(&root.join("videos").join(&key), "mp4")?
                 .map_or((0, 0), |l| next_file(l, cs));
             cameras.push(CameraFiles {
-                info: video_info_ordered(&info),
+                info,
                 current: None,
                 next_new,
             });

@@ -7,13 +7,15 @@
 //! back when the caller is silent for compute_ik's `calibration_lease`: a holder renews it
 //! by listing the controllers ([`ControllerManager::list`]) more often than that.
 
+use crate::service::{client, namespace_of};
+use crate::topics::{LIST_CONTROLLERS, SWITCH_CONTROLLER};
 use crate::{PlumbingError, RosNode};
 use eezybot_msgs::builtin_interfaces::Duration as RosDuration;
 use eezybot_msgs::controller_manager_msgs::{
     ControllerState, ListControllersRequest, ListControllersResponse, SwitchControllerRequest,
     SwitchControllerResponse,
 };
-use ros2_client::{Client, Message, Name, ServiceMapping, ServiceTypeName};
+use ros2_client::Client;
 use std::time::Duration;
 
 /// A client of one controller manager.
@@ -28,12 +30,21 @@ impl ControllerManager {
     /// services `controller_manager/...` in `node`'s namespace.
     pub fn new(ros: &mut RosNode, node: &str) -> Result<Self, PlumbingError> {
         let full = ros.resolver().resolve(node)?;
-        let namespace = match full.rfind('/') {
-            Some(0) | None => String::new(),
-            Some(i) => full[..i].to_string(),
-        };
-        let list = client(ros, &namespace, &crate::topics::LIST_CONTROLLERS)?;
-        let switch = client(ros, &namespace, &crate::topics::SWITCH_CONTROLLER)?;
+        let namespace = namespace_of(&full).to_string();
+        let [list, switch] =
+            [&LIST_CONTROLLERS, &SWITCH_CONTROLLER].map(|c| format!("{namespace}/{}", c.name));
+        let list = client(
+            ros,
+            &list,
+            LIST_CONTROLLERS.package,
+            LIST_CONTROLLERS.type_name,
+        )?;
+        let switch = client(
+            ros,
+            &switch,
+            SWITCH_CONTROLLER.package,
+            SWITCH_CONTROLLER.type_name,
+        )?;
         Ok(ControllerManager {
             namespace,
             list,
@@ -102,28 +113,4 @@ impl ControllerManager {
             Err(answer.message)
         }
     }
-}
-
-/// A client of the controller manager's `service` ([`crate::topics::CALLABLES`]) in
-/// `namespace` (empty or `/arm2`).
-fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
-    ros: &mut RosNode,
-    namespace: &str,
-    service: &crate::topics::Callable,
-) -> Result<Client<Req, Resp>, PlumbingError> {
-    let full = format!("{namespace}/{}", service.name);
-    let name = Name::parse(&full).map_err(|e| PlumbingError::Name {
-        name: full.clone(),
-        why: format!("{e:?}"),
-    })?;
-    let qos = crate::qos::SERVICES;
-    ros.node_mut()
-        .create_client(
-            ServiceMapping::Enhanced,
-            &name,
-            &ServiceTypeName::new(service.package, service.type_name),
-            qos.clone(),
-            qos,
-        )
-        .map_err(|e| PlumbingError::Ros(format!("{full}: {e:?}")))
 }

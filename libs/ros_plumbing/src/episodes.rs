@@ -3,10 +3,11 @@
 //! `task` parameter: the recorder's command line and the panel's Record button.
 
 use crate::remote_params::RemoteParameters;
+use crate::service::{client, namespace_of};
 use crate::topics::{self, Callable};
 use crate::{PlumbingError, RosNode};
 use eezybot_msgs::std_srvs::{TriggerRequest, TriggerResponse};
-use ros2_client::{Client, Name, ParameterValue, ServiceMapping, ServiceTypeName};
+use ros2_client::{Client, ParameterValue};
 use std::time::Duration;
 
 /// An episode request.
@@ -45,14 +46,19 @@ impl EpisodeClient {
     /// `recorder/...` in its namespace, as `ros2 service call` names them.
     pub fn new(ros: &mut RosNode, node: &str) -> Result<Self, PlumbingError> {
         let node_name = ros.resolver().resolve(node)?;
-        let namespace = match node_name.rfind('/') {
-            Some(0) | None => String::new(),
-            Some(i) => node_name[..i].to_string(),
+        let namespace = namespace_of(&node_name).to_string();
+        let mut trigger = |c: &Callable| {
+            client(
+                ros,
+                &format!("{namespace}/{}", c.name),
+                c.package,
+                c.type_name,
+            )
         };
         Ok(EpisodeClient {
-            start: client(ros, &namespace, &topics::START_EPISODE)?,
-            save: client(ros, &namespace, &topics::SAVE_EPISODE)?,
-            discard: client(ros, &namespace, &topics::DISCARD_EPISODE)?,
+            start: trigger(&topics::START_EPISODE)?,
+            save: trigger(&topics::SAVE_EPISODE)?,
+            discard: trigger(&topics::DISCARD_EPISODE)?,
             params: RemoteParameters::new(ros, node)?,
             node_name,
         })
@@ -137,26 +143,4 @@ impl EpisodeClient {
         })?
         .map_err(|e| format!("{}: {e:?}", call.callable().name))
     }
-}
-
-fn client(
-    ros: &mut RosNode,
-    namespace: &str,
-    service: &Callable,
-) -> Result<Client<TriggerRequest, TriggerResponse>, PlumbingError> {
-    let full = format!("{namespace}/{}", service.name);
-    let name = Name::parse(&full).map_err(|e| PlumbingError::Name {
-        name: full.clone(),
-        why: format!("{e:?}"),
-    })?;
-    let qos = crate::qos::SERVICES;
-    ros.node_mut()
-        .create_client(
-            ServiceMapping::Enhanced,
-            &name,
-            &ServiceTypeName::new(service.package, service.type_name),
-            qos.clone(),
-            qos,
-        )
-        .map_err(|e| PlumbingError::Ros(format!("{full}: {e:?}")))
 }

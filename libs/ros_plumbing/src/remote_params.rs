@@ -8,13 +8,12 @@
 //! [`ParameterValue`] ([`RemoteParameters::get_value`], [`RemoteParameters::set_value`]),
 //! each failure a [`RemoteParamError`].
 
+use crate::service::client;
 use crate::{PlumbingError, RosNode};
 use ros2_client::rcl_interfaces::{
     GetParametersRequest, GetParametersResponse, SetParametersRequest, SetParametersResponse,
 };
-use ros2_client::{
-    parameters::raw, Client, Message, Name, ParameterValue, ServiceMapping, ServiceTypeName,
-};
+use ros2_client::{parameters::raw, Client, ParameterValue};
 use std::time::Duration;
 
 /// Why a remote parameter could not be read or set.
@@ -92,8 +91,18 @@ impl RemoteParameters {
     /// The parameters of `node` (a name in our namespace, or absolute).
     pub fn new(ros: &mut RosNode, node: &str) -> Result<Self, PlumbingError> {
         let node_name = ros.resolver().resolve(node)?;
-        let get = client(ros, &node_name, "get_parameters", "GetParameters")?;
-        let set = client(ros, &node_name, "set_parameters", "SetParameters")?;
+        let get = client(
+            ros,
+            &format!("{node_name}/get_parameters"),
+            "rcl_interfaces",
+            "GetParameters",
+        )?;
+        let set = client(
+            ros,
+            &format!("{node_name}/set_parameters"),
+            "rcl_interfaces",
+            "SetParameters",
+        )?;
         Ok(Self {
             node_name,
             get,
@@ -197,30 +206,6 @@ impl RemoteParameters {
     pub async fn set(&self, name: &str, value: ParameterValue) -> Result<(), String> {
         self.set_value(name, value).await.map_err(|e| e.to_string())
     }
-}
-
-/// A client of `node`'s `service` (`get_parameters`), of type rcl_interfaces/`type_name`.
-fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
-    ros: &mut RosNode,
-    node: &str,
-    service: &str,
-    type_name: &str,
-) -> Result<Client<Req, Resp>, PlumbingError> {
-    let full = format!("{node}/{service}");
-    let name = Name::parse(&full).map_err(|e| PlumbingError::Name {
-        name: full.clone(),
-        why: format!("{e:?}"),
-    })?;
-    let qos = crate::qos::SERVICES;
-    ros.node_mut()
-        .create_client(
-            ServiceMapping::Enhanced,
-            &name,
-            &ServiceTypeName::new("rcl_interfaces", type_name),
-            qos.clone(),
-            qos,
-        )
-        .map_err(|e| PlumbingError::Ros(format!("{full}: {e:?}")))
 }
 
 /// A get's value, `None` when the node does not have the parameter (`NotSet`).

@@ -13,11 +13,43 @@ use crate::error::PlumbingError;
 use crate::names::Resolver;
 use crate::qos;
 use ros2_client::service::request_id::RmwRequestId;
-use ros2_client::{Message, Name, Node, Server, ServiceMapping, ServiceTypeName};
+use ros2_client::{Client, Message, Name, Node, Server, ServiceMapping, ServiceTypeName};
 use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 use tokio::sync::Notify;
+
+/// A client of the service `full` (an absolute name: `/arm2/recorder/start_episode`) of
+/// type `package/srv/type_name`, with the services' QoS: every client of ours is made here.
+pub fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
+    ros: &mut crate::RosNode,
+    full: &str,
+    package: &str,
+    type_name: &str,
+) -> Result<Client<Req, Resp>, PlumbingError> {
+    let name = Name::parse(full).map_err(|e| PlumbingError::Name {
+        name: full.to_string(),
+        why: format!("{e:?}"),
+    })?;
+    ros.node_mut()
+        .create_client(
+            ServiceMapping::Enhanced,
+            &name,
+            &ServiceTypeName::new(package, type_name),
+            qos::SERVICES,
+            qos::SERVICES,
+        )
+        .map_err(|e| PlumbingError::Ros(format!("{full}: {e:?}")))
+}
+
+/// The namespace of a node's full name, where its services are: `/arm2/recorder` is in
+/// `/arm2`, `/recorder` in `` (the services then `/recorder/...`).
+pub fn namespace_of(full_name: &str) -> &str {
+    match full_name.rfind('/') {
+        Some(0) | None => "",
+        Some(i) => &full_name[..i],
+    }
+}
 
 /// How long an answer waits for its client's response reader to match.
 const ANSWER_WAIT: Duration = Duration::from_secs(10);
