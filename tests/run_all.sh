@@ -80,7 +80,8 @@ CARGO_TARGET_DIR=$native_target cargo test --workspace
 stage "physics twin: MuJoCo 3.17's library from PyPI's wheel (launch_scripts/install_mujoco.sh), the twin's model and physics tests on simulated time"
 # (a subshell: only the twin is built against MuJoCo)
 ( . launch_scripts/install_mujoco.sh --env
-  CARGO_TARGET_DIR=$native_target cargo test -p twin --features mujoco )
+  CARGO_TARGET_DIR=$native_target cargo test -p twin --features mujoco
+  CARGO_TARGET_DIR=$native_target cargo build -p twin --features mujoco --bins )
 stage "Raspberry Pi: cross-build (aarch64, profile pi-check), pure crates' tests under qemu-aarch64; alongside: the patched crates (tests/check_patches.sh), then wan/'s build and unit tests"
 . launch_scripts/setup_cross.sh
 pi_target=$(cargo_target pi)

@@ -3,6 +3,7 @@
 
 pub mod core;
 pub mod link;
+pub mod pty;
 
 use crate::core::{angles_to_ticks, parse_servo_list, servo_list_text, ticks_to_angles};
 use crate::link::{Link, LinkEvent, LinkSnapshot};

@@ -1,0 +1,127 @@
+//! A [`Device`] served behind a pseudo-terminal, so that serial_node's real serial-port
+//! path can be used without a board: the `virtual_arduino` binary, and the physics twin's
+//! (`nodes/twin`), whose servos follow the device's pulses.
+
+use nix::fcntl::{fcntl, FcntlArg, OFlag};
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::pty::openpty;
+use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+use servo_protocol::device::Device;
+use std::io::{Read, Write};
+use std::os::fd::AsFd;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// What the command line asks for.
+#[derive(Debug, PartialEq)]
+pub enum Command {
+    /// `--help`.
+    Help,
+    /// Serve behind a link at this path.
+    Serve(String),
+}
+
+/// `args` without argv\[0\]; the error is the usage problem.
+pub fn parse(args: &[String]) -> Result<Command, String> {
+    let mut paths = Vec::new();
+    let mut options_done = false;
+    for arg in args {
+        match arg.as_str() {
+            "-h" | "--help" if !options_done => return Ok(Command::Help),
+            "--" if !options_done => options_done = true,
+            a if a.starts_with('-') && a != "-" && !options_done => {
+                return Err(format!("unknown option `{a}`"))
+            }
+            a => paths.push(a.to_string()),
+        }
+    }
+    match <[String; 1]>::try_from(paths) {
+        Ok([path]) => Ok(Command::Serve(path)),
+        Err(paths) if paths.is_empty() => Err("missing PTY_LINK_PATH".into()),
+        Err(paths) => Err(format!("one PTY_LINK_PATH expected, got {}", paths.len())),
+    }
+}
+
+/// Serves `device` behind a new pseudo-terminal, linked at `link` (replaced if it
+/// exists, removed when serving ends), until SIGINT or SIGTERM (`Ok`) or until `each_tick`
+/// fails (that error: the link is removed and the terminal closed, which the host sees as
+/// an unplugged cable). `each_tick` runs about every 2 ms, after the device has taken the
+/// host's bytes and its own tick, with the time since serving began. `name` prefixes the
+/// log line.
+pub fn serve(
+    name: &str,
+    link: &str,
+    mut device: Device,
+    mut each_tick: impl FnMut(&Device, Duration) -> Result<(), String>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    let pty = openpty(None, None)?;
+    let mut tio = tcgetattr(pty.slave.as_fd())?;
+    cfmakeraw(&mut tio);
+    tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &tio)?;
+    let slave_path = std::fs::read_link(format!(
+        "/proc/self/fd/{}",
+        std::os::fd::AsRawFd::as_raw_fd(&pty.slave)
+    ))?;
+    let _ = std::fs::remove_file(link);
+    std::os::unix::fs::symlink(&slave_path, link)?;
+    let flags = OFlag::from_bits_truncate(fcntl(pty.master.as_fd(), FcntlArg::F_GETFL)?);
+    fcntl(
+        pty.master.as_fd(),
+        FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK),
+    )?;
+    let mut master = std::fs::File::from(pty.master);
+    eprintln!("{name}: serving on {link} -> {}", slave_path.display());
+
+    let start = Instant::now();
+    let mut buf = [0u8; 256];
+    while !stop.load(Ordering::SeqCst) {
+        let ready = {
+            let mut fds = [PollFd::new(master.as_fd(), PollFlags::POLLIN)];
+            poll(&mut fds, PollTimeout::from(2u16)).unwrap_or(0)
+        };
+        if ready > 0 {
+            match master.read(&mut buf) {
+                Ok(n) if n > 0 => device.receive(&buf[..n], start.elapsed()),
+                _ => {}
+            }
+        }
+        device.tick(start.elapsed());
+        let out = device.take_output();
+        if !out.is_empty() {
+            let _ = master.write_all(&out);
+        }
+        if let Err(why) = each_tick(&device, start.elapsed()) {
+            let _ = std::fs::remove_file(link);
+            return Err(why.into());
+        }
+    }
+    let _ = std::fs::remove_file(link);
+    drop(pty.slave);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(args: &[&str]) -> Result<Command, String> {
+        parse(&args.iter().map(|a| a.to_string()).collect::<Vec<_>>())
+    }
+
+    #[test]
+    fn help_is_not_a_pty_path() {
+        assert_eq!(p(&["--help"]), Ok(Command::Help));
+        assert_eq!(p(&["-h"]), Ok(Command::Help));
+        assert_eq!(p(&["/tmp/tty", "--help"]), Ok(Command::Help));
+        assert_eq!(p(&["/tmp/tty"]), Ok(Command::Serve("/tmp/tty".into())));
+        assert_eq!(p(&["--", "--help"]), Ok(Command::Serve("--help".into())));
+        assert!(p(&["--bogus", "/tmp/tty"]).unwrap_err().contains("--bogus"));
+        assert!(p(&[]).is_err());
+        assert!(p(&["a", "b"]).is_err());
+    }
+}
