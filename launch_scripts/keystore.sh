@@ -9,8 +9,8 @@
 # Options:
 #   --enclave PATH    make this enclave (repeatable) instead of /eezybot/pc and /eezybot/pi
 #   --role pc|pi|tools  the permissions of the --enclave ones: pc = what gui_bridge,
-#                     compute_ik and state_publisher use (the operator PC: a second PC);
-#                     pi = what serial_node uses; tools = for stock ROS 2 tools (`ros2
+#                     compute_ik, state_publisher, the recorder and the twin use (the
+#                     operator PC: a second PC); pi = what serial_node and camera_node use; tools = for stock ROS 2 tools (`ros2
 #                     topic echo`, `ros2 param set`, RViz2): every topic of the contract
 #                     both ways, /rosout, every service. Default: pi for /eezybot/pi, pc
 #                     for any other enclave.
@@ -167,8 +167,8 @@ for enclave in "${ENCLAVES[@]}"; do
     sign "$d/permissions.xml" "$d/permissions.p7s"
     [ "$what" = created ] || what="kept, permissions renewed"
     case "$role" in
-      pc) nodes="gui_bridge, compute_ik, state_publisher" ;;
-      pi) nodes="serial_node" ;;
+      pc) nodes="gui_bridge, compute_ik, state_publisher, recorder, twin" ;;
+      pi) nodes="serial_node, camera_node" ;;
       tools) nodes="ROS 2 tools" ;;
     esac
     eezybot_say "enclave $enclave: $what ($d; permissions of $nodes in namespace $NAMESPACE)"

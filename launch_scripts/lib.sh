@@ -268,6 +268,10 @@ eezybot_banner() {
 # and EEZYBOT_PORT_FOUND (1 if the device exists or is the mock).
 eezybot_serial_port() {
   EEZYBOT_PORT_FOUND=1
+  if [ "${SERIAL_PORT:-}" = twin ]; then
+    EEZYBOT_PORT=twin  # the physics twin, started beside serial_node (eezybot_twin)
+    return
+  fi
   if [ -n "${SERIAL_PORT:-}" ]; then
     EEZYBOT_PORT=$SERIAL_PORT
   elif [ -e /dev/eezybot ]; then
@@ -278,6 +282,23 @@ eezybot_serial_port() {
     EEZYBOT_PORT=/dev/eezybot
   fi
   [ "$EEZYBOT_PORT" = mock ] || [ -e "$EEZYBOT_PORT" ] || EEZYBOT_PORT_FOUND=0
+}
+
+# The physics twin (docs/twin.md) for SERIAL_PORT=twin: in a source tree, MuJoCo
+# (launch_scripts/install_mujoco.sh) and `cargo build --release -p twin --features
+# mujoco`; then `twin --mujoco-check` must pass. Exits 1 with what is missing otherwise.
+eezybot_twin() {
+  if [ -z "${EEZYBOT_BIN_DIR:-}" ] && [ "$EEZYBOT_BIN" = "$EEZYBOT_ROOT/target/release" ] \
+    && [ -f "$EEZYBOT_ROOT/Cargo.toml" ] && command -v cargo >/dev/null 2>&1; then
+    eezybot_say "the physics twin: MuJoCo and cargo build --release -p twin --features mujoco"
+    ( . "$EEZYBOT_ROOT/launch_scripts/install_mujoco.sh" --env >/dev/null \
+      && cd "$EEZYBOT_ROOT" && cargo build --release -p twin --features mujoco ) || {
+      eezybot_say "the physics twin could not be built (docs/twin.md: Installing MuJoCo)"; exit 1; }
+  fi
+  eezybot_need_binaries "$EEZYBOT_BIN" "build it: cargo build --release -p twin --features mujoco (docs/twin.md)" twin
+  "$EEZYBOT_BIN/twin" --mujoco-check || {
+    eezybot_say "SERIAL_PORT=twin needs a twin built with MuJoCo (docs/twin.md); SERIAL_PORT=mock runs the virtual Arduino"
+    exit 1; }
 }
 
 # SROS2 (DDS Security), as rcl reads it: on only when ROS_SECURITY_ENABLE is exactly

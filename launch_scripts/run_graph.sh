@@ -3,7 +3,9 @@
 # gui_bridge (web panel on GUI_BIND, default 127.0.0.1:8080), compute_ik,
 # state_publisher and serial_node. serial_node drives the Arduino on SERIAL_PORT, or else
 # on /dev/eezybot or /dev/ttyACM0; when none of them exists it uses the built-in virtual
-# Arduino (SERIAL_PORT=mock asks for it), and says so.
+# Arduino (SERIAL_PORT=mock asks for it), and says so. SERIAL_PORT=twin runs the physics
+# twin (MuJoCo, docs/twin.md) beside them and serial_node drives it (port:=twin); in a
+# source tree the first run installs MuJoCo and builds the twin.
 #
 # Another arm: `--arm jaco` as the first arguments (or ARM=jaco) runs compute_ik and
 # state_publisher on urdf/jaco.urdf (the Kinova Jaco 2, 6 DOF) with gui_bridge, and no
@@ -44,7 +46,12 @@ case "$arm" in
       eezybot_say "no Arduino at ${SERIAL_PORT:-/dev/eezybot or /dev/ttyACM0}: using the built-in virtual Arduino"
       EEZYBOT_PORT=mock
     fi
-    eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge" /eezybot/pi serial_node
+    [ "$EEZYBOT_PORT" != twin ] || eezybot_twin
+    if [ "$EEZYBOT_PORT" = twin ]; then
+      eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge, twin" /eezybot/pi serial_node
+    else
+      eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge" /eezybot/pi serial_node
+    fi
 
     eezybot_arm_config
 
@@ -52,11 +59,19 @@ case "$arm" in
     eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_ARM_ARGS[@]}"
     eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
     eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind" "${EEZYBOT_ARM_ARGS[@]}"
+    # (the twin is an arm assembled to the shipped config: a calibration of your own
+    # then shows in it as on a real arm)
+    [ "$EEZYBOT_PORT" != twin ] || eezybot_start twin "${EEZYBOT_ENCLAVE[@]}"
     eezybot_enclave /eezybot/pi
     eezybot_start serial_node "${EEZYBOT_ENCLAVE[@]}" -p "port:=$EEZYBOT_PORT" "${EEZYBOT_ARM_ARGS[@]}"
 
     eezybot_banner
-    eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($([ "$EEZYBOT_PORT" = mock ] && echo "virtual Arduino" || echo "Arduino on $EEZYBOT_PORT"))"
+    case "$EEZYBOT_PORT" in
+      mock) device="virtual Arduino" ;;
+      twin) device="the physics twin: twin, MuJoCo" ;;
+      *) device="Arduino on $EEZYBOT_PORT" ;;
+    esac
+    eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($device)"
     eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
     eezybot_say "try: ros2 topic pub --once /xyz_target geometry_msgs/msg/PointStamped \"{header: {frame_id: base_link}, point: {x: 0.2, y: 0.0, z: 0.15}}\""
     ;;

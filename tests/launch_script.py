@@ -14,7 +14,7 @@ from conftest import OUTPUT, REPO, bin_path, default_sigint, descendants
 
 SCRIPTS = REPO / "launch_scripts"
 ROS_NODES = {"compute_ik", "state_publisher", "gui_bridge", "serial_node"}
-NODES = ROS_NODES | {"virtual_arduino"}
+NODES = ROS_NODES | {"virtual_arduino", "twin"}
 
 # the process groups of the scripts started (each leads a session of its own)
 STARTED = []

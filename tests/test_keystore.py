@@ -25,7 +25,7 @@ KEYSTORE_SH = REPO / "launch_scripts" / "keystore.sh"
 INSTALL_SH = REPO / "deploy" / "install.sh"
 ENCLAVE_FILES = ("cert.pem", "key.pem", "identity_ca.cert.pem", "permissions_ca.cert.pem", "governance.p7s",
                  "permissions.p7s", "permissions.xml")
-PC_NODES = {"gui_bridge", "compute_ik", "state_publisher", "recorder"}  # sros2.rs PC_NODES
+PC_NODES = {"gui_bridge", "compute_ik", "state_publisher", "recorder", "twin"}  # sros2.rs PC_NODES
 PI_NODES = {"serial_node", "camera_node"}  # libs/ros_plumbing/src/sros2.rs PI_NODES
 # roles that run beside either half, wherever their hardware is (ros_plumbing::sros2::EITHER_HALF):
 # a leader arm's reader

@@ -12,13 +12,16 @@ from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from conftest import TOPICS, bin_path, latest_status
 
-ROS_NODES = ["compute_ik", "serial_node", "state_publisher", "camera_node", "recorder"]
+ROS_NODES = ["compute_ik", "serial_node", "state_publisher", "camera_node", "recorder", "twin"]
 # camera_node: its test source, small and slow (no camera here; the topics are what counts);
-# the recorder: its dataset in a folder of this run's, recording the camera
+# the recorder: its dataset in a folder of this run's, recording both cameras; the physics
+# twin (its own link: serial_node runs on the virtual Arduino), its camera small and slow
 NODE_ARGS = {"serial_node": ["--ros-args", "-p", "port:=mock"],
              "camera_node": ["--ros-args", "-p", "device:=test", "-p", "width:=160", "-p", "height:=128", "-p", "fps:=5"],
              "recorder": ["--ros-args", "-p", f"root:={tempfile.mkdtemp(prefix='eezybot-ros-cli-')}/dataset",
-                          "-p", "image_topics:=[camera/image_raw/compressed]"]}
+                          "-p", "image_topics:=[camera/image_raw/compressed, twin/camera/image_raw/compressed]"],
+             "twin": ["--ros-args", "-p", f"link:={tempfile.mkdtemp(prefix='eezybot-ros-cli-')}/tty", "-p", "camera_fps:=5",
+                      "-p", "camera_width:=160", "-p", "camera_height:=128"]}
 
 
 def call(observer, client, request, timeout=10):
@@ -53,6 +56,8 @@ RANGES = {
     "camera_node": {"width": (144, 4096), "height": (128, 4096), "fps": (1, 120), "jpeg_quality": (1, 100),
                     "diagnostics_period": (0.05, 60.0)},
     "recorder": {"fps": (1, 200), "max_staleness": (0.01, 5.0)},
+    "twin": {"camera_fps": (0, 60), "camera_width": (16, 1920), "camera_height": (16, 1080), "camera_fovy": (10.0, 120.0),
+             "jpeg_quality": (1, 100), "state_rate": (1.0, 500.0), "diagnostics_period": (0.05, 60.0)},
 }
 CONSTRAINTS = {
     "compute_ik": {"solver": "one of: analytic, jacobian, dls, newton", "motion": "one of: joint, line",
@@ -62,6 +67,7 @@ CONSTRAINTS = {
     "camera_node": {"device": "a device path, or test"},
     "recorder": {"task": "1 to 500 characters, no control characters",
                  "arm_config": "empty, or an arm_config YAML file that loads"},
+    "twin": {"arm_config": "empty, or an arm_config YAML file that loads"},
 }
 
 

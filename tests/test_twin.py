@@ -1,44 +1,165 @@
-"""The physics twin behind a pseudo-terminal (nodes/twin: `twin PTY_LINK_PATH`), driven by
-serial_node over its real serial-port path, as it drives an Uno: the handshake, commands
-acknowledged with their stamps, and a clean stop that the host sees as the device lost.
-The twin's physics is checked on simulated time by its own tests (cargo test -p twin
---features mujoco, in the test command)."""
+"""The physics twin in the graph (nodes/twin, docs/twin.md): `twin` is a ROS node that serves
+the servo link protocol behind a pseudo-terminal; `serial_node port:=twin` drives it as it
+drives an Uno, and the twin publishes what its physics does: twin/joint_states (every
+joint, passive ones included), the cube's tf frame, its camera. Judged by order and by the
+messages' own stamps (simulated time on the wall clock's epoch), never by the host's
+speed. The physics itself is checked on simulated time by `cargo test -p twin --features
+mujoco` (in the test command)."""
+import io
 import math
 import os
 import signal
 import subprocess
 import time
 
-from conftest import bin_path, status_values
+from PIL import Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, JointState
+
+from conftest import TfListener, bin_path, latest_status, status_values
 from safety_rig import SerialNodeRig
 from test_serial_node import angles
 
 
-def start_twin(link):
-    p = subprocess.Popen([bin_path("twin"), str(link)], stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 20
+def stamp_s(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def twin_status(diags):
+    s = latest_status(diags, "twin")
+    return status_values(s) if s else {}
+
+
+class TwinRig(SerialNodeRig):
+    """The twin (a node of the test's `launch`) and serial_node on `port:=twin`; rclpy reads
+    the twin's topics."""
+
+    def __init__(self, launch, observer, *twin_params):
+        self.twin = launch("twin", "--ros-args", "-p", "camera_fps:=10", *twin_params)
+        self.joints = observer.sub("/twin/joint_states", JointState)
+        self.images = observer.sub("/twin/camera/image_raw/compressed", CompressedImage)
+        self.infos = observer.sub("/twin/camera/camera_info", CameraInfo)
+        super().__init__(launch, observer, "twin", 0.2)
+
+    def connected(self):
+        s = self.status()
+        return s is not None and status_values(s).get("connection") == "connected"
+
+    def joint(self, name, msg=None):
+        m = msg or self.joints[-1][1]
+        return m.position[list(m.name).index(name)]
+
+
+def test_serial_node_port_twin_drives_the_physics(launch, observer, domain):
+    rig = TwinRig(launch, observer)
+    assert observer.spin_until(rig.connected, 30), "serial_node never connected to the twin"
+    assert observer.spin_until(lambda: len(rig.joints) > 10, 10)
+    # every movable URDF joint, as the physics has them
+    names = set(rig.joints[-1][1].name)
+    assert {"base_joint", "shoulder_joint", "elbow_joint", "crank_joint", "wrist_joint",
+            "gripper_joint", "gripper_mimic_joint"} <= names, names
+    # home: main arm up, forearm level (the arm was limp until serial_node's first
+    # command, as an unpowered arm is, and drooped against its stops); the passive crank
+    # follows the forearm servo (phi = horn - 90 deg)
+    rig.angles.publish(angles([90, 90, 90, 60], sec=1))
+
+    def at_home():
+        return (abs(rig.joint("base_joint")) < math.radians(1) and abs(rig.joint("crank_joint")) < math.radians(2)
+                and abs(rig.joint("shoulder_joint") - math.radians(90)) < math.radians(2))
+    assert observer.spin_until(at_home, 10), \
+        {n: round(math.degrees(p), 1) for n, p in zip(rig.joints[-1][1].name, rig.joints[-1][1].position)}
+    # a 40 degree turn of the base servo: 20 degrees of the base, through the 2:1 gear
+    n = len(rig.joints)
+    rig.angles.publish(angles([50, 90, 90, 60], sec=2))
+    assert observer.spin_until(lambda: abs(rig.joint("base_joint") - math.radians(20)) < math.radians(1), 10), \
+        math.degrees(rig.joint("base_joint"))
+    # the physics took time to get there: at the MG995's 300 deg/s the horn needs 0.13 s,
+    # and the twin's own stamps show a motion through intermediate angles
+    moving = [m for _, m in rig.joints[n:] if math.radians(2) < rig.joint("base_joint", m) < math.radians(18)]
+    assert moving, "the base jumped: no state between the two poses"
+    first = next(m for _, m in rig.joints[n:] if rig.joint("base_joint", m) > math.radians(1))
+    done = next(m for _, m in rig.joints[n:] if abs(rig.joint("base_joint", m) - math.radians(20)) < math.radians(1))
+    assert 0.08 < stamp_s(done.header.stamp) - stamp_s(first.header.stamp) < 1.0
+    # the cube, as a tf frame of base_link, on its stand
+    tf = TfListener(domain)
+    try:
+        assert observer.spin_until(lambda: "cube" in tf.transforms(), 10)
+        cube = tf.transforms()["cube"]
+        assert cube.header.frame_id == "base_link"
+        t = cube.transform.translation
+        assert abs(t.x - 0.2) < 0.01 and abs(t.y) < 0.01 and 0.05 < t.z < 0.08, (t.x, t.y, t.z)
+    finally:
+        tf.close()
+    # the camera: JPEG 640 x 480, each image with its camera info
+    assert observer.spin_until(lambda: rig.images and rig.infos, 20)
+    img = rig.images[-1][1]
+    assert img.format == "jpeg"
+    assert Image.open(io.BytesIO(bytes(img.data))).size == (640, 480)
+    info = rig.infos[-1][1]
+    assert (info.width, info.height) == (640, 480) and info.k[0] > 0
+    assert observer.spin_until(lambda: twin_status(rig.diags).get("camera_frames", "0") != "0", 10)
+    v = twin_status(rig.diags)
+    assert float(v["loop_error_mm"]) < 1.0, v
+
+
+def start_twin(link, domain):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    p = subprocess.Popen([bin_path("twin"), "--ros-args", "-p", f"link:={link}", "-p", "camera_fps:=0"],
+                         stderr=subprocess.PIPE, text=True, env=env)
+    deadline = time.monotonic() + 30
     while not os.path.exists(link):
-        assert time.monotonic() < deadline and p.poll() is None, f"twin did not start: {p.stderr.read() if p.poll() is not None else ''}"
+        assert time.monotonic() < deadline and p.poll() is None, \
+            f"twin did not start: {p.stderr.read() if p.poll() is not None else ''}"
         time.sleep(0.01)
     return p
 
 
-def test_serial_node_drives_the_twin_through_a_pty(launch, observer, tmp_path):
+def test_a_stopped_twin_is_a_lost_device(launch, observer, tmp_path, domain):
+    """At a link of the user's choosing, the twin serves until stopped; its link goes with
+    it, and serial_node reports the device lost, as for an unplugged cable."""
     link = tmp_path / "tty"
-    twin = start_twin(link)
+    twin = start_twin(link, domain)
     try:
         rig = SerialNodeRig(launch, observer, str(link), 0.2)
-
-        def connection():
-            return status_values(rig.status()).get("connection") if rig.status() else None
-        assert observer.spin_until(lambda: connection() == "connected", 20)
+        assert observer.spin_until(lambda: status_values(rig.status()).get("connection") == "connected"
+                                   if rig.status() else False, 30)
         rig.angles.publish(angles([70, 110, 80, 120], sec=35))
         assert observer.spin_until(lambda: any(m.header.stamp.sec == 35 for _, m in rig.state), 10)
-        assert observer.spin_until(lambda: [round(math.degrees(p)) for p in rig.state[-1][1].position] == [70, 110, 80, 120], 10)
         assert twin.poll() is None, "the twin stopped"
     finally:
         twin.send_signal(signal.SIGINT)
         assert twin.wait(10) == 0
-    # its link is gone with it, and serial_node says the device is lost
     assert not os.path.exists(link)
     assert observer.spin_until(lambda: status_values(rig.status()).get("connection") == "disconnected", 15)
+
+
+def test_run_graph_with_serial_port_twin(domain, observer):
+    """`SERIAL_PORT=twin run_graph.sh -r __ns:=/arm3`: the twin starts beside the graph in
+    its namespace, serial_node drives it, a target moves the twin's arm there, and Ctrl-C
+    stops everything (no orphan) with exit code 0."""
+    from geometry_msgs.msg import PointStamped
+    from launch_script import Script, graph_ends, left_alive, reap_scripts  # noqa: F401 (fixture)
+
+    s = Script("run_graph.sh", "-r", "__ns:=/arm3", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "twin"})
+    try:
+        kids = s.children(5, timeout=40)
+        joints = observer.sub("/arm3/twin/joint_states", JointState)
+        xyz, state = graph_ends(observer, "/arm3/xyz_target", PointStamped, "/arm3/servo_state", JointState,
+                                {"compute_ik", "state_publisher", "serial_node", "gui_bridge", "twin"})
+        assert "physics twin" in s.output()
+        target = PointStamped()
+        target.header.frame_id = "base_link"
+        target.point.x, target.point.y, target.point.z = 0.2, 0.1, 0.15
+
+        def base():
+            m = joints[-1][1] if joints else None
+            return m.position[list(m.name).index("base_joint")] if m else None
+        want = math.atan2(0.1, 0.2)
+        end = time.monotonic() + 30
+        while time.monotonic() < end and not (base() is not None and abs(base() - want) < math.radians(1)):
+            xyz.publish(target)  # (repeated: the first may precede serial_node's handshake)
+            observer.spin_until(lambda: base() is not None and abs(base() - want) < math.radians(1), 1)
+        assert base() is not None and abs(base() - want) < math.radians(1), (base(), s.output())
+    finally:
+        code = s.stop()
+    assert code == 0, s.output()
+    assert not left_alive(kids), s.output()

@@ -96,8 +96,14 @@ pub enum Sros2Error {
 pub const MAX_DOMAIN_ID: u32 = 232;
 
 /// The nodes of the operator's PC (`launch_scripts/pc.sh`; the recorder beside them,
-/// where the datasets are kept).
-pub const PC_NODES: &[&str] = &["gui_bridge", "compute_ik", "state_publisher", "recorder"];
+/// where the datasets are kept, and the physics twin, which stands in for the Pi's arm).
+pub const PC_NODES: &[&str] = &[
+    "gui_bridge",
+    "compute_ik",
+    "state_publisher",
+    "recorder",
+    "twin",
+];
 /// The nodes of the Raspberry Pi (`launch_scripts/pi.sh`; camera_node is in its bundle,
 /// for a camera on the arm).
 pub const PI_NODES: &[&str] = &["serial_node", "camera_node"];

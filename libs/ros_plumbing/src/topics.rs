@@ -172,6 +172,8 @@ const STATE: &str = "state_publisher";
 const CAMERA: &str = "camera_node";
 /// The `recorder` node (LeRobot datasets from the running graph).
 const RECORDER: &str = "recorder";
+/// The physics twin (`twin`, docs/twin.md): the arm in MuJoCo behind the servo link.
+const TWIN: &str = "twin";
 /// `recorder replay`, the recorder's command line playing an episode back (a trajectory
 /// goal, the claw's openings).
 const REPLAY: &str = "recorder (replay)";
@@ -231,7 +233,7 @@ pub const ROBOT_DESCRIPTION: Topic<StringMsg> = Topic::new(
     &[GUI, RECORD],
 );
 /// Transforms of the movable joints.
-pub const TF: Topic<TFMessage> = Topic::new("tf", qos::TF, &[STATE], &[RECORD, FOXGLOVE]);
+pub const TF: Topic<TFMessage> = Topic::new("tf", qos::TF, &[STATE, TWIN], &[RECORD, FOXGLOVE]);
 /// Transforms of the fixed joints, latched.
 pub const TF_STATIC: Topic<TFMessage> =
     Topic::new("tf_static", qos::TF_STATIC, &[STATE], &[RECORD, FOXGLOVE]);
@@ -284,6 +286,25 @@ pub const CAMERA_IMAGE: Topic<CompressedImage> = Topic::new(
 /// uncalibrated camera's zero matrices).
 pub const CAMERA_INFO: Topic<CameraInfo> =
     Topic::new("camera/camera_info", qos::SENSOR_DATA, &[CAMERA], &[]).off_foxglove();
+
+/// The physics twin's joints as its physics has them: every movable URDF joint, passive
+/// ones included (rad, rad/s), what the arm in MuJoCo really does where `joint_states`
+/// is what compute_ik commands. The twin's tf frame `cube` (on `tf`) is its cube.
+pub const TWIN_JOINT_STATES: Topic<JointState> =
+    Topic::new("twin/joint_states", qos::COMMANDS, &[TWIN], &[]).off_foxglove();
+/// The twin's camera (the scene camera of its model), JPEG, the message `camera_node`
+/// sends: the recorder and the panel take it as a real camera.
+pub const TWIN_CAMERA_IMAGE: Topic<CompressedImage> = Topic::new(
+    "twin/camera/image_raw/compressed",
+    qos::SENSOR_DATA,
+    &[TWIN],
+    &[RECORDER],
+)
+.off_foxglove();
+/// The twin camera's [`CameraInfo`], with each image's header (its pinhole model from
+/// the camera's field of view).
+pub const TWIN_CAMERA_INFO: Topic<CameraInfo> =
+    Topic::new("twin/camera/camera_info", qos::SENSOR_DATA, &[TWIN], &[]).off_foxglove();
 
 /// One action or service of the contract: its name, its type, the nodes of ours that
 /// serve it and those that call it.
@@ -434,7 +455,10 @@ pub fn visit_all(v: &mut impl TopicVisitor) {
         LEADER_JOINT_STATES,
         LEADER_DEADMAN,
         CAMERA_IMAGE,
-        CAMERA_INFO
+        CAMERA_INFO,
+        TWIN_JOINT_STATES,
+        TWIN_CAMERA_IMAGE,
+        TWIN_CAMERA_INFO
     );
 }
 
@@ -621,7 +645,7 @@ mod tests {
             for n in e.publishers.iter().chain(e.subscribers) {
                 let node = n.split(' ').next().unwrap_or_default();
                 assert!(
-                    [GUI, IK, SERIAL, STATE, CAMERA, RECORDER].contains(&node),
+                    [GUI, IK, SERIAL, STATE, CAMERA, RECORDER, TWIN].contains(&node),
                     "{}: {n}",
                     e.name
                 );
@@ -641,7 +665,7 @@ mod tests {
             for n in c.servers.iter().chain(c.clients) {
                 let node = n.split(' ').next().unwrap_or_default();
                 assert!(
-                    [GUI, IK, SERIAL, STATE, CAMERA, RECORDER].contains(&node),
+                    [GUI, IK, SERIAL, STATE, CAMERA, RECORDER, TWIN].contains(&node),
                     "{}: {n}",
                     c.name
                 );

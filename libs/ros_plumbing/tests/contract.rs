@@ -224,8 +224,10 @@ const WRITTEN: &[Written] = &[
 
 /// The topics of [`topics::all`] besides [`WRITTEN`], with their types: the trajectory
 /// topics (which the written contract names outside its QoS table), the leader
-/// arm's (whose names it leaves to the implementation) and the camera's (named with their
-/// types under "Cameras"; their QoS is ROS's sensor-data profile, `qos::SENSOR_DATA`).
+/// arm's (whose names it leaves to the implementation), the camera's (named with their
+/// types under "Cameras"; their QoS is ROS's sensor-data profile, `qos::SENSOR_DATA`) and
+/// the physics twin's (named under "Physics twin": its joints as `joint_states` are, its
+/// camera as `camera_node`'s).
 const WRITTEN_WITHOUT_QOS: &[(&str, &str)] = &[
     (
         "arm_controller/joint_trajectory",
@@ -242,6 +244,12 @@ const WRITTEN_WITHOUT_QOS: &[(&str, &str)] = &[
         "sensor_msgs/msg/CompressedImage",
     ),
     ("camera/camera_info", "sensor_msgs/msg/CameraInfo"),
+    ("twin/joint_states", "sensor_msgs/msg/JointState"),
+    (
+        "twin/camera/image_raw/compressed",
+        "sensor_msgs/msg/CompressedImage",
+    ),
+    ("twin/camera/camera_info", "sensor_msgs/msg/CameraInfo"),
 ];
 
 #[test]

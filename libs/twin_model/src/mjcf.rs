@@ -8,7 +8,8 @@
 //!   between two joints of one parent link (the claw's second finger) is a gear pair, a
 //!   joint equality;
 //! - **what turns what:** a torque motor on each driven joint ([`crate::drive::Drive`]:
-//!   `crank_joint` for the forearm servo), its rotor inertia as the joint's armature;
+//!   `crank_joint` for the forearm servo), its rotor inertia as the joint's armature,
+//!   its gear train's friction as the joint's frictionloss;
 //!   every other joint is passive, its pins a little damped;
 //! - **mass:** each link's from its shapes, PLA's density and print fill, plus the
 //!   servos it carries ([`crate::mass`]);
@@ -119,9 +120,9 @@ impl Default for Scene {
     fn default() -> Self {
         Scene {
             // behind and above the arm's left shoulder, looking over it at the table
-            camera_pos: [-0.22, 0.12, 0.42],
-            camera_target: [0.17, 0.0, 0.03],
-            camera_fovy_deg: 58.0,
+            camera_pos: [-0.2, 0.24, 0.4],
+            camera_target: [0.14, 0.0, 0.09],
+            camera_fovy_deg: 55.0,
             image_size: (640, 480),
             cube_xy: [0.2, 0.0],
             stand_height_m: 0.055,
@@ -234,7 +235,7 @@ pub fn build(
         num(scene.timestep_s)
     ),
     );
-    out.line(1, &format!("<visual><global offwidth=\"{w}\" offheight=\"{h}\"/><quality shadowsize=\"2048\"/><headlight ambient=\"0.35 0.35 0.35\" diffuse=\"0.5 0.5 0.5\"/></visual>"));
+    out.line(1, &format!("<visual><global offwidth=\"{w}\" offheight=\"{h}\"/><quality shadowsize=\"1024\" offsamples=\"0\"/><headlight ambient=\"0.35 0.35 0.35\" diffuse=\"0.5 0.5 0.5\"/></visual>"));
     out.line(1, "<asset>");
     out.line(2, "<texture name=\"sky\" type=\"skybox\" builtin=\"gradient\" rgb1=\"0.55 0.65 0.8\" rgb2=\"0.1 0.12 0.15\" width=\"64\" height=\"512\"/>");
     out.line(2, "<texture name=\"wood\" type=\"2d\" builtin=\"checker\" rgb1=\"0.72 0.6 0.45\" rgb2=\"0.68 0.56 0.42\" width=\"256\" height=\"256\"/>");
@@ -296,7 +297,6 @@ pub fn build(
         &links,
         &materials,
         &drives,
-        &in_loops,
         &mut masses,
     )?;
     let c = CUBE_SIDE_M / 2.0;
@@ -338,7 +338,9 @@ pub fn build(
     out.line(1, "</equality>");
     out.line(1, "<actuator>");
     for (d, scale) in drives.iter().zip(scene.torque_scale) {
-        let limit = d.ratio.abs() * d.spec.stall_torque_nm * scale;
+        // (the motor's torque: the stall torque at the horn plus the gear friction it
+        // overcomes there)
+        let limit = d.ratio.abs() * (d.spec.stall_torque_nm * scale + d.spec.gear_friction_nm);
         out.line(
             2,
             &format!(
@@ -438,7 +440,6 @@ fn body_children(
     links: &HashMap<&str, &urdf_rs::Link>,
     materials: &HashMap<&str, [f64; 4]>,
     drives: &[Drive; 4],
-    in_loops: &[&str],
     masses: &mut Vec<(String, f64)>,
 ) -> Result<(), TwinModelError> {
     for j in children.get(parent).map(Vec::as_slice).unwrap_or_default() {
@@ -486,12 +487,10 @@ fn body_children(
                     j.name,
                     vec3(axis)
                 );
-                // the limits of the driven joints and of the claw's gear; a loop's passive
-                // joints follow those (their URDF limits are the consequence, and a
-                // second set of limit constraints on them would only fight the loops)
-                let passive = in_loops.contains(&j.name.as_str())
-                    && !drives.iter().any(|d| d.joint == j.name);
-                if matches!(j.joint_type, JointType::Revolute | JointType::Prismatic) && !passive {
+                // every pin's limits are its mechanical stops (a passive joint's are where
+                // the linkage puts it at the driven joints' limits: within them they never
+                // bind, and they keep a limp arm from folding the linkage over)
+                if matches!(j.joint_type, JointType::Revolute | JointType::Prismatic) {
                     let _ = write!(
                         attrs,
                         " range=\"{} {}\"",
@@ -502,8 +501,9 @@ fn body_children(
                 if let Some(d) = drives.iter().find(|d| d.joint == j.name) {
                     let _ = write!(
                         attrs,
-                        " armature=\"{}\"",
-                        num(d.ratio * d.ratio * d.spec.rotor_inertia_kg_m2)
+                        " armature=\"{}\" frictionloss=\"{}\"",
+                        num(d.ratio * d.ratio * d.spec.rotor_inertia_kg_m2),
+                        num(d.ratio.abs() * d.spec.gear_friction_nm)
                     );
                 }
                 out.line(depth + 1, &format!("<joint {attrs}/>"));
@@ -549,7 +549,6 @@ fn body_children(
             links,
             materials,
             drives,
-            in_loops,
             masses,
         )?;
         out.line(depth, "</body>");
@@ -737,11 +736,13 @@ mod tests {
         s.torque_scale[1] = 0.5;
         let urdf = include_str!("../../../urdf/eezybot.urdf");
         let m = build(urdf, "u", &ArmConfig::shipped().unwrap(), &s).unwrap();
-        let stall = crate::servo::ServoSpec::MG995.stall_torque_nm;
+        // half the stall torque, and the gear friction the motor overcomes besides
+        let mg995 = crate::servo::ServoSpec::MG995;
+        let limit = mg995.stall_torque_nm * 0.5 + mg995.gear_friction_nm;
         assert!(m.mjcf.contains(&format!(
             "<motor name=\"shoulder_servo\" joint=\"shoulder_joint\" ctrlrange=\"{} {}\"/>",
-            num(-stall / 2.0),
-            num(stall / 2.0)
+            num(-limit),
+            num(limit)
         )));
     }
 }

@@ -13,7 +13,11 @@
 //!   loaded one slower);
 //! - **backlash:** the motor side sits `b` of free play behind the output. While the
 //!   play is being taken up (the motor reversing), no torque reaches the output and the
-//!   motor side turns at `u · ω₀`; once a flank meets, the torque passes.
+//!   motor side turns at `u · ω₀`; once a flank meets, the torque passes;
+//! - **gear friction:** the datasheets' stall torque and speed are measured at the horn,
+//!   through the gear train's friction, so the motor makes that friction on top of the
+//!   line's torque while it drives (the physics charges it as the joint's
+//!   `frictionloss`, which is also what holds a limp servo).
 
 /// A servo model's constants, in the horn's units.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,6 +38,9 @@ pub struct ServoSpec {
     /// Inertia of the rotor and gear train, seen at the horn (kg·m²): MuJoCo's
     /// `armature`.
     pub rotor_inertia_kg_m2: f64,
+    /// The gear train's friction at the horn (N·m): what turning a limp servo by its
+    /// horn takes (MuJoCo's `frictionloss`). An unpowered arm droops against it.
+    pub gear_friction_nm: f64,
 }
 
 /// kgf·cm → N·m.
@@ -42,30 +49,33 @@ const KGF_CM: f64 = 0.098_066_5;
 impl ServoSpec {
     /// TowerPro MG995 at 4.8 V, its datasheet: stall torque 8.5 kgf·cm, 0.2 s/60°, dead
     /// band 5 µs (0.48° at the Servo library's 544–2400 µs for 180°). Backlash 1°
-    /// (metal gears; the datasheet gives none: our estimate), proportional band 4° and
-    /// a 10 ms mechanical time constant (our estimates; see docs/twin.md).
+    /// (metal gears; the datasheet gives none: our estimate), proportional band 5°,
+    /// a 10 ms mechanical time constant and 0.02 N·m of gear friction (our estimates;
+    /// see docs/twin.md).
     pub const MG995: ServoSpec = ServoSpec {
         name: "MG995",
         stall_torque_nm: 8.5 * KGF_CM,
         no_load_speed_rad_s: std::f64::consts::FRAC_PI_3 / 0.2,
         deadband_rad: 5.0 * (180.0 / 1856.0) * std::f64::consts::PI / 180.0,
         backlash_rad: 1.0 * std::f64::consts::PI / 180.0,
-        proportional_band_rad: 4.0 * std::f64::consts::PI / 180.0,
+        proportional_band_rad: 5.0 * std::f64::consts::PI / 180.0,
         rotor_inertia_kg_m2: 8.5 * KGF_CM * 0.010 / (std::f64::consts::FRAC_PI_3 / 0.2),
+        gear_friction_nm: 0.02,
     };
 
     /// TowerPro SG90 at 4.8 V, its datasheet: stall torque 1.8 kgf·cm, 0.12 s/60° (the
     /// figure config/arm.yaml's motion limits use; some revisions print 0.1 s), dead
     /// band 10 µs (0.97°). Backlash 2° (plastic gears: our estimate), proportional band
-    /// 4°, 10 ms mechanical time constant.
+    /// 5°, 10 ms mechanical time constant, 0.005 N·m of gear friction.
     pub const SG90: ServoSpec = ServoSpec {
         name: "SG90",
         stall_torque_nm: 1.8 * KGF_CM,
         no_load_speed_rad_s: std::f64::consts::FRAC_PI_3 / 0.12,
         deadband_rad: 10.0 * (180.0 / 1856.0) * std::f64::consts::PI / 180.0,
         backlash_rad: 2.0 * std::f64::consts::PI / 180.0,
-        proportional_band_rad: 4.0 * std::f64::consts::PI / 180.0,
+        proportional_band_rad: 5.0 * std::f64::consts::PI / 180.0,
         rotor_inertia_kg_m2: 1.8 * KGF_CM * 0.010 / (std::f64::consts::FRAC_PI_3 / 0.12),
+        gear_friction_nm: 0.005,
     };
 
     /// The same servo with its stall torque scaled (a weak supply, a worn motor: the
@@ -122,7 +132,7 @@ impl Servo {
         let flank = half - 1e-12;
         if (free >= flank && torque > 0.0) || (free <= -flank && torque < 0.0) {
             self.motor_rad = pos_rad + free.clamp(-half, half);
-            return torque;
+            return torque + s.gear_friction_nm * torque.signum();
         }
         // in the play: the output feels nothing
         self.motor_rad = pos_rad + free.clamp(-half, half);

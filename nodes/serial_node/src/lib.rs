@@ -5,6 +5,9 @@ pub mod core;
 pub mod link;
 pub mod pty;
 
+/// The `port` value of the physics twin ([`pty::twin_link`]).
+pub const TWIN_PORT: &str = "twin";
+
 use crate::core::{angles_to_ticks, parse_servo_list, servo_list_text, ticks_to_angles};
 use crate::link::{Link, LinkEvent, LinkSnapshot};
 use eezybot_kinematics::{ArmConfig, LeaderCalibration, ServoCalibrations, ServoId};
@@ -49,7 +52,7 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             ParamSpec::new(
                 "port",
                 ParameterValue::String("/dev/ttyACM0".into()),
-                "serial device of the Arduino, or `mock` for the built-in virtual Arduino",
+                "serial device of the Arduino, `mock` for the built-in virtual Arduino, or `twin` for the physics twin running on this host in this domain and namespace (docs/twin.md)",
             )
             .read_only(),
             int("baud", 115_200, 1_200, 4_000_000, "serial speed"),

@@ -53,7 +53,17 @@ fn main() -> ExitCode {
 /// Open the link, subscribe, publish and run the node until `shutdown`.
 async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()> {
     let params = node.params().clone();
-    let port = params.string("port").unwrap_or_default();
+    let mut port = params.string("port").unwrap_or_default();
+    if port == serial_node::TWIN_PORT {
+        // the physics twin of this domain and namespace, behind its pseudo-terminal
+        let link =
+            serial_node::pty::twin_link(u32::from(node.domain_id()), node.resolver().namespace());
+        log::info!(
+            "port `twin`: the physics twin's link {} (start it with `twin`: docs/twin.md)",
+            link.display()
+        );
+        port = link.to_string_lossy().into_owned();
+    }
     let baud = params.i64("baud").unwrap_or(115_200);
     let leader_role = params.string("role").as_deref() == Some("leader");
     let stop_action = |name: &str| {

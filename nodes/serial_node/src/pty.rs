@@ -43,21 +43,50 @@ pub fn parse(args: &[String]) -> Result<Command, String> {
     }
 }
 
+/// A flag that SIGINT and SIGTERM set: a process's [`serve`] stops on them.
+pub fn stop_on_signals() -> std::io::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    Ok(stop)
+}
+
+/// The pseudo-terminal link of the physics twin in a ROS domain and namespace: where
+/// `twin` serves by default and what `serial_node port:=twin` opens (the twin must run
+/// on serial_node's host, as the Arduino's cable would).
+pub fn twin_link(domain: u32, namespace: &str) -> std::path::PathBuf {
+    let ns: String = namespace
+        .trim_matches('/')
+        .chars()
+        .map(|c| if c == '/' { '_' } else { c })
+        .collect();
+    let name = if ns.is_empty() {
+        format!("domain-{domain}.tty")
+    } else {
+        format!("domain-{domain}-{ns}.tty")
+    };
+    std::env::temp_dir().join("eezybot-twin").join(name)
+}
+
 /// Serves `device` behind a new pseudo-terminal, linked at `link` (replaced if it
-/// exists, removed when serving ends), until SIGINT or SIGTERM (`Ok`) or until `each_tick`
-/// fails (that error: the link is removed and the terminal closed, which the host sees as
-/// an unplugged cable). `each_tick` runs about every 2 ms, after the device has taken the
-/// host's bytes and its own tick, with the time since serving began. `name` prefixes the
-/// log line.
+/// exists, removed when serving ends; its folder made if missing), until `stop` is set
+/// (`Ok`) or until `each_tick` fails (that error: the link is removed and the terminal
+/// closed, which the host sees as an unplugged cable). `each_tick` runs about every 2 ms,
+/// after the device has taken the host's bytes and its own tick, with the time since
+/// serving began. `name` prefixes the log line.
 pub fn serve(
     name: &str,
     link: &str,
     mut device: Device,
+    stop: &AtomicBool,
     mut each_tick: impl FnMut(&Device, Duration) -> Result<(), String>,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(sig, stop.clone())?;
+    if let Some(dir) = std::path::Path::new(link)
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+    {
+        std::fs::create_dir_all(dir)?;
     }
     let pty = openpty(None, None)?;
     let mut tio = tcgetattr(pty.slave.as_fd())?;

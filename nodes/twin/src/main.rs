@@ -1,93 +1,35 @@
-//! The physics twin behind a pseudo-terminal: the servo_control firmware's protocol (the
-//! virtual Arduino's device), its pulses driving the servos of the arm in MuJoCo, in real
-//! time:
+//! `twin` binary: the physics twin as a ROS node ([`twin::node`]): the arm in MuJoCo
+//! behind a pseudo-terminal speaking the servo_control firmware's protocol, so that
+//! `serial_node port:=twin` drives it as it drives the Uno; it publishes
+//! `twin/joint_states`, the cube's tf frame and its camera. Built without the `mujoco`
+//! feature it says what is missing and exits with 3.
 //!
-//!     twin /tmp/arm/tty &
-//!     serial_node --ros-args -p port:=/tmp/arm/tty
-//!
-//! An unstable simulation stops it with the reason (exit 1), its terminal closed: the
-//! host sees the device lost, as for an unplugged cable.
+//! `twin --mujoco-check` exits 0 when the twin has its physics (the launch scripts ask
+//! before they start it), else says what is missing and exits 3.
 
 use std::process::ExitCode;
 
-const USAGE: &str = "\
-twin: the physics twin (MuJoCo) behind a pseudo-terminal, speaking the servo_control
-firmware's protocol: serial_node drives it as it drives the arm.
+/// The launch scripts' question: is this twin built with MuJoCo? (Without it, every
+/// start says what is missing and exits 3.)
+#[cfg(feature = "mujoco")]
+const CHECK: &str = "--mujoco-check";
 
-usage: twin [--] PTY_LINK_PATH
-       twin --help
-
-PTY_LINK_PATH  the symbolic link to create to the pseudo-terminal (replaced if it
-               exists, removed on exit); give it to serial_node as -p port:=PTY_LINK_PATH
-
-Stops on SIGINT/SIGTERM. Exit codes: 0 stopped by a signal, 1 could not serve or the
-simulation went unstable (the reason is printed), 2 usage error, 3 built without MuJoCo.
-";
-
+#[cfg(feature = "mujoco")]
 fn main() -> ExitCode {
-    use serial_node::pty::{parse, Command};
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let link = match parse(&args) {
-        Ok(Command::Help) => {
-            print!("{USAGE}");
-            return ExitCode::SUCCESS;
-        }
-        Ok(Command::Serve(link)) => link,
-        Err(why) => {
-            eprintln!("twin: {why}\nusage: twin [--] PTY_LINK_PATH (see --help)");
-            return ExitCode::from(2);
-        }
-    };
-    run(&link)
+    if std::env::args().nth(1).as_deref() == Some(CHECK) {
+        return ExitCode::SUCCESS;
+    }
+    ros_plumbing::node::main(twin::spec(), twin::node::serve)
 }
 
 #[cfg(not(feature = "mujoco"))]
-fn run(_link: &str) -> ExitCode {
+fn main() -> ExitCode {
+    // --help still describes the node (its parameters) without MuJoCo
+    if std::env::args().skip(1).any(|a| a == "-h" || a == "--help") {
+        return ros_plumbing::node::main(twin::spec(), async |_: &mut ros_plumbing::RosNode, _| {
+            Ok::<(), ros_plumbing::PlumbingError>(())
+        });
+    }
     eprintln!("twin: {}", twin::WITHOUT_MUJOCO);
     ExitCode::from(3)
-}
-
-#[cfg(feature = "mujoco")]
-fn run(link: &str) -> ExitCode {
-    use servo_protocol::device::{Device, DeviceConfig};
-    match serve(link, Device::new(DeviceConfig::default())) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("twin: {e}");
-            ExitCode::from(1)
-        }
-    }
-}
-
-/// The device's pulses (0.5 µs ticks, 0 = none) drive the twin's servos; the simulation
-/// keeps up with the wall clock, a step at a time.
-#[cfg(feature = "mujoco")]
-fn serve(
-    link: &str,
-    device: servo_protocol::device::Device,
-) -> Result<(), Box<dyn std::error::Error>> {
-    use eezybot_kinematics::ArmConfig;
-    let config = ArmConfig::shipped()?;
-    let urdf = include_str!("../../../urdf/eezybot.urdf");
-    let mut sim = twin::sim::Sim::new(urdf, &config, &twin_model::Scene::default())?;
-    let mut behind_reported = false;
-    serial_node::pty::serve("twin", link, device, |device, now| {
-        sim.set_pulses_us(device.pulses().map(|t| f64::from(t) / 2.0));
-        let now = now.as_secs_f64();
-        // at most 100 ms of physics per tick: a host too slow for real time lags, and
-        // says so once, rather than spiral
-        let mut budget = (0.1 / sim.timestep()) as u32;
-        while sim.time() < now && budget > 0 {
-            sim.step().map_err(|e| e.to_string())?;
-            budget -= 1;
-        }
-        if budget == 0 && !behind_reported {
-            eprintln!(
-                "twin: the simulation is behind real time ({:.2} s at {now:.2} s)",
-                sim.time()
-            );
-            behind_reported = true;
-        }
-        Ok(())
-    })
 }

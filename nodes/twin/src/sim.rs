@@ -42,6 +42,7 @@ struct JointAddr {
 /// The twin: MuJoCo's model and data, the servos' states and their targets.
 pub struct Sim {
     model: TwinModel,
+    mj: Arc<MjModel>,
     data: MjData<Arc<MjModel>>,
     servos: [Servo; 4],
     /// Horn targets (rad), servo_angles order; `None`: no pulse (the servo goes limp).
@@ -53,10 +54,27 @@ pub struct Sim {
     closures: Vec<(usize, usize)>,
 }
 
+/// Routes MuJoCo's own messages (its warnings of an unstable simulation among them) to
+/// the `log` crate, once per process: without it MuJoCo writes them to MUJOCO_LOG.TXT in
+/// the working directory. [`Sim::new`] calls it before it touches MuJoCo.
+pub fn route_mujoco_logs() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // SAFETY: the hook must not be installed while another thread uses MuJoCo. Every
+        // use of MuJoCo in this crate starts with a Sim::new, which comes here first, and
+        // `call_once` holds every other caller until this call has returned.
+        #[allow(unsafe_code)]
+        unsafe {
+            mujoco_rs::logging::install_logging_hook();
+        }
+    });
+}
+
 impl Sim {
     /// The twin of the arm assembled to `config`, from URDF text, in `scene`, at rest in
     /// the home pose with the claw closed and the servos holding it there.
     pub fn new(urdf_text: &str, config: &ArmConfig, scene: &Scene) -> Result<Sim, SimError> {
+        route_mujoco_logs();
         let model = twin_model::build(urdf_text, "urdf", config, scene)?;
         let mj = Arc::new(
             MjModel::from_xml_string(&model.mjcf).map_err(|e| SimError::Load(e.to_string()))?,
@@ -102,6 +120,7 @@ impl Sim {
         let servos = model.drives.map(|d| Servo::new(d.spec, 0.0));
         let mut sim = Sim {
             model,
+            mj,
             data,
             servos,
             targets: [None; 4],
@@ -145,6 +164,29 @@ impl Sim {
     /// The generated model.
     pub fn model(&self) -> &TwinModel {
         &self.model
+    }
+
+    /// MuJoCo's model (for a renderer).
+    pub fn mj_model(&self) -> Arc<MjModel> {
+        self.mj.clone()
+    }
+
+    /// MuJoCo's data (for a camera's snapshot).
+    pub fn data(&self) -> &MjData<Arc<MjModel>> {
+        &self.data
+    }
+
+    /// Sets a joint's velocity (rad/s): a kick, for experiments and for the tests of an
+    /// unstable simulation.
+    pub fn set_joint_velocity(&mut self, name: &str, vel: f64) {
+        if let Some((_, a)) = self.joints.iter().find(|(n, _)| n == name) {
+            self.data.qvel_mut()[a.dof] = vel;
+        }
+    }
+
+    /// The horn targets (rad) the servos steer to; `None`: no pulse.
+    pub fn horn_targets(&self) -> [Option<f64>; 4] {
+        self.targets
     }
 
     /// Scales a servo's stall torque from now on (servo_angles order).
@@ -197,6 +239,8 @@ impl Sim {
             let a = self.drives[i];
             let pos = d.horn_rad(self.data.qpos()[a.qpos]);
             let vel = d.ratio * self.data.qvel()[a.dof];
+            // without a pulse the servo is limp: only its gear train's friction (the
+            // joint's frictionloss) holds it
             let torque = match self.targets[i] {
                 Some(target) => self.servos[i].torque(target, pos, vel, dt),
                 None => 0.0,

@@ -254,3 +254,33 @@ fn a_scripted_pick_lifts_the_cube_5_cm_in_19_of_20_seeded_trials() {
     );
     assert!(lifted >= 19, "{lifted}/20");
 }
+
+#[test]
+fn an_unstable_simulation_stops_with_the_reason_and_stays_stopped() {
+    let (mut sim, _) = sim();
+    sim.run(0.05).unwrap();
+    // far beyond anything physical: MuJoCo resets its state and warns; the twin stops
+    sim.set_joint_velocity("shoulder_joint", 1e12);
+    let e = sim.step().unwrap_err().to_string();
+    assert!(e.contains("unstable") && e.contains("velocity"), "{e}");
+    assert!(
+        sim.step().is_err(),
+        "it stays stopped: no made-up angles after a reset"
+    );
+}
+
+#[test]
+fn limp_servos_let_the_arm_droop_against_their_gear_friction_only() {
+    let (mut sim, _) = sim();
+    sim.run(0.2).unwrap();
+    let held = sim.tool0();
+    sim.set_horn_targets([None; 4]);
+    sim.run(1.0).unwrap();
+    let limp = sim.tool0();
+    eprintln!(
+        "without pulses the tool moved {:.1} mm",
+        (limp - held).norm() * 1e3
+    );
+    // unpowered, the arm is not held in place as a powered one is
+    assert!((limp - held).norm() > 1e-3);
+}

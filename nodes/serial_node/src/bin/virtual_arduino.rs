@@ -7,7 +7,7 @@
 //! Same behaviour as the firmware (protocol, limits, watchdog) with the servos' motion
 //! modelled. Stops on SIGINT/SIGTERM (exit 0); killing it is "unplugging the cable".
 
-use serial_node::pty::{parse, serve, Command};
+use serial_node::pty::{parse, serve, stop_on_signals, Command};
 use servo_protocol::device::{Device, DeviceConfig};
 use std::process::ExitCode;
 
@@ -40,12 +40,11 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    match serve(
-        "virtual_arduino",
-        &link,
-        Device::new(DeviceConfig::default()),
-        |_, _| Ok(()),
-    ) {
+    let served = stop_on_signals().map_err(Into::into).and_then(|stop| {
+        let device = Device::new(DeviceConfig::default());
+        serve("virtual_arduino", &link, device, &stop, |_, _| Ok(()))
+    });
+    match served {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("virtual_arduino: {e}");
