@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import time
+from pathlib import Path
 
 from PIL import Image
 from sensor_msgs.msg import CameraInfo, CompressedImage, JointState
@@ -163,3 +164,67 @@ def test_run_graph_with_serial_port_twin(domain, observer):
         code = s.stop()
     assert code == 0, s.output()
     assert not left_alive(kids), s.output()
+
+
+def board_timeline(events_path):
+    """From servo_sim's event file: the board's epoch (wall ns at power-up, from its first
+    `w` line) and each servo pin's pulses [(end s, width us)] on the board's clock."""
+    epoch, rise, pulses = None, {}, {p: [] for p in range(4)}
+    for line in Path(events_path).read_text().splitlines():
+        f = line.split()
+        if len(f) >= 3 and f[0] == "w" and epoch is None:
+            epoch = int(f[2]) - int(f[1]) * 1000 // 16
+        elif len(f) == 4 and f[0] == "e":
+            cycle, pin, level = int(f[1]), int(f[2]), int(f[3])
+            if level:
+                rise[pin] = cycle
+            elif pin in rise:
+                pulses[pin].append((cycle / 16e6, (cycle - rise.pop(pin)) / 16.0))
+    return epoch, pulses
+
+
+def test_the_firmware_in_simavr_drives_the_twin_by_its_pin_pulses(launch, observer, tmp_path):
+    """The highest-fidelity chain: serial_node -> the real firmware's UART (servo_control in
+    simavr) -> its PWM edges on pins 8-11 -> the twin's servos, in lock-step with the
+    board's simulated clock (the twin's `pulse_events`). Judged on that clock: the twin's
+    stamps and the board's pulses are both simulated time."""
+    from interop.servo_link import SimulatedUno
+    from safety_rig import FIRMWARE
+
+    board = SimulatedUno(tmp_path, FIRMWARE)
+    try:
+        launch("twin", "--ros-args", "-p", f"pulse_events:={board.events_path}", "-p", "camera_fps:=0")
+        joints = observer.sub("/twin/joint_states", JointState)
+        rig = SerialNodeRig(launch, observer, str(board.tty_path), 0.2)
+        assert observer.spin_until(lambda: status_values(rig.status()).get("connection") == "connected"
+                                   if rig.status() else False, 30)
+
+        def base():
+            m = joints[-1][1]
+            return m.position[list(m.name).index("base_joint")]
+        # home, then the base servo from 90 to 50 degrees: 20 degrees of base_joint
+        rig.angles.publish(angles([90, 90, 90, 60], sec=1))
+        assert observer.spin_until(lambda: joints and abs(base()) < math.radians(1), 20)
+        n = len(joints)
+        rig.angles.publish(angles([50, 90, 90, 60], sec=2))
+        assert observer.spin_until(lambda: abs(base() - math.radians(20)) < math.radians(0.7), 20), math.degrees(base())
+    finally:
+        board.proc.send_signal(signal.SIGINT)
+        board.proc.wait(10)
+    epoch, pulses = board_timeline(board.events_path)
+    assert epoch is not None
+    # the pin's last new width: where serial_node's ramp (300 deg/s) ended, on the board
+    base_pulses = pulses[0]
+    final = base_pulses[-1][1]
+    assert abs(final - (544 + (2400 - 544) * 50 / 180)) < 2, final
+    settled_pulse = next(t for t, w in base_pulses if abs(w - final) < 0.5)
+    # the twin's base on the same clock: it reached the command after the pin did, and
+    # within a servo's settling (a fraction of a second of simulated time)
+    def sim_s(m):
+        return (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec - epoch) / 1e9
+    reached = next(sim_s(m) for _, m in joints[n:]
+                   if abs(m.position[list(m.name).index("base_joint")] - math.radians(20)) < math.radians(0.7))
+    assert settled_pulse - 0.2 < reached < settled_pulse + 0.3, (settled_pulse, reached)
+    # and it moved through the pins' ramp: states between the two poses
+    moving = [m for _, m in joints[n:] if math.radians(2) < m.position[list(m.name).index("base_joint")] < math.radians(18)]
+    assert len(moving) >= 5

@@ -4,6 +4,7 @@
 pub mod drive;
 pub mod mass;
 pub mod mjcf;
+pub mod pulses;
 pub mod servo;
 
 pub use drive::Drive;

@@ -4,6 +4,8 @@
 #[cfg(feature = "mujoco")]
 pub mod camera;
 #[cfg(feature = "mujoco")]
+pub mod lockstep;
+#[cfg(feature = "mujoco")]
 pub mod node;
 #[cfg(feature = "mujoco")]
 pub mod sim;
@@ -35,6 +37,12 @@ pub fn spec() -> ros_plumbing::NodeSpec {
             "link",
             ParameterValue::String(String::new()),
             "the pseudo-terminal's link that serial_node opens; empty: the one `serial_node port:=twin` finds for this domain and namespace",
+        )
+        .read_only(),
+        ParamSpec::new(
+            "pulse_events",
+            ParameterValue::String(String::new()),
+            "instead of serving a pseudo-terminal, follow the servo pins of the firmware in simavr: the event file of servo_sim (--events), its pin edges driving the servos in lock-step with the board's simulated clock; empty: serve `link`",
         )
         .read_only(),
         ParamSpec::file(
@@ -78,6 +86,8 @@ pub fn spec() -> ros_plumbing::NodeSpec {
 pub struct Config {
     /// The pseudo-terminal's link; empty: [`serial_node::pty::twin_link`].
     pub link: String,
+    /// A servo_sim event file to follow instead (empty: serve the link).
+    pub pulse_events: String,
     /// The arm config file the twin is assembled to; empty: the shipped one.
     pub arm_config: String,
     /// The scene: camera, cube, torque scales.
@@ -94,6 +104,7 @@ impl Default for Config {
     fn default() -> Self {
         Config {
             link: String::new(),
+            pulse_events: String::new(),
             arm_config: String::new(),
             scene: Scene::default(),
             camera_fps: 30,
@@ -153,6 +164,7 @@ impl Config {
         };
         Ok(Config {
             link: p.string("link").unwrap_or_default(),
+            pulse_events: p.string("pulse_events").unwrap_or_default(),
             arm_config: p.string("arm_config").unwrap_or_default(),
             scene,
             camera_fps: int("camera_fps", d.camera_fps),

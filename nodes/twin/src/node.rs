@@ -76,11 +76,16 @@ pub async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()>
         }
     };
     log::info!(
-        "{} ready in ROS domain {}: the arm in MuJoCo behind {} (serial_node port:={}), publishing {} and the tf frame `{CUBE_FRAME}`{}",
+        "{} ready in ROS domain {}: the arm in MuJoCo, driven by {}, publishing {} and the tf frame `{CUBE_FRAME}`{}",
         node.resolver().node_fqn(),
         node.domain_id(),
-        link.display(),
-        if config.link.is_empty() { serial_node::TWIN_PORT.to_string() } else { link.display().to_string() },
+        if !config.pulse_events.is_empty() {
+            format!("the servo pins of the board in simavr ({}), in lock-step with its clock", config.pulse_events)
+        } else if config.link.is_empty() {
+            format!("{} (serial_node port:={})", link.display(), serial_node::TWIN_PORT)
+        } else {
+            format!("{} (serial_node port:={})", link.display(), link.display())
+        },
         node.resolve(&topics::TWIN_JOINT_STATES)?,
         if camera.is_some() {
             format!(", camera {}x{} at {} fps on {}", config.scene.image_size.0, config.scene.image_size.1, config.camera_fps, node.resolve(&topics::TWIN_CAMERA_IMAGE)?)
@@ -92,19 +97,25 @@ pub async fn serve(node: &mut RosNode, shutdown: Shutdown) -> anyhow::Result<()>
     let (done_tx, done_rx) = tokio::sync::oneshot::channel();
     let period = ros_plumbing::diagnostics::diagnostics_period(&params);
     let thread_stop = stop.clone();
-    let link_text = link.to_string_lossy().into_owned();
+    let link_text = if config.pulse_events.is_empty() {
+        link.to_string_lossy().into_owned()
+    } else {
+        format!("the pins of {} (lock-step)", config.pulse_events)
+    };
     let physics = std::thread::Builder::new()
         .name("twin physics".into())
         .spawn(move || {
+            let events = config.pulse_events.clone();
             let mut run = Physics::new(sim, camera, outputs, &config, period, link_text.clone());
-            let served = pty::serve(
-                "twin",
-                &link_text,
-                Device::new(DeviceConfig::default()),
-                &thread_stop,
-                |device, now| run.tick(device, now),
-            );
-            let result = served.map_err(|e| e.to_string());
+            let result = if events.is_empty() {
+                let device = Device::new(DeviceConfig::default());
+                pty::serve("twin", &link_text, device, &thread_stop, |device, now| {
+                    run.tick(device, now)
+                })
+                .map_err(|e| e.to_string())
+            } else {
+                follow_events(&events, &thread_stop, &mut run)
+            };
             if let Err(e) = &result {
                 run.report_failure(e);
             }
@@ -193,17 +204,7 @@ impl Physics {
         while self.sim.time() < now && budget > 0 {
             self.sim.step().map_err(|e| e.to_string())?;
             budget -= 1;
-            let t = self.sim.time();
-            if t >= self.next_state {
-                self.publish_state(t);
-                self.next_state = t + self.state_period;
-            }
-            if let (Some(period), Some(camera)) = (self.frame_period, &self.camera) {
-                if t >= self.next_frame {
-                    camera.offer(self.sim.data(), self.stamp(t));
-                    self.next_frame = (self.next_frame + period).max(t);
-                }
-            }
+            self.after_step();
         }
         if budget == 0 && self.behind_since.is_none() {
             log::warn!(
@@ -212,11 +213,30 @@ impl Physics {
             );
             self.behind_since = Some(now);
         }
+        self.maybe_report(now);
+        Ok(())
+    }
+
+    /// After a physics step: the state and a camera frame when they are due.
+    fn after_step(&mut self) {
+        let t = self.sim.time();
+        if t >= self.next_state {
+            self.publish_state(t);
+            self.next_state = t + self.state_period;
+        }
+        if let (Some(period), Some(camera)) = (self.frame_period, &self.camera) {
+            if t >= self.next_frame {
+                camera.offer(self.sim.data(), self.stamp(t));
+                self.next_frame = (self.next_frame + period).max(t);
+            }
+        }
+    }
+
+    fn maybe_report(&mut self, now: f64) {
         if now >= self.next_diag {
             self.report(now);
             self.next_diag = now + self.diag_period;
         }
-        Ok(())
     }
 
     fn publish_state(&self, t: f64) {
@@ -319,4 +339,42 @@ impl Physics {
             ],
         )]);
     }
+}
+
+/// Follows a servo_sim event file ([`crate::lockstep`]) until `stop`: the lines as they
+/// are appended (a partial last line waits for its end), the physics advanced to each
+/// event's simulated time; while the file does not grow, the twin waits with the board.
+fn follow_events(path: &str, stop: &AtomicBool, run: &mut Physics) -> Result<(), String> {
+    use std::io::Read;
+    use twin_model::pulses::BoardEvent;
+    let mut file = std::fs::File::open(path).map_err(|e| format!("{path}: {e}"))?;
+    let mut lockstep = crate::lockstep::Lockstep::new();
+    let mut pending = String::new();
+    let mut buf = vec![0u8; 1 << 16];
+    let started = std::time::Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        let n = file.read(&mut buf).map_err(|e| format!("{path}: {e}"))?;
+        if n == 0 {
+            // the board has not run further yet (a file gives no wake-up: look again soon)
+            std::thread::sleep(Duration::from_millis(2));
+            run.maybe_report(started.elapsed().as_secs_f64());
+            continue;
+        }
+        pending.push_str(&String::from_utf8_lossy(&buf[..n]));
+        let complete = pending.rfind('\n').map_or(0, |i| i + 1);
+        for line in pending[..complete].lines() {
+            if let Some(event) = BoardEvent::parse(line) {
+                lockstep
+                    .apply(&mut run.sim, event, |_| {})
+                    .map_err(|e| e.to_string())?;
+                if let Some(epoch) = lockstep.epoch_ns() {
+                    run.epoch_ns = epoch;
+                }
+                run.after_step();
+            }
+        }
+        pending.drain(..complete);
+        run.maybe_report(started.elapsed().as_secs_f64());
+    }
+    Ok(())
 }
