@@ -13,6 +13,7 @@ import subprocess
 import time
 from pathlib import Path
 
+from geometry_msgs.msg import PointStamped
 from PIL import Image
 from sensor_msgs.msg import CameraInfo, CompressedImage, JointState
 
@@ -137,7 +138,6 @@ def test_run_graph_with_serial_port_twin(domain, observer):
     """`SERIAL_PORT=twin run_graph.sh -r __ns:=/arm3`: the twin starts beside the graph in
     its namespace, serial_node drives it, a target moves the twin's arm there, and Ctrl-C
     stops everything (no orphan) with exit code 0."""
-    from geometry_msgs.msg import PointStamped
     from launch_script import Script, graph_ends, left_alive, reap_scripts  # noqa: F401 (fixture)
 
     s = Script("run_graph.sh", "-r", "__ns:=/arm3", env={"ROS_DOMAIN_ID": str(domain), "SERIAL_PORT": "twin"})
@@ -228,3 +228,105 @@ def test_the_firmware_in_simavr_drives_the_twin_by_its_pin_pulses(launch, observ
     # and it moved through the pins' ramp: states between the two poses
     moving = [m for _, m in joints[n:] if math.radians(2) < m.position[list(m.name).index("base_joint")] < math.radians(18)]
     assert len(moving) >= 5
+
+
+def test_a_miscalibrated_config_shows_in_the_twin_as_on_a_real_arm(launch, observer, tmp_path):
+    """The twin is an arm assembled to the shipped calibration: a graph whose config says
+    the base servo's centre is 95 degrees (5 off) commands 95 for a target straight ahead,
+    and the twin's base turns to where 95 puts the real arm, 2.5 degrees right of ahead
+    (the 2:1 gear), while compute_ik believes it at 0."""
+    from test_leader_arm import SHIPPED
+    config = tmp_path / "arm.yaml"
+    text = SHIPPED.replace("base:     { offset_deg: 90.0,", "base:     { offset_deg: 95.0,")
+    assert text != SHIPPED, "config/arm.yaml's base calibration line moved: update the test"
+    config.write_text(text)
+    link = tmp_path / "twin.tty"
+    joints = observer.sub("/twin/joint_states", JointState)
+    commanded = observer.sub("/joint_states", JointState)
+    launch("twin", "--ros-args", "-p", f"link:={link}", "-p", "camera_fps:=0")
+    launch("compute_ik", "--ros-args", "-p", f"arm_config:={config}")
+    rig = SerialNodeRig(launch, observer, str(link), 0.2)
+    assert observer.spin_until(lambda: status_values(rig.status()).get("connection") == "connected"
+                               if rig.status() else False, 30)
+    xyz = observer.pub("/xyz_target", PointStamped)
+    observer.wait_matched(xyz)
+
+    def base(msgs):
+        m = msgs[-1][1] if msgs else None
+        return m.position[list(m.name).index("base_joint")] if m else None
+    target = PointStamped()
+    target.header.frame_id = "base_link"
+    target.point.x, target.point.y, target.point.z = 0.2, 0.0, 0.15
+    want = math.radians(-2.5)
+    end = time.monotonic() + 30
+    while time.monotonic() < end and not (base(joints) is not None and abs(base(joints) - want) < math.radians(0.5)):
+        xyz.publish(target)  # (again until answered: compute_ik may match us a moment late)
+        observer.spin_until(lambda: base(joints) is not None and abs(base(joints) - want) < math.radians(0.5), 1)
+    assert abs(base(joints) - want) < math.radians(0.5), math.degrees(base(joints))
+    assert abs(base(commanded)) < 1e-6, "compute_ik commands straight ahead"
+
+
+def test_a_trajectory_within_the_servo_speed_tracks_and_a_faster_one_lags(launch, observer, tmp_path):
+    """Through the graph (arm_controller/joint_trajectory -> compute_ik -> serial_node ->
+    the twin): the config's motion limits raised far above an MG995's (1500 deg/s), so
+    that the graph lets a too-fast trajectory through, as it would to a real arm whose
+    config overstates its servos. A sweep of the base at a sixth of the servo's speed is
+    tracked by the twin within 3 degrees of what compute_ik commands at each stamp; one
+    at twice its speed lags it by tens of degrees (the virtual Arduino would not: its
+    servos are as fast as the config says)."""
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from conftest import COMMANDS
+    from test_leader_arm import SHIPPED
+    fast = SHIPPED.replace("base:     { max_velocity_deg_s: 300.0, max_acceleration_deg_s2: 1200.0 }",
+                           "base:     { max_velocity_deg_s: 1500.0, max_acceleration_deg_s2: 60000.0 }")
+    assert fast != SHIPPED, "config/arm.yaml's base motion line moved: update the test"
+    config = tmp_path / "arm.yaml"
+    config.write_text(fast)
+    link = tmp_path / "twin.tty"
+    twin = observer.sub("/twin/joint_states", JointState)
+    commanded = observer.sub("/joint_states", JointState)
+    launch("twin", "--ros-args", "-p", f"link:={link}", "-p", "camera_fps:=0")
+    launch("compute_ik", "--ros-args", "-p", f"arm_config:={config}", "-p", "max_target_age:=0.0")
+    rig = SerialNodeRig(launch, observer, str(link), 0.2, "-p", f"arm_config:={config}")
+    assert observer.spin_until(lambda: status_values(rig.status()).get("connection") == "connected"
+                               if rig.status() else False, 30)
+    topic = observer.pub("arm_controller/joint_trajectory", JointTrajectory, COMMANDS)
+    observer.wait_matched(topic)
+
+    def joint(m, name="base_joint"):
+        return m.position[list(m.name).index(name)]
+
+    def stamp(m):
+        return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+    def sweep(to_base, seconds):
+        """A base sweep to `to_base` (rad) in `seconds`; the largest lag (deg) of the twin
+        behind compute_ik's commanded base over the sweep and 0.5 s after, judged at the
+        twin's stamps (the command newest at each)."""
+        n_cmd, n_twin = len(commanded), len(twin)
+        point = JointTrajectoryPoint(positions=[to_base, math.radians(90), math.radians(-90)],
+                                     time_from_start=Duration(sec=int(seconds), nanosec=int((seconds % 1) * 1e9)))
+        topic.publish(JointTrajectory(joint_names=["base_joint", "shoulder_joint", "elbow_joint"], points=[point]))
+        assert observer.spin_until(lambda: len(commanded) > n_cmd and abs(joint(commanded[-1][1]) - to_base) < 1e-6, 10)
+        done = stamp(commanded[-1][1])
+        assert observer.spin_until(lambda: len(twin) > n_twin and stamp(twin[-1][1]) > done + 0.5
+                                   and abs(joint(twin[-1][1]) - to_base) < math.radians(1), 10)
+        cmds = [(stamp(m), joint(m)) for _, m in commanded[n_cmd:]]
+        lags = []
+        for _, m in twin[n_twin:]:
+            t = stamp(m)
+            newest = [q for s, q in cmds if s <= t]
+            if newest and t <= done + 0.5:
+                lags.append(abs(math.degrees(joint(m) - newest[-1])))
+        assert len(lags) > 10
+        return max(lags)
+
+    # home, at rest
+    assert sweep(0.0, 1.0) < 90
+    slow = sweep(math.radians(25), 1.0)      # 25 deg of the base in 1 s: 50 deg/s of the servo
+    fast_lag = sweep(math.radians(-25), 0.1)  # 50 deg of the base in 0.1 s: 1000 deg/s of the servo
+    print(f"twin behind compute_ik: {slow:.2f} deg at 50 deg/s of the servo, {fast_lag:.1f} deg at 1000 deg/s")
+    assert slow < 3.0, slow
+    assert fast_lag > 20.0, fast_lag
