@@ -4,10 +4,13 @@ as it takes a webcam's. The arm moves during the episode; the dataset is read by
 independent readers, pyarrow (the parquet files) and PyAV (the MP4): the twin's camera is
 `observation.images.twin_camera`, one decoded frame per dataset frame, and the pictures
 show the arm moving. (lerobot 0.6.1 itself loads such a folder: tests/lerobot_load.py DIR,
-by hand in its 5.4 GB venv; BENCHMARKS.md has the run.)"""
+by hand in its 5.4 GB venv, on the dataset this test leaves in $EEZYBOT_KEEP_DATASETS when
+that is set; BENCHMARKS.md has the run.)"""
 import json
 import os
+import shutil
 import subprocess
+from pathlib import Path
 
 import av
 import numpy as np
@@ -79,3 +82,5 @@ def test_an_episode_with_the_twin_camera_reads_as_a_lerobot_dataset(launch, obse
     assert np.abs(pictures[0].astype(int) - pictures[-1].astype(int)).mean() > 2.0
     base = [s[0] for s in rows["observation.state"]]
     assert max(base) - min(base) > 0.3
+    if os.environ.get("EEZYBOT_KEEP_DATASETS"):
+        shutil.copytree(root, Path(os.environ["EEZYBOT_KEEP_DATASETS"]) / "test_twin_record", dirs_exist_ok=True)
