@@ -143,6 +143,47 @@ mod tests {
     }
 
     #[test]
+    fn a_failing_tick_ends_serving_with_its_reason_and_takes_the_link_away() {
+        let dir = std::env::temp_dir().join(format!("pty-test-{}", std::process::id()));
+        let link = dir.join("sub").join("tty");
+        let stop = AtomicBool::new(false);
+        let mut ticks = 0;
+        let result = serve(
+            "test",
+            link.to_str().unwrap(),
+            Device::new(servo_protocol::device::DeviceConfig::default()),
+            &stop,
+            |_, _| {
+                ticks += 1;
+                // the link is there while it serves (its folder made)
+                assert!(link.symlink_metadata().is_ok());
+                if ticks == 3 {
+                    Err("the simulation went unstable".into())
+                } else {
+                    Ok(())
+                }
+            },
+        );
+        assert_eq!(
+            result.unwrap_err().to_string(),
+            "the simulation went unstable"
+        );
+        assert!(
+            link.symlink_metadata().is_err(),
+            "the link is gone: the host sees the device lost"
+        );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn the_twin_link_is_per_domain_and_namespace() {
+        let a = twin_link(7, "/");
+        assert!(a.ends_with("eezybot-twin/domain-7.tty"), "{a:?}");
+        assert!(twin_link(7, "/arm2/left").ends_with("eezybot-twin/domain-7-arm2_left.tty"));
+        assert_ne!(twin_link(8, "/"), a);
+    }
+
+    #[test]
     fn help_is_not_a_pty_path() {
         assert_eq!(p(&["--help"]), Ok(Command::Help));
         assert_eq!(p(&["-h"]), Ok(Command::Help));

@@ -23,7 +23,10 @@ use twin::sim::Sim;
 use twin_model::Scene;
 
 fn main() {
-    let seconds: f64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(20.0);
+    let seconds: f64 = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20.0);
     let events = std::env::args().nth(2);
     if let Err(e) = run(seconds).and_then(|()| events.map_or(Ok(()), |path| replay(&path))) {
         eprintln!("bench: {e}");
@@ -34,7 +37,10 @@ fn main() {
 /// The twin in lock-step with a recorded event file, replayed as fast as the physics runs.
 fn replay(path: &str) -> Result<(), Box<dyn std::error::Error>> {
     let text = std::fs::read_to_string(path)?;
-    let events: Vec<_> = text.lines().filter_map(twin_model::pulses::BoardEvent::parse).collect();
+    let events: Vec<_> = text
+        .lines()
+        .filter_map(twin_model::pulses::BoardEvent::parse)
+        .collect();
     let config = ArmConfig::shipped()?;
     let mut sim = Sim::new(twin::node::URDF, &config, &Scene::default())?;
     let mut lockstep = twin::lockstep::Lockstep::new();
@@ -64,13 +70,24 @@ fn script(config: &ArmConfig, t: f64) -> [Option<f64>; 4] {
         _ => (nalgebra::Vector3::new(0.15, -0.05, 0.2), 0.0),
     };
     let joints = arm.solve_position(&p, 0.0).unwrap_or(ArmJoints::HOME);
-    let state = ArmState { joints, gripper_opening: opening };
-    config.servos.servo_angles(&state).map(|a| a.rad.map(Some)).unwrap_or([None; 4])
+    let state = ArmState {
+        joints,
+        gripper_opening: opening,
+    };
+    config
+        .servos
+        .servo_angles(&state)
+        .map(|a| a.rad.map(Some))
+        .unwrap_or([None; 4])
 }
 
 fn percentiles(mut v: Vec<f64>) -> (f64, f64) {
     v.sort_by(f64::total_cmp);
-    let at = |q: f64| v.get(((v.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(f64::NAN);
+    let at = |q: f64| {
+        v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
     (at(0.5), at(0.99))
 }
 
@@ -100,9 +117,15 @@ fn run(seconds: f64) -> Result<(), Box<dyn std::error::Error>> {
     // with the camera: 640 x 480 at 30 fps of simulated time, rendered and encoded here
     let mut sim = Sim::new(urdf, &config, &scene)?;
     let model = sim.mj_model();
-    let camera = model.name_to_id(MjtObjBase::mjOBJ_CAMERA, twin::camera::CAMERA).ok_or("no camera")?;
+    let camera = model
+        .name_to_id(MjtObjBase::mjOBJ_CAMERA, twin::camera::CAMERA)
+        .ok_or("no camera")?;
     let (w, h) = scene.image_size;
-    let mut renderer = MjRenderer::builder().width(w).height(h).camera(MjvCamera::new_fixed(camera)).build(&model)?;
+    let mut renderer = MjRenderer::builder()
+        .width(w)
+        .height(h)
+        .camera(MjvCamera::new_fixed(camera))
+        .build(&model)?;
     let mut snapshot = MjData::new(model.clone());
     let (mut frames, mut jpeg_bytes) = (Vec::new(), 0usize);
     let mut next_frame = 0.0;
