@@ -330,3 +330,17 @@ def test_a_trajectory_within_the_servo_speed_tracks_and_a_faster_one_lags(launch
     print(f"twin behind compute_ik: {slow:.2f} deg at 50 deg/s of the servo, {fast_lag:.1f} deg at 1000 deg/s")
     assert slow < 3.0, slow
     assert fast_lag > 20.0, fast_lag
+
+
+def test_a_scripted_pick_through_the_graph_lifts_the_cube_by_its_tf(launch, observer, domain, tmp_path):
+    """One trial of the pick through the graph (tests/twin_pick.py): the claw closes on the
+    cube and lifts it 5 cm, as the cube's tf frame shows (tests/soak/twin_pick.py runs
+    seeded trials: BENCHMARKS.md)."""
+    from twin_pick import PickGraph, expected_start_z, gripped
+    g = PickGraph(launch, observer, domain, tmp_path / "twin.tty", (0.2, 0.01))
+    try:
+        assert abs(g.cube_z() - expected_start_z()) < 0.003, g.cube_z()
+        rise = g.pick()
+        assert gripped(rise), f"the cube rose {rise * 1e3:.1f} mm"
+    finally:
+        g.close()
