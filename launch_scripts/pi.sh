@@ -3,7 +3,8 @@
 # ROS_DOMAIN_ID (default 0). The Arduino is SERIAL_PORT, else /dev/eezybot (the udev rule
 # in deploy/), else /dev/ttyACM0. If none exists, serial_node starts on /dev/eezybot
 # anyway and connects when the board is plugged in (it never falls back to the virtual
-# Arduino by itself); SERIAL_PORT=mock runs the built-in virtual Arduino instead.
+# Arduino by itself); SERIAL_PORT=mock runs the built-in virtual Arduino instead, and
+# SERIAL_PORT=twin drives the physics twin running on this host (docs/twin.md).
 # Uses the prebuilt binaries in bin/ when they are there (a bundle from
 # cross_build.sh), so the Pi needs no Rust toolchain.
 #
@@ -42,6 +43,8 @@ eezybot_start_wan
 eezybot_banner
 if [ "$EEZYBOT_PORT" = mock ]; then
   eezybot_say "running here (Pi): serial_node with the built-in virtual Arduino (SERIAL_PORT=mock)"
+elif [ "$EEZYBOT_PORT" = twin ]; then
+  eezybot_say "running here: serial_node on the physics twin's link (SERIAL_PORT=twin): the twin must run on this host, in this domain and namespace (\`twin\`, docs/twin.md)"
 elif [ "$EEZYBOT_PORT_FOUND" = 1 ]; then
   eezybot_say "running here (Pi): serial_node on $EEZYBOT_PORT"
 else
