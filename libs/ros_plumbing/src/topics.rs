@@ -232,8 +232,9 @@ pub const ROBOT_DESCRIPTION: Topic<StringMsg> = Topic::new(
     &[STATE],
     &[GUI, RECORD],
 );
-/// Transforms of the movable joints.
-pub const TF: Topic<TFMessage> = Topic::new("tf", qos::TF, &[STATE, TWIN], &[RECORD, FOXGLOVE]);
+/// Transforms of the movable joints, and the twin's frame `cube` (the panel's 3D view shows it).
+pub const TF: Topic<TFMessage> =
+    Topic::new("tf", qos::TF, &[STATE, TWIN], &[GUI, RECORD, FOXGLOVE]);
 /// Transforms of the fixed joints, latched.
 pub const TF_STATIC: Topic<TFMessage> =
     Topic::new("tf_static", qos::TF_STATIC, &[STATE], &[RECORD, FOXGLOVE]);
@@ -274,7 +275,8 @@ pub const LEADER_DEADMAN: Topic<Bool> = Topic::new(
 /// A camera's images, JPEG (`format` `jpeg`), stamped when the frame was taken, with
 /// `frame_id` the camera's frame; several cameras by node namespace
 /// (`-r __ns:=/wrist`: `/wrist/camera/image_raw/compressed`). Sensor-data QoS
-/// ([`qos::SENSOR_DATA`]). No Foxglove channel: images are not forwarded to the web panel.
+/// ([`qos::SENSOR_DATA`]). No Foxglove channel; the panel's camera view shows it with
+/// gui_bridge's `-p camera_view:=camera/image_raw/compressed`.
 pub const CAMERA_IMAGE: Topic<CompressedImage> = Topic::new(
     "camera/image_raw/compressed",
     qos::SENSOR_DATA,
@@ -293,12 +295,13 @@ pub const CAMERA_INFO: Topic<CameraInfo> =
 pub const TWIN_JOINT_STATES: Topic<JointState> =
     Topic::new("twin/joint_states", qos::COMMANDS, &[TWIN], &[]).off_foxglove();
 /// The twin's camera (the scene camera of its model), JPEG, the message `camera_node`
-/// sends: the recorder and the panel take it as a real camera.
+/// sends: the recorder and the panel take it as a real camera (gui_bridge's small
+/// camera view, its `camera_view` by default).
 pub const TWIN_CAMERA_IMAGE: Topic<CompressedImage> = Topic::new(
     "twin/camera/image_raw/compressed",
     qos::SENSOR_DATA,
     &[TWIN],
-    &[RECORDER],
+    &[RECORDER, GUI],
 )
 .off_foxglove();
 /// The twin camera's [`CameraInfo`], with each image's header (its pinhole model from

@@ -17,6 +17,7 @@ pub mod record;
 pub mod recorder_ros;
 pub mod recording;
 pub mod ros_outputs;
+pub mod scene;
 pub mod serve;
 pub mod teleop;
 pub mod web;
@@ -26,7 +27,7 @@ use crate::message::Snapshot;
 use crate::panel::{Clock, Effect, Panel};
 use crate::teleop::Command;
 use crate::web::{LogLine, Requests, WebEvent, WebStats};
-use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
 use eezybot_msgs::sensor_msgs::JointState;
 use eezybot_msgs::Time;
 use futures::future::{BoxFuture, LocalBoxFuture};
@@ -39,6 +40,9 @@ use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, mpsc, watch};
 
 pub use crate::panel::{EXPECTED_NODES, MAX_TRACKED_NODES, REFUSAL_WARN_FOR};
+
+/// The default `camera_view`: the physics twin's camera (docs/twin.md).
+pub const CAMERA_VIEW: &str = "twin/camera/image_raw/compressed";
 
 /// The default `foxglove_origins`: Foxglove's web app.
 pub const FOXGLOVE_ORIGINS: &str = "https://app.foxglove.dev";
@@ -108,7 +112,20 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 ParameterValue::String(n) => check_node_names(std::slice::from_ref(n)),
                 _ => Ok(()),
             }),
-            ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent"),
+            ParamSpec::new("base_frame", ParameterValue::String("base_link".into()), "frame_id of the targets sent; the 3D view shows the twin's cube (tf frame `cube`) only as a child of this frame (as set at start)"),
+            ParamSpec::new(
+                "camera_view",
+                ParameterValue::String(CAMERA_VIEW.into()),
+                "the image topic (sensor_msgs/CompressedImage, JPEG or PNG, sensor-data QoS) the panel's small camera view shows, subscribed at start; empty = no camera view",
+            )
+            .read_only(),
+            ParamSpec::new(
+                "camera_view_fps",
+                ParameterValue::Double(scene::CAMERA_VIEW_FPS),
+                "most camera images a second passed on to the browsers (only while one is connected; the others are dropped, never queued)",
+            )
+            .read_only()
+            .range(ParamRange::Double { min: 0.5, max: 30.0 }),
             ParamSpec::new(
                 "program_dir",
                 ParameterValue::String(String::new()),
@@ -228,6 +245,10 @@ pub enum Input {
     LeaderJoints(JointState),
     /// `leader/deadman`
     LeaderDeadman(bool),
+    /// `tf`, as the panel reads it: the twin's cube, if the message has it
+    Tf(scene::CubeTf),
+    /// an image of the camera view's topic (`camera_view`)
+    CameraImage(scene::CameraImage),
     /// A sample on `topic` that could not be deserialized (malformed CDR): logged,
     /// counted in `diagnostics`, otherwise ignored (an unreadable `estop` changes nothing).
     Unreadable {
@@ -384,6 +405,9 @@ pub struct Handles<'a, I, O, F: Fn() -> Vec<usize>, S> {
     pub calibration: &'a dyn CalibrationControl,
     /// The recording card's ROS side.
     pub recorder: &'a dyn RecorderControl,
+    /// The camera view's latest image, for the browsers (each takes the latest when it
+    /// can: a slow one skips images, none queue).
+    pub camera: watch::Sender<Option<axum::body::Bytes>>,
     /// The loop ends when this resolves.
     pub shutdown: S,
 }
@@ -492,6 +516,8 @@ struct Bridge<'a, O, F: Fn() -> Vec<usize>> {
     params: Params,
     param_changes: watch::Receiver<u64>,
     reporting: Reporting<F>,
+    /// the camera view (`camera_view`): which images go to the browsers
+    camera: scene::CameraView,
 }
 
 impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
@@ -509,6 +535,7 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
             reporting,
             calibration,
             recorder,
+            camera,
             shutdown,
         } = io;
         snapshot.send_replace(panel.snapshot());
@@ -521,6 +548,7 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
                 web,
                 calibration,
                 recorder,
+                camera,
             },
             jobs: Jobs {
                 file: None,
@@ -532,6 +560,11 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
             peer_poll: tokio::time::interval(Duration::from_millis(250)),
             status_tick: tokio::time::interval(Duration::from_millis(500)),
             param_changes: params.subscribe(),
+            camera: scene::CameraView::new(
+                params
+                    .f64("camera_view_fps")
+                    .unwrap_or(scene::CAMERA_VIEW_FPS),
+            ),
             params,
             reporting,
         };
@@ -568,9 +601,18 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
                 sink.calibration.prepare(&panel.calibration_nodes());
                 sink.apply(panel.on_status_tick(Clock::read()), None, jobs)
             }
-            Event::Report => sink.report(panel, &self.reporting),
+            Event::Report => sink.report(panel, &self.camera, &self.reporting),
             Event::PeerPoll => self.poll_peers(),
             Event::Rate => panel.set_rate(self.params.f64("rate").unwrap_or(50.0)),
+            Event::Input(Input::CameraImage(image)) => {
+                let (outcome, line) =
+                    self.camera
+                        .on_image(image, sink.web.clients(), Instant::now());
+                log(line);
+                if let scene::CameraOutcome::Forward(bytes) = outcome {
+                    sink.camera.send_replace(Some(bytes));
+                }
+            }
             Event::Input(input) => sink.apply(panel.on_input(input, Clock::read()), None, jobs),
             Event::Web(event) => {
                 let ended = matches!(event, WebEvent::Ended { .. });
@@ -602,7 +644,7 @@ impl<'a, O: Outputs, F: Fn() -> Vec<usize>> Bridge<'a, O, F> {
             .update(&(reporting.counts)(), Instant::now());
         changes.iter().for_each(|c| c.log());
         if !changes.is_empty() {
-            self.sink.report(&self.panel, &self.reporting);
+            self.sink.report(&self.panel, &self.camera, &self.reporting);
         }
     }
 
@@ -649,6 +691,7 @@ struct Sink<'a, 'm, O> {
     web: WebStats,
     calibration: &'m dyn CalibrationControl,
     recorder: &'m dyn RecorderControl,
+    camera: watch::Sender<Option<axum::body::Bytes>>,
 }
 
 impl<'m, O: Outputs> Sink<'_, 'm, O> {
@@ -732,9 +775,20 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
     }
 
     /// The panel's `diagnostics`, with the watched topics' peers.
-    fn report<F: Fn() -> Vec<usize>>(&self, panel: &Panel, reporting: &Reporting<F>) {
+    fn report<F: Fn() -> Vec<usize>>(
+        &self,
+        panel: &Panel,
+        camera: &scene::CameraView,
+        reporting: &Reporting<F>,
+    ) {
         let now = Instant::now();
         let mut status = panel.report(&reporting.name, &reporting.url, &self.web, now);
+        status
+            .values
+            .extend(camera.values().into_iter().map(|(key, value)| KeyValue {
+                key: key.into(),
+                value,
+            }));
         reporting.peers.annotate(&mut status, now);
         self.outputs.diagnostics(status);
     }

@@ -95,6 +95,25 @@ pub enum ToClient {
     /// The recording card: the recorder's state and the last episode call (made by
     /// recording.rs's `RecordCard::view`).
     Recorder(Box<RecordView>),
+    /// The physics twin's cube (its `tf` frame `cube` in `base_frame`), at most
+    /// [`crate::scene::CUBE_VIEW_RATE_HZ`] a second and only when it moved; `p` and `q`
+    /// null once no cube frame came for [`crate::scene::CUBE_STALE_AFTER`] (hidden).
+    Cube {
+        /// position (m), null: no cube
+        p: Option<[f64; 3]>,
+        /// orientation, quaternion `[x, y, z, w]`, null: no cube
+        q: Option<[f64; 4]>,
+    },
+}
+
+impl ToClient {
+    /// The `cube` message for this pose (None: no cube).
+    pub fn cube(t: Option<&eezybot_msgs::geometry_msgs::Transform>) -> ToClient {
+        ToClient::Cube {
+            p: t.map(|t| [t.translation.x, t.translation.y, t.translation.z]),
+            q: t.map(|t| [t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]),
+        }
+    }
 }
 
 /// `{"t": "recorder", …}`: the recorder as its `diagnostics` report it (each value null
@@ -540,6 +559,10 @@ pub struct Snapshot {
     pub calibration: Option<Arc<ToClient>>,
     /// the latest `recorder` message (the recording card)
     pub recorder: Option<Arc<ToClient>>,
+    /// the latest `cube` message
+    pub cube: Arc<ToClient>,
+    /// the camera view's topic (`camera_view`; None: no camera view)
+    pub camera: Option<Arc<str>>,
 }
 
 /// `{"t": "hello", …}`.
@@ -553,6 +576,8 @@ struct Hello<'a> {
     program: &'a ToClient,
     calibration: Option<&'a ToClient>,
     recorder: Option<&'a ToClient>,
+    cube: &'a ToClient,
+    camera: Option<&'a str>,
     #[serde(flatten)]
     arm: &'a ArmFacts,
 }
@@ -568,6 +593,8 @@ impl Snapshot {
             program: &self.program,
             calibration: self.calibration.as_deref(),
             recorder: self.recorder.as_deref(),
+            cube: &self.cube,
+            camera: self.camera.as_deref(),
             arm: &self.arm,
         })
         .unwrap_or_default()
@@ -756,6 +783,13 @@ mod tests {
                 }),
                 json!({"t": "sent", "topic": "estop", "on": false}),
             ),
+            (
+                ToClient::Cube {
+                    p: Some([0.2, 0.0, 0.0675]),
+                    q: Some([0.0, 0.0, 0.0, 1.0]),
+                },
+                json!({"t": "cube", "p": [0.2, 0.0, 0.0675], "q": [0.0, 0.0, 0.0, 1.0]}),
+            ),
         ];
         for (message, wire) in cases {
             assert_eq!(value(&message), wire, "{message:?}");
@@ -783,9 +817,13 @@ mod tests {
             urdf: None,
             calibration: None,
             recorder: None,
+            cube: Arc::new(ToClient::cube(None)),
+            camera: Some("twin/camera/image_raw/compressed".into()),
         };
         let hello: serde_json::Value = serde_json::from_str(&snapshot.hello(50.0)).unwrap();
         assert!(hello["recorder"].is_null());
+        assert_eq!(hello["cube"], json!({"t": "cube", "p": null, "q": null}));
+        assert_eq!(hello["camera"], "twin/camera/image_raw/compressed");
         assert_eq!(hello["t"], "hello");
         assert_eq!(hello["rate"], 50.0);
         assert_eq!(hello["target"], json!([0.2, 0.0, 0.1]));

@@ -9,6 +9,7 @@ use crate::message::{
     ArmFacts, ArmJointsMsg, NodeEntry, Pose, RobotInfo, Sent, Snapshot, ToClient, UrdfScene,
 };
 use crate::recording::{RecordCard, RecordDone, RecordWork};
+use crate::scene::CubeView;
 use crate::teleop::{xyz_topic, Command, Event, Teleop};
 use crate::web::{self, ClientRequest, WebStats};
 use crate::{Input, NodeNames};
@@ -386,6 +387,12 @@ pub struct Panel {
     recorder: RecordCard,
     /// its latest view
     recorder_view: Arc<ToClient>,
+    /// the physics twin's cube, from `tf`
+    cube: CubeView,
+    /// its latest message
+    cube_view: Arc<ToClient>,
+    /// the camera view's topic (`camera_view`), if any
+    camera_topic: Option<Arc<str>>,
 }
 
 /// A leader's deadman is shown only with joints heard this recently.
@@ -432,6 +439,27 @@ impl Panel {
             recorder_view: Arc::new(ToClient::Recorder(Box::new(
                 RecordCard::new(NodeNames::RECORDER).view(Instant::now()),
             ))),
+            cube: CubeView::new("base_link"),
+            cube_view: Arc::new(ToClient::cube(None)),
+            camera_topic: None,
+        }
+    }
+
+    /// Show the twin's cube in `base_frame` (the 3D view's root; default `base_link`)
+    /// and name the camera view's topic (None: no camera view).
+    pub fn with_scene(mut self, base_frame: &str, camera_topic: Option<&str>) -> Panel {
+        self.cube = CubeView::new(base_frame);
+        self.camera_topic = camera_topic.map(Arc::from);
+        self
+    }
+
+    /// The cube's message changed: to every browser and those that connect later.
+    fn show_cube(&mut self, message: Option<ToClient>, effects: &mut Vec<Effect>) {
+        if let Some(m) = message {
+            let m = Arc::new(m);
+            effects.push(Effect::Broadcast((*m).clone()));
+            self.cube_view = m;
+            self.changed = true;
         }
     }
 
@@ -598,6 +626,8 @@ impl Panel {
             urdf: self.urdf.as_ref().map(|(text, _)| text.clone()),
             calibration: self.calibration.clone(),
             recorder: Some(self.recorder_view.clone()),
+            cube: self.cube_view.clone(),
+            camera: self.camera_topic.clone(),
         }
     }
 
@@ -667,6 +697,10 @@ impl Panel {
         if self.leader.pending {
             self.send_leader(clock.now, &mut effects);
         }
+        if self.cube.pending() {
+            let m = self.cube.on_tick(clock.now);
+            self.show_cube(m, &mut effects);
+        }
         self.finish(effects)
     }
 
@@ -684,6 +718,9 @@ impl Panel {
         if self.leader.pending {
             self.send_leader(clock.now, &mut effects);
         }
+        // a held-back move of the cube, or the cube gone silent
+        let m = self.cube.on_tick(clock.now);
+        self.show_cube(m, &mut effects);
         self.finish(effects)
     }
 
@@ -859,6 +896,13 @@ impl Panel {
                     self.stop_playing(&mut effects);
                 }
             }
+            Input::Tf(tf) => {
+                let (m, log) = self.cube.on_tf(tf, clock.now);
+                effects.extend(log.map(|(level, text)| Effect::Log(level, text)));
+                self.show_cube(m, &mut effects);
+            }
+            // the bridge loop passes the images on itself (they are not the panel's state)
+            Input::CameraImage(_) => {}
             Input::Unreadable { topic, error } => {
                 effects.extend(self.unreadable.note(topic, &error, clock.now));
             }
@@ -908,6 +952,7 @@ impl Panel {
         ];
         values.extend(web.values());
         values.extend(self.unreadable.values());
+        values.extend(self.cube.values());
         let last = web.last_refusal().cloned();
         let recent = last
             .clone()

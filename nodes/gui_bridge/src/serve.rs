@@ -31,6 +31,34 @@ pub async fn serve(
     let estop = node.subscribe_to(&topics::ESTOP)?;
     let leader_joints = node.subscribe_to(&topics::LEADER_JOINT_STATES)?;
     let leader_deadman = node.subscribe_to(&topics::LEADER_DEADMAN)?;
+    // the twin's cube and camera, read by bounded readers (scene.rs): at start, so the
+    // graph shows the contract's endpoints whether or not a twin runs
+    let tf = node.subscription::<crate::scene::CubeTf>(topics::TF.name, topics::TF.qos.clone())?;
+    let camera_topic = params
+        .string("camera_view")
+        .map(|t| t.trim().to_string())
+        .filter(|t| !t.is_empty());
+    let camera = match &camera_topic {
+        Some(topic) => {
+            let sub = node.subscription::<crate::scene::CameraImage>(
+                topic,
+                topics::TWIN_CAMERA_IMAGE.qos.clone(),
+            )?;
+            log::info!(
+                "camera view: {} (at most {} images a second to the browsers)",
+                node.resolver().resolve(topic)?,
+                params
+                    .f64("camera_view_fps")
+                    .unwrap_or(crate::scene::CAMERA_VIEW_FPS)
+            );
+            Some(sub)
+        }
+        None => {
+            log::info!("no camera view (camera_view is empty)");
+            None
+        }
+    };
+    let (camera_tx, camera_rx) = tokio::sync::watch::channel(None);
     let (to_browsers, _) = tokio::sync::broadcast::channel(256);
     let limits = Limits::default();
     let (req_tx, req_rx) = crate::web::request_channels(&limits);
@@ -62,7 +90,13 @@ pub async fn serve(
     log::info!("waypoint programs in {}", desk.dir().display());
     let names = crate::NodeNames::from_params(&params);
     let mut panel = crate::panel::Panel::new(arm, rate, desk, node.resolver().node_name())
-        .with_node_names(names.clone());
+        .with_node_names(names.clone())
+        .with_scene(
+            &params
+                .string("base_frame")
+                .unwrap_or_else(|| "base_link".into()),
+            camera_topic.as_deref(),
+        );
     let arm_config = params.string("arm_config").unwrap_or_default();
     match eezybot_kinematics::ArmConfig::load_or_shipped(&arm_config) {
         Ok(config) => {
@@ -95,7 +129,8 @@ pub async fn serve(
         AccessPolicy::new(token.clone()),
         limits,
     )
-    .with_urdf(Arc::new(move || urdf_view.borrow().urdf.clone()));
+    .with_urdf(Arc::new(move || urdf_view.borrow().urdf.clone()))
+    .with_camera(camera_rx);
     let foxglove = crate::foxglove::serve(&node, AccessPolicy::new(token.clone())).await?;
     let web =
         crate::web::WebStats::default().with_foxglove(foxglove.as_ref().map(|f| f.front.clone()));
@@ -130,7 +165,7 @@ pub async fn serve(
             log::error!("web server stopped: {e}");
         }
     });
-    let inputs = futures::stream::select_all([
+    let mut streams = vec![
         inputs_of(&joint_states, &topics::JOINT_STATES, Input::JointStates),
         inputs_of(&description, &topics::ROBOT_DESCRIPTION, |m| {
             Input::RobotDescription(m.data)
@@ -146,7 +181,22 @@ pub async fn serve(
         inputs_of(&leader_deadman, &topics::LEADER_DEADMAN, |m| {
             Input::LeaderDeadman(m.data)
         }),
-    ]);
+        ros_plumbing::samples::inputs(&tf, Input::Tf, |error| Input::Unreadable {
+            topic: topics::TF.name,
+            error,
+        }),
+    ];
+    if let Some(camera) = &camera {
+        streams.push(ros_plumbing::samples::inputs(
+            camera,
+            Input::CameraImage,
+            |error| Input::Unreadable {
+                topic: "camera_view",
+                error,
+            },
+        ));
+    }
+    let inputs = futures::stream::select_all(streams);
     let reporting = crate::Reporting {
         name: panel_name,
         url,
@@ -178,6 +228,7 @@ pub async fn serve(
             reporting,
             calibration: &calibration,
             recorder: &recorder,
+            camera: camera_tx,
             shutdown,
         },
     );

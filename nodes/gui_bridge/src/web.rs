@@ -13,6 +13,7 @@
 //! ([`WebStats`]), and the server's tasks share no lock.
 
 use crate::access::{self, AccessPolicy, RequestFacts};
+use axum::body::Bytes;
 use axum::extract::ws::{CloseFrame, Message as WsMessage, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
@@ -28,7 +29,7 @@ use std::fmt;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::sync::{broadcast, mpsc, Semaphore};
+use tokio::sync::{broadcast, mpsc, watch, Semaphore};
 
 pub mod stats;
 pub use stats::{LogLine, WebEvent, WebStats};
@@ -317,7 +318,8 @@ impl Default for Limits {
             estop_queue: 16,
             event_queue: 256,
             max_clients: 32,
-            max_write_buffer_bytes: 1024 * 1024,
+            // room for one camera image and its frame header (scene.rs)
+            max_write_buffer_bytes: crate::scene::MAX_CAMERA_IMAGE_BYTES + 64 * 1024,
             send_timeout: Duration::from_secs(10),
         }
     }
@@ -551,6 +553,10 @@ pub struct WebState {
     /// The URDF the page's 3D view loads from `/robot.urdf` (None: not known yet). Over
     /// HTTP, not in a WebSocket message: a URDF can be larger than a client's write buffer.
     pub urdf: Arc<dyn Fn() -> Option<Arc<str>> + Send + Sync>,
+    /// The camera view's latest image (a JPEG or PNG file), sent to every client as a
+    /// binary message when it changes: a client still sending the last one skips to the
+    /// newest, nothing queues.
+    pub camera: watch::Receiver<Option<Bytes>>,
 }
 
 impl WebState {
@@ -570,7 +576,14 @@ impl WebState {
             slots: Arc::new(Semaphore::new(limits.max_clients)),
             limits,
             urdf: Arc::new(|| None),
+            camera: watch::channel(None).1,
         }
+    }
+
+    /// Where the camera view's images come from.
+    pub fn with_camera(mut self, camera: watch::Receiver<Option<Bytes>>) -> WebState {
+        self.camera = camera;
+        self
     }
 
     /// Where `/robot.urdf` gets the URDF from.
@@ -868,7 +881,8 @@ async fn bad_request(
     send(socket, refused(&format!("bad request: {reason}")), state).await
 }
 
-/// Serve one client until its connection ends; how it ended. `bad` counts the
+/// Serve one client until its connection ends; how it ended. Besides the JSON
+/// messages it gets the camera view's images, each a binary message (the image file). `bad` counts the
 /// messages from it that were no request.
 async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u64) -> ClientEnd {
     let mut all = state.broadcast.subscribe();
@@ -877,6 +891,10 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
         return end;
     }
     let max_bytes = state.limits.max_message_bytes;
+    // images from now on: an image from before this client came may be stale
+    let mut camera = state.camera.clone();
+    camera.borrow_and_update();
+    let mut camera_open = true;
     loop {
         tokio::select! {
             incoming = socket.recv() => {
@@ -926,6 +944,16 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
                 Ok(text) => if let Err(end) = send(&mut socket, WsMessage::Text(text.into()), state).await { return end },
                 Err(broadcast::error::RecvError::Lagged(_)) => continue,
                 Err(broadcast::error::RecvError::Closed) => return ClientEnd::Shutdown,
+            },
+            changed = camera.changed(), if camera_open => match changed {
+                Ok(()) => {
+                    let image = camera.borrow_and_update().clone();
+                    if let Some(image) = image {
+                        if let Err(end) = send(&mut socket, WsMessage::Binary(image), state).await { return end }
+                    }
+                }
+                // no camera view (its sender is gone)
+                Err(_) => camera_open = false,
             },
         }
     }

@@ -75,6 +75,7 @@ fn handles<'a, I, O, S>(
         },
         calibration: &gui_bridge::NoCalibration,
         recorder: &gui_bridge::NoRecorder,
+        camera: watch::channel(None).0,
         shutdown,
     }
 }
