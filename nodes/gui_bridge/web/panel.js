@@ -76,7 +76,9 @@ function connect() {
     const refused = !opened && await explainRefusal();
     retry = setTimeout(connect, refused ? 5000 : 1000);
   };
-  ws.onmessage = (ev) => handle(JSON.parse(ev.data));
+  ws.binaryType = "blob";
+  // a binary message is the camera view's image (a JPEG or PNG file); the rest is JSON
+  ws.onmessage = (ev) => (typeof ev.data === "string" ? handle(JSON.parse(ev.data)) : showCamera(ev.data));
 }
 
 function handle(m) {
@@ -88,6 +90,10 @@ function handle(m) {
       if (m.calibration) showCalibration(m.calibration);
       if (m.leader) showLeader(m.leader);
       if (m.recorder) showRecorder(m.recorder);
+      if (m.cube) showCube(m.cube);
+      cameraTopic = m.camera || null;
+      $("camera-caption").textContent = cameraTopic || "";
+      if (!cameraTopic) hideCamera();
       break;
     case "robot": applyRobot(m.robot); break;
     case "ack": reachable = true; target = m.target; showReach(true, ""); if (mode === "xyz") setSliders(target, true); break;
@@ -105,7 +111,42 @@ function handle(m) {
     case "latency": $("latency").textContent = m.ms.toFixed(1) + " ms (median " + m.median_ms.toFixed(1) + ")"; break;
     case "estop": setEstop(m.on); break;
     case "sent": window.__sent = (window.__sent || 0) + 1; break;
+    case "cube": showCube(m); break;
   }
+}
+
+// ---- the physics twin: its cube in the 3D view, its camera in the small view
+// the cube as gui_bridge last told it: {p, q}, p null when no cube frame comes (hidden)
+let cube = null;
+function showCube(m) {
+  cube = m.p ? m : null;
+  if (view3d) view3d.setCube(cube ? cube.p : null, cube ? cube.q : null);
+}
+// the camera view: each image a blob: URL (the CSP's img-src allows blob:), the previous
+// one revoked once the next is shown; hidden when no image came for CAMERA_STALE_MS
+const CAMERA_STALE_MS = 2000;
+let cameraTopic = null, cameraUrl = null, cameraTimer = null, cameraDecoding = false;
+window.__camera = { shown: 0 };
+function showCamera(blob) {
+  if (cameraDecoding) return; // still showing the last one: skip, never queue
+  cameraDecoding = true;
+  const url = URL.createObjectURL(blob);
+  const img = $("camera-img");
+  img.onload = () => {
+    cameraDecoding = false;
+    if (cameraUrl) URL.revokeObjectURL(cameraUrl);
+    cameraUrl = url;
+    $("camera-view").hidden = false;
+    window.__camera.shown++;
+  };
+  img.onerror = () => { cameraDecoding = false; URL.revokeObjectURL(url); };
+  img.src = url;
+  clearTimeout(cameraTimer);
+  cameraTimer = setTimeout(hideCamera, CAMERA_STALE_MS);
+}
+function hideCamera() {
+  clearTimeout(cameraTimer);
+  $("camera-view").hidden = true;
 }
 
 function showReach(ok, reason) {

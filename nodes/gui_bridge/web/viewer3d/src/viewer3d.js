@@ -11,6 +11,7 @@
 // Only what is used is imported, so esbuild can tree-shake three.
 import {
     AmbientLight,
+    BoxGeometry,
     BufferGeometry,
     Color,
     CylinderGeometry,
@@ -53,6 +54,8 @@ const TARGET_RADIUS = 0.008;
 const REACHABLE = '#1a9850';
 const UNREACHABLE = '#d73027';
 const ENVELOPE_COLOR = '#4575b4';
+const CUBE_SIDE = 0.025; // the physics twin's cube (libs/twin_model, CUBE_SIDE_M), metres
+const CUBE_COLOR = '#d62728';
 const STICK_COLOR = '#8a8a92';
 const IDLE_MS = 1500; // stop the render loop this long after the last change
 const MIN_FPS = 40; // adaptive resolution (software GL only) steps down below this
@@ -239,6 +242,14 @@ function create(container, options = {}) {
     target.add(targetBall, drop);
     target.visible = false;
     scene.add(target);
+
+    // The physics twin's cube: a 25 mm red box with dark edges, hidden until posed.
+    const cube = new Group();
+    const cubeGeom = new BoxGeometry(CUBE_SIDE, CUBE_SIDE, CUBE_SIDE);
+    cube.add(new Mesh(cubeGeom, new MeshPhongMaterial({ color: CUBE_COLOR, shininess: 30 })));
+    cube.add(new LineSegments(new EdgesGeometry(cubeGeom), new LineBasicMaterial({ color: 0x5a0f0f })));
+    cube.visible = false;
+    scene.add(cube);
 
     let robot = null;
     let envelope = null;
@@ -465,6 +476,30 @@ function create(container, options = {}) {
         wake();
     }
 
+    // ---- the twin's cube ----------------------------------------------------------------------
+    // p: [x, y, z] in the robot's root frame (base_link), q: [x, y, z, w] (default: no turn);
+    // null (or a p that is not finite) hides it.
+    function setCube(p, q) {
+        if (disposed) return;
+        if (!finite3(p)) {
+            cube.visible = false;
+        } else {
+            cube.position.set(+p[0], +p[1], +p[2]);
+            const ok = Array.isArray(q) && q.length === 4 && q.every((v) => Number.isFinite(+v));
+            if (ok) cube.quaternion.set(+q[0], +q[1], +q[2], +q[3]).normalize();
+            else cube.quaternion.identity();
+            cube.visible = true;
+        }
+        wake();
+    }
+
+    // The cube as drawn: {position, quaternion, side}, or null while hidden.
+    function cubeState() {
+        if (!cube.visible) return null;
+        const p = cube.position, q = cube.quaternion;
+        return { position: [p.x, p.y, p.z], quaternion: [q.x, q.y, q.z, q.w], side: CUBE_SIDE };
+    }
+
     // ---- envelope -----------------------------------------------------------------------------
     function latheEnvelope(env) {
         const prof = (env.profile || []).filter((p) => Array.isArray(p) && Number.isFinite(+p[0]) && Number.isFinite(+p[1]))
@@ -573,6 +608,8 @@ function create(container, options = {}) {
         setRobot,
         setJoints,
         setTarget,
+        setCube,
+        cube: cubeState,
         setEnvelope,
         resize,
         resetView,
