@@ -243,13 +243,20 @@ function create(container, options = {}) {
     target.visible = false;
     scene.add(target);
 
-    // The physics twin's cube: a 25 mm red box with dark edges, hidden until posed.
+    // The physics twin's cube: a 25 mm red box with dark edges, hidden until posed, with a
+    // faint drop line from its centre to the ground (the stand it may sit on is not drawn).
     const cube = new Group();
     const cubeGeom = new BoxGeometry(CUBE_SIDE, CUBE_SIDE, CUBE_SIDE);
     cube.add(new Mesh(cubeGeom, new MeshPhongMaterial({ color: CUBE_COLOR, shininess: 30 })));
     cube.add(new LineSegments(new EdgesGeometry(cubeGeom), new LineBasicMaterial({ color: 0x5a0f0f })));
     cube.visible = false;
     scene.add(cube);
+    const cubeDropGeom = new BufferGeometry();
+    cubeDropGeom.setAttribute('position', new Float32BufferAttribute([0, 0, 0, 0, 0, 0], 3));
+    const cubeDrop = new Line(cubeDropGeom, new LineBasicMaterial({ color: CUBE_COLOR, transparent: true, opacity: 0.45 }));
+    cubeDrop.frustumCulled = false;
+    cubeDrop.visible = false;
+    scene.add(cubeDrop);
 
     let robot = null;
     let envelope = null;
@@ -483,8 +490,14 @@ function create(container, options = {}) {
         if (disposed) return;
         if (!finite3(p)) {
             cube.visible = false;
+            cubeDrop.visible = false;
         } else {
             cube.position.set(+p[0], +p[1], +p[2]);
+            const drop = cubeDropGeom.attributes.position;
+            drop.setXYZ(0, +p[0], +p[1], +p[2]);
+            drop.setXYZ(1, +p[0], +p[1], 0);
+            drop.needsUpdate = true;
+            cubeDrop.visible = true;
             const ok = Array.isArray(q) && q.length === 4 && q.every((v) => Number.isFinite(+v));
             if (ok) cube.quaternion.set(+q[0], +q[1], +q[2], +q[3]).normalize();
             else cube.quaternion.identity();
