@@ -508,3 +508,50 @@ fn the_recording_card_calls_the_recorder_named_by_recorder_node_once_it_reports(
     );
     assert!(card["note"].as_str().unwrap().contains("not reporting"));
 }
+
+/// A `tf` message with the cube in `parent` at `x`, as the panel reads it.
+fn cube_tf(parent: &str, x: f64) -> Input {
+    use eezybot_msgs::geometry_msgs::{Transform, TransformStamped, Vector3};
+    let msg = eezybot_msgs::tf2_msgs::TFMessage {
+        transforms: vec![TransformStamped {
+            header: Header {
+                stamp: Time::new(1, 0),
+                frame_id: parent.into(),
+            },
+            child_frame_id: "cube".into(),
+            transform: Transform {
+                translation: Vector3 {
+                    x,
+                    y: 0.0,
+                    z: 0.0675,
+                },
+                ..Transform::default()
+            },
+        }],
+    };
+    let bytes = eezybot_msgs::cdr::encode(&msg).unwrap();
+    Input::Tf(eezybot_msgs::cdr::decode(&bytes).unwrap())
+}
+
+#[test]
+fn the_twins_cube_goes_to_the_browsers_and_a_later_hello_and_hides_when_silent() {
+    let t0 = Instant::now();
+    let mut p = panel("cube").with_scene("base_link", Some("twin/camera/image_raw/compressed"));
+    let hello: Value = serde_json::from_str(&p.snapshot().hello(50.0)).unwrap();
+    assert!(hello["cube"]["p"].is_null());
+    assert_eq!(hello["camera"], "twin/camera/image_raw/compressed");
+    let fx = p.on_input(cube_tf("base_link", 0.2), at(t0, 0));
+    let cubes = told(&fx, true);
+    assert_eq!(of_kind(&cubes, "cube")[0]["p"][0], 0.2);
+    let hello: Value = serde_json::from_str(&p.snapshot().hello(50.0)).unwrap();
+    assert_eq!(hello["cube"]["p"], serde_json::json!([0.2, 0.0, 0.0675]));
+    // a cube of another frame: nothing told
+    let fx = p.on_input(cube_tf("world", 0.3), at(t0, 100));
+    assert!(of_kind(&told(&fx, true), "cube").is_empty());
+    // silent for 2 s: hidden, for every browser and a later one
+    let fx = p.on_status_tick(at(t0, 2500));
+    let hidden = told(&fx, true);
+    assert!(of_kind(&hidden, "cube")[0]["p"].is_null());
+    let hello: Value = serde_json::from_str(&p.snapshot().hello(50.0)).unwrap();
+    assert!(hello["cube"]["p"].is_null());
+}
