@@ -30,7 +30,7 @@ pub const CUBE_FRAME: &str = "cube";
 pub const NAME_MAX: usize = 64;
 /// The largest camera image passed on to browsers, bytes; a bigger one is refused
 /// (counted, logged) without being copied.
-pub const MAX_CAMERA_IMAGE_BYTES: usize = 2 * 1024 * 1024;
+pub const MAX_CAMERA_IMAGE_BYTES: usize = crate::web::MAX_IMAGE_BYTES;
 /// How often the browsers get the cube's pose, at most.
 pub const CUBE_VIEW_RATE_HZ: f64 = 20.0;
 /// No cube frame for this long: the cube is hidden (the twin stopped).

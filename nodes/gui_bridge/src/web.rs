@@ -318,8 +318,8 @@ impl Default for Limits {
             estop_queue: 16,
             event_queue: 256,
             max_clients: 32,
-            // room for one camera image and its frame header (scene.rs)
-            max_write_buffer_bytes: crate::scene::MAX_CAMERA_IMAGE_BYTES + 64 * 1024,
+            // room for one camera image and its frame header
+            max_write_buffer_bytes: MAX_IMAGE_BYTES + 64 * 1024,
             send_timeout: Duration::from_secs(10),
         }
     }
@@ -401,6 +401,10 @@ pub fn request_channels(limits: &Limits) -> (RequestSenders, Requests) {
 
 /// The length reasons are cut to in log lines, diagnostics and answers.
 pub const REASON_MAX: usize = 200;
+
+/// The largest image the panel passes to a browser (the camera view's; scene.rs refuses
+/// bigger ones as it reads them), so that one fits a client's write buffer.
+pub const MAX_IMAGE_BYTES: usize = 2 * 1024 * 1024;
 
 /// How a client's connection ended.
 #[derive(Clone, Debug, PartialEq, Eq)]
