@@ -465,6 +465,21 @@ async fn a_command_sent_after_arm_config_was_set_is_judged_by_the_new_config() {
             fake.value("connection").as_deref() == Some("connected")
         })
         .await;
+        // the base brought to 110° first, within the shipped range, and its ramp (300°/s
+        // from the hold pose's 90°: several frames) finished: a round's refused command
+        // must find no frame of an earlier move still going out (a busy host's round
+        // took long enough for that ramp to send one mid-round: sent 4, not 3)
+        inputs
+            .unbounded_send(Input::ServoAngles(command(-1), Instant::now()))
+            .unwrap();
+        until("the base at 110° (the ramp done)", || {
+            fake.servo_state
+                .lock()
+                .unwrap()
+                .last()
+                .is_some_and(|m| (m.position[0].to_degrees() - 110.0).abs() < 0.05)
+        })
+        .await;
         for round in 0..20 {
             let (rejected, sent) = (counter("inputs_rejected"), link.snapshot().sent.sent);
             params.set("arm_config", ParameterValue::String(narrow.clone()));
