@@ -305,6 +305,12 @@ class Keystore:
     def with_expired_certificate(self, base, name):
         """Enclave `name`: `base` with its certificate re-issued by the identity CA (same key,
         same subject) valid only in January 2025."""
+        return self.with_certificate_dates(base, name, "20250101000000Z", "20250201000000Z")
+
+    def with_certificate_dates(self, base, name, start, end):
+        """Enclave `name`: `base` with its certificate re-issued by the identity CA (same key,
+        same subject, so its permissions still name it) valid from `start` to `end`
+        (openssl's YYYYMMDDHHMMSSZ)."""
         dst = self.copy_enclave(base, name)
         cert, key = self._ca("identity")
         subject = _run(["openssl", "x509", "-in", dst / "cert.pem", "-noout", "-subject", "-nameopt", "RFC2253"]).stdout
@@ -319,7 +325,7 @@ class Keystore:
         _run(["openssl", "req", "-new", "-key", dst / "key.pem", "-subj", "/CN=" + cn.replace("/", "\\/"),
               "-out", work / "req.csr"])
         _run(["openssl", "ca", "-batch", "-config", "ca.cnf", "-cert", cert, "-keyfile", key, "-in", "req.csr",
-              "-out", dst / "cert.pem", "-startdate", "20250101000000Z", "-enddate", "20250201000000Z", "-notext"],
+              "-out", dst / "cert.pem", "-startdate", start, "-enddate", end, "-notext"],
              cwd=work)
         shutil.rmtree(work)
         return dst

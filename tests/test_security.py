@@ -498,3 +498,45 @@ def test_a_bad_keystore_file_stops_the_node_naming_it(domain, keystore, foreign_
     assert not running, f"{node} kept running with {case} under Enforce:\n{out[-2000:]}"
     assert code == 2, f"{node} exited {code}, not 2:\n{out[-2000:]}"
     assert str(bad) in out, f"{node}'s message does not name {bad}:\n{out[-2000:]}"
+
+
+# ---------------------------------------------------------------------------------------
+# certificates that expire are seen before they do (issue 36, item 5)
+
+def test_a_secured_node_reports_its_certificate_expiry_and_warns_a_month_before(domain, keystore):
+    """A secured node's every diagnostics report carries its certificate's end
+    (`certificate_expires`, `certificate_days_left`); within 30 days it is a warning naming
+    the file to renew. serial_node's enclave re-issued to end in 10 days; compute_ik's the
+    keystore's own (ten years). Read by a Fast DDS peer with the PC's enclave."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from interop import cdr
+    now = time.time()
+    fmt = lambda t: time.strftime("%Y%m%d%H%M%SZ", time.gmtime(t))  # noqa: E731
+    soon = keystore.with_certificate_dates("/eezybot/pi", "/test/expires_soon", fmt(now - 86400), fmt(now + 10 * 86400))
+    nodes = [NodeProcess("serial_node", ["--ros-args", "-p", "port:=mock", "-p", "diagnostics_period:=0.2"], domain,
+                         env=security_env(keystore, "/test/expires_soon")),
+             NodeProcess("compute_ik", ["--ros-args", "-p", "diagnostics_period:=0.2"], domain,
+                         env=security_env(keystore, "/eezybot/pc"))]
+    peer = SecurePeer(domain, enclave=keystore.enclave("/eezybot/pc"), subs=["diagnostics"])
+    try:
+        def reports():
+            out = {}
+            for _, payload in peer.received("diagnostics"):
+                for s in cdr.deserialize(payload, DiagnosticArray()).status:
+                    out[s.name.split(":")[0]] = s
+            return out
+        assert peer.wait(lambda: {"serial_node", "compute_ik"} <= set(reports()), 30), (peer.stderr(), reports().keys())
+        serial = reports()["serial_node"]
+        v = {kv.key: kv.value for kv in serial.values}
+        assert v["certificate_days_left"] in ("9", "10"), v
+        assert v["certificate_expires"] == time.strftime("%Y-%m-%d", time.gmtime(now + 10 * 86400)), v
+        level = serial.level[0] if isinstance(serial.level, bytes) else serial.level
+        assert level >= 1, serial  # at least a warning
+        assert f"{soon / 'cert.pem'} expires on {v['certificate_expires']}" in serial.message, serial.message
+        ik = {kv.key: kv.value for kv in reports()["compute_ik"].values}
+        assert int(ik["certificate_days_left"]) >= 3600, ik
+    finally:
+        peer.close()
+        codes = [n.stop() for n in nodes]
+    assert codes == [0, 0], codes

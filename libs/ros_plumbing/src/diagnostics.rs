@@ -6,6 +6,7 @@
 
 use crate::params::{ParamRange, ParamSpec, Params};
 use crate::publisher::TopicPublisher;
+use crate::security::CertificateExpiry;
 use eezybot_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
 use eezybot_msgs::std_msgs::Header;
 use eezybot_msgs::Time;
@@ -211,19 +212,89 @@ pub fn status(
     }
 }
 
+/// A certificate this close to its end makes every report of the node a warning.
+pub const CERTIFICATE_WARNING_DAYS: i64 = 30;
+
+/// Adds a secured node's certificate expiry to one of its reports:
+/// `certificate_expires` (UTC date) and `certificate_days_left`; within
+/// [`CERTIFICATE_WARNING_DAYS`] of it (or past it) the report is at least a warning
+/// and its message says which file to renew.
+pub fn annotate_certificate(
+    status: &mut DiagnosticStatus,
+    expiry: &CertificateExpiry,
+    now_unix: i64,
+) {
+    let days_left = (expiry.not_after - now_unix).div_euclid(86_400);
+    let date = utc_date(expiry.not_after);
+    status.values.push(KeyValue {
+        key: "certificate_expires".into(),
+        value: date.clone(),
+    });
+    status.values.push(KeyValue {
+        key: "certificate_days_left".into(),
+        value: days_left.to_string(),
+    });
+    if days_left < CERTIFICATE_WARNING_DAYS {
+        status.level = status.level.max(DiagnosticStatus::WARN);
+        let warning = format!(
+            "{} expires on {date} ({days_left} days): renew it (docs/security.md: Certificates that expire)",
+            expiry.path.display()
+        );
+        status.message = if status.message.is_empty() {
+            warning
+        } else {
+            format!("{}; {warning}", status.message)
+        };
+    }
+}
+
+/// `YYYY-MM-DD` of a Unix time (UTC; the proleptic Gregorian calendar).
+fn utc_date(unix: i64) -> String {
+    // Howard Hinnant's days-to-civil
+    let z = unix.div_euclid(86_400) + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}")
+}
+
 /// Publishes a node's diagnostics on `diagnostics`.
 pub struct DiagnosticsPublisher {
     publisher: TopicPublisher<DiagnosticArray>,
+    certificate: Option<CertificateExpiry>,
 }
 
 impl DiagnosticsPublisher {
     /// Wrap a publisher created on the `diagnostics` topic.
     pub fn new(publisher: TopicPublisher<DiagnosticArray>) -> Self {
-        DiagnosticsPublisher { publisher }
+        DiagnosticsPublisher {
+            publisher,
+            certificate: None,
+        }
     }
 
-    /// Publish these statuses stamped now. A failed write is logged, never fatal.
-    pub fn publish(&self, status: Vec<DiagnosticStatus>) {
+    /// Every report from now on carries the certificate's expiry ([`annotate_certificate`]).
+    pub fn with_certificate(mut self, expiry: Option<CertificateExpiry>) -> Self {
+        self.certificate = expiry;
+        self
+    }
+
+    /// Publish these statuses stamped now (a secured node's with its certificate's
+    /// expiry). A failed write is logged, never fatal.
+    pub fn publish(&self, mut status: Vec<DiagnosticStatus>) {
+        if let Some(expiry) = &self.certificate {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX));
+            for s in &mut status {
+                annotate_certificate(s, expiry, now);
+            }
+        }
         let msg = DiagnosticArray {
             header: Header {
                 stamp: Time::now(),
@@ -232,5 +303,78 @@ impl DiagnosticsPublisher {
             status,
         };
         self.publisher.publish(msg);
+    }
+}
+
+#[cfg(test)]
+mod certificate_tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn expiry(days: i64) -> CertificateExpiry {
+        CertificateExpiry {
+            path: PathBuf::from("/k/enclaves/eezybot/pi/cert.pem"),
+            not_after: 1_800_000_000 + days * 86_400,
+        }
+    }
+
+    fn ok() -> DiagnosticStatus {
+        status(
+            DiagnosticStatus::OK,
+            "serial_node: servo link",
+            "eezybot_arm",
+            "connected",
+            &[],
+        )
+    }
+
+    #[test]
+    fn a_report_carries_the_certificate_expiry_and_stays_ok_far_from_it() {
+        let mut s = ok();
+        annotate_certificate(&mut s, &expiry(400), 1_800_000_000);
+        assert_eq!(s.level, DiagnosticStatus::OK);
+        assert_eq!(s.message, "connected");
+        let v: Vec<_> = s
+            .values
+            .iter()
+            .map(|kv| (kv.key.as_str(), kv.value.as_str()))
+            .collect();
+        assert_eq!(
+            v,
+            [
+                ("certificate_expires", "2028-02-19"),
+                ("certificate_days_left", "400")
+            ]
+        );
+    }
+
+    #[test]
+    fn within_30_days_it_is_a_warning_that_names_the_file() {
+        let mut s = ok();
+        annotate_certificate(&mut s, &expiry(29), 1_800_000_000);
+        assert_eq!(s.level, DiagnosticStatus::WARN);
+        assert!(
+            s.message
+                .starts_with("connected; /k/enclaves/eezybot/pi/cert.pem expires on "),
+            "{}",
+            s.message
+        );
+        assert!(s.message.contains("(29 days): renew it"), "{}", s.message);
+        let mut s = ok();
+        annotate_certificate(&mut s, &expiry(30), 1_800_000_000);
+        assert_eq!(s.level, DiagnosticStatus::OK);
+        // an error stays an error; past the end the days go negative
+        let mut e = status(DiagnosticStatus::ERROR, "x", "y", "", &[]);
+        annotate_certificate(&mut e, &expiry(-2), 1_800_000_000);
+        assert_eq!(e.level, DiagnosticStatus::ERROR);
+        assert!(e.message.contains("(-2 days)"), "{}", e.message);
+    }
+
+    #[test]
+    fn dates_are_utc_calendar_dates() {
+        assert_eq!(utc_date(0), "1970-01-01");
+        assert_eq!(utc_date(951_782_400), "2000-02-29");
+        assert_eq!(utc_date(1_796_000_000), "2026-11-30"); // (checked with Python's datetime)
+        assert_eq!(utc_date(-86_400), "1969-12-31");
     }
 }

@@ -195,6 +195,8 @@ pub struct RosNode {
     domain_id: u16,
     /// The SROS2 enclave in use, `None` when unsecured.
     enclave: Option<String>,
+    /// When the enclave's certificate (or its CA) runs out, for the diagnostics.
+    certificate: Option<security::CertificateExpiry>,
     spinner: Option<tokio::task::JoinHandle<()>>,
     // Dropped last: the DDS participant outlives the node's entities.
     _context: Context,
@@ -356,6 +358,17 @@ impl RosNode {
                  with the system clock"
             );
         }
+        // (the enclave was checked when the plan was made: its certificates read)
+        let certificate = match (&enclave, &plan) {
+            (Some(_), Some(plan)) => match security::CertificateExpiry::of_enclave(plan) {
+                Ok(expiry) => Some(expiry),
+                Err(e) => {
+                    log::warn!("security: the certificate's expiry cannot be read: {e}");
+                    None
+                }
+            },
+            _ => None,
+        };
         Ok(RosNode {
             node,
             resolver,
@@ -363,6 +376,7 @@ impl RosNode {
             user_args,
             domain_id,
             enclave,
+            certificate,
             spinner: Some(spinner),
             _context: context,
         })
@@ -531,9 +545,10 @@ impl RosNode {
 
     /// The node's `diagnostics` publisher.
     pub fn diagnostics(&mut self) -> Result<DiagnosticsPublisher, PlumbingError> {
-        Ok(DiagnosticsPublisher::new(
-            self.publish_on(&topics::DIAGNOSTICS)?,
-        ))
+        Ok(
+            DiagnosticsPublisher::new(self.publish_on(&topics::DIAGNOSTICS)?)
+                .with_certificate(self.certificate.clone()),
+        )
     }
 }
 

@@ -300,6 +300,37 @@ fn certificate(path: &Path) -> Result<X509, SecurityError> {
     X509::from_pem(&pem).map_err(|_| malformed(path, "not a PEM certificate"))
 }
 
+/// When an enclave's identity runs out: the earlier `notAfter` of its certificate and of
+/// the identity CA that issued it (either one expired stops the node at its next start).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CertificateExpiry {
+    /// The file whose certificate runs out first.
+    pub path: PathBuf,
+    /// Its `notAfter`, seconds since the Unix epoch.
+    pub not_after: i64,
+}
+
+impl CertificateExpiry {
+    /// Reads the enclave's certificate and identity CA (checked already by
+    /// [`check_enclave`]).
+    pub fn of_enclave(plan: &SecurityPlan) -> Result<CertificateExpiry, SecurityError> {
+        let mut earliest: Option<CertificateExpiry> = None;
+        for name in [CERT, IDENTITY_CA] {
+            let path = plan.dir.join(name);
+            let cert = certificate(&path)?;
+            let epoch = Asn1Time::from_unix(0).map_err(|e| malformed(&path, e.to_string()))?;
+            let d = epoch
+                .diff(cert.not_after())
+                .map_err(|e| malformed(&path, format!("bad notAfter: {e}")))?;
+            let not_after = i64::from(d.days) * 86_400 + i64::from(d.secs);
+            if earliest.as_ref().is_none_or(|e| not_after < e.not_after) {
+                earliest = Some(CertificateExpiry { path, not_after });
+            }
+        }
+        earliest.ok_or_else(|| malformed(&plan.dir, "no certificate"))
+    }
+}
+
 /// The certificate is valid at `now` (seconds since the Unix epoch).
 fn check_dates(path: &Path, cert: &X509, now: i64) -> Result<(), SecurityError> {
     // time_t is 32 bits on armv7 (infallible where it is 64)
@@ -601,10 +632,15 @@ mod tests {
 
         impl Ca {
             pub fn new(name: &str) -> Ca {
+                Ca::short_lived(name, 3650)
+            }
+
+            /// A CA valid from a day ago for `days` days.
+            pub fn short_lived(name: &str, days: i64) -> Ca {
                 let key = key();
                 let t = now();
                 Ca {
-                    cert: cert(name, &key, None, t - DAY, t + 3650 * DAY),
+                    cert: cert(name, &key, None, t - DAY, t + days * DAY),
                     key,
                 }
             }
@@ -674,6 +710,33 @@ mod tests {
         pub fn write(dir: &Path, name: &str, bytes: &[u8]) {
             std::fs::write(dir.join(name), bytes).unwrap();
         }
+    }
+
+    #[test]
+    fn the_expiry_is_the_earlier_of_the_certificate_and_its_ca() {
+        let (ca, dir) = good_enclave("expiry");
+        let plan = SecurityPlan {
+            enclave: "/eezybot/pc".into(),
+            dir: dir.to_path_buf(),
+            strategy: Strategy::Enforce,
+        };
+        // the enclave's certificate: a year; the CA: ten
+        let e = CertificateExpiry::of_enclave(&plan).unwrap();
+        assert!(e.path.ends_with("cert.pem"), "{e:?}");
+        assert!(
+            (e.not_after - (keystore::now() + 365 * 86_400)).abs() <= 5,
+            "{e:?}"
+        );
+        // a CA that ends first is the one named
+        let short = keystore::Ca::short_lived("ca", 20);
+        keystore::write(&dir, "identity_ca.cert.pem", &short.cert.to_pem().unwrap());
+        let e = CertificateExpiry::of_enclave(&plan).unwrap();
+        assert!(e.path.ends_with("identity_ca.cert.pem"), "{e:?}");
+        assert!(
+            (e.not_after - (keystore::now() + 20 * 86_400)).abs() <= 5,
+            "{e:?}"
+        );
+        drop(ca);
     }
 
     fn checked(dir: &Path) -> Result<(), SecurityError> {
