@@ -5,7 +5,9 @@ import os
 import signal
 import statistics
 import subprocess
+import tempfile
 import time
+from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
@@ -244,13 +246,23 @@ def ik_done(diags, accepted):
     return int(v.get("accepted", 0)) >= accepted and v.get("motion") == "at rest"
 
 
-def start_virtual_arduino(link):
-    p = subprocess.Popen([bin_path("virtual_arduino"), str(link)], stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 10
+def start_at_link(argv, link, env=None, timeout=10):
+    """A device process (virtual_arduino, the twin) that makes a pseudo-terminal and links it
+    at `link`: started, and returned once the link exists (it says it serves by making it;
+    the bound only ends a failure, with what the process said)."""
+    err = tempfile.TemporaryFile(mode="w+")  # (not a pipe: nobody reads it while it runs)
+    p = subprocess.Popen([str(a) for a in argv], stderr=err, text=True, env=env)
+    deadline = time.monotonic() + timeout
     while not os.path.exists(link):
-        assert time.monotonic() < deadline and p.poll() is None, "virtual_arduino did not start"
-        time.sleep(0.01)
+        if time.monotonic() >= deadline or p.poll() is not None:
+            err.seek(0)
+            raise AssertionError(f"{Path(argv[0]).name} did not start: {err.read()[-2000:]}")
+        time.sleep(0.01)  # (a file's appearance: no event to wait on)
     return p
+
+
+def start_virtual_arduino(link):
+    return start_at_link([bin_path("virtual_arduino"), link], link)
 
 
 def test_missing_port_then_unplug_and_replug(launch, observer, tmp_path):

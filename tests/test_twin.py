@@ -9,7 +9,6 @@ import io
 import math
 import os
 import signal
-import subprocess
 import time
 from pathlib import Path
 
@@ -19,7 +18,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, JointState
 
 from conftest import TfListener, bin_path, latest_status, status_values
 from safety_rig import SerialNodeRig
-from test_serial_node import angles
+from test_serial_node import angles, start_at_link
 
 
 def stamp_s(stamp):
@@ -104,15 +103,8 @@ def test_serial_node_port_twin_drives_the_physics(launch, observer, domain):
 
 
 def start_twin(link, domain):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
-    p = subprocess.Popen([bin_path("twin"), "--ros-args", "-p", f"link:={link}", "-p", "camera_fps:=0"],
-                         stderr=subprocess.PIPE, text=True, env=env)
-    deadline = time.monotonic() + 30
-    while not os.path.exists(link):
-        assert time.monotonic() < deadline and p.poll() is None, \
-            f"twin did not start: {p.stderr.read() if p.poll() is not None else ''}"
-        time.sleep(0.01)
-    return p
+    return start_at_link([bin_path("twin"), "--ros-args", "-p", f"link:={link}", "-p", "camera_fps:=0"], link,
+                         env=dict(os.environ, ROS_DOMAIN_ID=str(domain)), timeout=30)
 
 
 def test_a_stopped_twin_is_a_lost_device(launch, observer, tmp_path, domain):

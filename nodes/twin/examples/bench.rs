@@ -18,7 +18,6 @@ use std::time::Instant;
 
 use eezybot_kinematics::{ArmConfig, ArmJoints, ArmState};
 use mujoco_rs::prelude::*;
-use mujoco_rs::renderer::MjRenderer;
 use twin::sim::Sim;
 use twin_model::Scene;
 
@@ -46,7 +45,7 @@ fn replay(path: &str) -> Result<(), Box<dyn std::error::Error>> {
     let mut lockstep = twin::lockstep::Lockstep::new();
     let start = Instant::now();
     for e in &events {
-        lockstep.apply(&mut sim, *e, |_| {})?;
+        lockstep.apply(&mut sim, *e)?;
     }
     let wall = start.elapsed().as_secs_f64();
     println!(
@@ -117,15 +116,8 @@ fn run(seconds: f64) -> Result<(), Box<dyn std::error::Error>> {
     // with the camera: 640 x 480 at 30 fps of simulated time, rendered and encoded here
     let mut sim = Sim::new(urdf, &config, &scene)?;
     let model = sim.mj_model();
-    let camera = model
-        .name_to_id(MjtObjBase::mjOBJ_CAMERA, twin::camera::CAMERA)
-        .ok_or("no camera")?;
     let (w, h) = scene.image_size;
-    let mut renderer = MjRenderer::builder()
-        .width(w)
-        .height(h)
-        .camera(MjvCamera::new_fixed(camera))
-        .build(&model)?;
+    let mut renderer = twin::camera::scene_renderer(&model, w, h)?;
     let mut snapshot = MjData::new(model.clone());
     let (mut frames, mut jpeg_bytes) = (Vec::new(), 0usize);
     let mut next_frame = 0.0;

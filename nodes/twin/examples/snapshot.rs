@@ -5,7 +5,6 @@
 use std::process::ExitCode;
 
 use mujoco_rs::prelude::*;
-use mujoco_rs::renderer::MjRenderer;
 
 fn main() -> ExitCode {
     let out = std::env::args()
@@ -33,15 +32,8 @@ fn snapshot(out: &str) -> Result<(), Box<dyn std::error::Error>> {
     sim.set_horn_targets(horns);
     sim.run(0.5)?;
     let model = sim.mj_model();
-    let camera = model
-        .name_to_id(MjtObjBase::mjOBJ_CAMERA, twin::camera::CAMERA)
-        .ok_or("no scene camera")?;
     let (w, h) = scene.image_size;
-    let mut renderer = MjRenderer::builder()
-        .width(w)
-        .height(h)
-        .camera(MjvCamera::new_fixed(camera))
-        .build(&model)?;
+    let mut renderer = twin::camera::scene_renderer(&model, w, h)?;
     let mut data = MjData::new(model.clone());
     sim.data().copy_visual_to(&mut data)?;
     renderer.sync_data(&mut data)?;

@@ -65,9 +65,6 @@ impl CameraFeed {
         settings: CameraSettings,
         publish: impl FnMut(CompressedImage, CameraInfo) + Send + 'static,
     ) -> Result<CameraFeed, String> {
-        let camera = model
-            .name_to_id(MjtObjBase::mjOBJ_CAMERA, CAMERA)
-            .ok_or_else(|| format!("the model has no camera `{CAMERA}`"))?;
         let shared = Arc::new(Shared {
             shot: Mutex::new(Shot {
                 data: MjData::new(model.clone()),
@@ -83,22 +80,17 @@ impl CameraFeed {
         let thread_shared = shared.clone();
         let thread = std::thread::Builder::new()
             .name("twin camera".into())
-            .spawn(move || {
-                let renderer = MjRenderer::builder()
-                    .width(settings.width)
-                    .height(settings.height)
-                    .camera(MjvCamera::new_fixed(camera))
-                    .build(&model);
-                match renderer {
+            .spawn(
+                move || match scene_renderer(&model, settings.width, settings.height) {
                     Ok(r) => {
                         let _ = ready_tx.send(Ok(()));
                         render_loop(r, &thread_shared, &settings, publish);
                     }
                     Err(e) => {
-                        let _ = ready_tx.send(Err(format!("the camera's offscreen renderer: {e}")));
+                        let _ = ready_tx.send(Err(e));
                     }
-                }
-            })
+                },
+            )
             .map_err(|e| e.to_string())?;
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(CameraFeed {
@@ -144,6 +136,20 @@ impl Drop for CameraFeed {
             let _ = t.join();
         }
     }
+}
+
+/// An offscreen renderer of the model's camera [`CAMERA`] at `width` × `height` (on the
+/// calling thread: its EGL context belongs to it).
+pub fn scene_renderer(model: &MjModel, width: u32, height: u32) -> Result<MjRenderer, String> {
+    let camera = model
+        .name_to_id(MjtObjBase::mjOBJ_CAMERA, CAMERA)
+        .ok_or_else(|| format!("the model has no camera `{CAMERA}`"))?;
+    MjRenderer::builder()
+        .width(width)
+        .height(height)
+        .camera(MjvCamera::new_fixed(camera))
+        .build(model)
+        .map_err(|e| format!("the camera's offscreen renderer: {e}"))
 }
 
 /// The camera info of an ideal pinhole camera of `fovy_deg` (square pixels, no

@@ -26,20 +26,14 @@ impl Lockstep {
         Lockstep::default()
     }
 
-    /// Advances `sim` to `event`'s time, a step at a time with the pulses as they are
-    /// (`after_step` runs after each step), then takes the event.
-    pub fn apply(
-        &mut self,
-        sim: &mut Sim,
-        event: BoardEvent,
-        mut after_step: impl FnMut(&Sim),
-    ) -> Result<(), SimError> {
+    /// Advances `sim` to `event`'s time, a step at a time with the pulses as they are,
+    /// then takes the event.
+    pub fn apply(&mut self, sim: &mut Sim, event: BoardEvent) -> Result<(), SimError> {
         let t = event.time_s();
         let dt = sim.timestep();
         while sim.time() + dt / 2.0 <= t {
             sim.set_pulses_us(self.pulses.widths_us(sim.time()));
             sim.step()?;
-            after_step(sim);
         }
         match event {
             BoardEvent::Edge { pin, high, .. } => self.pulses.edge(pin, high, t),

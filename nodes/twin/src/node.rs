@@ -158,7 +158,8 @@ struct Physics {
     next_diag: f64,
     /// (wall, simulated) time at the last diagnostics report
     last_report: (f64, f64),
-    behind_since: Option<f64>,
+    /// the host was too slow for real time once (said once)
+    behind_reported: bool,
     link: String,
 }
 
@@ -186,7 +187,7 @@ impl Physics {
             next_frame: 0.0,
             next_diag: 0.0,
             last_report: (0.0, 0.0),
-            behind_since: None,
+            behind_reported: false,
             link,
         }
     }
@@ -206,12 +207,12 @@ impl Physics {
             budget -= 1;
             self.after_step();
         }
-        if budget == 0 && self.behind_since.is_none() {
+        if budget == 0 && !self.behind_reported {
             log::warn!(
                 "twin: the simulation is behind real time ({:.2} s simulated at {now:.2} s)",
                 self.sim.time()
             );
-            self.behind_since = Some(now);
+            self.behind_reported = true;
         }
         self.maybe_report(now);
         Ok(())
@@ -365,11 +366,13 @@ fn follow_events(path: &str, stop: &AtomicBool, run: &mut Physics) -> Result<(),
         for line in pending[..complete].lines() {
             if let Some(event) = BoardEvent::parse(line) {
                 lockstep
-                    .apply(&mut run.sim, event, |_| {})
+                    .apply(&mut run.sim, event)
                     .map_err(|e| e.to_string())?;
                 if let Some(epoch) = lockstep.epoch_ns() {
                     run.epoch_ns = epoch;
                 }
+                // (the board's clock line comes every simulated millisecond, a physics
+                // step: an event advances the physics by one step at most)
                 run.after_step();
             }
         }
