@@ -558,3 +558,42 @@ def handshake_permissions_removed(datagram):
     DATA_FRAG submessages; nothing else on the wire is XML. What is left is what must
     not show a topic name."""
     return PERMISSIONS_TOPIC.sub(b"<topic/>", datagram)
+
+
+# ---------------------------------------------------------------------------------------
+# samples of every size (issue 36, item 3)
+
+def string_sample(length, index=0):
+    """A std_msgs/String's CDR whose text is `length` bytes (1 to 65527: a 64 KiB sample
+    at most), printable, and different for every `index` and every position, so that a
+    lost, reordered or corrupted fragment shows."""
+    head = f"{index}:{length}:".encode()
+    body = bytes(0x21 + (i * 7 + index * 13 + (i >> 8) * 31) % 94 for i in range(length))
+    text = (head + body[len(head):])[:length]
+    return b"\x00\x01\x00\x00" + struct.pack("<I", length + 1) + text + b"\x00"
+
+
+def exchange(sender, receiver, topic, sizes, timeout=10.0, first_index=0):
+    """Each size in turn: `sender` publishes a String sample of it and waits until
+    `receiver` has it (lock-step, so the latched topic's keep-last-1 history never drops
+    one). Returns [(size, verdict, seconds)], the verdict `ok`, `corrupt` (a sample with
+    its index and size arrived, other bytes) or `lost` (nothing of it within `timeout`).
+    Other samples on the topic (another publisher's) are ignored."""
+    out = []
+    for n, size in enumerate(sizes, start=first_index):
+        payload = string_sample(size, n)
+        before = len(receiver.received(topic))
+
+        def since():
+            return [p for _, p in receiver.received(topic)[before:]]
+        t0 = time.monotonic()
+        sender.publish(topic, payload)
+        arrived = receiver.wait(lambda: payload in since(), timeout)
+        seconds = time.monotonic() - t0
+        if arrived:
+            out.append((size, "ok", seconds))
+        else:
+            # the text starts with "index:size:" (cut to `size` bytes)
+            head = b"\x00\x01\x00\x00" + struct.pack("<I", size + 1) + f"{n}:{size}:".encode()[:size]
+            out.append((size, "corrupt" if any(p.startswith(head) for p in since()) else "lost", None))
+    return out

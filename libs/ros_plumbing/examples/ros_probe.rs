@@ -15,13 +15,15 @@
 //! ```
 //!
 //! TOPIC is the DDS name (`rt/xyz_target`); the types it knows are PointStamped (to
-//! publish) and JointState (both ways). With `--enclave` the probe runs under that
+//! publish), JointState and, on `rt/robot_description`, std_msgs/String (both ways: a
+//! sample of any size, for the secured large-sample tests). With `--enclave` the probe runs under that
 //! enclave of its keystore (ROS_SECURITY_ENABLE=true, Enforce) and names itself
 //! `gui_bridge`, the operator node whose permissions the `/eezybot/pc` enclave grants.
 
 use eezybot_msgs::cdr::{self, hex, unhex};
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::sensor_msgs::JointState;
+use eezybot_msgs::std_msgs::String as StringMsg;
 use futures::StreamExt;
 use ros_plumbing::{topics, NodeSpec, RosNode, Topic};
 use std::io::{BufRead, Write};
@@ -30,6 +32,7 @@ use tokio::sync::mpsc;
 
 const POINT: &str = "geometry_msgs::msg::dds_::PointStamped_";
 const JOINTS: &str = "sensor_msgs::msg::dds_::JointState_";
+const STRING: &str = "std_msgs::msg::dds_::String_";
 
 struct Args {
     domain: String,
@@ -65,9 +68,9 @@ fn parse(mut argv: impl Iterator<Item = String>) -> Result<Args, String> {
             "--pub" | "--sub" => {
                 let pair = (value()?, value()?);
                 let known = if flag == "--pub" {
-                    [POINT, JOINTS]
+                    [POINT, JOINTS, STRING]
                 } else {
-                    [JOINTS, JOINTS]
+                    [JOINTS, STRING, STRING]
                 };
                 if !known.contains(&pair.1.as_str()) {
                     return Err(format!("{flag} {} {}: type not supported", pair.0, pair.1));
@@ -103,9 +106,30 @@ fn joints_topic(dds: &str) -> Result<&'static Topic<JointState>, String> {
     .ok_or(format!("{dds}: not a JointState topic of the contract"))
 }
 
+/// The contract's String topic named `dds` (only `rt/robot_description`).
+fn string_topic(dds: &str) -> Result<&'static Topic<StringMsg>, String> {
+    (dds.strip_prefix("rt/") == Some(topics::ROBOT_DESCRIPTION.name))
+        .then_some(&topics::ROBOT_DESCRIPTION)
+        .ok_or(format!("{dds}: the String topic is rt/robot_description"))
+}
+
 enum Pub {
     Point(ros_plumbing::TopicPublisher<PointStamped>),
     Joints(ros_plumbing::TopicPublisher<JointState>),
+    Text(ros_plumbing::TopicPublisher<StringMsg>),
+}
+
+enum Sub {
+    Joints(ros2_client::Subscription<JointState>),
+    Text(ros2_client::Subscription<StringMsg>),
+}
+
+/// A received sample's CDR (with its encapsulation header), or why there is none.
+fn encoded<M: serde::Serialize, I, E: std::fmt::Debug>(
+    r: Result<(M, I), E>,
+) -> Result<Vec<u8>, String> {
+    let (m, _) = r.map_err(|e| format!("{e:?}"))?;
+    cdr::encode(&m).map_err(|e| e.to_string())
 }
 
 async fn main_async() -> Result<(), String> {
@@ -144,6 +168,11 @@ async fn main_async() -> Result<(), String> {
             )
         } else if ty == POINT {
             return Err(format!("{topic}: the PointStamped topic is rt/xyz_target"));
+        } else if ty == STRING {
+            Pub::Text(
+                node.publish_on(string_topic(topic)?)
+                    .map_err(|e| e.to_string())?,
+            )
         } else {
             Pub::Joints(
                 node.publish_on(joints_topic(topic)?)
@@ -154,18 +183,34 @@ async fn main_async() -> Result<(), String> {
     }
     let (tx, mut rx) = mpsc::unbounded_channel::<String>();
     let mut subs = Vec::new();
-    for (topic, _) in &args.subs {
-        let sub = node
-            .subscribe_to(joints_topic(topic)?)
-            .map_err(|e| e.to_string())?;
+    for (topic, ty) in &args.subs {
+        let sub = if ty == STRING {
+            Sub::Text(
+                node.subscribe_to(string_topic(topic)?)
+                    .map_err(|e| e.to_string())?,
+            )
+        } else {
+            Sub::Joints(
+                node.subscribe_to(joints_topic(topic)?)
+                    .map_err(|e| e.to_string())?,
+            )
+        };
         subs.push((topic.clone(), sub));
     }
     let mut sub_counts = vec![usize::MAX; subs.len()];
+    // each sample as its CDR again, whatever its type
     let mut streams = futures::stream::select_all(subs.iter().map(|(topic, sub)| {
         let topic = topic.clone();
-        sub.async_stream()
-            .map(move |r| (topic.clone(), r))
-            .boxed_local()
+        match sub {
+            Sub::Joints(s) => s
+                .async_stream()
+                .map(move |r| (topic.clone(), encoded(r)))
+                .boxed_local(),
+            Sub::Text(s) => s
+                .async_stream()
+                .map(move |r| (topic.clone(), encoded(r)))
+                .boxed_local(),
+        }
     }));
     std::thread::spawn(move || {
         for line in std::io::stdin().lock().lines() {
@@ -202,26 +247,31 @@ async fn main_async() -> Result<(), String> {
                         Ok(m) => { p.publish(m); say(&format!("published {topic}")); }
                         Err(e) => eprintln!("ros_probe: {topic}: {e}"),
                     },
+                    Some((_, Pub::Text(p), _)) => match cdr::decode::<StringMsg>(&bytes) {
+                        Ok(m) => { p.publish(m); say(&format!("published {topic}")); }
+                        Err(e) => eprintln!("ros_probe: {topic}: {e}"),
+                    },
                     None => eprintln!("ros_probe: not publishing {topic}"),
                 }
             }
             Some((topic, r)) = streams.next() => match r {
-                Ok((m, _)) => match cdr::encode(&m) {
-                    Ok(bytes) => say(&format!("recv {topic} {}", hex(&bytes))),
-                    Err(e) => eprintln!("ros_probe: {topic}: {e}"),
-                },
-                Err(e) => eprintln!("ros_probe: {topic}: {e:?}"),
+                Ok(bytes) => say(&format!("recv {topic} {}", hex(&bytes))),
+                Err(e) => eprintln!("ros_probe: {topic}: {e}"),
             },
             _ = poll.tick() => {
                 for (topic, p, last) in pubs.iter_mut() {
                     let n = match p {
                         Pub::Point(p) => p.get_subscription_count(node.node()),
                         Pub::Joints(p) => p.get_subscription_count(node.node()),
+                        Pub::Text(p) => p.get_subscription_count(node.node()),
                     };
                     if n != *last { *last = n; say(&format!("matched {topic} pub {n}")); }
                 }
                 for ((topic, s), last) in subs.iter().zip(sub_counts.iter_mut()) {
-                    let n = s.get_publisher_count(node.node());
+                    let n = match s {
+                        Sub::Joints(s) => s.get_publisher_count(node.node()),
+                        Sub::Text(s) => s.get_publisher_count(node.node()),
+                    };
                     if n != *last { *last = n; say(&format!("matched {topic} sub {n}")); }
                 }
             }

@@ -385,6 +385,26 @@ mod tests {
     );
   }
 
+  // The last fragment of a sample whose size is not a multiple of 4 arrives
+  // with 1-3 bytes of the DATA_FRAG's alignment padding after it (as from Fast
+  // DDS, and from DataFrag::write_to): the sample is exactly sampleSize bytes.
+  #[test]
+  fn a_padded_last_fragment_reassembles_to_the_sample_size() {
+    let frag_size = 256u16;
+    for data_size in 2009u32..=2012 {
+      let whole: Vec<u8> = (0..data_size as usize).map(|i| (i % 251) as u8 | 1).collect();
+      let first = datafrag(1, 7, frag_size, data_size, whole[..1792].to_vec());
+      let mut tail = whole[1792..].to_vec();
+      tail.resize(tail.len().next_multiple_of(4), 0);
+      let tail = datafrag(8, 1, frag_size, data_size, tail);
+      let mut ab = AssemblyBuffer::new(&first).expect("valid first fragment");
+      ab.insert_frags(&first, frag_size);
+      ab.insert_frags(&tail, frag_size);
+      assert!(ab.is_complete(), "size {data_size}");
+      assert_eq!(&ab.buffer_bytes[..], &whole[..], "size {data_size}");
+    }
+  }
+
   // A single DATAFRAG carrying the whole sample in one multi-fragment run.
   #[test]
   fn reassemble_single_submessage_all_fragments() {

@@ -8,6 +8,7 @@ use bytes::Bytes;
 
 use crate::{
   messages::submessages::{elements::parameter_list::ParameterList, submessages::*},
+  serialization::{padding_needed_for_alignment_4, round_up_to_4},
   structure::{
     guid::EntityId,
     sequence_number::{FragmentNumber, SequenceNumber},
@@ -77,18 +78,28 @@ impl DataFrag {
   // This is compatible with the definition of the definition of
   // "octetsToNextHeader" field in RTPS spec v2.5 Section "9.4.5.1 Submessage
   // Header".
+  //
+  // Padded to a multiple of 4, as Data is: every submessage starts 4-aligned
+  // (RTPS v2.5 9.4.1). The last fragment of a sample whose size is not a multiple
+  // of 4 needs 1-3 bytes. Unpadded, a submessage that follows it lands unaligned,
+  // which Fast DDS cannot parse: under DDS Security's RTPS protection that is the
+  // SRTPS_POSTFIX, and the whole message is dropped ("Error in fastcdr trying to
+  // deserialize SecureDataTag length"). Receivers take the last fragment's length
+  // from sampleSize, so the padding is never part of the sample.
   pub fn len_serialized(&self) -> usize {
-    2 + // extraFlags (unused in RTPS v2.5)
-    2 + // octetsToInlineSos
-    4 + // readerId
-    4 + // writerId
-    8 + // writerSN
-    4 + // fragmentStartingNum
-    2 + // fragmentsInSubmessage
-    2 + // fragmentSize
-    4 + // sampleSize
-    self.inline_qos.as_ref().map(|q| q.len_serialized() ).unwrap_or(0) + // QoS ParameterList
-    self.serialized_payload.len()
+    round_up_to_4(
+      2 + // extraFlags (unused in RTPS v2.5)
+      2 + // octetsToInlineSos
+      4 + // readerId
+      4 + // writerId
+      8 + // writerSN
+      4 + // fragmentStartingNum
+      2 + // fragmentsInSubmessage
+      2 + // fragmentSize
+      4 + // sampleSize
+      self.inline_qos.as_ref().map(|q| q.len_serialized() ).unwrap_or(0) + // QoS ParameterList
+      self.serialized_payload.len(),
+    )
   }
 
   /// Spec talks about (expected) total number of fragments.
@@ -299,6 +310,9 @@ impl<C: Context> Writable<C> for DataFrag {
       writer.write_value(inline_qos)?;
     }
     writer.write_bytes(&self.serialized_payload)?;
+    for _ in 0..padding_needed_for_alignment_4(self.serialized_payload.len()) {
+      writer.write_u8(0)?;
+    }
     Ok(())
   }
 }
@@ -417,11 +431,21 @@ mod tests {
         };
         let bytes = serialize_body(&df);
         assert_eq!(bytes.len(), df.len_serialized(), "payload {payload_len}");
+        // 4-aligned, so that a submessage after it (an SRTPS_POSTFIX) is too
+        assert_eq!(bytes.len() % 4, 0, "payload {payload_len}");
         let mut flags = BitFlags::from_flag(DATAFRAG_Flags::Endianness);
         if df.inline_qos.is_some() {
           flags |= DATAFRAG_Flags::InlineQos;
         }
-        assert_eq!(DataFrag::deserialize(&bytes, flags).unwrap(), df);
+        // the receiver sees the padding as serializedData (zeros); the fragment
+        // assembler cuts the last fragment at sampleSize
+        let mut padded = df.serialized_payload.to_vec();
+        padded.resize(payload_len.next_multiple_of(4), 0);
+        let expected = DataFrag {
+          serialized_payload: Bytes::from(padded),
+          ..df.clone()
+        };
+        assert_eq!(DataFrag::deserialize(&bytes, flags).unwrap(), expected);
       }
     }
   }
