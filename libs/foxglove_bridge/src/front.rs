@@ -17,6 +17,12 @@
 //!    in, and a message over [`FrontLimits::max_message_bytes`] closes it with 1009
 //!    before its payload is read (nothing of it is buffered).
 //!
+//! With a TLS configuration ([`crate::FoxgloveBridge::start_secure`]) the front speaks
+//! `wss://`: each connection's handshake runs in its own task, within
+//! [`FrontLimits::header_timeout`] and counted among the pending connections, so a slow
+//! or silent client holds up no other; the request head is then read from the decrypted
+//! stream as above.
+//!
 //! The SDK's port is still open to programs on this machine (which can publish on DDS
 //! directly anyway), and a web page could find it by trying ports. So that such a
 //! connection gets nothing, the front introduces each connection it makes: its first
@@ -134,8 +140,10 @@ pub struct FrontStats {
     pub refused_busy: std::sync::atomic::AtomicU64,
     /// Closed for a message over [`FrontLimits::max_message_bytes`].
     pub closed_oversized: std::sync::atomic::AtomicU64,
-    /// Dropped for sending no complete request head in time.
+    /// Dropped for sending no complete request head (or TLS handshake) in time.
     pub header_timeouts: std::sync::atomic::AtomicU64,
+    /// TLS handshakes that failed (a client that does not trust the certificate).
+    pub tls_failures: std::sync::atomic::AtomicU64,
 }
 
 /// Introductions handed out to the front's own connections: random topic → may publish.
@@ -169,6 +177,8 @@ pub(crate) struct Front {
     pub(crate) publishing: bool,
     /// refusals logged already (address, status)
     pub(crate) logged: Mutex<std::collections::HashSet<(std::net::IpAddr, u16)>>,
+    /// `wss://`: every connection's TLS handshake first
+    pub(crate) tls: Option<tokio_rustls::TlsAcceptor>,
 }
 
 impl Front {
@@ -189,7 +199,27 @@ impl Front {
             let (front, clients) = (self.clone(), clients.clone());
             tokio::spawn(async move {
                 let _ = stream.set_nodelay(true);
-                front.connection(stream, peer, head_permit, clients).await;
+                match front.tls.clone() {
+                    None => front.connection(stream, peer, head_permit, clients).await,
+                    Some(tls) => {
+                        let shaken =
+                            tokio::time::timeout(front.limits.header_timeout, tls.accept(stream))
+                                .await;
+                        match shaken {
+                            Ok(Ok(stream)) => {
+                                front.connection(stream, peer, head_permit, clients).await;
+                            }
+                            Ok(Err(e)) => {
+                                front.count(&front.stats.tls_failures);
+                                log::debug!("Foxglove client {peer}: TLS handshake failed: {e}");
+                            }
+                            Err(_) => {
+                                front.count(&front.stats.header_timeouts);
+                                log::debug!("Foxglove client {peer}: no TLS handshake in time");
+                            }
+                        }
+                    }
+                }
             });
         }
     }
@@ -207,9 +237,9 @@ impl Front {
         c.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
 
-    async fn connection(
+    async fn connection<S: AsyncRead + AsyncWrite + Unpin>(
         &self,
-        mut client: TcpStream,
+        mut client: S,
         peer: SocketAddr,
         head_permit: tokio::sync::OwnedSemaphorePermit,
         clients: Arc<Semaphore>,
@@ -266,9 +296,9 @@ impl Front {
     }
 
     /// Join an admitted client to the SDK's server until either side ends.
-    async fn join(
+    async fn join<S: AsyncRead + AsyncWrite + Unpin>(
         &self,
-        client: TcpStream,
+        client: S,
         request: &UpgradeRequest,
         early: Vec<u8>,
         may_publish: bool,
@@ -288,7 +318,7 @@ impl Front {
         }
         head.push_str("\r\n");
         inner.write_all(head.as_bytes()).await?;
-        let (mut client_rd, mut client_wr) = client.into_split();
+        let (mut client_rd, mut client_wr) = tokio::io::split(client);
         let (mut inner_rd, mut inner_wr) = inner.into_split();
         // the SDK's answer, then its first message (serverInfo), on to the client
         let (answer_head, mut buffered) = read_head(&mut inner_rd, 64 * 1024)

@@ -162,6 +162,20 @@ impl FoxgloveBridge {
         gate: Gate,
         limits: FrontLimits,
     ) -> Result<FoxgloveBridge, FoxgloveBridgeError> {
+        Self::start_secure(bind, names, publish, server_name, gate, limits, None).await
+    }
+
+    /// [`FoxgloveBridge::start_with`], the front speaking TLS (`wss://`) with `tls` when
+    /// given ([`crate::front`]).
+    pub async fn start_secure(
+        bind: &str,
+        names: &TopicNames,
+        publish: ClientPublish,
+        server_name: &str,
+        gate: Gate,
+        limits: FrontLimits,
+        tls: Option<Arc<tokio_rustls::rustls::ServerConfig>>,
+    ) -> Result<FoxgloveBridge, FoxgloveBridgeError> {
         let addr: SocketAddr = bind.parse().map_err(|_| FoxgloveBridgeError::BadBind {
             bind: bind.to_string(),
         })?;
@@ -239,6 +253,7 @@ impl FoxgloveBridge {
             stats: front_stats.clone(),
             publishing: publish != ClientPublish::Off,
             logged: Mutex::new(std::collections::HashSet::new()),
+            tls: tls.map(tokio_rustls::TlsAcceptor::from),
         });
         let front = tokio::spawn(front.run(listener));
         Ok(FoxgloveBridge {

@@ -249,7 +249,7 @@ pub fn annotate_certificate(
 }
 
 /// `YYYY-MM-DD` of a Unix time (UTC).
-fn utc_date(unix: i64) -> String {
+pub fn utc_date(unix: i64) -> String {
     let (y, m, d) = crate::sros2::civil_from_days(unix.div_euclid(86_400));
     format!("{y:04}-{m:02}-{d:02}")
 }
@@ -272,6 +272,13 @@ impl DiagnosticsPublisher {
     /// Every report from now on carries the certificate's expiry ([`annotate_certificate`]).
     pub fn with_certificate(mut self, expiry: Option<CertificateExpiry>) -> Self {
         self.certificate = expiry;
+        self
+    }
+
+    /// Another certificate the node serves with (the web panel's TLS certificate): the
+    /// reports carry whichever of its certificates runs out first, naming that file.
+    pub fn also_certificate(mut self, expiry: CertificateExpiry) -> Self {
+        self.certificate = CertificateExpiry::earlier(self.certificate, expiry);
         self
     }
 

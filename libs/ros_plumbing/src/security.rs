@@ -318,17 +318,51 @@ impl CertificateExpiry {
         for name in [CERT, IDENTITY_CA] {
             let path = plan.dir.join(name);
             let cert = certificate(&path)?;
-            let epoch = Asn1Time::from_unix(0).map_err(|e| malformed(&path, e.to_string()))?;
-            let d = epoch
-                .diff(cert.not_after())
-                .map_err(|e| malformed(&path, format!("bad notAfter: {e}")))?;
-            let not_after = i64::from(d.days) * 86_400 + i64::from(d.secs);
-            if earliest.as_ref().is_none_or(|e| not_after < e.not_after) {
-                earliest = Some(CertificateExpiry { path, not_after });
-            }
+            let not_after = not_after_unix(&path, &cert)?;
+            earliest = CertificateExpiry::earlier(earliest, CertificateExpiry { path, not_after });
         }
         earliest.ok_or_else(|| malformed(&plan.dir, "no certificate"))
     }
+
+    /// The earliest `notAfter` of the certificates in a PEM file (a TLS server's chain:
+    /// its own certificate, and any CA certificates after it), named by that file.
+    pub fn of_pem_chain(path: &Path) -> Result<CertificateExpiry, SecurityError> {
+        let pem = read(path)?;
+        let chain =
+            X509::stack_from_pem(&pem).map_err(|_| malformed(path, "not a PEM certificate"))?;
+        let mut earliest = None;
+        for cert in &chain {
+            let not_after = not_after_unix(path, cert)?;
+            earliest = CertificateExpiry::earlier(
+                earliest,
+                CertificateExpiry {
+                    path: path.to_path_buf(),
+                    not_after,
+                },
+            );
+        }
+        earliest.ok_or_else(|| malformed(path, "no certificate in it"))
+    }
+
+    /// Whichever of `a` and `b` runs out first (`b` when `a` is `None`).
+    pub fn earlier(
+        a: Option<CertificateExpiry>,
+        b: CertificateExpiry,
+    ) -> Option<CertificateExpiry> {
+        match a {
+            Some(a) if a.not_after <= b.not_after => Some(a),
+            _ => Some(b),
+        }
+    }
+}
+
+/// A certificate's `notAfter` in seconds since the Unix epoch.
+fn not_after_unix(path: &Path, cert: &X509) -> Result<i64, SecurityError> {
+    let epoch = Asn1Time::from_unix(0).map_err(|e| malformed(path, e.to_string()))?;
+    let d = epoch
+        .diff(cert.not_after())
+        .map_err(|e| malformed(path, format!("bad notAfter: {e}")))?;
+    Ok(i64::from(d.days) * 86_400 + i64::from(d.secs))
 }
 
 /// The certificate is valid at `now` (seconds since the Unix epoch).
@@ -736,6 +770,24 @@ mod tests {
             (e.not_after - (keystore::now() + 20 * 86_400)).abs() <= 5,
             "{e:?}"
         );
+        drop(ca);
+    }
+
+    #[test]
+    fn a_pem_chain_expires_with_its_earliest_certificate() {
+        let (ca, dir) = good_enclave("chain");
+        let short = keystore::Ca::short_lived("ca", 20);
+        let mut chain = std::fs::read(dir.join(CERT)).unwrap();
+        chain.extend(short.cert.to_pem().unwrap());
+        keystore::write(&dir, "chain.pem", &chain);
+        let e = CertificateExpiry::of_pem_chain(&dir.join("chain.pem")).unwrap();
+        assert!(e.path.ends_with("chain.pem"), "{e:?}");
+        assert!(
+            (e.not_after - (keystore::now() + 20 * 86_400)).abs() <= 5,
+            "{e:?}"
+        );
+        keystore::write(&dir, "empty.pem", b"no certificate here\n");
+        assert!(CertificateExpiry::of_pem_chain(&dir.join("empty.pem")).is_err());
         drop(ca);
     }
 

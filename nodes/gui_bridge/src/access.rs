@@ -6,8 +6,9 @@
 //!
 //! The rules, in the order they are checked:
 //! 1. **Origin.** A browser names the page a request comes from in `Origin`; it must be
-//!    the panel's own: `http://` + the request's `Host` (`https://` behind a TLS proxy
-//!    that says `X-Forwarded-Proto: https`), comparing scheme, host (case-insensitive)
+//!    the panel's own: `http://` + the request's `Host` (`https://` when gui_bridge
+//!    serves TLS itself, [`AccessPolicy::over_tls`], or behind a TLS proxy that says
+//!    `X-Forwarded-Proto: https`), comparing scheme, host (case-insensitive)
 //!    and port (80/443 when omitted). A request without `Origin` comes from a program,
 //!    not from a web page (browsers always send it on WebSocket upgrades), so no page
 //!    can drive the arm through it; it passes this rule (Jupyter does the same) but not
@@ -286,12 +287,30 @@ impl Refusal {
 #[derive(Clone, Debug)]
 pub struct AccessPolicy {
     token: Option<Token>,
+    /// the server speaks TLS itself: its pages' origin is `https://` + `Host`
+    tls: bool,
 }
 
 impl AccessPolicy {
     /// The policy of a server with this token.
     pub fn new(token: Option<Token>) -> AccessPolicy {
-        AccessPolicy { token }
+        AccessPolicy { token, tls: false }
+    }
+
+    /// The server speaks TLS itself (`tls_cert`): the panel's own origin is `https://` +
+    /// `Host` (whatever `X-Forwarded-Proto` says).
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::access::{AccessPolicy, RequestFacts};
+    /// let https = AccessPolicy::new(None).over_tls(true);
+    /// let from = |origin| RequestFacts { host: Some("127.0.0.1:8080"), origin: Some(origin), ..Default::default() };
+    /// assert!(https.check(&from("https://127.0.0.1:8080")).is_ok());
+    /// assert!(https.check(&from("http://127.0.0.1:8080")).is_err());
+    /// ```
+    pub fn over_tls(mut self, tls: bool) -> AccessPolicy {
+        self.tls = tls;
+        self
     }
 
     /// Does every request need the token?
@@ -371,6 +390,7 @@ impl AccessPolicy {
             }
         } else if let Some(origin) = req.origin {
             let scheme = match req.forwarded_proto.map(forwarded_scheme) {
+                _ if self.tls => "https",
                 Some(Some(s)) => s,
                 _ => "http",
             };

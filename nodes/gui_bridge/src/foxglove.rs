@@ -358,6 +358,7 @@ pub struct Serving<'a> {
 pub async fn serve<'a>(
     node: &'a RefCell<&mut RosNode>,
     access: AccessPolicy,
+    tls: Option<Arc<rustls::ServerConfig>>,
 ) -> anyhow::Result<Option<Serving<'a>>> {
     let params = node.borrow().params().clone();
     let bind = params.string("foxglove_bind").unwrap_or_default();
@@ -377,13 +378,15 @@ pub async fn serve<'a>(
     );
     let names = topic_names(&node.borrow());
     let server_name = node.borrow().resolver().node_name().to_string();
-    let started = FoxgloveBridge::start_with(
+    let scheme = if tls.is_some() { "wss" } else { "ws" };
+    let started = FoxgloveBridge::start_secure(
         &bind,
         &names,
         publish,
         &server_name,
         gate,
         FrontLimits::default(),
+        tls,
     )
     .await;
     let mut bridge = match started {
@@ -400,7 +403,7 @@ pub async fn serve<'a>(
         ClientPublish::Targets { .. } => Some(TargetPublishers::new(&mut node.borrow_mut())?),
     };
     log::info!(
-        "Foxglove WebSocket server on ws://{} ({}{})",
+        "Foxglove WebSocket server on {scheme}://{} ({}{})",
         bridge.local_addr(),
         if targets.is_some() {
             "clients may publish targets"
@@ -408,7 +411,7 @@ pub async fn serve<'a>(
             "watch only"
         },
         if token_required {
-            ", token required: ws://ADDRESS/?token=… as the panel's URL"
+            ", token required: ws(s)://ADDRESS/?token=… as the panel's URL"
         } else {
             ", loopback only, no token"
         }

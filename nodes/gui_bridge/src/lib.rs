@@ -20,6 +20,7 @@ pub mod ros_outputs;
 pub mod scene;
 pub mod serve;
 pub mod teleop;
+pub mod tls;
 pub mod web;
 
 use crate::desk::FileDone;
@@ -149,6 +150,24 @@ pub fn spec() -> ros_plumbing::NodeSpec {
                 "foxglove_publish",
                 ParameterValue::Boolean(false),
                 "let Foxglove clients publish xyz_target, xyz_line_target, pose_target, gripper_target, joint_target (each client passes the panel's rules first: Origin, Host, and the token, which a foxglove_bind beyond loopback requires)",
+            )
+            .read_only(),
+            ParamSpec::new(
+                "tls_cert",
+                ParameterValue::String(String::new()),
+                "the web panel's TLS certificate (PEM, the server's certificate first, then any CA certificates of its chain; valid for the names and addresses browsers use, e.g. from launch_scripts/panel_certs.sh): with tls_key, the panel is served as https:// and wss://, the Foxglove server as wss://; empty = plain HTTP, which a bind or foxglove_bind beyond loopback refuses unless insecure_http",
+            )
+            .read_only(),
+            ParamSpec::new(
+                "tls_key",
+                ParameterValue::String(String::new()),
+                "the private key of tls_cert (PEM: PKCS#8, EC or RSA; readable by this user only)",
+            )
+            .read_only(),
+            ParamSpec::new(
+                "insecure_http",
+                ParameterValue::Boolean(false),
+                "serve plain HTTP and WS on a bind or foxglove_bind beyond loopback, without tls_cert: the access token then travels in the clear (anyone on that network can read it and move the arm); a warning at start and in every diagnostics report. Without this or tls_cert such a bind does not start (exit 2)",
             )
             .read_only(),
             ParamSpec::new(
@@ -363,6 +382,8 @@ pub struct Reporting<F: Fn() -> Vec<usize>> {
     pub peers: PeerWatch,
     /// Their counts now, in [`watched_topics`]' order.
     pub counts: F,
+    /// What the panel's listeners speak: `insecure_http` warns in every report.
+    pub transport: tls::Transport,
 }
 
 /// The panel's program directory: the `program_dir` parameter, else
@@ -789,6 +810,23 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                 key: key.into(),
                 value,
             }));
+        match &reporting.transport {
+            tls::Transport::Plain => {}
+            tls::Transport::Tls { .. } => status.values.push(KeyValue {
+                key: "tls".into(),
+                value: "on".into(),
+            }),
+            insecure @ tls::Transport::Insecure { .. } => {
+                status.values.push(KeyValue {
+                    key: "tls".into(),
+                    value: "off (insecure_http)".into(),
+                });
+                status.level = status.level.max(DiagnosticStatus::WARN);
+                if let Some(warning) = insecure.warning() {
+                    status.message = format!("{}; {warning}", status.message);
+                }
+            }
+        }
         reporting.peers.annotate(&mut status, now);
         self.outputs.diagnostics(status);
     }

@@ -15,7 +15,8 @@
 //! `TimedOut` and the server drops it: a client that opens connections and sends
 //! nothing (or a byte a minute) holds no connection for long, and it has not been
 //! authenticated yet (hyper has no such timeout unless given a timer, and axum's
-//! `serve` gives none).
+//! `serve` gives none). Over TLS the head is read from the decrypted stream:
+//! [`HeadTimed`] around the TLS stream does the same there.
 
 use axum::serve::Listener;
 use std::future::Future as _;
@@ -68,6 +69,14 @@ struct HeadDeadline {
 }
 
 impl HeadDeadline {
+    fn new(timeout: Duration) -> HeadDeadline {
+        HeadDeadline {
+            sleep: Box::pin(tokio::time::sleep(timeout)),
+            timeout,
+            matched: 0,
+        }
+    }
+
     /// Take in bytes read; true once the head is complete.
     fn complete_after(&mut self, bytes: &[u8]) -> bool {
         const END: &[u8] = b"\r\n\r\n";
@@ -96,11 +105,7 @@ impl Listener for LingeringListener {
         let stream = LingeringStream {
             tcp: Some(tcp),
             linger: self.linger,
-            head: self.head_timeout.map(|timeout| HeadDeadline {
-                sleep: Box::pin(tokio::time::sleep(timeout)),
-                timeout,
-                matched: 0,
-            }),
+            head: self.head_timeout.map(HeadDeadline::new),
         };
         (stream, from)
     }
@@ -145,23 +150,99 @@ impl AsyncRead for LingeringStream {
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
         let this = self.get_mut();
-        if let Some(head) = this.head.as_mut() {
-            if head.sleep.as_mut().poll(cx).is_ready() {
-                let why = format!(
-                    "no complete request head within {:.0} s",
-                    head.timeout.as_secs_f64()
-                );
-                return Poll::Ready(Err(io::Error::new(io::ErrorKind::TimedOut, why)));
-            }
+        let tcp = this.tcp.as_mut().ok_or(io::ErrorKind::NotConnected)?;
+        read_before(&mut this.head, Pin::new(tcp), cx, buf)
+    }
+}
+
+/// Read from `inner`, failing with `TimedOut` once `head`'s deadline passes before the
+/// end of the first request head (then `head` is `None`: no deadline any more).
+fn read_before<R: AsyncRead + ?Sized>(
+    head: &mut Option<HeadDeadline>,
+    inner: Pin<&mut R>,
+    cx: &mut Context<'_>,
+    buf: &mut ReadBuf<'_>,
+) -> Poll<io::Result<()>> {
+    if let Some(h) = head.as_mut() {
+        if h.sleep.as_mut().poll(cx).is_ready() {
+            let why = format!(
+                "no complete request head within {:.0} s",
+                h.timeout.as_secs_f64()
+            );
+            return Poll::Ready(Err(io::Error::new(io::ErrorKind::TimedOut, why)));
         }
-        let before = buf.filled().len();
-        let read = this.tcp()?.poll_read(cx, buf);
-        if let (Poll::Ready(Ok(())), Some(head)) = (&read, this.head.as_mut()) {
-            if head.complete_after(&buf.filled()[before..]) {
-                this.head = None;
-            }
+    }
+    let before = buf.filled().len();
+    let read = inner.poll_read(cx, buf);
+    if let (Poll::Ready(Ok(())), Some(h)) = (&read, head.as_mut()) {
+        if h.complete_after(&buf.filled()[before..]) {
+            *head = None;
         }
-        read
+    }
+    read
+}
+
+/// A stream (a TLS stream over a [`LingeringStream`]) whose first request head must
+/// arrive within a time, as [`LingeringListener::with_head_timeout`] asks of a plain one.
+pub struct HeadTimed<S> {
+    inner: S,
+    head: Option<HeadDeadline>,
+}
+
+impl<S> HeadTimed<S> {
+    /// `inner`, whose reads fail with `TimedOut` if no complete request head came within
+    /// `timeout` from now.
+    pub fn new(inner: S, timeout: Duration) -> Self {
+        HeadTimed {
+            inner,
+            head: Some(HeadDeadline::new(timeout)),
+        }
+    }
+
+    /// The stream inside.
+    pub fn get_mut(&mut self) -> &mut S {
+        &mut self.inner
+    }
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for HeadTimed<S> {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        read_before(&mut this.head, Pin::new(&mut this.inner), cx, buf)
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for HeadTimed<S> {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.get_mut().inner).poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.get_mut().inner).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_flush(cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_shutdown(cx)
     }
 }
 

@@ -42,6 +42,18 @@ impl RosOutputs {
 }
 
 impl RosOutputs {
+    /// Every `diagnostics` report also carries the expiry of this certificate (the web
+    /// panel's TLS certificate), or of the node's SROS2 certificate if that runs out first.
+    pub fn also_certificate(
+        mut self,
+        expiry: Option<ros_plumbing::security::CertificateExpiry>,
+    ) -> Self {
+        if let Some(expiry) = expiry {
+            self.diagnostics = self.diagnostics.also_certificate(expiry);
+        }
+        self
+    }
+
     /// The publisher of `xyz_target`, or with `line` of `xyz_line_target`.
     pub fn xyz_publisher(&self, line: bool) -> &TopicPublisher<PointStamped> {
         if line {

@@ -3,6 +3,7 @@
 use crate::access::{self, AccessPolicy, Token, TokenSource};
 use crate::linger::{self, LingeringListener};
 use crate::ros_outputs::RosOutputs;
+use crate::tls::{self, Transport};
 use crate::web::{Limits, WebState};
 use crate::Input;
 use anyhow::Context as _;
@@ -22,7 +23,7 @@ pub async fn serve(
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<()> {
     let params = node.params().clone();
-    let outputs = RosOutputs::new(node)?;
+    let mut outputs = RosOutputs::new(node)?;
     let joint_states = node.subscribe_to(&topics::JOINT_STATES)?;
     let diagnostics = node.subscribe_to(&topics::DIAGNOSTICS)?;
     let rate = params.f64("rate").unwrap_or(50.0);
@@ -84,6 +85,52 @@ pub async fn serve(
         },
     )?;
     hide_token_parameter(node, &params, source);
+    // HTTPS beyond loopback, or plain HTTP only when insecure_http says so
+    let mut beyond = vec![];
+    if !local.ip().is_loopback() {
+        beyond.push(format!("bind {local}"));
+    }
+    if !crate::foxglove::bind_is_loopback(&foxglove_bind) {
+        beyond.push(format!("foxglove_bind {}", foxglove_bind.trim()));
+    }
+    let transport = tls::choose(
+        &beyond,
+        &params.string("tls_cert").unwrap_or_default(),
+        &params.string("tls_key").unwrap_or_default(),
+        params.bool("insecure_http").unwrap_or(false),
+    )?;
+    let tls_setup = match &transport {
+        Transport::Tls { cert, key } => {
+            let setup = tls::load(cert, key)?;
+            log::info!(
+                "HTTPS and WSS with the certificate {}{}",
+                cert.display(),
+                setup
+                    .expiry
+                    .as_ref()
+                    .map(|e| format!(
+                        " (valid until {})",
+                        ros_plumbing::diagnostics::utc_date(e.not_after)
+                    ))
+                    .unwrap_or_default()
+            );
+            outputs = outputs.also_certificate(setup.expiry.clone());
+            Some(setup)
+        }
+        Transport::Insecure { .. } => {
+            if let Some(warning) = transport.warning() {
+                log::warn!("{warning}");
+            }
+            None
+        }
+        Transport::Plain => {
+            if params.bool("insecure_http").unwrap_or(false) {
+                log::info!("insecure_http has no effect: every listener is on loopback");
+            }
+            None
+        }
+    };
+    let over_tls = tls_setup.is_some();
     let desk = crate::desk::Desk::new(crate::program_dir(
         &params.string("program_dir").unwrap_or_default(),
     ));
@@ -126,15 +173,21 @@ pub async fn serve(
         to_browsers.clone(),
         req_tx,
         Arc::new(move || view.borrow().hello(p.f64("rate").unwrap_or(50.0))),
-        AccessPolicy::new(token.clone()),
+        AccessPolicy::new(token.clone()).over_tls(over_tls),
         limits,
     )
     .with_urdf(Arc::new(move || urdf_view.borrow().urdf.clone()))
     .with_camera(camera_rx);
-    let foxglove = crate::foxglove::serve(&node, AccessPolicy::new(token.clone())).await?;
+    let foxglove = crate::foxglove::serve(
+        &node,
+        AccessPolicy::new(token.clone()).over_tls(over_tls),
+        tls_setup.as_ref().map(|t| t.config.clone()),
+    )
+    .await?;
     let web =
         crate::web::WebStats::default().with_foxglove(foxglove.as_ref().map(|f| f.front.clone()));
-    let url = format!("http://{local}/");
+    let scheme = transport.scheme();
+    let url = format!("{scheme}://{local}/");
     // no borrow of the node may live across an await: the Foxglove server borrows it
     let (panel_name, xyz_target, servo_state_topic) = {
         let ros = node.borrow();
@@ -155,16 +208,32 @@ pub async fn serve(
             ros.resolve(&topics::SERVO_STATE)?,
         )
     };
-    print_panel_urls(local, token.as_ref());
-    let server = tokio::spawn(async move {
-        let app = crate::web::router(state).into_make_service_with_connect_info::<SocketAddr>();
-        let listener = LingeringListener::new(listener, linger::LINGER)
-            .with_head_timeout(linger::HEAD_TIMEOUT)
-            .tap_io(|s| s.set_nodelay());
-        if let Err(e) = axum::serve(listener, app).await {
-            log::error!("web server stopped: {e}");
+    print_panel_urls(scheme, local, token.as_ref());
+    let tcp = LingeringListener::new(listener, linger::LINGER);
+    let app = crate::web::router(state).into_make_service_with_connect_info::<SocketAddr>();
+    let server = match tls_setup {
+        Some(setup) => {
+            // the head arrives encrypted: its deadline is kept on the decrypted stream
+            // (`tap_io` for axum's ConnectInfo, which it gives a tapped listener's address;
+            // TCP_NODELAY is set before the handshake)
+            let listener = tls::TlsListener::new(tcp, setup.config, linger::HEAD_TIMEOUT)
+                .with_context(|| format!("cannot serve HTTPS on {local}"))?
+                .tap_io(|_| {});
+            tokio::spawn(async move {
+                if let Err(e) = axum::serve(listener, app).await {
+                    log::error!("web server stopped: {e}");
+                }
+            })
         }
-    });
+        None => tokio::spawn(async move {
+            let listener = tcp
+                .with_head_timeout(linger::HEAD_TIMEOUT)
+                .tap_io(|s| s.set_nodelay());
+            if let Err(e) = axum::serve(listener, app).await {
+                log::error!("web server stopped: {e}");
+            }
+        }),
+    };
     let mut streams = vec![
         inputs_of(&joint_states, &topics::JOINT_STATES, Input::JointStates),
         inputs_of(&description, &topics::ROBOT_DESCRIPTION, |m| {
@@ -208,6 +277,7 @@ pub async fn serve(
                 servo_state.get_publisher_count(ros.node()),
             ]
         },
+        transport,
     };
     let calibration =
         crate::calibration_ros::RosCalibration::new(&node, calibration_path, &names.ik);
@@ -322,7 +392,7 @@ fn panel_addresses(local: SocketAddr) -> Vec<IpAddr> {
 /// goes in the fragment (`#token=`), which the browser never sends to a server (no
 /// request line, proxy log or Referer has it); the page moves it to its origin's
 /// storage and out of the address bar.
-fn print_panel_urls(local: SocketAddr, token: Option<&Token>) {
+fn print_panel_urls(scheme: &str, local: SocketAddr, token: Option<&Token>) {
     let query = token
         .map(|t| format!("#token={}", t.reveal()))
         .unwrap_or_default();
@@ -330,7 +400,7 @@ fn print_panel_urls(local: SocketAddr, token: Option<&Token>) {
     for ip in panel_addresses(local) {
         let _ = writeln!(
             out,
-            "web panel: http://{}/{query}",
+            "web panel: {scheme}://{}/{query}",
             SocketAddr::new(ip, local.port())
         );
     }

@@ -72,6 +72,7 @@ fn handles<'a, I, O, S>(
             url: "http://127.0.0.1:8080/".into(),
             peers: PeerWatch::new(&[]),
             counts: Vec::new,
+            transport: gui_bridge::tls::Transport::Plain,
         },
         calibration: &gui_bridge::NoCalibration,
         recorder: &gui_bridge::NoRecorder,
