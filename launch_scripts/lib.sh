@@ -181,6 +181,36 @@ eezybot_arm_config() {
   fi
 }
 
+# The web panel's address and TLS (README: Exposing the web panel safely): GUI_BIND
+# (default 127.0.0.1:8080), and the certificate from GUI_TLS_DIR (panel.pem and
+# panel.key, launch_scripts/panel_certs.sh) or GUI_TLS_CERT and GUI_TLS_KEY (the user's
+# own); GUI_INSECURE_HTTP=1 serves plain HTTP beyond loopback (the token travels in the
+# clear). Sets EEZYBOT_GUI_ARGS (gui_bridge's arguments) and EEZYBOT_GUI_URL (for the
+# banner). A file named that does not exist: exit 2 before anything starts. Without
+# any of them, gui_bridge gets `bind` only, as before.
+eezybot_gui() {
+  local bind=${GUI_BIND:-127.0.0.1:8080} cert=${GUI_TLS_CERT:-} key=${GUI_TLS_KEY:-} scheme=http
+  if [ -n "${GUI_TLS_DIR:-}" ]; then
+    cert=${cert:-$GUI_TLS_DIR/panel.pem}
+    key=${key:-$GUI_TLS_DIR/panel.key}
+  fi
+  EEZYBOT_GUI_ARGS=(-p "bind:=$bind")
+  if [ -n "$cert" ] || [ -n "$key" ]; then
+    local f
+    for f in "$cert" "$key"; do
+      [ -n "$f" ] && [ -r "$f" ] || { eezybot_say "no readable TLS file '${f}' (GUI_TLS_DIR, GUI_TLS_CERT, GUI_TLS_KEY; launch_scripts/panel_certs.sh DIR HOST... makes them)"; exit 2; }
+    done
+    EEZYBOT_GUI_ARGS+=(-p "tls_cert:=$cert" -p "tls_key:=$key")
+    scheme=https
+  fi
+  case "${GUI_INSECURE_HTTP:-}" in
+    1|true) EEZYBOT_GUI_ARGS+=(-p "insecure_http:=true") ;;
+    ''|0|false) ;;
+    *) eezybot_say "GUI_INSECURE_HTTP=${GUI_INSECURE_HTTP}: 1 or nothing"; exit 2 ;;
+  esac
+  EEZYBOT_GUI_URL="$scheme://$bind/"
+}
+
 # Start one node: eezybot_start NAME [ROS ARGS...]. The node gets --ros-args, then the
 # given node-specific arguments, then the user's (so the user's win).
 eezybot_start() {

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # The operator's PC half of the graph: gui_bridge (web panel on GUI_BIND, default
-# 127.0.0.1:8080; 0.0.0.0:8080 to reach it from another machine), compute_ik and
+# 127.0.0.1:8080; 0.0.0.0:8080 to reach it from another machine, over HTTPS with
+# GUI_TLS_DIR from launch_scripts/panel_certs.sh, or GUI_TLS_CERT and GUI_TLS_KEY; plain
+# HTTP there only with GUI_INSECURE_HTTP=1, the token then in the clear), compute_ik and
 # state_publisher, in ROS domain ROS_DOMAIN_ID (default 0). Run pi.sh on the Raspberry
 # Pi next to the Arduino, in the same domain, on the same network (multicast allowed).
 #
@@ -26,7 +28,7 @@ EEZYBOT_SCRIPT=pc.sh
 
 eezybot_find_binaries compute_ik state_publisher gui_bridge
 eezybot_ros_args "$@"
-bind=${GUI_BIND:-127.0.0.1:8080}
+eezybot_gui
 eezybot_security /eezybot/pc "compute_ik, state_publisher, gui_bridge"
 eezybot_enclave /eezybot/pc
 eezybot_wan pc
@@ -34,7 +36,7 @@ eezybot_wan pc
 eezybot_arm_config
 eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_ARM_ARGS[@]}"
 eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
-eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind" "${EEZYBOT_ARM_ARGS[@]}"
+eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_GUI_ARGS[@]}" "${EEZYBOT_ARM_ARGS[@]}"
 eezybot_start_wan
 
 eezybot_banner
@@ -45,5 +47,5 @@ if [ "$EEZYBOT_WAN" = 1 ]; then
 else
   eezybot_say "expected on the Pi (pi.sh, same ROS domain): serial_node"
 fi
-eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
+eezybot_say "web panel: $EEZYBOT_GUI_URL (Ctrl-C to stop)"
 eezybot_wait

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole EezyBot graph on this machine, in one ROS domain (ROS_DOMAIN_ID, default 0):
-# gui_bridge (web panel on GUI_BIND, default 127.0.0.1:8080), compute_ik,
+# gui_bridge (web panel on GUI_BIND, default 127.0.0.1:8080; beyond loopback over HTTPS
+# with GUI_TLS_DIR, or GUI_TLS_CERT and GUI_TLS_KEY, as pc.sh), compute_ik,
 # state_publisher and serial_node. serial_node drives the Arduino on SERIAL_PORT, or else
 # on /dev/eezybot or /dev/ttyACM0; when none of them exists it uses the built-in virtual
 # Arduino (SERIAL_PORT=mock asks for it), and says so. SERIAL_PORT=twin runs the physics
@@ -35,7 +36,7 @@ case "${1:-}" in
          arm=$2; shift 2 ;;
   --arm=*) arm=${1#--arm=}; shift ;;
 esac
-bind=${GUI_BIND:-127.0.0.1:8080}
+eezybot_gui
 
 case "$arm" in
   eezybot)
@@ -58,7 +59,7 @@ case "$arm" in
     eezybot_enclave /eezybot/pc
     eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_ARM_ARGS[@]}"
     eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}"
-    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind" "${EEZYBOT_ARM_ARGS[@]}"
+    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_GUI_ARGS[@]}" "${EEZYBOT_ARM_ARGS[@]}"
     # (the twin is an arm assembled to the shipped config: a calibration of your own
     # then shows in it as on a real arm)
     [ "$EEZYBOT_PORT" != twin ] || eezybot_start twin "${EEZYBOT_ENCLAVE[@]}"
@@ -72,7 +73,7 @@ case "$arm" in
       *) device="Arduino on $EEZYBOT_PORT" ;;
     esac
     eezybot_say "running here: compute_ik, state_publisher, gui_bridge, serial_node ($device)"
-    eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
+    eezybot_say "web panel: $EEZYBOT_GUI_URL (Ctrl-C to stop)"
     eezybot_say "try: ros2 topic pub --once /xyz_target geometry_msgs/msg/PointStamped \"{header: {frame_id: base_link}, point: {x: 0.2, y: 0.0, z: 0.15}}\""
     ;;
   jaco)
@@ -85,12 +86,12 @@ case "$arm" in
 
     eezybot_start compute_ik "${EEZYBOT_ENCLAVE[@]}" -p "urdf:=$urdf" -p "tip_link:=jaco_end_effector"
     eezybot_start state_publisher "${EEZYBOT_ENCLAVE[@]}" -p "urdf:=$urdf"
-    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" -p "bind:=$bind"
+    eezybot_start gui_bridge "${EEZYBOT_ENCLAVE[@]}" "${EEZYBOT_GUI_ARGS[@]}"
 
     eezybot_banner
     eezybot_say "arm: Kinova Jaco 2 (6 DOF, $urdf), tip jaco_end_effector; no serial_node (no servos to drive)"
     eezybot_say "running here: compute_ik, state_publisher, gui_bridge"
-    eezybot_say "web panel: http://$bind/ (Ctrl-C to stop)"
+    eezybot_say "web panel: $EEZYBOT_GUI_URL (Ctrl-C to stop)"
     eezybot_say "try: ros2 topic pub --once /pose_target geometry_msgs/msg/PoseStamped \"{header: {frame_id: base_link}, pose: {position: {x: 0.5, y: 0.0, z: 0.4}, orientation: {x: 0.0, y: 0.7071068, z: 0.0, w: 0.7071068}}}\""
     ;;
   *)

@@ -17,8 +17,10 @@ _log() { echo "[setup] $*" >&2; }
 # and libclang-dev (the cyclors crate builds Cyclone DDS and binds it with bindgen); for
 # control_msgs in the test venvs (launch_scripts/gen_control_msgs.sh): cmake, gcc, g++
 # and Python 3.11's headers (python3.11-dev, when the venvs use Debian's Python); for the
-# camera videos of LeRobot datasets (libs/lerobot_dataset): ffmpeg (5.1, with libsvtav1).
-EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump cmake libclang-dev gcc python3.11-dev ffmpeg}
+# camera videos of LeRobot datasets (libs/lerobot_dataset): ffmpeg (5.1, with libsvtav1);
+# for the web panel over HTTPS (tests/test_panel_tls.py): NSS's certutil (libnss3-tools),
+# which makes the throwaway certificate store in which Chromium trusts the test's CA.
+EEZYBOT_APT_PACKAGES=${EEZYBOT_APT_PACKAGES:-gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev chromium clang libclang-rt-14-dev libssl-dev pkg-config libfastrtps-dev g++ tcpdump cmake libclang-dev gcc python3.11-dev ffmpeg libnss3-tools}
 . "$_here/launch_scripts/apt_missing.sh"
 # shellcheck disable=SC2086 # a list of words
 apt_missing setup $EEZYBOT_APT_PACKAGES
