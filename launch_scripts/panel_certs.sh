@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A certificate for the web panel over HTTPS (README: Exposing the web panel safely): a
+# A certificate for the web panel over HTTPS (README: The panel on a phone or tablet): a
 # small CA of the panel's own, and the panel's certificate from it, valid for each HOST
 # (an IP address or a DNS name that browsers open the panel at) and for localhost,
 # 127.0.0.1 and ::1. Trust ca.pem once on each phone, tablet or PC that opens the panel;
@@ -95,7 +95,7 @@ if [ ! -s "$DIR/panel.pem" ] || [ ! -s "$DIR/panel.key" ] || [ "$(cat "$DIR/pane
     $'basicConstraints = critical, CA:FALSE\nkeyUsage = critical, digitalSignature\nextendedKeyUsage = serverAuth\nsubjectKeyIdentifier = hash\nauthorityKeyIdentifier = keyid\nsubjectAltName = '"$(IFS=,; echo "${SANS[*]}")" \
     "$DIR/ca.pem" "$DIR/private/ca.key"
   if ! openssl verify -CAfile "$DIR/ca.pem" "$WORK/panel.pem" >"$WORK/verify" 2>&1; then
-    eezybot_say "the CA in $DIR may not sign for ${HOSTS[*]} (its name constraints: the addresses and names it was made for, README: Exposing the web panel safely): run again with --new-ca, then trust the new ca.pem on every device"
+    eezybot_say "the CA in $DIR may not sign for ${HOSTS[*]} (its name constraints: the addresses and names it was made for, README: The panel on a phone or tablet): run again with --new-ca, then trust the new ca.pem on every device"
     sed 's/^/  /' "$WORK/verify" >&2
     exit 1
   fi

@@ -352,13 +352,15 @@ class Keystore:
 # the wire
 
 class Capture:
-    """tcpdump on `iface` of namespace `netns` (UDP, whole packets) into `path`."""
+    """tcpdump on `iface` of namespace `netns` (UDP, or the packets of `expression`;
+    whole packets) into `path`; `promiscuous=False` leaves the interface as it is (a
+    change of its flags is a network change to a browser, which then aborts its loads)."""
 
-    def __init__(self, netns, iface, path):
+    def __init__(self, netns, iface, path, expression="udp", promiscuous=True):
         self.path = Path(path)
         self.log = open(self.path.with_suffix(".log"), "w+")
-        self.proc = subprocess.Popen(["ip", "netns", "exec", netns, "tcpdump", "-i", iface, "-s", "0", "-U", "-n",
-                                      "-w", str(self.path), "udp"], stdout=self.log, stderr=subprocess.STDOUT)
+        self.proc = subprocess.Popen(["ip", "netns", "exec", netns, "tcpdump", "-i", iface, *([] if promiscuous else ["-p"]), "-s", "0", "-U", "-n",
+                                      "-w", str(self.path), expression], stdout=self.log, stderr=subprocess.STDOUT)
         end = time.monotonic() + 10
         while time.monotonic() < end:
             if "listening on" in self.path.with_suffix(".log").read_text():

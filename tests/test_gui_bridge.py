@@ -894,7 +894,9 @@ def test_non_loopback_bind_needs_the_printed_token(launch, observer, browser):
     from rcl_interfaces.srv import GetParameters
     xyz = observer.sub("/xyz_target", PointStamped)
     rosout = observer.sub("/rosout", Log, ROSOUT)
-    proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
+    # (plain HTTP beyond loopback, insecure_http: the token rules are the same over HTTPS,
+    # tests/test_panel_tls.py)
+    proc, port = start_panel(launch, observer, "-p", "insecure_http:=true", bind_host="0.0.0.0")
     deadline = time.monotonic() + 5
     while not (m := re.search(rf"web panel: http://127\.0\.0\.1:{port}/#token=([0-9a-f]+)", proc.output())):
         assert time.monotonic() < deadline, proc.output()

@@ -75,7 +75,9 @@ def test_foxglove_on_the_network_publishes_only_with_the_panel_s_token(launch, o
     turned. Now a Foxglove server beyond loopback makes the panel's token required for
     both, and every Foxglove client passes the panel's rules."""
     xyz = observer.sub("/xyz_target", PointStamped)
-    proc, port, fox = start_panel_with_foxglove(launch, observer, "0.0.0.0", "-p", "foxglove_publish:=true")
+    # (plain HTTP beyond loopback, as before TLS: the rules are the same over HTTPS)
+    proc, port, fox = start_panel_with_foxglove(launch, observer, "0.0.0.0", "-p", "foxglove_publish:=true",
+                                                "-p", "insecure_http:=true")
     for headers, path, status in (({"Origin": "http://evil.example"}, "/", 403),
                                   ({}, "/", 401),
                                   ({}, "/?token=" + "0" * 48, 403),
@@ -186,7 +188,7 @@ def test_the_token_goes_to_no_other_server_and_not_into_urls(launch, observer, b
     keeps it in its origin's localStorage and sends it as a WebSocket subprotocol."""
     seen = []
     with another_site(b"<p>another server</p>", seen) as other_port:
-        proc, port = start_panel(launch, observer, bind_host="0.0.0.0")
+        proc, port = start_panel(launch, observer, "-p", "insecure_http:=true", bind_host="0.0.0.0")
         token = printed_token(proc, port)
         context = browser.new_context()
         page = context.new_page()

@@ -88,7 +88,7 @@ pub async fn serve(
     // HTTPS beyond loopback, or plain HTTP only when insecure_http says so
     let mut beyond = vec![];
     if !local.ip().is_loopback() {
-        beyond.push(format!("bind {local}"));
+        beyond.push(format!("bind {}", bind.trim()));
     }
     if !crate::foxglove::bind_is_loopback(&foxglove_bind) {
         beyond.push(format!("foxglove_bind {}", foxglove_bind.trim()));

@@ -80,7 +80,7 @@ impl Transport {
 #[non_exhaustive]
 pub enum TlsError {
     /// A listener beyond loopback, and neither TLS nor `insecure_http`.
-    #[error("{} beyond loopback would send the access token in the clear: give tls_cert and tls_key (a certificate for this host's names and addresses; launch_scripts/panel_certs.sh DIR HOST... makes one), or set insecure_http:=true to serve plain HTTP anyway (the token then travels in the clear); README: Exposing the web panel safely", .beyond.join(" and "))]
+    #[error("{} beyond loopback would send the access token in the clear: give tls_cert and tls_key (a certificate for this host's names and addresses; launch_scripts/panel_certs.sh DIR HOST... makes one), or set insecure_http:=true to serve plain HTTP anyway (the token then travels in the clear); README: The panel on a phone or tablet", .beyond.join(" and "))]
     NeedsTls {
         /// The listeners beyond loopback (`bind 0.0.0.0:8080`).
         beyond: Vec<String>,
@@ -329,7 +329,7 @@ impl FirstFailures {
             .unwrap_or(false);
         if first {
             log::warn!(
-                "TLS handshake with {ip} failed: {why} (a browser that does not trust the panel's certificate ends it so: README, Exposing the web panel safely; further failures of this address are logged at debug level)"
+                "TLS handshake with {ip} failed: {why} (a browser that does not trust the panel's certificate ends it so: README: The panel on a phone or tablet; further failures of this address are logged at debug level)"
             );
         } else {
             log::debug!("TLS handshake with {ip} failed: {why}");
