@@ -6,6 +6,7 @@ the panel across a veth between two network namespaces while tcpdump on the link
 no token (and finds it in the plain-HTTP control); the certificate's expiry is in
 diagnostics, with a warning 30 days before."""
 import datetime
+import json
 import os
 import re
 import secrets
@@ -16,10 +17,9 @@ import time
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PointStamped
 
 import twohost
-from conftest import CHROMIUM, CHROMIUM_ARGS, REPO, NodeProcess, Observer
+from conftest import CHROMIUM, CHROMIUM_ARGS, REPO, NodeProcess
 from launch_script import Script, node_processes, reap_scripts  # noqa: F401 (a fixture)
 from security_rig import Capture
 from test_gui_bridge import panel_status, run_cli, start_panel
@@ -178,6 +178,15 @@ def plain_get(port):
         return data
 
 
+def sent_xyz(frame, z):
+    """Is this WebSocket frame gui_bridge's word that it published an xyz_target at `z`?"""
+    try:
+        m = json.loads(frame)
+    except (TypeError, ValueError):
+        return False
+    return m.get("t") == "sent" and m.get("topic") == "xyz_target" and abs(m["xyz"][2] - z) < 1e-9
+
+
 def foxglove_hello(host, port, token, context):
     """Upgrade to the Foxglove server with ?token= (as Foxglove's URL carries it), over
     `context` (TLS) or plain; the first bytes after the answer's head."""
@@ -199,9 +208,10 @@ def foxglove_hello(host, port, token, context):
 def test_chromium_drives_the_panel_over_https_and_the_link_carries_no_token(domain, tmp_path):
     """gui_bridge in namespace `pc` on its veth address (panel and Foxglove server),
     Chromium in `pi` trusting panel_certs.sh's CA: the page opens at
-    https://ADDRESS:PORT/#token=…, its WebSocket comes up and a slider's target reaches
-    ROS; a Foxglove client connects over wss:// with ?token=. tcpdump on the link sees the
-    handshakes and no byte sequence of the token. The control, insecure_http with the
+    https://ADDRESS:PORT/#token=…, its WebSocket comes up and a slider's target goes out
+    on xyz_target (gui_bridge's `sent` to the page); a Foxglove client connects over
+    wss:// with ?token=. tcpdump on the link sees the handshakes and no byte sequence of
+    the token. The control, insecure_http with the
     same steps over http://, shows the token on the link (so the capture can fail)."""
     from playwright.sync_api import sync_playwright
     hosts = twohost.TwoHosts(tag="tls")
@@ -210,73 +220,70 @@ def test_chromium_drives_the_panel_over_https_and_the_link_carries_no_token(doma
         panel_certs(certs, hosts.pc_addr)
         home = trusting_home(tmp_path, certs / "ca.pem")
         token = secrets.token_hex(24)
-        o = Observer(domain, name="operator", netns=hosts.pc)
-        xyz = o.sub("/xyz_target", PointStamped)
-        try:
-            for tls in (True, False):
-                web, fox = 8443 if tls else 8080, 8765
-                transport = (["-p", f"tls_cert:={certs / 'panel.pem'}", "-p", f"tls_key:={certs / 'panel.key'}"] if tls
-                             else ["-p", "insecure_http:=true"])
-                gui = NodeProcess("gui_bridge", ["--ros-args", "-p", f"bind:={hosts.pc_addr}:{web}",
-                                                 "-p", f"foxglove_bind:={hosts.pc_addr}:{fox}", "-p", f"token:={token}", "--log-level", "debug",
-                                                 *transport], domain, netns=hosts.pc)
-                capture = Capture(hosts.pi, hosts.pi_if, tmp_path / f"link-{tls}.pcap", "tcp", promiscuous=False)
-                try:
-                    o.spin_until(lambda: "Foxglove WebSocket server on" in gui.output() and "web panel:" in gui.output(), 15)
-                    o.wait_publisher("/xyz_target")
-                    scheme = "https" if tls else "http"
-                    assert f"web panel: {scheme}://{hosts.pc_addr}:{web}/#token={token}" in gui.output(), gui.output()
-                    with twohost.netns(hosts.pi), sync_playwright() as p:
-                        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, env={**os.environ, "HOME": str(home)})
+        for tls in (True, False):
+            web, fox = 8443 if tls else 8080, 8765
+            transport = (["-p", f"tls_cert:={certs / 'panel.pem'}", "-p", f"tls_key:={certs / 'panel.key'}"] if tls
+                         else ["-p", "insecure_http:=true"])
+            gui = NodeProcess("gui_bridge", ["--ros-args", "-p", f"bind:={hosts.pc_addr}:{web}",
+                                             "-p", f"foxglove_bind:={hosts.pc_addr}:{fox}", "-p", f"token:={token}",
+                                             "--log-level", "debug", *transport], domain, netns=hosts.pc)
+            capture = Capture(hosts.pi, hosts.pi_if, tmp_path / f"link-{tls}.pcap", "tcp", promiscuous=False)
+            try:
+                deadline = time.monotonic() + 15
+                while not ("Foxglove WebSocket server on" in gui.output() and "web panel:" in gui.output()):
+                    assert time.monotonic() < deadline and gui.proc.poll() is None, gui.output()
+                    time.sleep(0.05)
+                scheme = "https" if tls else "http"
+                assert f"web panel: {scheme}://{hosts.pc_addr}:{web}/#token={token}" in gui.output(), gui.output()
+                with twohost.netns(hosts.pi), sync_playwright() as p:
+                    b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, env={**os.environ, "HOME": str(home)})
+                    try:
+                        page = b.new_page()
+                        console = []
+                        page.on("console", lambda m: console.append((m.type, m.text)))
+                        frames = []
+                        page.on("websocket", lambda ws: (console.append(("websocket", ws.url)),
+                                                         ws.on("framereceived", lambda f: frames.append(f))))
+                        page.goto(f"{scheme}://{hosts.pc_addr}:{web}/#token={token}")
                         try:
-                            page = b.new_page()
-                            console = []
-                            page.on("console", lambda m: console.append((m.type, m.text)))
-                            page.on("websocket", lambda ws: console.append(("websocket", ws.url)))
-                            page.goto(f"{scheme}://{hosts.pc_addr}:{web}/#token={token}")
-                            try:
-                                page.wait_for_function(UP, timeout=30000)
-                            except Exception as e:
-                                raise AssertionError(f"{e}; the page's console: {console}") from None
-                            assert "token" not in page.url
-                            # a target from the slider reaches ROS (again with a step more
-                            # while the operator's subscription is not matched yet: DDS
-                            # keeps no target for a late reader)
-                            for step in range(20):
-                                z = (0.16 if tls else 0.17) + step * 1e-3
-                                page.eval_on_selector("#z", "(el, v) => { el.value = v; el.dispatchEvent(new Event('input')); }", z)
-                                if o.spin_until(lambda: xyz and abs(xyz[-1][1].point.z - z) < 1e-9, 1):
-                                    break
-                            page.wait_for_function("() => (window.__sent || 0) >= 1", timeout=15000)
+                            page.wait_for_function(UP, timeout=30000)
+                        except Exception as e:
+                            raise AssertionError(f"{e}; the page's console: {console}") from None
+                        assert "token" not in page.url
+                        # a target from the slider goes out on xyz_target: gui_bridge says
+                        # so to the page (`sent`, with the target)
+                        z = 0.16 if tls else 0.17
+                        page.eval_on_selector("#z", "(el, v) => { el.value = v; el.dispatchEvent(new Event('input')); }", z)
+                        deadline = time.monotonic() + 15
+                        while not any(sent_xyz(f, z) for f in frames):
+                            assert time.monotonic() < deadline, frames[-5:]
+                            page.wait_for_timeout(50)
+                    finally:
+                        b.close()
+                    if tls:  # a browser that does not trust the CA gets no page (README)
+                        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS,
+                                              env={**os.environ, "HOME": str(tmp_path)})
+                        try:
+                            with pytest.raises(Exception, match="ERR_CERT_AUTHORITY_INVALID"):
+                                b.new_page().goto(f"https://{hosts.pc_addr}:{web}/")
                         finally:
                             b.close()
-                        if tls:  # a browser that does not trust the CA gets no page (README)
-                            b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS,
-                                                  env={**os.environ, "HOME": str(tmp_path)})
-                            try:
-                                with pytest.raises(Exception, match="ERR_CERT_AUTHORITY_INVALID"):
-                                    b.new_page().goto(f"https://{hosts.pc_addr}:{web}/")
-                            finally:
-                                b.close()
-                        context = ssl.create_default_context(cafile=str(certs / "ca.pem")) if tls else None
-                        hello = foxglove_hello(hosts.pc_addr, fox, token, context)
-                        assert b"101 Switching Protocols" in hello and b"serverInfo" in hello
-                    assert xyz and abs(xyz[-1][1].point.z - z) < 1e-9, [m.point for _, m in xyz]
-                finally:
-                    pcap = capture.stop()
-                    code = gui.stop()
-                assert code == 0, gui.output()
-                assert len(pcap) > 5000, len(pcap)
-                pieces = {token[i:i + 12] for i in range(0, len(token) - 11, 6)}
-                seen = sorted(p for p in pieces if p.encode() in pcap)
-                if tls:
-                    assert b"\x16\x03" in pcap  # TLS handshake records crossed the link
-                    assert not seen, f"parts of the token in the clear on the link: {seen}"
-                    assert b"GET /" not in pcap and b"eezybot.panel.v1" not in pcap
-                else:
-                    assert token.encode() in pcap and b"token." + token.encode() in pcap, "the control saw no token"
-        finally:
-            o.close()
+                    context = ssl.create_default_context(cafile=str(certs / "ca.pem")) if tls else None
+                    hello = foxglove_hello(hosts.pc_addr, fox, token, context)
+                    assert b"101 Switching Protocols" in hello and b"serverInfo" in hello
+            finally:
+                pcap = capture.stop()
+                code = gui.stop()
+            assert code == 0, gui.output()
+            assert len(pcap) > 5000, len(pcap)
+            pieces = {token[i:i + 12] for i in range(0, len(token) - 11, 6)}
+            seen = sorted(p for p in pieces if p.encode() in pcap)
+            if tls:
+                assert b"\x16\x03" in pcap  # TLS handshake records crossed the link
+                assert not seen, f"parts of the token in the clear on the link: {seen}"
+                assert b"GET /" not in pcap and b"eezybot.panel.v1" not in pcap
+            else:
+                assert token.encode() in pcap and b"token." + token.encode() in pcap, "the control saw no token"
     finally:
         hosts.close()
 
