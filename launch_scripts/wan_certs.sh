@@ -7,8 +7,15 @@
 #   launch_scripts/wan_certs.sh DIR HOST...              CA, router, pc, pi
 #   launch_scripts/wan_certs.sh DIR HOST... --client pc2  one more client (e.g. a second PC)
 #
+# Each client certificate has a role, the subject's common name: `pc` or `pi`, from
+# the start of the client's NAME (pc, pc2, pc-lab: role pc; pi, pi2, pi-kitchen: role
+# pi). The router lets each role publish only its own side's topics (a `pi` may not
+# publish `servo_angles`; wan/README.md, "Roles"); a second PC or Pi is one more
+# certificate of that role, and the router needs no change for it.
+#
 # Running it again keeps what exists (CA, keys, certificates); the router's certificate
-# is issued again when the HOST list differs from the one it was made for.
+# is issued again when the HOST list differs from the one it was made for, and a
+# client's when its common name is not its role (made before roles existed).
 #
 # Layout (ZENOH_TLS_DIR of router.sh, pc.sh and pi.sh):
 #   ca.pem                   the CA's certificate (every party needs it)
@@ -34,8 +41,8 @@ while [ $# -gt 0 ]; do
     -h|--help) eezybot_usage; exit 0 ;;
     --client)
       [ $# -ge 2 ] || eezybot_bad_usage "--client needs a NAME"
-      if ! [[ $2 =~ ^[A-Za-z0-9_-]+$ ]] || [ "$2" = router ] || [ "$2" = ca ]; then
-        eezybot_bad_usage "client name '$2': letters, digits, _ and -, not router or ca"
+      if ! [[ $2 =~ ^(pc|pi)([0-9_-][A-Za-z0-9_-]*)?$ ]]; then
+        eezybot_bad_usage "client name '$2': its role pc or pi, then optionally a digit, _ or - and more letters, digits, _ and - (pc2, pi-kitchen)"
       fi
       CLIENTS+=("$2"); shift 2 ;;
     -*) eezybot_bad_usage "unknown option $1" ;;
@@ -85,14 +92,19 @@ if [ ! -s "$DIR/router.pem" ] || [ ! -s "$DIR/router.key" ] || [ "$(cat "$DIR/ro
   made+=(router.pem)
 fi
 
+# a client's role: the first two letters of its name (checked above); its certificate's
+# subject is CN=ROLE, which the router's access control matches
+role_of() { printf '%s' "${1:0:2}"; }
 for c in "${CLIENTS[@]}"; do
+  role=$(role_of "$c")
   if [ ! -s "$DIR/$c.pem" ] || [ ! -s "$DIR/$c.key" ] ||
-     ! openssl verify -CAfile "$DIR/ca.pem" "$DIR/$c.pem" >/dev/null 2>&1; then
+     ! openssl verify -CAfile "$DIR/ca.pem" "$DIR/$c.pem" >/dev/null 2>&1 ||
+     [ "$(openssl x509 -in "$DIR/$c.pem" -noout -subject -nameopt RFC2253 2>/dev/null)" != "subject=CN=$role" ]; then
     [ -s "$DIR/$c.key" ] || certs_new_key "$DIR/$c.key"
-    certs_issue "$c" "$DIR/$c.key" "$DIR/$c.pem" 825 "$LEAF"$'\nextendedKeyUsage = clientAuth' "${CA[@]}"
+    certs_issue "$role" "$DIR/$c.key" "$DIR/$c.pem" 825 "$LEAF"$'\nextendedKeyUsage = clientAuth' "${CA[@]}"
     made+=("$c.pem")
   fi
 done
 
 eezybot_say "${made[*]:+made ${made[*]}; }files in $DIR (ZENOH_TLS_DIR), router valid for ${SANS[*]}"
-eezybot_say "router: ca.pem router.pem router.key; $(for c in "${CLIENTS[@]}"; do printf '%s: ca.pem %s.pem %s.key; ' "$c" "$c" "$c"; done)CA key private/ca.key stays here"
+eezybot_say "router: ca.pem router.pem router.key; $(for c in "${CLIENTS[@]}"; do printf '%s (role %s): ca.pem %s.pem %s.key; ' "$c" "$(role_of "$c")" "$c" "$c"; done)CA key private/ca.key stays here"

@@ -10,7 +10,11 @@ use std::str::FromStr;
 use rustls::pki_types::{CertificateDer, UnixTime};
 use zenoh::config::Config;
 
+pub mod acl;
+pub mod cdr;
 mod crossing;
+pub mod expiry;
+pub mod refusals;
 pub use crossing::{Crossing, Side, CROSSING};
 
 /// Exit status for a configuration error: a missing or unusable TLS file, a bad
