@@ -62,7 +62,7 @@ export EEZYBOT_WAN_BIN_DIR=$wan_target/release
 patches_log=$(mktemp)
 {
   CARGO_TARGET_DIR=$(cargo_target patches) tests/check_patches.sh \
-    && (cd wan && CARGO_TARGET_DIR=$wan_target cargo build --release --locked \
+    && (cd wan && CARGO_TARGET_DIR=$wan_target cargo build --release --locked --bins --examples \
         && echo "wan/: unit tests (ours and the patched zenoh-plugin-ros2dds's)" \
         && CARGO_TARGET_DIR=$wan_target cargo test --release --locked --lib -p eezybot_wan -p zenoh-plugin-ros2dds)
 } >"$patches_log" 2>&1 &

@@ -27,19 +27,19 @@ ROUTER = "10.77.0.1"
 PORT = 7447
 # site -> subnet number of its link to `wan` (10.77.K.0/24: wan .1, the site .2)
 SITES = {"pc": 1, "pi": 2, "pc2": 3, "stranger": 4}
-WAN_BINARIES = ("eezybot_wan_router", "eezybot_wan_bridge")
+WAN_BINARIES = ("eezybot_wan_router", "eezybot_wan_bridge", "examples/acl_probe")
 
 
 def wan_bin_dir():
-    """The WAN binaries (wan/): EEZYBOT_WAN_BIN_DIR (the test command builds them there),
-    else wan/target/release, built now if missing."""
+    """The WAN binaries (wan/, and its example acl_probe): EEZYBOT_WAN_BIN_DIR (the test
+    command builds them there), else wan/target/release, built now if missing."""
     d = os.environ.get("EEZYBOT_WAN_BIN_DIR")
     if d:
         return Path(d)
     d = REPO / "wan" / "target" / "release"
     if not all((d / b).exists() for b in WAN_BINARIES):
         print("building wan/ (cargo build --release; the first build takes several minutes)", file=sys.stderr)
-        subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=REPO / "wan", check=True)
+        subprocess.run(["cargo", "build", "--release", "--quiet", "--bins", "--examples"], cwd=REPO / "wan", check=True)
     return d
 
 

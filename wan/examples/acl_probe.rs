@@ -66,10 +66,10 @@ async fn main() {
         .await
         .unwrap_or_else(|e| fail(PROGRAM, format!("connecting: {e}")));
     println!("connected as {}", session.zid());
-    let publisher = session
-        .declare_publisher(key.clone())
-        .await
-        .unwrap_or_else(|e| fail(PROGRAM, format!("publisher on {key}: {e}")));
+    // Session puts, not a declared publisher: a publisher sends only where the router
+    // said a subscriber is, and the router does not tell a role of subscribers to a topic
+    // it may not publish; a put each time goes to the router whatever it said, so what
+    // stops it is the router's refusal of the put itself.
     let names: Vec<&str> = names.iter().map(String::as_str).collect();
     let mut tick = tokio::time::interval(std::time::Duration::from_secs_f64(1.0 / rate));
     let mut report = tokio::time::interval(std::time::Duration::from_secs(1));
@@ -80,7 +80,7 @@ async fn main() {
         tokio::select! {
             _ = tick.tick() => {
                 let payload = cdr::joint_state(cdr::now_nanos(), &names, &positions);
-                if publisher.put(payload).await.is_ok() {
+                if session.put(&key, payload).await.is_ok() {
                     sent += 1;
                 }
             }

@@ -17,7 +17,9 @@
 //! to K on KEY`, and `Z on SUBJECT is unauthorized to K on KEY` unless it is one of the
 //! nine that follow `ACL (FLOW): caching permissions for `KEY` ...` on the same thread
 //! (the cache of every message kind for that key, computed when the key is first used:
-//! not a message). The role comes from SUBJECT (Zenoh's `interface+CN+protocol+zid`).
+//! not a message). The role comes from SUBJECT (Zenoh's
+//! `Interface(…)+CertCommonName(…)+Transport(…)+zid`). Not said: a client declaring
+//! its own admin space ([`own_admin_space`]).
 
 use std::cell::RefCell;
 use std::collections::HashMap;
@@ -109,13 +111,25 @@ pub fn parse(msg: &str) -> Option<Line<'_>> {
     })
 }
 
-/// The role named in a subject (`w-pi+pi+Tls+zid`), if one of [`ROLES`].
+/// The role named in a subject
+/// (`Interface(w-pi)+CertCommonName(pi)+Transport(Tls)+zid`), if one of [`ROLES`].
 fn role_in(subject: &str) -> Option<&'static str> {
-    let names: Vec<&str> = subject.split('+').collect();
-    ROLES
-        .iter()
-        .map(|r| r.name())
-        .find(|r| names.contains(r))
+    let cn = subject
+        .split('+')
+        .find_map(|p| p.strip_prefix("CertCommonName(")?.strip_suffix(')'))?;
+    ROLES.iter().map(|r| r.name()).find(|r| *r == cn)
+}
+
+/// A client declaring its own admin space (`@/ZID/…`: every Zenoh session does, as it
+/// opens): refused, as every `@/…` key is (nobody reaches a bridge's admin space
+/// through the router), but expected, so not said.
+fn own_admin_space(zid: &str, kind: &str, flow: &str, key: &str) -> bool {
+    flow == "ingress"
+        && matches!(kind, "Declare Subscriber" | "Declare Queryable")
+        && key
+            .strip_prefix("@/")
+            .and_then(|k| k.strip_prefix(zid))
+            .is_some_and(|k| k.starts_with('/'))
 }
 
 /// What a refused kind of message means, as "may not …".
@@ -227,7 +241,12 @@ impl Refusals {
                     CACHING.with(|c| *c.borrow_mut() = None);
                 }
                 // undeclarations follow their declaration's fate
-                if allowed || of_cache || kind.starts_with("Undeclare") || kind.contains('/') {
+                if allowed
+                    || of_cache
+                    || kind.starts_with("Undeclare")
+                    || kind.contains('/')
+                    || own_admin_space(zid, kind, flow, key)
+                {
                     return;
                 }
                 self.refused(&mut state, zid, kind, flow, key);
@@ -342,10 +361,10 @@ mod tests {
             })
         );
         assert_eq!(
-            parse("3f2a on w-pi+pi+Tls+3f2a is authorized to Declare Liveliness Subscriber (egress) on @/*/@ros2_lv/**"),
+            parse("3f2a on Interface(w-pi)+CertCommonName(pi)+Transport(Tls)+3f2a is authorized to Declare Liveliness Subscriber (egress) on @/*/@ros2_lv/**"),
             Some(Line::Decision {
                 zid: "3f2a",
-                subject: Some("w-pi+pi+Tls+3f2a"),
+                subject: Some("Interface(w-pi)+CertCommonName(pi)+Transport(Tls)+3f2a"),
                 allowed: true,
                 kind: "Declare Liveliness Subscriber",
                 flow: "egress",
@@ -361,7 +380,7 @@ mod tests {
         let (r, lines) = layer();
         // the Pi's bridge subscribing to servo_angles: the cache says put is not
         // allowed, but no put was refused
-        for l in cache_lines("w-pi+pi+Tls+3f2a", "ingress", "servo_angles", &["Declare/Undeclare Subscriber"]) {
+        for l in cache_lines("Interface(w-pi)+CertCommonName(pi)+Transport(Tls)+3f2a", "ingress", "servo_angles", &["Declare/Undeclare Subscriber"]) {
             r.take(&l);
         }
         r.take(&format!("Using cached result: {Z} is authorized to Declare Subscriber (ingress) on servo_angles"));
@@ -378,14 +397,18 @@ mod tests {
     #[test]
     fn an_uncached_refusal_and_a_client_without_a_role_are_said() {
         let (r, lines) = layer();
-        r.take(&format!("{Z} on w-pc+pi+Tls+{Z} is unauthorized to Put (ingress) on servo_angles"));
+        r.take(&format!("{Z} on Interface(w-pc)+CertCommonName(pi)+Transport(Tls)+{Z} is unauthorized to Put (ingress) on servo_angles"));
         r.take("77aa did not match any configured ACL subject. Default permission `Deny` will be applied on all messages");
-        r.take(&format!("{Z} on w-pc+pi+Tls+{Z} is unauthorized to Declare Subscriber (ingress) on robot_description"));
+        r.take(&format!("{Z} on Interface(w-pc)+CertCommonName(pi)+Transport(Tls)+{Z} is unauthorized to Declare Subscriber (ingress) on robot_description"));
+        // its own admin space: refused, not said; another's is
+        r.take(&format!("{Z} on Interface(w-pc)+CertCommonName(pi)+Transport(Tls)+{Z} is unauthorized to Declare Queryable (ingress) on @/{Z}/ros2/**"));
+        r.take(&format!("{Z} on Interface(w-pc)+CertCommonName(pi)+Transport(Tls)+{Z} is unauthorized to Declare Queryable (ingress) on @/{Z}0/ros2/**"));
         let got = lines.lock().unwrap().clone();
-        assert_eq!(got.len(), 3, "{got:?}");
+        assert_eq!(got.len(), 4, "{got:?}");
         assert!(got[0].contains("pi (client 3f2a) may not publish servo_angles"), "{got:?}");
         assert!(got[1].contains("client 77aa has no role"), "{got:?}");
         assert!(got[2].contains("may not subscribe to robot_description"), "{got:?}");
+        assert!(got[3].contains("may not serve queries on @/3f2a0/ros2/**"), "{got:?}");
     }
 
     #[test]
