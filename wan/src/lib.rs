@@ -14,6 +14,7 @@ pub mod acl;
 pub mod cdr;
 mod crossing;
 pub mod expiry;
+pub mod health;
 pub mod refusals;
 pub use crossing::{Crossing, Side, CROSSING};
 

@@ -12,6 +12,10 @@
 //!   --namespace NS                 the nodes' ROS namespace (-r __ns:=NS), default /
 //!   --print-config                 print the Zenoh configuration and exit
 //! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint).
+//!
+//! Its own `diagnostics` on the site's LAN, once a second ([`eezybot_wan::health`]):
+//! whether the router is connected and, over TLS, when its certificate (or the CA's)
+//! runs out, a warning within 30 days of it (also said on stderr at start).
 
 use eezybot_wan::{
     base_config, check_endpoint, check_namespace, fail, json, topic_regex, CommandLine, Role, Side,
@@ -159,6 +163,10 @@ async fn main() {
         std::env::set_var("ROS_DISTRO", "jazzy");
     }
     let side = args.side;
+    let expiry = certificate(&args);
+    if let Some(e) = &expiry {
+        eprintln!("{PROGRAM}: {}", e.summary(eezybot_wan::expiry::now_unix()));
+    }
     eprintln!(
         "{PROGRAM}: {} side, ROS domain {}, router {}; out: {}; in: {}",
         side.name(),
@@ -181,6 +189,18 @@ async fn main() {
         Ok(r) => r,
         Err(e) => fail(PROGRAM, format!("starting Zenoh: {e}")),
     };
+    let connected = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    eezybot_wan::health::spawn(
+        PROGRAM,
+        args.domain.as_deref().and_then(|d| d.parse().ok()).unwrap_or(0),
+        eezybot_wan::health::Health {
+            node: format!("eezybot_wan_bridge_{}", side.name()),
+            namespace: check_namespace(&args.namespace).unwrap_or_default(),
+            router: args.router.clone().unwrap_or_default(),
+            expiry,
+            connected: connected.clone(),
+        },
+    );
     // start() returns once connected to the router (it retries forever); until then,
     // say so every 10 s: a refused certificate or plain TCP to a TLS router is only
     // logged at debug level by Zenoh.
@@ -188,6 +208,7 @@ async fn main() {
     let began = std::time::Instant::now();
     let mut tick = tokio::time::interval(std::time::Duration::from_secs(10));
     tick.tick().await;
+    let for_health = runtime.clone();
     let start = runtime.start();
     tokio::pin!(start);
     loop {
@@ -206,8 +227,43 @@ async fn main() {
         }
     }
     eprintln!("{PROGRAM}: connected to the router {router}");
+    watch_router(for_health, connected).await;
     signal().await;
     std::process::exit(0)
+}
+
+/// The certificate's end (and the CA's), when the router is dialled over TLS with
+/// usable files (checked already by [`config`]).
+fn certificate(args: &Args) -> Option<eezybot_wan::expiry::CertificateExpiry> {
+    let router = check_endpoint("ZENOH_ROUTER", args.router.as_deref()?).ok()?;
+    if !router.tls {
+        return None;
+    }
+    let name = args.cert.as_deref().unwrap_or(args.side.name());
+    let files = TlsFiles::load(args.tls_dir.as_deref()?, name, Role::Client).ok()?;
+    eezybot_wan::expiry::CertificateExpiry::earliest(&[&files.cert, &files.ca]).ok()
+}
+
+/// Keep `connected` current (whether the runtime has a router), every second, in a
+/// task of its own.
+async fn watch_router(
+    runtime: zenoh::internal::runtime::Runtime,
+    connected: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) {
+    let session = match zenoh::session::init(runtime.into()).await {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("{PROGRAM}: the router's state for diagnostics: {e}");
+            return;
+        }
+    };
+    tokio::spawn(async move {
+        loop {
+            let n = session.info().routers_zid().await.count();
+            connected.store(n > 0, std::sync::atomic::Ordering::Relaxed);
+            tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+        }
+    });
 }
 
 /// Ctrl-C or SIGTERM ([`eezybot_wan::stop_signal`]).
