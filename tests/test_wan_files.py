@@ -58,6 +58,22 @@ def test_wan_certs_makes_a_ca_a_router_for_each_host_and_clients(tmp_path):
     text = openssl("x509", "-in", str(d / "pc.pem"), "-noout", "-ext", "extendedKeyUsage").stdout
     assert "TLS Web Client Authentication" in text, text
     assert (d / "private").stat().st_mode & 0o777 == 0o700
+    # each client's common name is its role (the router's access control matches it):
+    # pc2 is a second PC
+    for name, role in (("pc", "pc"), ("pi", "pi"), ("pc2", "pc")):
+        subject = openssl("x509", "-in", str(d / f"{name}.pem"), "-noout", "-subject", "-nameopt", "RFC2253").stdout
+        assert subject.strip() == f"subject=CN={role}", (name, subject)
+    # a client certificate made before roles (CN=pc2) is issued again, with its key
+    old = subprocess.run(["openssl", "req", "-new", "-key", str(d / "pc2.key"), "-subj", "/CN=pc2"],
+                         capture_output=True, check=True).stdout
+    subprocess.run(["openssl", "x509", "-req", "-CA", str(d / "ca.pem"), "-CAkey", str(d / "private" / "ca.key"),
+                    "-days", "30", "-out", str(d / "pc2.pem")], input=old, capture_output=True, check=True)
+    key_before = (d / "pc2.key").read_bytes()
+    r = subprocess.run([str(CERTS_SH), str(d), "10.1.2.3", "vps.example.org", "--client", "pc2"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "made pc2.pem" in r.stderr + r.stdout, r.stderr
+    subject = openssl("x509", "-in", str(d / "pc2.pem"), "-noout", "-subject", "-nameopt", "RFC2253").stdout
+    assert subject.strip() == "subject=CN=pc" and (d / "pc2.key").read_bytes() == key_before, subject
     # again with the same hosts: nothing made anew; another host list: the router only
     before = {f: (d / f).read_bytes() for f in ("ca.pem", "router.pem", "pc.pem")}
     assert subprocess.run([str(CERTS_SH), str(d), "10.1.2.3", "vps.example.org"], capture_output=True,
@@ -69,8 +85,9 @@ def test_wan_certs_makes_a_ca_a_router_for_each_host_and_clients(tmp_path):
     assert "10.1.2.4" in text and "10.1.2.3" not in text, text
 
 
-@pytest.mark.parametrize("args", [[], ["DIR"], ["DIR", "bad host!"], ["DIR", "h", "--client", "router"]],
-                         ids=["nothing", "no-host", "bad-host", "client-named-router"])
+@pytest.mark.parametrize("args", [[], ["DIR"], ["DIR", "bad host!"], ["DIR", "h", "--client", "router"],
+                                  ["DIR", "h", "--client", "pickle"]],
+                         ids=["nothing", "no-host", "bad-host", "client-named-router", "client-without-a-role"])
 def test_wan_certs_usage_errors_exit_2(args, tmp_path):
     args = [str(tmp_path / "d") if a == "DIR" else a for a in args]
     r = subprocess.run([str(CERTS_SH), *args], capture_output=True, text=True, timeout=60)
