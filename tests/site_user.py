@@ -12,7 +12,8 @@ seconds). --estop publishes that value on /estop (latched): once then (or at the
 without --until), or every 1/HZ s with --estop-rate; after a single one it stays 5 s
 more (a late reader gets it; what it subscribes goes on counting). --topics lists the topic names this site's DDS graph has. Prints
 one JSON line: {"got": {topic: {"count": n, "first": ..., "last": ...}}, "estops_sent": n,
-"topics": [...]}."""
+"topics": [...], "statuses": {name: {"level": n, "message": ...}} (of /diagnostics: each
+status name's last)}."""
 import argparse
 import json
 import sys
@@ -80,6 +81,14 @@ def main():
     result = {"got": {t: {"count": len(ms), "first": summary(ms[0]) if ms else None,
                           "last": summary(ms[-1]) if ms else None} for t, ms in got.items()},
               "estops_sent": sent}
+    # diagnostics: each status name's last level and message
+    statuses = {}
+    for m in got.get("/diagnostics", []):
+        for st in m.status:
+            statuses[st.name] = {"level": st.level[0] if isinstance(st.level, bytes) else st.level,
+                                 "message": st.message[:200]}
+    if statuses:
+        result["statuses"] = statuses
     if a.topics:
         result["topics"] = sorted(n for n, _ in node.get_topic_names_and_types())
     print(json.dumps(result), flush=True)

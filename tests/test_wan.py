@@ -213,7 +213,14 @@ def test_a_second_operator_pc_joins_late_and_a_stranger_gets_nothing(domain, tmp
         assert g.pump_until(lambda: g.answers_after(t_done), 30), \
             f"the arm stopped following while strangers tried: {g.diag_values('serial_node')}"
         assert g.diag_values("serial_node")[2].get("estop") == "false", "a stranger's e-stop reached the Pi"
-        assert all(v["count"] == 0 for v in theirs_got["got"].values()), f"a stranger got {theirs_got}"
+        # nothing from the router; on the stranger's LAN only its own bridges' status,
+        # which says they are not connected
+        assert all(v["count"] == 0 for t, v in theirs_got["got"].items() if t != "/diagnostics"), \
+            f"a stranger got {theirs_got}"
+        own = theirs_got.get("statuses", {})
+        assert set(own) <= {"eezybot_wan_bridge_pc: WAN link"} and \
+            all(s["message"].startswith("not connected to the router") for s in own.values()), \
+            f"a stranger got diagnostics other than its own bridges' not connected: {theirs_got}"
         # each stranger's bridge says it is not let in (every 10 s while it tries), and
         # never that it was; the second PC's was
         assert g.pump_until(lambda: all("not connected to the router" in p.output() for p in extra[1:]), 30), \

@@ -134,11 +134,7 @@ fn rules(role: Side) -> Vec<Rule> {
             Rule {
                 id: format!("{name}-subscribe-history"),
                 flow: "ingress",
-                messages: &[
-                    "query",
-                    "declare_liveliness_subscriber",
-                    "liveliness_query",
-                ],
+                messages: &["query", "declare_liveliness_subscriber", "liveliness_query"],
                 keys: keys(&inc, history_key),
             },
             Rule {
@@ -171,7 +167,10 @@ pub fn access_control() -> String {
             "{{ id: {}, subjects: [{}], rules: [{}] }}",
             json(format!("role-{name}")),
             json(name),
-            rs.iter().map(|r| json(&r.id)).collect::<Vec<_>>().join(", ")
+            rs.iter()
+                .map(|r| json(&r.id))
+                .collect::<Vec<_>>()
+                .join(", ")
         ));
         rule_list.extend(rs.iter().map(Rule::json5));
         subjects.push(format!(
@@ -200,7 +199,9 @@ mod tests {
         rules(role).iter().any(|r| {
             r.flow == flow
                 && r.messages.contains(&message)
-                && r.keys.iter().any(|k| KeyExpr::new(k.as_str()).unwrap().includes(&key))
+                && r.keys
+                    .iter()
+                    .any(|k| KeyExpr::new(k.as_str()).unwrap().includes(&key))
         })
     }
 
@@ -221,13 +222,26 @@ mod tests {
             (Side::Pc, "diagnostics", false),
             (Side::Pc, "anything/else", false),
         ] {
-            assert_eq!(allowed(role, "ingress", "put", key), ok, "{role:?} put {key}");
+            assert_eq!(
+                allowed(role, "ingress", "put", key),
+                ok,
+                "{role:?} put {key}"
+            );
         }
         for role in ROLES {
-            for message in ["put", "delete", "query", "declare_queryable", "declare_subscriber"] {
+            for message in [
+                "put",
+                "delete",
+                "query",
+                "declare_queryable",
+                "declare_subscriber",
+            ] {
                 // no wildcard grabs, no admin space
                 for key in ["**", "@/**", "@/0123/ros2/**"] {
-                    assert!(!allowed(role, "ingress", message, key), "{role:?} {message} {key}");
+                    assert!(
+                        !allowed(role, "ingress", message, key),
+                        "{role:?} {message} {key}"
+                    );
                 }
             }
             assert!(!allowed(role, "ingress", "delete", "servo_state"));
@@ -238,18 +252,58 @@ mod tests {
     fn history_and_discovery_go_only_each_topics_way() {
         // a late Pi asks the PCs' estop cache, never the robot_description one
         assert!(allowed(Side::Pi, "ingress", "query", "estop/@adv/pub/**"));
-        assert!(!allowed(Side::Pi, "ingress", "query", "robot_description/@adv/pub/**"));
+        assert!(!allowed(
+            Side::Pi,
+            "ingress",
+            "query",
+            "robot_description/@adv/pub/**"
+        ));
         assert!(allowed(Side::Pi, "egress", "reply", "estop"));
         assert!(!allowed(Side::Pi, "ingress", "reply", "estop"));
-        assert!(!allowed(Side::Pi, "ingress", "declare_queryable", "estop/@adv/pub/ab/1/_"));
-        assert!(allowed(Side::Pc, "ingress", "declare_queryable", "estop/@adv/pub/ab/1/_"));
-        assert!(allowed(Side::Pc, "egress", "query", "arm2/estop/@adv/pub/**"));
+        assert!(!allowed(
+            Side::Pi,
+            "ingress",
+            "declare_queryable",
+            "estop/@adv/pub/ab/1/_"
+        ));
+        assert!(allowed(
+            Side::Pc,
+            "ingress",
+            "declare_queryable",
+            "estop/@adv/pub/ab/1/_"
+        ));
+        assert!(allowed(
+            Side::Pc,
+            "egress",
+            "query",
+            "arm2/estop/@adv/pub/**"
+        ));
         // the Pi may not subscribe to what it does not take
-        assert!(!allowed(Side::Pi, "ingress", "declare_subscriber", "robot_description"));
-        assert!(allowed(Side::Pi, "ingress", "declare_subscriber", "servo_angles"));
+        assert!(!allowed(
+            Side::Pi,
+            "ingress",
+            "declare_subscriber",
+            "robot_description"
+        ));
+        assert!(allowed(
+            Side::Pi,
+            "ingress",
+            "declare_subscriber",
+            "servo_angles"
+        ));
         for role in ROLES {
-            assert!(allowed(role, "ingress", "liveliness_token", "@/0a1b/@ros2_lv/MP/servo_angles/t/q"));
-            assert!(allowed(role, "ingress", "declare_liveliness_subscriber", "@/*/@ros2_lv/**"));
+            assert!(allowed(
+                role,
+                "ingress",
+                "liveliness_token",
+                "@/0a1b/@ros2_lv/MP/servo_angles/t/q"
+            ));
+            assert!(allowed(
+                role,
+                "ingress",
+                "declare_liveliness_subscriber",
+                "@/*/@ros2_lv/**"
+            ));
             assert!(!allowed(role, "ingress", "put", "@/0a1b/@ros2_lv/MP/x"));
         }
     }

@@ -20,7 +20,7 @@ impl Cdr {
     }
 
     fn align(&mut self, n: usize) {
-        while (self.0.len() - 4) % n != 0 {
+        while !(self.0.len() - 4).is_multiple_of(n) {
             self.0.push(0);
         }
     }
@@ -108,7 +108,7 @@ mod tests {
             &1i32.to_le_bytes(),
             &2u32.to_le_bytes(),
             &1u32.to_le_bytes(), // frame_id "" (its NUL)
-            &[0, 0, 0, 0],        // NUL + padding to 4
+            &[0, 0, 0, 0],       // NUL + padding to 4
             &1u32.to_le_bytes(),
             &2u32.to_le_bytes(),
             b"a\0",

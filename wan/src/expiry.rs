@@ -137,9 +137,14 @@ mod tests {
         assert_eq!(expiry(30).warning(now), None);
         assert_eq!(expiry(30).days_left(now), 30);
         let w = expiry(29).warning(now).unwrap();
-        assert!(w.starts_with("/certs/pi.pem expires on 2027-02-13 (29 days): renew it"), "{w}");
+        assert!(
+            w.starts_with("/certs/pi.pem expires on 2027-02-13 (29 days): renew it"),
+            "{w}"
+        );
         assert!(expiry(-2).warning(now).unwrap().contains("(-2 days)"));
-        assert!(expiry(400).summary(now).starts_with("certificate valid until"));
+        assert!(expiry(400)
+            .summary(now)
+            .starts_with("certificate valid until"));
         assert!(expiry(3).summary(now).starts_with("WARNING: /certs/pi.pem"));
     }
 }

@@ -89,7 +89,10 @@ pub fn diagnostic_array(unix_nanos: i128, statuses: &[Status]) -> Vec<u8> {
     c.header(unix_nanos, "");
     c.u32(statuses.len() as u32);
     for (level, name, message, hardware_id, values) in statuses {
-        c.u8(*level).string(name).string(message).string(hardware_id);
+        c.u8(*level)
+            .string(name)
+            .string(message)
+            .string(hardware_id);
         c.u32(values.len() as u32);
         for (k, v) in values {
             c.string(k).string(v);
@@ -146,6 +149,8 @@ impl Writer {
             if ret < 0 {
                 return Err(format!("sertype: {}", retcode(ret)));
             }
+            // ddsrt_iov_len_t is usize here, not on every platform Cyclone builds for
+            #[allow(clippy::useless_conversion)]
             let iov = ddsrt_iovec_t {
                 iov_base: data.as_ptr() as *mut std::ffi::c_void,
                 iov_len: data.len().try_into().map_err(|_| "sample too large")?,
@@ -185,7 +190,11 @@ pub fn spawn(program: &'static str, domain: u32, health: Health) {
                 std::thread::sleep(Duration::from_millis(100));
             }
             let topic = format!("rt{}/diagnostics", health.namespace);
-            let writer = match Writer::new(domain, &topic, "diagnostic_msgs::msg::dds_::DiagnosticArray_") {
+            let writer = match Writer::new(
+                domain,
+                &topic,
+                "diagnostic_msgs::msg::dds_::DiagnosticArray_",
+            ) {
                 Ok(w) => w,
                 Err(e) => {
                     eprintln!("{program}: no diagnostics on {topic}: {e}");
@@ -229,7 +238,10 @@ mod tests {
     #[test]
     fn the_status_says_the_link_and_the_certificates_end() {
         let (level, name, message, _, values) = health(true, Some(400)).status(1_800_000_000);
-        assert_eq!((level, name.as_str()), (OK, "eezybot_wan_bridge_pi: WAN link"));
+        assert_eq!(
+            (level, name.as_str()),
+            (OK, "eezybot_wan_bridge_pi: WAN link")
+        );
         assert!(message.starts_with("connected"), "{message}");
         let v: std::collections::HashMap<_, _> = values.into_iter().collect();
         assert_eq!(v["certificate_days_left"], "400");
@@ -245,14 +257,23 @@ mod tests {
 
     #[test]
     fn a_diagnostic_array_as_ros_writes_it() {
-        let b = diagnostic_array(0, &[(1, "n".into(), "".into(), "h".into(), vec![("k".into(), "v".into())])]);
+        let b = diagnostic_array(
+            0,
+            &[(
+                1,
+                "n".into(),
+                "".into(),
+                "h".into(),
+                vec![("k".into(), "v".into())],
+            )],
+        );
         let want: Vec<u8> = [
             &[0, 1, 0, 0][..],
-            &[0; 8],               // stamp
-            &1u32.to_le_bytes(),   // frame_id
-            &[0, 0, 0, 0],         // its NUL, padding
-            &1u32.to_le_bytes(),   // one status
-            &[1, 0, 0, 0],         // level, padding
+            &[0; 8],             // stamp
+            &1u32.to_le_bytes(), // frame_id
+            &[0, 0, 0, 0],       // its NUL, padding
+            &1u32.to_le_bytes(), // one status
+            &[1, 0, 0, 0],       // level, padding
             &2u32.to_le_bytes(),
             b"n\0",
             &[0, 0],

@@ -212,6 +212,11 @@ impl Refusals {
                 key,
                 cached,
             } => {
+                if cached && allowed {
+                    // the common case, every message let through: nothing to learn or say
+                    CACHING.with(|c| *c.borrow_mut() = None);
+                    return;
+                }
                 let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
                 if let Some(role) = subject.and_then(role_in) {
                     if state.roles.len() < MAX_TRACKED || state.roles.contains_key(zid) {
@@ -269,7 +274,12 @@ impl Refusals {
         let id = (zid.to_string(), format!("{kind} {flow}"), key.to_string());
         let full = state.seen.len() >= MAX_TRACKED && !state.seen.contains_key(&id);
         let seen = if full {
-            line = format!("{}: refused: more kinds of message than tracked, the last: {} may not {} {key}", self.program, who, verb(kind, flow));
+            line = format!(
+                "{}: refused: more kinds of message than tracked, the last: {} may not {} {key}",
+                self.program,
+                who,
+                verb(kind, flow)
+            );
             &mut state.overflow
         } else {
             state.seen.entry(id).or_default()
@@ -278,9 +288,17 @@ impl Refusals {
             Some(t) if now.duration_since(t) < REPEAT_EVERY => seen.unsaid += 1,
             _ => {
                 if seen.unsaid > 0 {
-                    let _ = write!(line, " ({} more times since the last such line)", seen.unsaid);
+                    let _ = write!(
+                        line,
+                        " ({} more times since the last such line)",
+                        seen.unsaid
+                    );
                 } else if seen.last_said.is_none() {
-                    let _ = write!(line, " ({kind} {flow}; repeats counted, said again every {} s at most)", REPEAT_EVERY.as_secs());
+                    let _ = write!(
+                        line,
+                        " ({kind} {flow}; repeats counted, said again every {} s at most)",
+                        REPEAT_EVERY.as_secs()
+                    );
                 }
                 seen.last_said = Some(now);
                 seen.unsaid = 0;
@@ -336,8 +354,14 @@ mod tests {
     fn cache_lines(subject: &str, flow: &str, key: &str, allowed: &[&str]) -> Vec<String> {
         let mut v = vec![format!("ACL ({flow}): caching permissions for `{key}` ...")];
         for kind in CACHE_ORDER {
-            let verdict = if allowed.contains(&kind) { "authorized" } else { "unauthorized" };
-            v.push(format!("{Z} on {subject} is {verdict} to {kind} ({flow}) on {key}"));
+            let verdict = if allowed.contains(&kind) {
+                "authorized"
+            } else {
+                "unauthorized"
+            };
+            v.push(format!(
+                "{Z} on {subject} is {verdict} to {kind} ({flow}) on {key}"
+            ));
         }
         v
     }
@@ -346,7 +370,10 @@ mod tests {
     fn parses_zenohs_lines() {
         assert_eq!(
             parse("ACL (ingress): caching permissions for `servo_angles` ..."),
-            Some(Line::Caching { flow: "ingress", key: "servo_angles" })
+            Some(Line::Caching {
+                flow: "ingress",
+                key: "servo_angles"
+            })
         );
         assert_eq!(
             parse("Using cached result: 3f2a is unauthorized to Put (ingress) on servo_angles"),
@@ -380,18 +407,34 @@ mod tests {
         let (r, lines) = layer();
         // the Pi's bridge subscribing to servo_angles: the cache says put is not
         // allowed, but no put was refused
-        for l in cache_lines("Interface(w-pi)+CertCommonName(pi)+Transport(Tls)+3f2a", "ingress", "servo_angles", &["Declare/Undeclare Subscriber"]) {
+        for l in cache_lines(
+            "Interface(w-pi)+CertCommonName(pi)+Transport(Tls)+3f2a",
+            "ingress",
+            "servo_angles",
+            &["Declare/Undeclare Subscriber"],
+        ) {
             r.take(&l);
         }
         r.take(&format!("Using cached result: {Z} is authorized to Declare Subscriber (ingress) on servo_angles"));
-        assert!(lines.lock().unwrap().is_empty(), "{:?}", lines.lock().unwrap());
+        assert!(
+            lines.lock().unwrap().is_empty(),
+            "{:?}",
+            lines.lock().unwrap()
+        );
         // then it publishes there: refused, said once, then counted
         for _ in 0..3 {
-            r.take(&format!("Using cached result: {Z} is unauthorized to Put (ingress) on servo_angles"));
+            r.take(&format!(
+                "Using cached result: {Z} is unauthorized to Put (ingress) on servo_angles"
+            ));
         }
         let got = lines.lock().unwrap().clone();
         assert_eq!(got.len(), 1, "{got:?}");
-        assert!(got[0].starts_with("r: refused: pi (client 3f2a) may not publish servo_angles (Put ingress;"), "{got:?}");
+        assert!(
+            got[0].starts_with(
+                "r: refused: pi (client 3f2a) may not publish servo_angles (Put ingress;"
+            ),
+            "{got:?}"
+        );
     }
 
     #[test]
@@ -405,17 +448,28 @@ mod tests {
         r.take(&format!("{Z} on Interface(w-pc)+CertCommonName(pi)+Transport(Tls)+{Z} is unauthorized to Declare Queryable (ingress) on @/{Z}0/ros2/**"));
         let got = lines.lock().unwrap().clone();
         assert_eq!(got.len(), 4, "{got:?}");
-        assert!(got[0].contains("pi (client 3f2a) may not publish servo_angles"), "{got:?}");
+        assert!(
+            got[0].contains("pi (client 3f2a) may not publish servo_angles"),
+            "{got:?}"
+        );
         assert!(got[1].contains("client 77aa has no role"), "{got:?}");
-        assert!(got[2].contains("may not subscribe to robot_description"), "{got:?}");
-        assert!(got[3].contains("may not serve queries on @/3f2a0/ros2/**"), "{got:?}");
+        assert!(
+            got[2].contains("may not subscribe to robot_description"),
+            "{got:?}"
+        );
+        assert!(
+            got[3].contains("may not serve queries on @/3f2a0/ros2/**"),
+            "{got:?}"
+        );
     }
 
     #[test]
     fn memory_is_bounded() {
         let (r, lines) = layer();
         for i in 0..(MAX_TRACKED + 50) {
-            r.take(&format!("Using cached result: {Z} is unauthorized to Put (ingress) on k{i}"));
+            r.take(&format!(
+                "Using cached result: {Z} is unauthorized to Put (ingress) on k{i}"
+            ));
         }
         let state = r.state.lock().unwrap();
         assert_eq!(state.seen.len(), MAX_TRACKED);

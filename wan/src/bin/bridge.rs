@@ -192,7 +192,10 @@ async fn main() {
     let connected = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     eezybot_wan::health::spawn(
         PROGRAM,
-        args.domain.as_deref().and_then(|d| d.parse().ok()).unwrap_or(0),
+        args.domain
+            .as_deref()
+            .and_then(|d| d.parse().ok())
+            .unwrap_or(0),
         eezybot_wan::health::Health {
             node: format!("eezybot_wan_bridge_{}", side.name()),
             namespace: check_namespace(&args.namespace).unwrap_or_default(),

@@ -69,7 +69,8 @@ async fn main() {
         let dir = tls_dir.unwrap_or_else(|| {
             fail(PROGRAM, "ZENOH_TLS_DIR is not set: the directory with ca.pem, router.pem and router.key (launch_scripts/wan_certs.sh)")
         });
-        let files = TlsFiles::load(&dir, "router", Role::Server).unwrap_or_else(|e| fail(PROGRAM, e));
+        let files =
+            TlsFiles::load(&dir, "router", Role::Server).unwrap_or_else(|e| fail(PROGRAM, e));
         files.configure(PROGRAM, &mut c, Role::Server);
         match CertificateExpiry::earliest(&[&files.cert, &files.ca]) {
             Ok(e) => eprintln!("{PROGRAM}: {}", e.summary(now_unix())),
