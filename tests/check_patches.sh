@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # The patched crates of patches/ stay honest (tests/run_all.sh runs this):
-# 1. the workspace resolves rustdds and ros2-client to their copies under patches/, and
+# 1. the workspace resolves rustdds, ros2-client and foxglove to their copies under patches/, and
 #    wan/ zenoh-plugin-ros2dds and zenoh-link-tls to wan/patches/
 #    (cargo only warns when a [patch.crates-io] entry goes unused, e.g. after a
 #    version bump), and so does patches/ros2-client's own lock file when its tests
 #    run against the patched rustdds;
 # 2. the unit tests of both copies pass, as we build them (feature `security`),
-#    ros2-client's against the patched rustdds.
+#    ros2-client's against the patched rustdds. (foxglove's copy is tested through
+#    libs/foxglove_bridge, its only user: its own tests need a dozen more crates.)
 # Both crates build in one target directory of their own (CARGO_TARGET_DIR, default
 # target/patches; tests/run_all.sh keeps it per machine): their dependencies are shared
 # between the two, not with the workspace (other profile).
@@ -45,7 +46,8 @@ trap 'rm -f "$metadata"' EXIT
 # --locked: a lock file that would have to change (e.g. to record an unused patch)
 # fails here too
 cargo metadata --format-version 1 --locked >"$metadata"
-check_resolution "workspace (Cargo.lock)" rustdds=patches/rustdds ros2-client=patches/ros2-client <"$metadata"
+check_resolution "workspace (Cargo.lock)" rustdds=patches/rustdds ros2-client=patches/ros2-client \
+  foxglove=patches/foxglove <"$metadata"
 cargo metadata --format-version 1 --locked --manifest-path patches/ros2-client/Cargo.toml \
   "${patch_rustdds[@]}" >"$metadata"
 check_resolution "patches/ros2-client (its Cargo.lock)" rustdds=patches/rustdds <"$metadata"

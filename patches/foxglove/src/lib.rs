@@ -514,7 +514,7 @@ mod websocket_server;
 #[cfg(feature = "websocket")]
 pub use websocket::ws_protocol;
 #[cfg(feature = "websocket")]
-pub use websocket_server::{WebSocketServer, WebSocketServerHandle};
+pub use websocket_server::{StreamAcceptor, WebSocketServer, WebSocketServerHandle};
 
 #[doc(hidden)]
 #[cfg(feature = "derive")]

@@ -4,7 +4,7 @@ use std::collections::HashMap;
 use std::fmt::{Debug, Display};
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::Arc;
+use std::sync::{Arc, Weak};
 
 use crate::sink_channel_filter::{SinkChannelFilter, SinkChannelFilterFn};
 use crate::websocket::PlaybackState;
@@ -258,6 +258,20 @@ impl WebSocketServer {
         Ok(WebSocketServerHandle(server, addr))
     }
 
+    /// Starts the WebSocket server without listening on any port: it serves only the
+    /// connections handed to it through [`WebSocketServerHandle::stream_acceptor`], which
+    /// their owner accepted (and checked: origin, authentication, limits) itself. The host
+    /// and port set with [`WebSocketServer::bind`] are not used, and the handle's
+    /// [`port`](WebSocketServerHandle::port) is 0. TLS, if wanted, is the owner's.
+    pub async fn start_without_listener(self) -> Result<WebSocketServerHandle, FoxgloveError> {
+        let server = create_server(&self.context, self.options)?;
+        server.start_without_listener()?;
+        Ok(WebSocketServerHandle(
+            server,
+            SocketAddr::from(([0, 0, 0, 0], 0)),
+        ))
+    }
+
     /// Starts the WebSocket server.
     ///
     /// Returns a handle that can optionally be used to gracefully shutdown the server. The caller
@@ -301,6 +315,12 @@ impl WebSocketServerHandle {
     /// Returns the number of currently connected clients.
     pub fn client_count(&self) -> usize {
         self.0.client_count()
+    }
+
+    /// Where to hand connections the caller accepted itself (see
+    /// [`WebSocketServer::start_without_listener`]).
+    pub fn stream_acceptor(&self) -> StreamAcceptor {
+        StreamAcceptor(Arc::downgrade(&self.0))
     }
 
     /// Returns an app URL to open the WebSocket connection as a data source.
@@ -392,5 +412,28 @@ impl WebSocketServerHandle {
     /// handle is dropped, all client tasks will be immediately aborted.
     pub fn stop(self) -> ShutdownHandle {
         self.0.stop().expect("this wrapper can only call stop once")
+    }
+}
+
+/// Hands connections to a running server: each is one end of an in-process pipe
+/// ([`tokio::io::duplex`]) whose other end carries a client's WebSocket upgrade request
+/// and then its frames, as read by the caller from a connection it accepted (and checked)
+/// itself. Holds the server weakly: once it is stopped or dropped, nothing is served.
+#[derive(Clone)]
+pub struct StreamAcceptor(Weak<Server>);
+
+impl Debug for StreamAcceptor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("StreamAcceptor").finish()
+    }
+}
+
+impl StreamAcceptor {
+    /// Serve the client on `stream` (`addr`: its address, for the server's log). False,
+    /// and the stream is dropped, when the server no longer runs.
+    pub fn serve(&self, stream: tokio::io::DuplexStream, addr: SocketAddr) -> bool {
+        self.0
+            .upgrade()
+            .is_some_and(|server| server.serve_stream(stream, addr))
     }
 }

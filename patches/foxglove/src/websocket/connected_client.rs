@@ -6,14 +6,13 @@ use std::{collections::HashMap, net::SocketAddr, sync::Arc};
 use bimap::BiHashMap;
 use flume::TrySendError;
 use send_lossy::SendLossyResult;
-use tokio::net::TcpStream;
 use tokio::sync::oneshot;
 use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::Message;
 
 use crate::sink_channel_filter::SinkChannelFilter;
 use crate::websocket::PlaybackControlRequest;
-use crate::websocket::streams::ServerStream;
+use crate::websocket::streams::ClientStream;
 use crate::{ChannelId, Context, FoxgloveError, Metadata, RawChannel, Sink, SinkId};
 
 use self::ws_protocol::server::{
@@ -156,7 +155,7 @@ impl ConnectedClient {
     pub fn new(
         context: &Weak<Context>,
         server: &Weak<Server>,
-        websocket: WebSocketStream<ServerStream<TcpStream>>,
+        websocket: WebSocketStream<ClientStream>,
         addr: SocketAddr,
         message_backlog_size: usize,
         channel_filter: Option<Arc<dyn SinkChannelFilter>>,

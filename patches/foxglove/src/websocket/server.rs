@@ -7,17 +7,19 @@ use std::{collections::HashMap, net::SocketAddr, sync::Arc};
 use indexmap::IndexSet;
 
 use futures_util::SinkExt;
+use tokio::io::DuplexStream;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::runtime::Handle;
 use tokio::task::{JoinError, JoinSet};
 use tokio::time::MissedTickBehavior;
 use tokio_tungstenite::tungstenite::Message;
+use tokio_util::either::Either;
 use tokio_util::sync::CancellationToken;
 
 use crate::library_version::get_library_identifier;
 use crate::sink_channel_filter::SinkChannelFilter;
 use crate::websocket::connected_client::ShutdownReason;
-use crate::websocket::streams::{Acceptor, StreamConfiguration, TlsIdentity};
+use crate::websocket::streams::{Acceptor, ClientStream, StreamConfiguration, TlsIdentity};
 use crate::{Context, FoxgloveError};
 
 use super::connected_client::ConnectedClient;
@@ -314,15 +316,54 @@ impl Server {
         self.listener.as_deref()
     }
 
+    /// Mark the server started (an error if it was started or stopped already).
+    fn start_tasks(&self) -> Result<(), FoxgloveError> {
+        let mut tasks = self.tasks.lock();
+        if tasks.is_some() || self.cancellation_token.is_cancelled() {
+            return Err(FoxgloveError::ServerAlreadyStarted);
+        }
+        tasks.replace(JoinSet::new());
+        Ok(())
+    }
+
+    /// Start without a listener: the server takes only the connections its owner hands it
+    /// ([`Server::serve_stream`]), and no port of this host leads to it.
+    pub fn start_without_listener(&self) -> Result<(), FoxgloveError> {
+        self.start_tasks()?;
+        let cancellation_token = self.cancellation_token.clone();
+        let server = self.arc();
+        self.runtime.spawn(async move {
+            tokio::select! {
+                () = server.clone().reap_completed_tasks() => (),
+                () = cancellation_token.cancelled() => (),
+            }
+        });
+        tracing::info!("Started server without a listener");
+        Ok(())
+    }
+
+    /// Serve a connection its owner accepted (and checked) itself: `stream` carries the
+    /// client's WebSocket upgrade request and then its frames, `addr` is the client's
+    /// address (for the log). No TLS here: the owner terminates it. False (and the stream
+    /// is dropped) when the server is not running.
+    pub fn serve_stream(&self, stream: DuplexStream, addr: SocketAddr) -> bool {
+        let mut tasks = self.tasks.lock();
+        let Some(tasks) = tasks.as_mut() else {
+            return false;
+        };
+        if self.cancellation_token.is_cancelled() {
+            return false;
+        }
+        tasks.spawn_on(
+            self.arc().serve_connection(Either::Right(stream), addr),
+            &self.runtime,
+        );
+        true
+    }
+
     // Spawn a task to accept all incoming connections and return the server's local address
     pub async fn start(&self, host: &str, port: u16) -> Result<SocketAddr, FoxgloveError> {
-        {
-            let mut tasks = self.tasks.lock();
-            if tasks.is_some() || self.cancellation_token.is_cancelled() {
-                return Err(FoxgloveError::ServerAlreadyStarted);
-            }
-            tasks.replace(JoinSet::new());
-        }
+        self.start_tasks()?;
 
         let addr = format!("{host}:{port}");
         let listener = TcpListener::bind(&addr)
@@ -633,7 +674,13 @@ impl Server {
                 return;
             }
         };
+        self.serve_connection(Either::Left(stream), addr).await;
+    }
 
+    /// A connection after TLS (if any), whether the server accepted it or its owner
+    /// handed it over: the WebSocket handshake, then the client as
+    /// [`Server::handle_connection`] says.
+    async fn serve_connection(self: Arc<Self>, stream: ClientStream, addr: SocketAddr) {
         let Ok(mut ws_stream) = handshake::do_handshake(stream).await else {
             tracing::error!("Dropping client {addr}: handshake failed");
             return;

@@ -1,11 +1,10 @@
 use futures_util::{SinkExt, StreamExt};
-use tokio::net::TcpStream;
 use tokio::sync::oneshot;
 use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::Message;
 
 use crate::websocket::Status;
-use crate::websocket::streams::ServerStream;
+use crate::websocket::streams::ClientStream;
 
 use super::{ConnectedClient, ShutdownReason};
 
@@ -16,7 +15,7 @@ use super::{ConnectedClient, ShutdownReason};
 /// - Receiving messages from the WebSocket and invoking [`ConnectedClient::handle_message`].
 /// - Waiting for a shutdown signal, and closing the WebSocket.
 pub(super) struct Poller {
-    websocket: WebSocketStream<ServerStream<TcpStream>>,
+    websocket: WebSocketStream<ClientStream>,
     data_plane_rx: flume::Receiver<Message>,
     control_plane_rx: flume::Receiver<Message>,
     shutdown_rx: oneshot::Receiver<ShutdownReason>,
@@ -25,7 +24,7 @@ pub(super) struct Poller {
 impl Poller {
     /// Creates a new poller.
     pub fn new(
-        websocket: WebSocketStream<ServerStream<TcpStream>>,
+        websocket: WebSocketStream<ClientStream>,
         data_plane_rx: flume::Receiver<Message>,
         control_plane_rx: flume::Receiver<Message>,
         shutdown_rx: oneshot::Receiver<ShutdownReason>,

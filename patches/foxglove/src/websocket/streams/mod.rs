@@ -17,6 +17,11 @@ use crate::FoxgloveError;
 
 pub(crate) type ServerStream<S> = Either<S, TlsStream<S>>;
 
+/// A client's stream: a TCP connection the server accepted (TLS or not), or one end of an
+/// in-process pipe its owner handed over ([`Server::serve_stream`](super::Server::serve_stream)),
+/// whose other end carries a connection the owner accepted and checked itself.
+pub(crate) type ClientStream = Either<ServerStream<TcpStream>, tokio::io::DuplexStream>;
+
 pub(crate) trait Acceptor {
     async fn accept(&self, stream: TcpStream) -> Result<ServerStream<TcpStream>, FoxgloveError>;
     fn accepts_tls(&self) -> bool;
