@@ -3,8 +3,9 @@
 //! The Foxglove SDK (0.25) accepts every TCP connection on its own listener, shows the
 //! server neither the upgrade request (no `Origin`, `Host`, URL or `Authorization`) nor
 //! the client's address, has no limit on connections, and reads messages of up to 64 MiB
-//! (tungstenite's default). So the SDK's server listens on a free port of 127.0.0.1 only,
-//! and this front listens on `foxglove_bind`:
+//! (tungstenite's default). So the SDK's server listens on no port at all (our copy of the
+//! SDK, patches/foxglove: `WebSocketServer::start_without_listener`), and this front
+//! listens on `foxglove_bind`:
 //!
 //! 1. at most [`FrontLimits::max_pending`] connections may be sending their request head,
 //!    and each has [`FrontLimits::header_timeout`] to send it, at most
@@ -13,9 +14,10 @@
 //!    token), which admits it (and says whether this client may publish) or refuses it
 //!    with an HTTP status;
 //! 3. at most [`FrontLimits::max_clients`] clients at once (503 beyond);
-//! 4. an admitted client is joined to the SDK's server; its frames are checked on the way
-//!    in, and a message over [`FrontLimits::max_message_bytes`] closes it with 1009
-//!    before its payload is read (nothing of it is buffered).
+//! 4. an admitted client is joined to the SDK's server through an in-process pipe
+//!    ([`tokio::io::duplex`], handed over with `foxglove::StreamAcceptor`); its frames are
+//!    checked on the way in, and a message over [`FrontLimits::max_message_bytes`] closes
+//!    it with 1009 before its payload is read (nothing of it is buffered).
 //!
 //! With a TLS configuration ([`crate::FoxgloveBridge::start_secure`]) the front speaks
 //! `wss://`: each connection's handshake runs in its own task, within
@@ -23,25 +25,29 @@
 //! or silent client holds up no other; the request head is then read from the decrypted
 //! stream as above.
 //!
-//! The SDK's port is still open to programs on this machine (which can publish on DDS
-//! directly anyway), and a web page could find it by trying ports. So that such a
-//! connection gets nothing, the front introduces each connection it makes: its first
-//! message to the SDK advertises a client channel (id [`INTRODUCTION_CHANNEL`]) whose
-//! topic is a random 128-bit introduction, known only to this process. The server's listener
-//! ([`crate::server`]) sends samples only to clients introduced so, and takes samples
-//! only from clients introduced as publishers; anything else the SDK's port is asked
-//! gets the channel list (names and schemas, no data).
+//! Before our copy of the SDK had `start_without_listener`, the SDK listened on a free
+//! port of 127.0.0.1, where a page of any origin could connect (found by trying ports)
+//! and send four 64 MiB messages to take the node to 363 MB (issue 36). Now every
+//! connection the SDK serves is one the front made. The front still introduces each one:
+//! its first message to the SDK advertises a client channel (id [`INTRODUCTION_CHANNEL`])
+//! whose topic is a random 128-bit introduction, known only to this process, and which
+//! says whether that client may publish. The server's listener ([`crate::server`]) sends
+//! samples only to clients introduced so, and takes samples only from clients introduced
+//! as publishers.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 
 /// The client channel id the introduction is advertised under (and unadvertised at once).
 pub(crate) const INTRODUCTION_CHANNEL: u32 = u32::MAX;
+
+/// Bytes each way in the pipe between the front and the SDK's server for one client.
+const PIPE_BYTES: usize = 64 * 1024;
 
 /// The upgrade request of a Foxglove client, as the [`Gate`] sees it.
 #[derive(Debug, Clone, Default)]
@@ -170,7 +176,8 @@ impl Introductions {
 pub(crate) struct Front {
     pub(crate) gate: Gate,
     pub(crate) limits: FrontLimits,
-    pub(crate) inner: SocketAddr,
+    /// where the SDK's server takes the connections the front joins to it
+    pub(crate) sdk: foxglove::StreamAcceptor,
     pub(crate) introductions: Arc<Introductions>,
     pub(crate) stats: Arc<FrontStats>,
     /// Does the SDK's server take samples at all?
@@ -290,7 +297,7 @@ impl Front {
             return;
         };
         let may_publish = admitted.may_publish && self.publishing;
-        if let Err(e) = self.join(client, &request, rest, may_publish).await {
+        if let Err(e) = self.join(client, peer, &request, rest, may_publish).await {
             log::debug!("Foxglove client {peer}: {e}");
         }
     }
@@ -299,6 +306,7 @@ impl Front {
     async fn join<S: AsyncRead + AsyncWrite + Unpin>(
         &self,
         client: S,
+        peer: SocketAddr,
         request: &UpgradeRequest,
         early: Vec<u8>,
         may_publish: bool,
@@ -307,8 +315,11 @@ impl Front {
             .introductions
             .issue(may_publish)
             .ok_or_else(|| std::io::Error::other("no random numbers for an introduction"))?;
-        let mut inner = TcpStream::connect(self.inner).await?;
-        let _ = inner.set_nodelay(true);
+        // the SDK's end of the pipe: its buffer bounds what waits in it either way
+        let (mut inner, sdk_end) = tokio::io::duplex(PIPE_BYTES);
+        if !self.sdk.serve(sdk_end, peer) {
+            return Err(std::io::Error::other("the SDK's server no longer runs"));
+        }
         // the request as the SDK needs it: no token, no cookie, no URL
         let mut head = String::from("GET / HTTP/1.1\r\n");
         for (name, value) in &request.headers {
@@ -319,7 +330,7 @@ impl Front {
         head.push_str("\r\n");
         inner.write_all(head.as_bytes()).await?;
         let (mut client_rd, mut client_wr) = tokio::io::split(client);
-        let (mut inner_rd, mut inner_wr) = inner.into_split();
+        let (mut inner_rd, mut inner_wr) = tokio::io::split(inner);
         // the SDK's answer, then its first message (serverInfo), on to the client
         let (answer_head, mut buffered) = read_head(&mut inner_rd, 64 * 1024)
             .await

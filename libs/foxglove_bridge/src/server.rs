@@ -75,8 +75,9 @@ struct Shared {
 }
 
 impl Shared {
-    /// Did the front introduce this client (None: no, a connection to the SDK's port that
-    /// did not come through the front)? Some(may publish) if so.
+    /// Did the front introduce this client (None: no: a connection that did not come
+    /// through the front, which the SDK, listening on no port, no longer has)? Some(may
+    /// publish) if so.
     fn introduced(&self, client: &Client) -> Option<bool> {
         self.introduced.lock().ok()?.get(&client.id()).copied()
     }
@@ -231,24 +232,24 @@ impl FoxgloveBridge {
         let local_addr = listener
             .local_addr()
             .map_err(|e| server_error(foxglove::FoxgloveError::Bind(e)))?;
-        // the SDK's server on a free loopback port, behind the front; clientPublish always
-        // (the front introduces its connections with a client channel), taken from the
-        // serverInfo of a client that may not publish
+        // the SDK's server behind the front, on no port of its own (patches/foxglove): it
+        // serves only the connections the front hands it. clientPublish always (the front
+        // introduces its connections with a client channel), taken from the serverInfo of
+        // a client that may not publish
         let server = foxglove::WebSocketServer::new()
             .name(server_name)
-            .bind("127.0.0.1", 0)
             .context(&context)
             .listener(Arc::new(Listener(shared.clone())))
             .capabilities([Capability::ClientPublish])
             .supported_encodings(["cdr"])
-            .start()
+            .start_without_listener()
             .await
             .map_err(server_error)?;
         let front_stats = Arc::new(FrontStats::default());
         let front = Arc::new(Front {
             gate,
             limits,
-            inner: SocketAddr::from(([127, 0, 0, 1], server.port())),
+            sdk: server.stream_acceptor(),
             introductions: shared.introductions.clone(),
             stats: front_stats.clone(),
             publishing: publish != ClientPublish::Off,
@@ -265,13 +266,6 @@ impl FoxgloveBridge {
             front,
             front_stats,
         })
-    }
-
-    /// The address of the SDK's own server behind the front (loopback), for tests that
-    /// check what a connection bypassing the front gets (nothing but the channel list).
-    #[doc(hidden)]
-    pub fn sdk_addr(&self) -> SocketAddr {
-        SocketAddr::from(([127, 0, 0, 1], self.server.as_ref().map_or(0, |s| s.port())))
     }
 
     /// The front's counters (refusals, busy, oversized messages, header timeouts).
@@ -313,8 +307,8 @@ impl FoxgloveBridge {
                 latched.insert(t.spec.topic, (Arc::from(cdr), log_time_ns));
             }
         }
-        // to the introduced clients subscribed, each by its sink (never to all sinks: a
-        // connection to the SDK's port that bypassed the front is a sink too)
+        // to the introduced clients subscribed, each by its sink (never to all sinks: every
+        // client is a sink, introduced or not)
         let sinks: Vec<SinkId> = match self.shared.sinks.lock() {
             Ok(s) => s
                 .get(t.spec.topic)
@@ -410,7 +404,7 @@ impl ServerListener for Listener {
         };
         let (Some(_), Some(sink)) = (self.0.introduced(&client), client.sink_id()) else {
             client.send_status(Status::error(
-                "connect through the server's address, not the SDK's port".to_string(),
+                "this connection was not introduced by the server's front".to_string(),
             ));
             return;
         };

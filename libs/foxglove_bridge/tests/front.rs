@@ -149,38 +149,6 @@ async fn the_gate_decides_who_connects_and_who_publishes() {
 }
 
 #[tokio::test]
-async fn a_connection_to_the_sdk_s_own_port_gets_no_data_and_cannot_publish() {
-    let mut bridge = start(ClientPublish::Targets { queue: 8 }).await;
-    bridge.log("robot_description", &urdf(), 1).unwrap();
-    let mut samples = bridge.take_client_samples().unwrap();
-    // a page that found the SDK's port by trying ports: its Origin is not checked there
-    let mut sneak = try_connect(bridge.sdk_addr(), Some("http://evil.example"))
-        .await
-        .unwrap();
-    subscribe_urdf(&mut sneak).await;
-    send_target(&mut sneak).await;
-    // the same through the front gets the latched URDF at once
-    let mut front = try_connect(bridge.local_addr(), None).await.unwrap();
-    subscribe_urdf(&mut front).await;
-    assert!(
-        message_data(&mut front, WAIT).await.is_some(),
-        "the front's client got nothing"
-    );
-    bridge.log("robot_description", &urdf(), 2).unwrap();
-    // A sample logged to the sneak would be in its queue now. Data and answers leave by
-    // two queues, so a sample queued before an answer may follow it, but not the answer
-    // to a request sent after that one came.
-    for _ in 0..2 {
-        assert!(
-            !has_message_data(&round_trip(&mut sneak).await),
-            "data leaked"
-        );
-    }
-    assert_no_sample(&mut samples, "a sample from the SDK's port");
-    bridge.stop().await;
-}
-
-#[tokio::test]
 async fn connections_over_the_cap_are_refused_with_503() {
     let limits = FrontLimits {
         max_clients: 4,
