@@ -731,6 +731,8 @@ impl Panel {
             ClientRequest::Check { xyz } => {
                 return vec![Effect::Answer(self.check(xyz))];
             }
+            // taken by the web side (a waiting client's first message)
+            ClientRequest::Hello => return vec![],
             ClientRequest::Program(op) => {
                 let out = self.desk.request(
                     op,

@@ -10,7 +10,18 @@
 //!
 //! What happens to the connections (refusals, bad requests, ends) goes to the bridge
 //! loop as [`WebEvent`]s, on a channel of their own: the loop keeps the counters
-//! ([`WebStats`]), and the server's tasks share no lock.
+//! ([`WebStats`]), and the server's tasks share no lock but the [`WaitingRoom`]'s.
+//!
+//! **Who holds one of the [`Limits::max_clients`] places.** A client that presented the
+//! panel's token holds one from its upgrade (503 when all are taken). On a panel without
+//! a token, where any program on this machine passes the access policy, a client takes a
+//! place only with its first request (the page sends `{"t": "hello"}` as soon as it is
+//! connected): until then it waits in the [`WaitingRoom`], which holds at most
+//! [`Limits::max_waiting`] and makes room for a newcomer by closing the one that has
+//! waited longest (code 1013). So connections that send nothing hold no place, however
+//! many are opened, and the operator's page, which speaks at once, always gets in
+//! (issue 36: 32 silent connections had taken every place, and the operator's browser
+//! got 503).
 
 use crate::access::{self, AccessPolicy, RequestFacts};
 use axum::body::Bytes;
@@ -27,9 +38,10 @@ use ros_plumbing::logging::shorten;
 use serde::Deserialize;
 use std::fmt;
 use std::net::SocketAddr;
-use std::sync::Arc;
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use tokio::sync::{broadcast, mpsc, watch, Semaphore};
+use tokio::sync::{broadcast, mpsc, watch, Notify, OwnedSemaphorePermit, Semaphore};
 
 pub mod stats;
 pub use stats::{LogLine, WebEvent, WebStats};
@@ -126,6 +138,9 @@ pub enum ClientRequest {
     /// The recording card (`{"t": "record", "op": "start", "task": …}`, `save`,
     /// `discard`): calls on the recorder node.
     Record(RecordRequest),
+    /// The page's first message (`{"t": "hello"}`): nothing to do but to take a client's
+    /// place on a panel without a token ([`WaitingRoom`]); never sent to the bridge loop.
+    Hello,
 }
 
 /// What a browser asks of the recorder ([`crate::recording::RecordOp`]).
@@ -303,6 +318,9 @@ pub struct Limits {
     pub event_queue: usize,
     /// Clients connected at once.
     pub max_clients: usize,
+    /// Connections that have sent nothing yet on a panel without a token, at once (the
+    /// [`WaitingRoom`]); beyond, the one that has waited longest is closed.
+    pub max_waiting: usize,
     /// Largest amount of outgoing data buffered for one client, bytes.
     pub max_write_buffer_bytes: usize,
     /// A client that does not take a message within this time is dropped.
@@ -318,6 +336,7 @@ impl Default for Limits {
             estop_queue: 16,
             event_queue: 256,
             max_clients: 32,
+            max_waiting: 32,
             // room for one camera image and its frame header
             max_write_buffer_bytes: MAX_IMAGE_BYTES + 64 * 1024,
             send_timeout: Duration::from_secs(10),
@@ -428,6 +447,18 @@ pub enum ClientEnd {
         /// the timeout
         timeout: Duration,
     },
+    /// It had sent nothing, and the [`WaitingRoom`] made room for a newer connection
+    /// (closed with code 1013 and the reason).
+    Evicted {
+        /// the room's size
+        max_waiting: usize,
+    },
+    /// Its first request came when all [`Limits::max_clients`] places were taken (closed
+    /// with code 1013; reported as [`WebEvent::Busy`] too).
+    Full {
+        /// the limit
+        max_clients: usize,
+    },
     /// The node stops.
     Shutdown,
 }
@@ -442,6 +473,8 @@ impl ClientEnd {
             ClientEnd::WriteError(_) => "client/write_error",
             ClientEnd::Oversized { .. } => "client/oversized",
             ClientEnd::Stalled { .. } => "client/stalled",
+            ClientEnd::Evicted { .. } => "client/evicted",
+            ClientEnd::Full { .. } => "client/full",
             ClientEnd::Shutdown => "client/shutdown",
         }
     }
@@ -449,15 +482,18 @@ impl ClientEnd {
     /// Whether the panel dropped the client (counted in `clients_dropped`),
     /// rather than the client or the node ending the connection in order.
     pub fn is_drop(&self) -> bool {
-        !matches!(self, ClientEnd::Closed | ClientEnd::Shutdown)
+        !matches!(
+            self,
+            ClientEnd::Closed | ClientEnd::Shutdown | ClientEnd::Full { .. }
+        )
     }
 
     /// How loud its log line is: debug for an orderly end, info for a client that went
     /// away, warn for errors.
     pub fn level(&self) -> log::Level {
         match self {
-            ClientEnd::Closed | ClientEnd::Shutdown => log::Level::Debug,
-            ClientEnd::Gone(_) => log::Level::Info,
+            ClientEnd::Closed | ClientEnd::Shutdown | ClientEnd::Full { .. } => log::Level::Debug,
+            ClientEnd::Gone(_) | ClientEnd::Evicted { .. } => log::Level::Info,
             _ => log::Level::Warn,
         }
     }
@@ -533,6 +569,14 @@ impl fmt::Display for ClientEnd {
             ClientEnd::Stalled { timeout } => {
                 write!(f, "took no message within {:.1} s", timeout.as_secs_f64())
             }
+            ClientEnd::Evicted { max_waiting } => write!(
+                f,
+                "sent nothing while {max_waiting} newer connections came (closed with 1013)"
+            ),
+            ClientEnd::Full { max_clients } => write!(
+                f,
+                "its first request came with {max_clients} clients connected (closed with 1013)"
+            ),
             ClientEnd::Shutdown => write!(f, "the node stops"),
         }
     }
@@ -554,6 +598,9 @@ pub struct WebState {
     /// Room for [`Limits::max_clients`] clients: the one thing the accept path must know
     /// at once (a semaphore, no lock); the counters are the bridge loop's ([`WebStats`]).
     pub slots: Arc<Semaphore>,
+    /// Connections without a place yet (a panel without a token: until their first
+    /// request).
+    pub waiting: Arc<WaitingRoom>,
     /// The URDF the page's 3D view loads from `/robot.urdf` (None: not known yet). Over
     /// HTTP, not in a WebSocket message: a URDF can be larger than a client's write buffer.
     pub urdf: Arc<dyn Fn() -> Option<Arc<str>> + Send + Sync>,
@@ -578,6 +625,7 @@ impl WebState {
             hello,
             access: Arc::new(access),
             slots: Arc::new(Semaphore::new(limits.max_clients)),
+            waiting: Arc::new(WaitingRoom::new(limits.max_waiting)),
             limits,
             urdf: Arc::new(|| None),
             camera: watch::channel(None).1,
@@ -765,7 +813,11 @@ async fn guard(State(state): State<WebState>, request: Request, next: Next) -> R
         state.access.check(&facts)
     };
     match decision {
-        Ok(_) => next.run(request).await,
+        Ok(admission) => {
+            let mut request = request;
+            request.extensions_mut().insert(admission);
+            next.run(request).await
+        }
         Err(refusal) => {
             let what = format!("{} {}", request.method(), request.uri().path());
             let event = WebEvent::Refused {
@@ -792,26 +844,58 @@ async fn guard(State(state): State<WebState>, request: Request, next: Next) -> R
     }
 }
 
+/// Where a client stands: in one of the [`Limits::max_clients`] places, or waiting for
+/// its first request in the [`WaitingRoom`] (a panel without a token).
+enum Seat {
+    Placed {
+        /// the place, given back when the client goes
+        _slot: OwnedSemaphorePermit,
+    },
+    Waiting(Waiting),
+}
+
+/// Until `leave` is notified; never without one.
+async fn told_to_leave(leave: Option<Arc<Notify>>) {
+    match leave {
+        Some(leave) => leave.notified().await,
+        None => std::future::pending().await,
+    }
+}
+
 async fn ws_handler(
     ws: WebSocketUpgrade,
     State(state): State<WebState>,
     connect_info: Option<Extension<ConnectInfo<SocketAddr>>>,
+    admission: Option<Extension<access::Admission>>,
 ) -> Response {
     let who = connect_info.map(|c| c.0 .0);
-    let Ok(slot) = state.slots.clone().try_acquire_owned() else {
-        let max_clients = state.limits.max_clients;
-        state
-            .requests
-            .report(WebEvent::Busy { who, max_clients })
-            .await;
-        return (
-            StatusCode::SERVICE_UNAVAILABLE,
-            format!(
-                "503: {} clients are connected already\n",
-                state.limits.max_clients
-            ),
+    // a client that presented the token takes its place now; on a panel without one, a
+    // client waits for its first request (any program here passes the policy)
+    let token = admission.is_some_and(|a| {
+        matches!(
+            a.0.by,
+            access::Credential::Query | access::Credential::Header | access::Credential::Protocol
         )
-            .into_response();
+    });
+    let placed = if token {
+        let Ok(slot) = state.slots.clone().try_acquire_owned() else {
+            let max_clients = state.limits.max_clients;
+            state
+                .requests
+                .report(WebEvent::Busy { who, max_clients })
+                .await;
+            return (
+                StatusCode::SERVICE_UNAVAILABLE,
+                format!(
+                    "503: {} clients are connected already\n",
+                    state.limits.max_clients
+                ),
+            )
+                .into_response();
+        };
+        Some(slot)
+    } else {
+        None
     };
     let l = state.limits;
     let from = who.map_or_else(|| "(unknown address)".to_string(), |a| a.to_string());
@@ -830,10 +914,13 @@ async fn ws_handler(
             tokio::spawn(async move { events.report(event).await });
         })
         .on_upgrade(move |socket| async move {
+            let seat = match placed {
+                Some(slot) => Seat::Placed { _slot: slot },
+                None => Seat::Waiting(state.waiting.enter()),
+            };
             state.requests.report(WebEvent::Connected).await;
             let mut bad_requests = 0;
-            let end = client(socket, &state, &from, &mut bad_requests).await;
-            drop(slot);
+            let end = client(socket, &state, (who, &from), seat, &mut bad_requests).await;
             // a broken connection ends this client's task only: counted, logged, gone
             let event = WebEvent::Ended {
                 from,
@@ -885,10 +972,27 @@ async fn bad_request(
     send(socket, refused(&format!("bad request: {reason}")), state).await
 }
 
-/// Serve one client until its connection ends; how it ended. Besides the JSON
-/// messages it gets the camera view's images, each a binary message (the image file). `bad` counts the
-/// messages from it that were no request.
-async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u64) -> ClientEnd {
+/// Close `socket` with code 1013 (try again later) and `reason`.
+async fn try_later(socket: &mut WebSocket, state: &WebState, reason: String) {
+    let close = CloseFrame {
+        code: 1013,
+        reason: reason.into(),
+    };
+    let _ = send(socket, WsMessage::Close(Some(close)), state).await;
+}
+
+/// Serve one client (`who`: its address, and as text) until its connection ends; how it
+/// ended. Besides the JSON messages it gets the camera view's images, each a binary
+/// message (the image file). A waiting client ([`Seat::Waiting`]) takes a place with its
+/// first request, or leaves when the [`WaitingRoom`] makes room for a newer one. `bad`
+/// counts the messages from it that were no request.
+async fn client(
+    mut socket: WebSocket,
+    state: &WebState,
+    (who, from): (Option<SocketAddr>, &str),
+    mut seat: Seat,
+    bad: &mut u64,
+) -> ClientEnd {
     let mut all = state.broadcast.subscribe();
     let (reply_tx, mut replies) = mpsc::channel::<String>(state.limits.reply_queue.max(1));
     if let Err(end) = send(&mut socket, WsMessage::Text((state.hello)().into()), state).await {
@@ -900,7 +1004,17 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
     camera.borrow_and_update();
     let mut camera_open = true;
     loop {
+        let leave = match &seat {
+            Seat::Waiting(w) => Some(w.leave.clone()),
+            Seat::Placed { .. } => None,
+        };
         tokio::select! {
+            () = told_to_leave(leave) => {
+                let max_waiting = state.limits.max_waiting;
+                let reason = "room made for a newer connection: one that sends nothing holds no place";
+                try_later(&mut socket, state, reason.into()).await;
+                return ClientEnd::Evicted { max_waiting };
+            }
             incoming = socket.recv() => {
                 let text = match incoming {
                     None => return ClientEnd::Closed,
@@ -929,6 +1043,19 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
                 };
                 match serde_json::from_str::<ClientRequest>(&text) {
                     Ok(request) => {
+                        if matches!(seat, Seat::Waiting(_)) {
+                            // its first request: a place, if one is free
+                            let Ok(slot) = state.slots.clone().try_acquire_owned() else {
+                                let max_clients = state.limits.max_clients;
+                                state.requests.report(WebEvent::Busy { who, max_clients }).await;
+                                try_later(&mut socket, state, format!("{max_clients} clients are connected already")).await;
+                                return ClientEnd::Full { max_clients };
+                            };
+                            seat = Seat::Placed { _slot: slot };
+                        }
+                        if request == ClientRequest::Hello {
+                            continue;
+                        }
                         // waits while the loop is busy: this client's next message stays
                         // unread (TCP holds it), other clients take their turns
                         if state.requests.send(FromClient { request, reply: reply_tx.clone() }).await.is_err() {
@@ -960,5 +1087,87 @@ async fn client(mut socket: WebSocket, state: &WebState, from: &str, bad: &mut u
                 Err(_) => camera_open = false,
             },
         }
+    }
+}
+
+/// Connections that have not sent their first request yet, on a panel without a token:
+/// at most `max`, oldest first. A newcomer beyond makes the oldest leave (its
+/// [`Waiting::leave`] is notified; its task closes it with 1013). Shared by the server's
+/// tasks behind a lock held only to enter and leave (at most `max` entries).
+#[derive(Debug)]
+pub struct WaitingRoom {
+    max: usize,
+    /// the next entry's number, and the entries (number, its leave signal), oldest first
+    queue: Mutex<(u64, VecDeque<(u64, Arc<Notify>)>)>,
+}
+
+impl WaitingRoom {
+    /// A room for `max` connections (at least one).
+    pub fn new(max: usize) -> WaitingRoom {
+        WaitingRoom {
+            max: max.max(1),
+            queue: Mutex::new((0, VecDeque::new())),
+        }
+    }
+
+    fn queue(&self) -> std::sync::MutexGuard<'_, (u64, VecDeque<(u64, Arc<Notify>)>)> {
+        // a poisoned lock only means a panic elsewhere while it was held: the queue is
+        // still consistent (each change is one push or remove)
+        self.queue.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Enter; the oldest leave while the room is full. The guard leaves when dropped.
+    ///
+    /// # Examples
+    /// ```
+    /// use gui_bridge::web::WaitingRoom;
+    /// let room = std::sync::Arc::new(WaitingRoom::new(2));
+    /// let (a, b) = (room.enter(), room.enter());
+    /// let c = room.enter(); // a is told to leave
+    /// assert_eq!(room.len(), 2);
+    /// drop(b);
+    /// assert_eq!(room.len(), 1);
+    /// ```
+    pub fn enter(self: &Arc<Self>) -> Waiting {
+        let leave = Arc::new(Notify::new());
+        let mut q = self.queue();
+        let id = q.0;
+        q.0 += 1;
+        while q.1.len() >= self.max {
+            if let Some((_, oldest)) = q.1.pop_front() {
+                oldest.notify_one();
+            }
+        }
+        q.1.push_back((id, leave.clone()));
+        Waiting {
+            id,
+            leave,
+            room: self.clone(),
+        }
+    }
+
+    /// How many wait now.
+    pub fn len(&self) -> usize {
+        self.queue().1.len()
+    }
+
+    /// Whether none waits.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A place in the [`WaitingRoom`], left when dropped.
+#[derive(Debug)]
+pub struct Waiting {
+    id: u64,
+    /// Notified when the room makes room for a newer connection: leave then.
+    pub leave: Arc<Notify>,
+    room: Arc<WaitingRoom>,
+}
+
+impl Drop for Waiting {
+    fn drop(&mut self) {
+        self.room.queue().1.retain(|(id, _)| *id != self.id);
     }
 }

@@ -69,10 +69,12 @@ function connect() {
   let opened = false;
   ws = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws",
                      TOKEN ? ["eezybot.panel.v1", "token." + TOKEN] : ["eezybot.panel.v1"]);
-  ws.onopen = () => { opened = true; showAccess(""); $("ws-dot").className = "dot up"; };
+  // the first message takes this page's place among the panel's clients (without a token,
+  // a connection that has said nothing holds none)
+  ws.onopen = () => { opened = true; send({ t: "hello" }); showAccess(""); $("ws-dot").className = "dot up"; };
   ws.onclose = async (ev) => {
     $("ws-dot").className = "dot down";
-    if (ev.code === 1009) showAccess("The panel closed the connection: " + ev.reason);
+    if (ev.code === 1009 || ev.code === 1013) showAccess("The panel closed the connection: " + ev.reason);
     const refused = !opened && await explainRefusal();
     retry = setTimeout(connect, refused ? 5000 : 1000);
   };

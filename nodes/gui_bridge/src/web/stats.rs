@@ -88,6 +88,7 @@ pub struct WebStats {
     clients_dropped: u64,
     dropped_replies: u64,
     stalled: u64,
+    evicted: u64,
     last_refusal: Option<(Instant, String)>,
     logged: HashSet<(IpAddr, &'static str)>,
     last_rejection: Option<String>,
@@ -216,6 +217,7 @@ impl WebStats {
         match end {
             ClientEnd::Oversized { .. } => self.oversized += 1,
             ClientEnd::Stalled { .. } => self.stalled += 1,
+            ClientEnd::Evicted { .. } => self.evicted += 1,
             _ => {}
         }
         self.dropped(from, end.kind(), end.level(), end.to_string(), &after, now)
@@ -294,6 +296,7 @@ impl WebStats {
             ("last_client_drop", text(&self.last_drop)),
             ("closed_oversized", self.oversized.to_string()),
             ("closed_stalled", self.stalled.to_string()),
+            ("closed_waiting", self.evicted.to_string()),
             ("rejected", self.rejected.to_string()),
             ("bad_requests", self.bad_requests.to_string()),
             ("last_rejection", text(&self.last_rejection)),
