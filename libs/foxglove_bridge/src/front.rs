@@ -123,6 +123,11 @@ pub struct FrontLimits {
     pub max_header_bytes: usize,
     /// Largest message from a client (every frame of a fragmented message together).
     pub max_message_bytes: u64,
+    /// Largest sample the server forwards to its clients (and keeps as a latched topic's
+    /// last): a larger one is refused ([`crate::FoxgloveBridge::log`]) and counted in
+    /// [`FrontStats::oversized_samples`]. Any DDS peer may publish a URDF of megabytes;
+    /// each client's queue holds up to 1024 samples.
+    pub max_sample_bytes: usize,
 }
 
 impl Default for FrontLimits {
@@ -133,6 +138,8 @@ impl Default for FrontLimits {
             header_timeout: Duration::from_secs(10),
             max_header_bytes: 16 * 1024,
             max_message_bytes: 1024 * 1024,
+            // a camera image of the panel's largest (gui_bridge's MAX_IMAGE_BYTES)
+            max_sample_bytes: 2 * 1024 * 1024,
         }
     }
 }
@@ -150,6 +157,8 @@ pub struct FrontStats {
     pub header_timeouts: std::sync::atomic::AtomicU64,
     /// TLS handshakes that failed (a client that does not trust the certificate).
     pub tls_failures: std::sync::atomic::AtomicU64,
+    /// Samples not forwarded for being over [`FrontLimits::max_sample_bytes`].
+    pub oversized_samples: std::sync::atomic::AtomicU64,
 }
 
 /// Introductions handed out to the front's own connections: random topic → may publish.

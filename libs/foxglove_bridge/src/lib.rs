@@ -32,6 +32,16 @@ pub enum FoxgloveBridgeError {
         #[source]
         source: foxglove::FoxgloveError,
     },
+    /// A sample over [`FrontLimits::max_sample_bytes`], not forwarded.
+    #[error("{topic}: a sample of {bytes} bytes is not forwarded (more than {limit})")]
+    SampleTooLarge {
+        /// the topic (relative name)
+        topic: String,
+        /// the sample's size
+        bytes: usize,
+        /// the limit
+        limit: usize,
+    },
     /// A topic that is not one of the graph's ([`TOPICS`]).
     #[error("{topic:?} is not a topic of the graph")]
     UnknownTopic {

@@ -114,6 +114,7 @@ pub struct FoxgloveBridge {
     from_clients: Option<mpsc::Receiver<ClientSample>>,
     front: tokio::task::JoinHandle<()>,
     front_stats: Arc<FrontStats>,
+    max_sample_bytes: usize,
 }
 
 impl Drop for FoxgloveBridge {
@@ -265,6 +266,7 @@ impl FoxgloveBridge {
             from_clients,
             front,
             front_stats,
+            max_sample_bytes: limits.max_sample_bytes,
         })
     }
 
@@ -288,7 +290,9 @@ impl FoxgloveBridge {
     /// `cdr` exactly as received from DDS, with its 4-byte encapsulation header;
     /// `log_time_ns` = when it was received (ns since the Unix epoch). Costs nothing
     /// beyond a lookup when nobody subscribes, except that the last sample of a latched
-    /// topic is kept for later subscribers.
+    /// topic is kept for later subscribers. A sample over
+    /// [`FrontLimits::max_sample_bytes`] is refused (counted in
+    /// [`FrontStats::oversized_samples`]; a latched topic keeps its last one).
     pub fn log(
         &self,
         topic: &str,
@@ -302,6 +306,16 @@ impl FoxgloveBridge {
             .ok_or_else(|| FoxgloveBridgeError::UnknownTopic {
                 topic: topic.to_string(),
             })?;
+        if cdr.len() > self.max_sample_bytes {
+            self.front_stats
+                .oversized_samples
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return Err(FoxgloveBridgeError::SampleTooLarge {
+                topic: topic.to_string(),
+                bytes: cdr.len(),
+                limit: self.max_sample_bytes,
+            });
+        }
         if t.spec.latched {
             if let Ok(mut latched) = self.shared.latched.lock() {
                 latched.insert(t.spec.topic, (Arc::from(cdr), log_time_ns));

@@ -5,9 +5,8 @@
 mod common;
 
 use common::{
-    advertise, assert_no_sample, channel_ids, client_message, handshake, has_message_data,
-    message_data, next_json, next_sample, offers, round_trip, start, start_with, subscribe,
-    try_connect, Ws, WAIT,
+    advertise, assert_no_sample, channel_ids, client_message, handshake, next_json, next_sample,
+    offers, round_trip, start, start_with, subscribe, try_connect, Ws, WAIT,
 };
 use eezybot_msgs::geometry_msgs::PointStamped;
 use eezybot_msgs::std_msgs::String as RosString;
@@ -239,4 +238,39 @@ async fn the_sdk_s_own_refusal_reaches_the_client_whole() {
     .await;
     assert!(answer.starts_with("HTTP/1.1 400"), "{answer}");
     assert!(answer.contains("sec-websocket-protocol"), "{answer}");
+}
+
+#[tokio::test]
+async fn a_sample_over_the_limit_is_not_forwarded_and_a_latched_topic_keeps_its_last() {
+    // issue 36: any DDS peer may publish a URDF of megabytes, and each client's queue
+    // holds up to 1024 samples
+    let limits = FrontLimits {
+        max_sample_bytes: 1000,
+        ..FrontLimits::default()
+    };
+    let bridge = start_limited(limits).await;
+    bridge.log("robot_description", &urdf(), 1).unwrap();
+    let big = eezybot_msgs::cdr::encode(&RosString {
+        data: format!("<robot name='{}'/>", "x".repeat(2000)),
+    })
+    .unwrap();
+    let refused = bridge.log("robot_description", &big, 2).unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains("is not forwarded (more than 1000)"),
+        "{refused}"
+    );
+    assert_eq!(
+        bridge
+            .front_stats()
+            .oversized_samples
+            .load(Ordering::Relaxed),
+        1
+    );
+    // a client that subscribes now gets the last sample within the limit
+    let mut ws = try_connect(bridge.local_addr(), None).await.unwrap();
+    subscribe_urdf(&mut ws).await;
+    assert_eq!(common::next_message_data(&mut ws).await, (1, 1, urdf()));
+    bridge.stop().await;
 }

@@ -59,7 +59,9 @@ async fn the_sdk_listens_on_no_port_and_the_front_still_serves() {
     let mut ws = connect(bridge.local_addr()).await;
     next_json(&mut ws, "serverInfo").await;
     let ids = channel_ids(&mut ws).await;
-    ws.send(subscribe(1, ids["/robot_description"])).await.unwrap();
+    ws.send(subscribe(1, ids["/robot_description"]))
+        .await
+        .unwrap();
     assert_eq!(next_message_data(&mut ws).await, (1, 1, urdf));
     bridge.stop().await;
 }

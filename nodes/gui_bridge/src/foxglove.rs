@@ -446,6 +446,9 @@ async fn forward(
         let always = always_tapped_topics();
         let mut wanted: BTreeSet<&'static str> = always.clone();
         taps.follow(node, &wanted);
+        // a peer flooding samples over the limit gets a line every few seconds (each one
+        // is counted in diagnostics: foxglove_oversized_samples)
+        let mut complaints = ros_plumbing::logging::Throttle::default();
         loop {
             tokio::select! {
                 changed = watched.changed() => {
@@ -457,7 +460,9 @@ async fn forward(
                 }
                 Some((topic, cdr)) = taps.streams.next() => {
                     if let Err(e) = bridge.log(topic, &cdr, now_ns()) {
-                        log::warn!("Foxglove: {e}");
+                        if let Some(quiet) = complaints.allow(topic, std::time::Instant::now()) {
+                            log::warn!("Foxglove: {e}{}", ros_plumbing::logging::Throttle::suffix(quiet));
+                        }
                     }
                 }
             }

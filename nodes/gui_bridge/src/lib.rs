@@ -2,6 +2,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod access;
+pub mod bounded;
 pub mod calibrate;
 pub mod calibrate_cli;
 pub mod calibration_ros;
@@ -268,6 +269,15 @@ pub enum Input {
     Tf(scene::CubeTf),
     /// an image of the camera view's topic (`camera_view`)
     CameraImage(scene::CameraImage),
+    /// A sample on `topic` over the panel's limits ([`bounded`]): not copied, logged
+    /// (throttled), counted in `diagnostics` and shown on the page; the panel keeps what
+    /// it had.
+    Refused {
+        /// the topic, as subscribed (`robot_description`, `leader/joint_states`, …)
+        topic: &'static str,
+        /// why, e.g. `16000 joints > 256`
+        reason: String,
+    },
     /// A sample on `topic` that could not be deserialized (malformed CDR): logged,
     /// counted in `diagnostics`, otherwise ignored (an unreadable `estop` changes nothing).
     Unreadable {
@@ -733,7 +743,13 @@ impl<'m, O: Outputs> Sink<'_, 'm, O> {
                     Command::Estop(on) => self.outputs.estop(on),
                 },
                 Effect::Broadcast(message) => {
-                    let _ = self.to_browsers.send(message.to_text());
+                    let text = message.to_text();
+                    if text.len() > web::MAX_BROADCAST_BYTES {
+                        // bounded at their sources (bounded.rs); this is the last wall
+                        log(self.web.dropped_broadcast(&text, Instant::now()));
+                    } else {
+                        let _ = self.to_browsers.send(text);
+                    }
                 }
                 Effect::Answer(message) => {
                     let full = reply.map(|r| r.try_send(message.to_text()));

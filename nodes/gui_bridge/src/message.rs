@@ -95,6 +95,12 @@ pub enum ToClient {
     /// The recording card: the recorder's state and the last episode call (made by
     /// recording.rs's `RecordCard::view`).
     Recorder(Box<RecordView>),
+    /// The inputs refused now (`robot_description` over the limits, …: bounded.rs),
+    /// each with its reason; empty once each refused topic's next sample is taken.
+    InputsRefused {
+        /// topic and reason, e.g. `robot_description`, `16000 joints > 256`
+        inputs: Vec<crate::bounded::InputRefusal>,
+    },
     /// The physics twin's cube (its `tf` frame `cube` in `base_frame`), at most
     /// [`crate::scene::CUBE_VIEW_RATE_HZ`] a second and only when it moved; `p` and `q`
     /// null once no cube frame came for [`crate::scene::CUBE_STALE_AFTER`] (hidden).
@@ -563,6 +569,8 @@ pub struct Snapshot {
     pub cube: Arc<ToClient>,
     /// the camera view's topic (`camera_view`; None: no camera view)
     pub camera: Option<Arc<str>>,
+    /// the inputs refused now
+    pub inputs_refused: Vec<crate::bounded::InputRefusal>,
 }
 
 /// `{"t": "hello", …}`.
@@ -578,6 +586,7 @@ struct Hello<'a> {
     recorder: Option<&'a ToClient>,
     cube: &'a ToClient,
     camera: Option<&'a str>,
+    inputs_refused: &'a [crate::bounded::InputRefusal],
     #[serde(flatten)]
     arm: &'a ArmFacts,
 }
@@ -595,6 +604,7 @@ impl Snapshot {
             recorder: self.recorder.as_deref(),
             cube: &self.cube,
             camera: self.camera.as_deref(),
+            inputs_refused: &self.inputs_refused,
             arm: &self.arm,
         })
         .unwrap_or_default()
@@ -819,11 +829,19 @@ mod tests {
             recorder: None,
             cube: Arc::new(ToClient::cube(None)),
             camera: Some("twin/camera/image_raw/compressed".into()),
+            inputs_refused: vec![crate::bounded::InputRefusal {
+                topic: "robot_description",
+                reason: "16000 joints > 256".into(),
+            }],
         };
         let hello: serde_json::Value = serde_json::from_str(&snapshot.hello(50.0)).unwrap();
         assert!(hello["recorder"].is_null());
         assert_eq!(hello["cube"], json!({"t": "cube", "p": null, "q": null}));
         assert_eq!(hello["camera"], "twin/camera/image_raw/compressed");
+        assert_eq!(
+            hello["inputs_refused"],
+            json!([{"topic": "robot_description", "reason": "16000 joints > 256"}])
+        );
         assert_eq!(hello["t"], "hello");
         assert_eq!(hello["rate"], 50.0);
         assert_eq!(hello["target"], json!([0.2, 0.0, 0.1]));

@@ -3,6 +3,7 @@
 //! ([`Clock`]); [`Effect`]s come out for the loop to apply (publish, answer a browser,
 //! tell every browser, run a file job, log). No I/O here.
 
+use crate::bounded::{RefusedInputs, MAX_JOINTS};
 use crate::calibrate::{self as cal, Wizard};
 use crate::desk::{Desk, DeskOutcome, FileDone, FileJob};
 use crate::message::{
@@ -359,6 +360,8 @@ pub struct Panel {
     health: NodeHealth,
     latency: Latency,
     unreadable: UnreadableSamples,
+    /// samples over the limits of bounded.rs, refused
+    refused: RefusedInputs,
     /// `xyz_target` messages published
     sent: u64,
     /// the arm of `robot_description`, for the live view
@@ -424,6 +427,7 @@ impl Panel {
             health: NodeHealth::new(own),
             latency: Latency::new(),
             unreadable: UnreadableSamples::default(),
+            refused: RefusedInputs::default(),
             sent: 0,
             model: None,
             eezybot_envelope: None,
@@ -628,6 +632,7 @@ impl Panel {
             recorder: Some(self.recorder_view.clone()),
             cube: self.cube_view.clone(),
             camera: self.camera_topic.clone(),
+            inputs_refused: self.refused.view(),
         }
     }
 
@@ -837,6 +842,7 @@ impl Panel {
         let mut effects = vec![];
         match input {
             Input::JointStates(js) => {
+                self.input_taken(topics::JOINT_STATES.name, &mut effects);
                 if let Some(w) = self.wizard.as_mut() {
                     let joints = js
                         .name
@@ -856,7 +862,10 @@ impl Panel {
                 // arrival is judged on where the tool is now
                 self.desk_step(clock.now, &mut effects);
             }
-            Input::RobotDescription(text) => self.robot_description(text, &mut effects),
+            Input::RobotDescription(text) => {
+                self.input_taken(topics::ROBOT_DESCRIPTION.name, &mut effects);
+                self.robot_description(text, clock.now, &mut effects);
+            }
             Input::Diagnostics(d) => {
                 let recorder = d
                     .status
@@ -908,7 +917,11 @@ impl Panel {
             Input::Unreadable { topic, error } => {
                 effects.extend(self.unreadable.note(topic, &error, clock.now));
             }
+            Input::Refused { topic, reason } => {
+                self.refuse_input(topic, &reason, clock.now, &mut effects);
+            }
             Input::LeaderJoints(js) => {
+                self.input_taken(topics::LEADER_JOINT_STATES.name, &mut effects);
                 self.leader.joints = js
                     .name
                     .iter()
@@ -954,6 +967,7 @@ impl Panel {
         ];
         values.extend(web.values());
         values.extend(self.unreadable.values());
+        values.extend(self.refused.values());
         values.extend(self.cube.values());
         let last = web.last_refusal().cloned();
         let recent = last
@@ -962,8 +976,12 @@ impl Panel {
         if let Some((_, last)) = last {
             values.push(("last_refusal", last));
         }
-        let (level, message) = match recent {
-            Some((at, last)) => (
+        let refused_input = self
+            .refused
+            .last()
+            .filter(|(at, _)| now.saturating_duration_since(*at) < REFUSAL_WARN_FOR);
+        let (level, message) = match (recent, refused_input) {
+            (Some((at, last)), _) => (
                 DiagnosticStatus::WARN,
                 format!(
                     "web panel on {url}; refused a client {:.0} s ago ({} refusals in all): {last}",
@@ -971,7 +989,14 @@ impl Panel {
                     web.refused_total()
                 ),
             ),
-            None => (DiagnosticStatus::OK, format!("web panel on {url}")),
+            (None, Some((at, last))) => (
+                DiagnosticStatus::WARN,
+                format!(
+                    "web panel on {url}; refused an input {:.0} s ago: {last}",
+                    now.saturating_duration_since(*at).as_secs_f64(),
+                ),
+            ),
+            (None, None) => (DiagnosticStatus::OK, format!("web panel on {url}")),
         };
         ros_plumbing::diagnostics::status(level, name, "", &message, &values)
     }
@@ -1034,8 +1059,44 @@ impl Panel {
         }
     }
 
-    fn robot_description(&mut self, text: String, effects: &mut Vec<Effect>) {
+    /// A sample of `topic` refused ([`Input::Refused`]): counted, logged (throttled), and
+    /// shown on the page while it holds.
+    fn refuse_input(
+        &mut self,
+        topic: &'static str,
+        reason: &str,
+        now: Instant,
+        effects: &mut Vec<Effect>,
+    ) {
+        let (changed, line) = self.refused.refused(topic, reason, now);
+        effects.extend(line.map(|(level, text)| Effect::Log(level, text)));
+        if changed {
+            self.show_refused(effects);
+        }
+    }
+
+    /// A sample of `topic` was taken: a refusal of it shown on the page is over.
+    fn input_taken(&mut self, topic: &str, effects: &mut Vec<Effect>) {
+        if self.refused.taken(topic) {
+            self.show_refused(effects);
+        }
+    }
+
+    fn show_refused(&mut self, effects: &mut Vec<Effect>) {
+        effects.push(Effect::Broadcast(ToClient::InputsRefused {
+            inputs: self.refused.view(),
+        }));
+        self.changed = true;
+    }
+
+    fn robot_description(&mut self, text: String, now: Instant, effects: &mut Vec<Effect>) {
         let m = match RobotModel::from_urdf_str(&text, topics::ROBOT_DESCRIPTION.name) {
+            Ok(m) if m.joints.len() > MAX_JOINTS => {
+                // (bounded.rs counts `<joint` elements before parsing; this is the model's)
+                let reason = format!("{} joints > {MAX_JOINTS}", m.joints.len());
+                self.refuse_input(topics::ROBOT_DESCRIPTION.name, &reason, now, effects);
+                return;
+            }
             Ok(m) => m,
             Err(e) => {
                 effects.push(Effect::Log(

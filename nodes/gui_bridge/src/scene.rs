@@ -72,7 +72,7 @@ impl fmt::Display for Name {
 
 /// Reads a string as a [`Name`] (the deserializer lends it: nothing is copied beyond
 /// [`NAME_MAX`] bytes).
-struct NameSeed;
+pub(crate) struct NameSeed;
 
 impl<'de> DeserializeSeed<'de> for NameSeed {
     type Value = Name;
@@ -116,7 +116,7 @@ impl<'de> Visitor<'de> for IsName {
 }
 
 /// A `std_msgs/Header` as its stamp and its frame as a [`Name`].
-struct HeaderSeed;
+pub(crate) struct HeaderSeed;
 
 impl<'de> DeserializeSeed<'de> for HeaderSeed {
     type Value = (Time, Name);

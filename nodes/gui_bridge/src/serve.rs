@@ -24,13 +24,24 @@ pub async fn serve(
 ) -> anyhow::Result<()> {
     let params = node.params().clone();
     let mut outputs = RosOutputs::new(node)?;
-    let joint_states = node.subscribe_to(&topics::JOINT_STATES)?;
+    // what goes on to the browsers is read by bounded readers (bounded.rs): any DDS peer
+    // may publish a URDF of 16,000 joints or joint states of 30,000 names
+    let joint_states = node.subscription::<crate::bounded::Joints>(
+        topics::JOINT_STATES.name,
+        topics::JOINT_STATES.qos.clone(),
+    )?;
     let diagnostics = node.subscribe_to(&topics::DIAGNOSTICS)?;
     let rate = params.f64("rate").unwrap_or(50.0);
-    let description = node.subscribe_to(&topics::ROBOT_DESCRIPTION)?;
+    let description = node.subscription::<crate::bounded::Description>(
+        topics::ROBOT_DESCRIPTION.name,
+        topics::ROBOT_DESCRIPTION.qos.clone(),
+    )?;
     let servo_state = node.subscribe_to(&topics::SERVO_STATE)?;
     let estop = node.subscribe_to(&topics::ESTOP)?;
-    let leader_joints = node.subscribe_to(&topics::LEADER_JOINT_STATES)?;
+    let leader_joints = node.subscription::<crate::bounded::Joints>(
+        topics::LEADER_JOINT_STATES.name,
+        topics::LEADER_JOINT_STATES.qos.clone(),
+    )?;
     let leader_deadman = node.subscribe_to(&topics::LEADER_DEADMAN)?;
     // the twin's cube and camera, read by bounded readers (scene.rs): at start, so the
     // graph shows the contract's endpoints whether or not a twin runs
@@ -235,18 +246,20 @@ pub async fn serve(
         }),
     };
     let mut streams = vec![
-        inputs_of(&joint_states, &topics::JOINT_STATES, Input::JointStates),
-        inputs_of(&description, &topics::ROBOT_DESCRIPTION, |m| {
-            Input::RobotDescription(m.data)
+        bounded_inputs(&joint_states, topics::JOINT_STATES.name, |j| {
+            j.into_input(topics::JOINT_STATES.name, Input::JointStates)
         }),
+        bounded_inputs(
+            &description,
+            topics::ROBOT_DESCRIPTION.name,
+            crate::bounded::Description::into_input,
+        ),
         inputs_of(&diagnostics, &topics::DIAGNOSTICS, Input::Diagnostics),
         inputs_of(&servo_state, &topics::SERVO_STATE, Input::ServoState),
         inputs_of(&estop, &topics::ESTOP, |m| Input::Estop(m.data)),
-        inputs_of(
-            &leader_joints,
-            &topics::LEADER_JOINT_STATES,
-            Input::LeaderJoints,
-        ),
+        bounded_inputs(&leader_joints, topics::LEADER_JOINT_STATES.name, |j| {
+            j.into_input(topics::LEADER_JOINT_STATES.name, Input::LeaderJoints)
+        }),
         inputs_of(&leader_deadman, &topics::LEADER_DEADMAN, |m| {
             Input::LeaderDeadman(m.data)
         }),
@@ -334,6 +347,20 @@ fn inputs_of<'a, M: eezybot_msgs::RosMessage>(
             },
         })
         .boxed()
+}
+
+/// The samples of `topic` read by a bounded reader (bounded.rs), as the panel's inputs:
+/// `input` of each (the sample or its refusal), [`Input::Unreadable`] for one that
+/// cannot be read.
+fn bounded_inputs<'a, M: eezybot_msgs::RosMessage>(
+    subscription: &'a ros_plumbing::Subscription<M>,
+    topic: &'static str,
+    input: fn(M) -> Input,
+) -> futures::stream::BoxStream<'a, Input> {
+    ros_plumbing::samples::inputs(subscription, input, move |error| Input::Unreadable {
+        topic,
+        error,
+    })
 }
 
 /// From now on the `token` parameter reads `(generated)` or `(hidden)`, so that

@@ -36,9 +36,9 @@ use axum::Router;
 use futures::SinkExt as _;
 use ros_plumbing::logging::shorten;
 use serde::Deserialize;
+use std::collections::VecDeque;
 use std::fmt;
 use std::net::SocketAddr;
-use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::sync::{broadcast, mpsc, watch, Notify, OwnedSemaphorePermit, Semaphore};
@@ -420,6 +420,12 @@ pub fn request_channels(limits: &Limits) -> (RequestSenders, Requests) {
 
 /// The length reasons are cut to in log lines, diagnostics and answers.
 pub const REASON_MAX: usize = 200;
+
+/// The largest message broadcast to the browsers: a larger one is dropped, counted and
+/// logged, never sent (it would fill half of a client's write buffer, and the broadcast
+/// channel keeps 256 messages). The inputs are bounded so that none comes near it
+/// (bounded.rs); the largest legitimate one, a program of 1000 points, is about 150 KB.
+pub const MAX_BROADCAST_BYTES: usize = 1024 * 1024;
 
 /// The largest image the panel passes to a browser (the camera view's; scene.rs refuses
 /// bigger ones as it reads them), so that one fits a client's write buffer.
@@ -1097,8 +1103,16 @@ async fn client(
 #[derive(Debug)]
 pub struct WaitingRoom {
     max: usize,
-    /// the next entry's number, and the entries (number, its leave signal), oldest first
-    queue: Mutex<(u64, VecDeque<(u64, Arc<Notify>)>)>,
+    queue: Mutex<Queue>,
+}
+
+/// The [`WaitingRoom`]'s entries.
+#[derive(Debug, Default)]
+struct Queue {
+    /// the next entry's number
+    next: u64,
+    /// (number, its leave signal), oldest first
+    entries: VecDeque<(u64, Arc<Notify>)>,
 }
 
 impl WaitingRoom {
@@ -1106,11 +1120,11 @@ impl WaitingRoom {
     pub fn new(max: usize) -> WaitingRoom {
         WaitingRoom {
             max: max.max(1),
-            queue: Mutex::new((0, VecDeque::new())),
+            queue: Mutex::new(Queue::default()),
         }
     }
 
-    fn queue(&self) -> std::sync::MutexGuard<'_, (u64, VecDeque<(u64, Arc<Notify>)>)> {
+    fn queue(&self) -> std::sync::MutexGuard<'_, Queue> {
         // a poisoned lock only means a panic elsewhere while it was held: the queue is
         // still consistent (each change is one push or remove)
         self.queue.lock().unwrap_or_else(|e| e.into_inner())
@@ -1122,8 +1136,8 @@ impl WaitingRoom {
     /// ```
     /// use gui_bridge::web::WaitingRoom;
     /// let room = std::sync::Arc::new(WaitingRoom::new(2));
-    /// let (a, b) = (room.enter(), room.enter());
-    /// let c = room.enter(); // a is told to leave
+    /// let (_a, b) = (room.enter(), room.enter());
+    /// let _c = room.enter(); // _a is told to leave (its `leave` is notified)
     /// assert_eq!(room.len(), 2);
     /// drop(b);
     /// assert_eq!(room.len(), 1);
@@ -1131,14 +1145,14 @@ impl WaitingRoom {
     pub fn enter(self: &Arc<Self>) -> Waiting {
         let leave = Arc::new(Notify::new());
         let mut q = self.queue();
-        let id = q.0;
-        q.0 += 1;
-        while q.1.len() >= self.max {
-            if let Some((_, oldest)) = q.1.pop_front() {
+        let id = q.next;
+        q.next += 1;
+        while q.entries.len() >= self.max {
+            if let Some((_, oldest)) = q.entries.pop_front() {
                 oldest.notify_one();
             }
         }
-        q.1.push_back((id, leave.clone()));
+        q.entries.push_back((id, leave.clone()));
         Waiting {
             id,
             leave,
@@ -1148,7 +1162,7 @@ impl WaitingRoom {
 
     /// How many wait now.
     pub fn len(&self) -> usize {
-        self.queue().1.len()
+        self.queue().entries.len()
     }
 
     /// Whether none waits.
@@ -1168,6 +1182,6 @@ pub struct Waiting {
 
 impl Drop for Waiting {
     fn drop(&mut self) {
-        self.room.queue().1.retain(|(id, _)| *id != self.id);
+        self.room.queue().entries.retain(|(id, _)| *id != self.id);
     }
 }

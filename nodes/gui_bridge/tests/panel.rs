@@ -377,6 +377,114 @@ fn an_unusable_robot_description_is_logged_and_changes_nothing() {
     assert!(told(&e, false)[0]["reachable"].is_null());
 }
 
+/// A chain arm of `n` revolute joints with names of 40 characters.
+fn chain_urdf(n: usize) -> String {
+    let name = |kind: &str, i: usize| format!("{kind}_{i:0>34}");
+    let links: String = (0..=n)
+        .map(|i| format!("<link name='{}'/>", name("link", i)))
+        .collect();
+    let joints: String = (0..n)
+        .map(|i| {
+            format!(
+                "<joint name='{}' type='revolute'><parent link='{}'/><child link='{}'/>\
+                 <origin xyz='0 0 0.01'/><axis xyz='0 0 1'/>\
+                 <limit lower='-1' upper='1' effort='1' velocity='1'/></joint>",
+                name("joint", i),
+                name("link", i),
+                name("link", i + 1)
+            )
+        })
+        .collect();
+    format!("<robot name='chain'>{links}{joints}</robot>")
+}
+
+#[test]
+fn a_refused_input_is_shown_until_taken_and_the_largest_arm_taken_stays_small_for_the_browsers() {
+    use gui_bridge::bounded::MAX_JOINTS;
+    let mut p = panel("refused");
+    let t0 = Instant::now();
+    let refused = Input::Refused {
+        topic: "robot_description",
+        reason: "16000 joints > 256".into(),
+    };
+    let e = p.on_input(refused.clone(), at(t0, 0));
+    // logged, shown to every browser and in what a browser gets when it connects
+    assert!(e
+        .iter()
+        .any(|x| matches!(x, Effect::Log(log::Level::Warn, t)
+        if t.starts_with("robot_description refused: 16000 joints > 256"))));
+    let shown = serde_json::json!([{"topic": "robot_description", "reason": "16000 joints > 256"}]);
+    assert_eq!(
+        of_kind(&told(&e, true), "inputs_refused")[0]["inputs"],
+        shown
+    );
+    let hello: Value = serde_json::from_str(&p.snapshot().hello(50.0)).unwrap();
+    assert_eq!(hello["inputs_refused"], shown);
+    // the same again changes nothing the page shows
+    assert!(told(&p.on_input(refused, at(t0, 1)), true).is_empty());
+    // diagnostics: WARN, counted and named
+    let web = gui_bridge::web::WebStats::default();
+    let status = p.report(
+        "gui_bridge: operator panel",
+        "http://x/",
+        &web,
+        at(t0, 2).now,
+    );
+    let values: std::collections::HashMap<_, _> = status
+        .values
+        .iter()
+        .map(|kv| (kv.key.as_str(), kv.value.as_str()))
+        .collect();
+    assert_eq!(status.level, DiagnosticStatus::WARN);
+    assert!(
+        status.message.contains("refused an input"),
+        "{}",
+        status.message
+    );
+    assert_eq!(values["inputs_refused"], "2");
+    assert_eq!(
+        values["last_input_refused"],
+        "robot_description: 16000 joints > 256"
+    );
+    // an arm of the most joints taken: the refusal is over, and the first message of a
+    // browser and the live view's pose stay small
+    let e = p.on_input(Input::RobotDescription(chain_urdf(MAX_JOINTS)), at(t0, 3));
+    let all = told(&e, true);
+    assert_eq!(
+        of_kind(&all, "inputs_refused")[0]["inputs"],
+        serde_json::json!([])
+    );
+    assert_eq!(
+        of_kind(&all, "robot")[0]["robot"]["joints"]
+            .as_array()
+            .unwrap()
+            .len(),
+        MAX_JOINTS
+    );
+    let hello = p.snapshot().hello(50.0);
+    let names: Vec<String> = (0..MAX_JOINTS).map(|i| format!("joint_{i:0>34}")).collect();
+    let js = JointState {
+        position: vec![0.5; names.len()],
+        name: names,
+        ..JointState::default()
+    };
+    let e = p.on_input(Input::JointStates(js), at(t0, 4));
+    let pose = e
+        .iter()
+        .find_map(|x| match x {
+            Effect::Broadcast(m) if m.to_text().starts_with(r#"{"t":"pose""#) => Some(m.to_text()),
+            _ => None,
+        })
+        .unwrap();
+    println!(
+        "{MAX_JOINTS} joints: hello {} bytes, pose {} bytes",
+        hello.len(),
+        pose.len()
+    );
+    assert!(hello.len() < 100_000, "{}", hello.len());
+    assert!(pose.len() < 64 * 1024, "{}", pose.len());
+}
+
 /// A `diagnostics` report of the recorder's (a status named `name`) in `state`.
 fn recorder_report(name: &str, state: &str, episodes: u64) -> Input {
     use eezybot_msgs::diagnostic_msgs::KeyValue;

@@ -98,13 +98,20 @@ async fn connections_that_send_nothing_hold_no_place_and_the_operator_always_get
     // more silent connections than there are places
     let mut silent = Vec::new();
     for _ in 0..40 {
-        silent.push(connect(addr, None).await.expect("a silent connection refused"));
+        silent.push(
+            connect(addr, None)
+                .await
+                .expect("a silent connection refused"),
+        );
     }
     // the operator's page: admitted, its hello takes a place, its e-stop reaches the loop
     let mut operator = connect(addr, None).await.expect("the operator refused");
     say(&mut operator, r#"{"t":"hello"}"#).await;
     say(&mut operator, r#"{"t":"estop","on":true}"#).await;
-    assert_eq!(estop(&mut requests).await, ClientRequest::Estop { on: true });
+    assert_eq!(
+        estop(&mut requests).await,
+        ClientRequest::Estop { on: true }
+    );
     // the waiting room holds 32: the 9 oldest silent ones (40, and the operator's
     // connection before its hello) were told to try later
     for ws in &mut silent[..9] {
@@ -115,7 +122,10 @@ async fn connections_that_send_nothing_hold_no_place_and_the_operator_always_get
     // the newest 31 still wait: each one's first request takes one of the 31 places left
     for ws in &mut silent[9..] {
         say(ws, r#"{"t":"estop","on":false}"#).await;
-        assert_eq!(estop(&mut requests).await, ClientRequest::Estop { on: false });
+        assert_eq!(
+            estop(&mut requests).await,
+            ClientRequest::Estop { on: false }
+        );
     }
 }
 
@@ -145,7 +155,10 @@ async fn places_are_taken_by_first_requests_and_by_the_token_at_upgrade() {
     while leaving.next().await.is_some() {}
     let mut next = connect(addr, None).await.unwrap();
     say(&mut next, r#"{"t":"estop","on":false}"#).await;
-    assert_eq!(estop(&mut requests).await, ClientRequest::Estop { on: false });
+    assert_eq!(
+        estop(&mut requests).await,
+        ClientRequest::Estop { on: false }
+    );
     // with a token: a client that presented it is placed at its upgrade, the 33rd gets 503
     let (addr, _requests) = serve(Some(TOKEN)).await;
     assert_eq!(connect(addr, None).await.err(), Some(401));

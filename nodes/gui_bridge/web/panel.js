@@ -93,6 +93,7 @@ function handle(m) {
       if (m.leader) showLeader(m.leader);
       if (m.recorder) showRecorder(m.recorder);
       if (m.cube) showCube(m.cube);
+      showRefusedInputs(m.inputs_refused || []);
       cameraTopic = m.camera || null;
       $("camera-caption").textContent = cameraTopic || "";
       if (!cameraTopic) hideCamera();
@@ -114,7 +115,16 @@ function handle(m) {
     case "estop": setEstop(m.on); break;
     case "sent": window.__sent = (window.__sent || 0) + 1; break;
     case "cube": showCube(m); break;
+    case "inputs_refused": showRefusedInputs(m.inputs); break;
   }
+}
+
+// samples gui_bridge refused for being over its limits (a URDF of thousands of joints, …):
+// one line each, "robot_description refused: 16000 joints > 256", while they hold
+function showRefusedInputs(inputs) {
+  const box = $("refused-inputs");
+  box.textContent = inputs.map((r) => r.topic + " refused: " + r.reason).join("; ");
+  box.hidden = inputs.length === 0;
 }
 
 // ---- the physics twin: its cube in the 3D view, its camera in the small view

@@ -87,6 +87,7 @@ pub struct WebStats {
     clients_closed: u64,
     clients_dropped: u64,
     dropped_replies: u64,
+    dropped_broadcasts: u64,
     stalled: u64,
     evicted: u64,
     last_refusal: Option<(Instant, String)>,
@@ -267,6 +268,21 @@ impl WebStats {
         self.dropped_replies += 1;
     }
 
+    /// Count a message to the browsers over [`super::MAX_BROADCAST_BYTES`], dropped; the
+    /// line to log (once per [`Throttle::PERIOD`]), naming its kind and size.
+    pub fn dropped_broadcast(&mut self, text: &str, now: Instant) -> Option<LogLine> {
+        self.dropped_broadcasts += 1;
+        let kind: String = text.chars().take(24).collect();
+        let quiet = self.complaints.allow("broadcast/oversized", now)?;
+        let line = format!(
+            "a message of {} bytes to the browsers dropped (more than {}): {kind}…{}",
+            text.len(),
+            super::MAX_BROADCAST_BYTES,
+            Throttle::suffix(quiet)
+        );
+        Some((log::Level::Warn, line))
+    }
+
     /// The reason of the latest refused request.
     pub fn last_rejection(&self) -> Option<&str> {
         self.last_rejection.as_deref()
@@ -301,6 +317,7 @@ impl WebStats {
             ("bad_requests", self.bad_requests.to_string()),
             ("last_rejection", text(&self.last_rejection)),
             ("dropped_replies", self.dropped_replies.to_string()),
+            ("dropped_broadcasts", self.dropped_broadcasts.to_string()),
         ];
         if let Some(f) = &self.foxglove {
             let get = |c: &std::sync::atomic::AtomicU64| {
@@ -311,6 +328,7 @@ impl WebStats {
                 ("foxglove_refused_busy", get(&f.refused_busy)),
                 ("foxglove_closed_oversized", get(&f.closed_oversized)),
                 ("foxglove_header_timeouts", get(&f.header_timeouts)),
+                ("foxglove_oversized_samples", get(&f.oversized_samples)),
             ]);
         }
         values
