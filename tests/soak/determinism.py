@@ -26,7 +26,7 @@ from conftest import OUTPUT, REPO
 MODULES = ",".join([
     # in the background beside the other modules (pytest.mark.background)
     "test_link_outages.py", "test_leader_arm.py", "test_calibration_wizard.py", "test_leader_calibration.py",
-    "test_wan.py", "test_wan_outages.py",
+    "test_wan.py", "test_wan_outages.py", "test_web_attacks.py",
     # had a wall-clock window or another timing dependency (issue 32's audit)
     "test_security.py", "test_trajectory_action.py", "test_leader_follow.py", "test_serial_node.py",
     "test_keystore.py", "test_wan_files.py", "test_leader_firmware.py", "test_gui_bridge.py",
