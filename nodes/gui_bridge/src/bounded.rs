@@ -15,6 +15,7 @@
 //! `robot_description refused: 16000 joints > 256`. [`RefusedInputs`] keeps what is
 //! refused now, for the page (a banner), the log (throttled) and `diagnostics`.
 
+use crate::message::InputRefusal;
 use crate::scene::{HeaderSeed, Name, NameSeed};
 use crate::Input;
 use eezybot_msgs::sensor_msgs::JointState;
@@ -325,15 +326,6 @@ impl<'de> Visitor<'de> for FloatsSeed {
         }
         Ok((kept, count))
     }
-}
-
-/// One refused input as the page shows it.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
-pub struct InputRefusal {
-    /// the topic (relative name: `robot_description`)
-    pub topic: &'static str,
-    /// why, e.g. `16000 joints > 256`
-    pub reason: String,
 }
 
 /// The inputs refused: what is refused now, per topic (cleared when the topic's next

@@ -99,7 +99,7 @@ pub enum ToClient {
     /// each with its reason; empty once each refused topic's next sample is taken.
     InputsRefused {
         /// topic and reason, e.g. `robot_description`, `16000 joints > 256`
-        inputs: Vec<crate::bounded::InputRefusal>,
+        inputs: Vec<InputRefusal>,
     },
     /// The physics twin's cube (its `tf` frame `cube` in `base_frame`), at most
     /// [`crate::scene::CUBE_VIEW_RATE_HZ`] a second and only when it moved; `p` and `q`
@@ -545,6 +545,15 @@ impl ArmFacts {
     }
 }
 
+/// One input refused now ([`crate::bounded`]), as the page shows it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct InputRefusal {
+    /// the topic (relative name: `robot_description`)
+    pub topic: &'static str,
+    /// why, e.g. `16000 joints > 256`
+    pub reason: String,
+}
+
 /// What a browser that connects gets first: the panel as it is now. The bridge loop
 /// keeps it current; the web server reads it for each new client (and `/robot.urdf`).
 #[derive(Clone, Debug)]
@@ -570,7 +579,7 @@ pub struct Snapshot {
     /// the camera view's topic (`camera_view`; None: no camera view)
     pub camera: Option<Arc<str>>,
     /// the inputs refused now
-    pub inputs_refused: Vec<crate::bounded::InputRefusal>,
+    pub inputs_refused: Vec<InputRefusal>,
 }
 
 /// `{"t": "hello", …}`.
@@ -586,7 +595,7 @@ struct Hello<'a> {
     recorder: Option<&'a ToClient>,
     cube: &'a ToClient,
     camera: Option<&'a str>,
-    inputs_refused: &'a [crate::bounded::InputRefusal],
+    inputs_refused: &'a [InputRefusal],
     #[serde(flatten)]
     arm: &'a ArmFacts,
 }
@@ -829,7 +838,7 @@ mod tests {
             recorder: None,
             cube: Arc::new(ToClient::cube(None)),
             camera: Some("twin/camera/image_raw/compressed".into()),
-            inputs_refused: vec![crate::bounded::InputRefusal {
+            inputs_refused: vec![InputRefusal {
                 topic: "robot_description",
                 reason: "16000 joints > 256".into(),
             }],
