@@ -697,7 +697,7 @@ def gen_ws(rng, kind):
         return 1, payload, kind, "refused"
     if kind == "unknown_kind":
         payload = rng.choice([js({"t": "foo"}), js({"t": ""}), js({"t": None}), js({"t": 3}), js({"T": "target", "xyz": list(p)}),
-                              js({"t": "TARGET", "xyz": list(p)}), js({"t": "hello"}), js({"t": "ack"}), js({"t": "status"}),
+                              js({"t": "TARGET", "xyz": list(p)}), js({"t": "pose"}), js({"t": "ack"}), js({"t": "status"}),
                               js({"xyz": list(p)}), js({"t": ["target"]}), js({"t": "target\u0000"})])
         return 1, payload, kind, "refused"
     if kind == "wrong_types":
