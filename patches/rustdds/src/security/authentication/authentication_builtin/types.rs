@@ -303,12 +303,22 @@ pub const ECDH_KAGREE_ALGO_NAME: &str = "ECDH+prime256v1-CEUM";
 pub const RSA_SIGNATURE_ALGO_NAME: &[u8] = b"RSASSA-PSS-SHA256";
 pub const ECDSA_SIGNATURE_ALGO_NAME: &[u8] = b"ECDSA-SHA256";
 
+/// An algorithm name of a handshake message (`c.dsign_algo`, `c.kagree_algo`)
+/// without the single terminating NUL byte some implementations send with it:
+/// Cyclone DDS sets these properties with `DDS_Security_BinaryProperty_set_by_string`,
+/// whose value is the C string with its terminator, and itself accepts a name with
+/// or without one (`str_octseq_equal`). Only the comparisons use this; the hashes
+/// (`hash_c1`, `hash_c2`) take the property as it came.
+pub(crate) fn algo_name(name: &[u8]) -> &[u8] {
+  name.strip_suffix(&[0]).unwrap_or(name)
+}
+
 // Recognize standard string constatns and convert to
 // corresponging algorithm identifiers in ring library.
 pub(crate) fn parse_signature_algo_name_to_ring(
-  algo_name: &[u8],
+  algo_name_bytes: &[u8],
 ) -> SecurityResult<&'static dyn ring::signature::VerificationAlgorithm> {
-  match algo_name {
+  match algo_name(algo_name_bytes) {
     RSA_SIGNATURE_ALGO_NAME => Ok(&ring::signature::RSA_PSS_2048_8192_SHA256),
     ECDSA_SIGNATURE_ALGO_NAME => Ok(&ring::signature::ECDSA_P256_SHA256_ASN1),
     _other =>
@@ -686,5 +696,38 @@ impl From<BuiltinAuthenticatedPeerCredentialToken> for AuthenticatedPeerCredenti
           true,
         );
     AuthenticatedPeerCredentialToken::from(dh_builder.build())
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+
+  #[test]
+  fn algorithm_names_are_recognised_with_a_terminating_nul() {
+    // Cyclone DDS sends "ECDSA-SHA256\0" and "ECDH+prime256v1-CEUM\0"
+    for name in [
+      &b"ECDSA-SHA256"[..],
+      b"ECDSA-SHA256\0",
+      b"RSASSA-PSS-SHA256\0",
+    ] {
+      assert!(parse_signature_algo_name_to_ring(name).is_ok(), "{name:?}");
+    }
+    for name in [
+      &b"ECDSA-SHA256\0\0"[..],
+      b"ECDSA-SHA25",
+      b"\0ECDSA-SHA256",
+      b"",
+    ] {
+      assert!(parse_signature_algo_name_to_ring(name).is_err(), "{name:?}");
+    }
+    assert_eq!(
+      algo_name(b"ECDH+prime256v1-CEUM\0"),
+      ECDH_KAGREE_ALGO_NAME.as_bytes()
+    );
+    assert_eq!(
+      algo_name(DH_MODP_KAGREE_ALGO_NAME.as_bytes()),
+      DH_MODP_KAGREE_ALGO_NAME.as_bytes()
+    );
   }
 }
