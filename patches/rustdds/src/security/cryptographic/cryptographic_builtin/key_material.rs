@@ -290,6 +290,23 @@ impl TryFrom<Vec<CryptoToken>> for KeyMaterial_AES_GCM_GMAC_seq {
 impl TryFrom<KeyMaterial_AES_GCM_GMAC_seq> for Vec<CryptoToken> {
   type Error = SecurityError;
   fn try_from(key_materials: KeyMaterial_AES_GCM_GMAC_seq) -> Result<Self, Self::Error> {
+    // A payload key material of kind NONE beside a protecting submessage one (the
+    // secure built-in endpoints: their submessages are protected, their payloads not)
+    // is not sent: the tokens say only what protects. Cyclone DDS refuses a token of
+    // kind NONE for an endpoint whose submessages are protected ("Invalid Crypto
+    // token", its check_crypto_keymaterial), and sends a single token itself there;
+    // a receiver decodes no payload of such an endpoint (payload_not_protected).
+    let key_materials = match key_materials {
+      KeyMaterial_AES_GCM_GMAC_seq::Two(submessage, payload)
+        if payload.transformation_kind
+          == BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE
+          && submessage.transformation_kind
+            != BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE =>
+      {
+        KeyMaterial_AES_GCM_GMAC_seq::One(submessage)
+      }
+      other => other,
+    };
     Vec::from(key_materials)
       .iter()
       .map(|key_material| CryptoToken::try_from(key_material.clone()))
@@ -381,4 +398,50 @@ impl From<KeyMaterial_AES_GCM_GMAC> for Serializable_KeyMaterial_AES_GCM_GMAC {
 pub(super) enum CommonEncodeKeyMaterials {
   Some(KeyMaterial_AES_GCM_GMAC_seq),
   Volatile(bool), // bool is for use_256_bit_key
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+
+  fn material(kind: BuiltinCryptoTransformationKind) -> KeyMaterial_AES_GCM_GMAC {
+    let length = KeyLength::from(kind);
+    KeyMaterial_AES_GCM_GMAC {
+      transformation_kind: kind,
+      master_salt: BuiltinKey::generate_random(length),
+      sender_key_id: CryptoTransformKeyId::ZERO,
+      master_sender_key: BuiltinKey::generate_random(length),
+      receiver_specific_key_id: CryptoTransformKeyId::ZERO,
+      master_receiver_specific_key: BuiltinKey::None,
+    }
+  }
+
+  #[test]
+  fn a_none_payload_key_material_beside_a_protecting_one_is_not_sent() {
+    use BuiltinCryptoTransformationKind::*;
+    let tokens = |seq| Vec::<CryptoToken>::try_from(seq).unwrap();
+    // a secure built-in writer: submessages encrypted, payload not
+    let sent = tokens(KeyMaterial_AES_GCM_GMAC_seq::Two(
+      material(CRYPTO_TRANSFORMATION_KIND_AES256_GCM),
+      material(CRYPTO_TRANSFORMATION_KIND_NONE),
+    ));
+    assert_eq!(sent.len(), 1);
+    let back = KeyMaterial_AES_GCM_GMAC_seq::try_from(sent).unwrap();
+    assert_eq!(
+      back.key_material().transformation_kind,
+      CRYPTO_TRANSFORMATION_KIND_AES256_GCM
+    );
+    // two that protect: both sent
+    let sent = tokens(KeyMaterial_AES_GCM_GMAC_seq::Two(
+      material(CRYPTO_TRANSFORMATION_KIND_AES256_GMAC),
+      material(CRYPTO_TRANSFORMATION_KIND_AES256_GCM),
+    ));
+    assert_eq!(sent.len(), 2);
+    // nothing protected at all: as before
+    let sent = tokens(KeyMaterial_AES_GCM_GMAC_seq::Two(
+      material(CRYPTO_TRANSFORMATION_KIND_NONE),
+      material(CRYPTO_TRANSFORMATION_KIND_NONE),
+    ));
+    assert_eq!(sent.len(), 2);
+  }
 }
