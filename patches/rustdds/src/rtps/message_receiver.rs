@@ -102,6 +102,28 @@ impl Default for MessageReceiverState<'_> {
   }
 }
 
+/// The non-secure built-in discovery endpoints (SEDP publications, subscriptions and
+/// topics, the participant message endpoints). In an rtps-protected domain an
+/// unprotected submessage for one of them is dropped, as for any endpoint, but
+/// without an ERROR: Cyclone DDS keeps sending them unprotected for as long as the
+/// participants live (preemptive ACKNACKs from its plain SEDP readers, HEARTBEATs of
+/// its plain SEDP writers: about 30 a second to a node, measured), and they carry
+/// nothing a domain whose discovery is protected uses.
+#[cfg(feature = "security")]
+fn plain_builtin_discovery(entity_id: EntityId) -> bool {
+  matches!(
+    entity_id,
+    EntityId::SEDP_BUILTIN_PUBLICATIONS_WRITER
+      | EntityId::SEDP_BUILTIN_PUBLICATIONS_READER
+      | EntityId::SEDP_BUILTIN_SUBSCRIPTIONS_WRITER
+      | EntityId::SEDP_BUILTIN_SUBSCRIPTIONS_READER
+      | EntityId::SEDP_BUILTIN_TOPIC_WRITER
+      | EntityId::SEDP_BUILTIN_TOPIC_READER
+      | EntityId::P2P_BUILTIN_PARTICIPANT_MESSAGE_WRITER
+      | EntityId::P2P_BUILTIN_PARTICIPANT_MESSAGE_READER
+  )
+}
+
 /// [`MessageReceiver`] is the submessage sequence interpreter described in
 /// RTPS spec v2.3 Section 8.3.4 "The RTPS Message Receiver".
 /// It calls the message/submessage deserializers to parse the sequence of
@@ -607,7 +629,15 @@ impl MessageReceiver {
         EntityId::SPDP_BUILTIN_PARTICIPANT_READER
         | EntityId::P2P_BUILTIN_PARTICIPANT_STATELESS_READER
         | EntityId::P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_READER => (),
-        // Otherwise we have to reject
+        // Otherwise we have to reject; quietly for the non-secure built-in discovery
+        // endpoints, which Cyclone DDS keeps addressing unprotected
+        // (`plain_builtin_discovery`)
+        other if plain_builtin_discovery(other) => {
+          return debug!(
+            "Dropped an unprotected writer submessage for the non-secure built-in reader \
+             {other:?} in an rtps-protected domain."
+          )
+        }
         other => {
           return error!(
             "Received an unprotected message containing a writer submessage for the reader \
@@ -860,7 +890,13 @@ impl MessageReceiver {
         EntityId::SPDP_BUILTIN_PARTICIPANT_WRITER
         | EntityId::P2P_BUILTIN_PARTICIPANT_STATELESS_WRITER
         | EntityId::P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_WRITER => (),
-        // Otherwise we have to reject
+        // Otherwise we have to reject; quietly as above
+        other if plain_builtin_discovery(other) => {
+          return debug!(
+            "Dropped an unprotected reader submessage for the non-secure built-in writer \
+             {other:?} in an rtps-protected domain."
+          )
+        }
         other => {
           return error!(
             "Received an unprotected message containing a reader submessage for the writer \
@@ -1357,5 +1393,26 @@ mod tests {
     let bytes = header.write_to_vec().unwrap();
     let new_header = Header::read_from_buffer(&bytes).unwrap();
     assert_eq!(header, new_header);
+  }
+
+  #[cfg(feature = "security")]
+  #[test]
+  fn only_the_plain_builtin_discovery_endpoints_are_dropped_quietly() {
+    use super::plain_builtin_discovery;
+    for quiet in [
+      EntityId::SEDP_BUILTIN_PUBLICATIONS_WRITER,
+      EntityId::SEDP_BUILTIN_SUBSCRIPTIONS_READER,
+      EntityId::P2P_BUILTIN_PARTICIPANT_MESSAGE_READER,
+    ] {
+      assert!(plain_builtin_discovery(quiet), "{quiet:?}");
+    }
+    for loud in [
+      EntityId::SEDP_BUILTIN_PUBLICATIONS_SECURE_WRITER,
+      EntityId::P2P_BUILTIN_PARTICIPANT_MESSAGE_SECURE_READER,
+      EntityId::SPDP_RELIABLE_BUILTIN_PARTICIPANT_SECURE_WRITER,
+      EntityId::create_custom_entity_id([0, 0, 18], EntityKind::WRITER_NO_KEY_USER_DEFINED),
+    ] {
+      assert!(!plain_builtin_discovery(loud), "{loud:?}");
+    }
   }
 }
