@@ -16,7 +16,8 @@
 #                     for any other enclave.
 #   --namespace NS    the nodes run with -r __ns:=NS (their topics are rt/NS/...)
 #   --domain N        only ROS domain N in the governance and permissions (default: every
-#                     domain, 0 ... 232)
+#                     domain, 0 ... 230: sros2's range; Cyclone DDS refuses documents
+#                     with a higher domain id)
 #   --renew           rewrite and re-sign the permissions of the enclaves concerned (and the
 #                     governance), from the current topic contract and options; their
 #                     keys and certificates are kept
@@ -80,7 +81,7 @@ esac
 [ -z "$ROLE" ] || [ ${#ENCLAVES[@]} -gt 0 ] || eezybot_bad_usage "--role applies to --enclave PATH"
 [ "$NAMESPACE" = / ] || [[ $NAMESPACE =~ $ROS_NAME ]] || eezybot_bad_usage "namespace '$NAMESPACE' is not an absolute ROS namespace such as /arm2"
 if [ -n "$DOMAIN" ]; then
-  [[ $DOMAIN =~ ^[0-9]+$ ]] && [ "$DOMAIN" -le 232 ] || eezybot_bad_usage "--domain $DOMAIN: a ROS domain id 0 ... 232"
+  [[ $DOMAIN =~ ^[0-9]+$ ]] && [ "$DOMAIN" -le 230 ] || eezybot_bad_usage "--domain $DOMAIN: a ROS domain id 0 ... 230 (the keystore's documents: Cyclone DDS refuses higher ones)"
 fi
 [ ${#ENCLAVES[@]} -gt 0 ] || ENCLAVES=(/eezybot/pc /eezybot/pi)
 command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }

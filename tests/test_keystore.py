@@ -198,12 +198,13 @@ def test_governance_and_permissions_are_signed_by_the_ca(keystore, tmp_path):
 def test_the_governance_requires_authentication_and_encrypts(keystore):
     """sros2's default governance: no unauthenticated participant, join access control,
     discovery and liveliness encrypted, RTPS signed, read/write access control and
-    encrypted data and metadata on every topic; every ROS domain (0 ... 232)."""
+    encrypted data and metadata on every topic; every ROS domain (0 ... 230: sros2's range,
+    the most Cyclone DDS's access control takes)."""
     dds = ET.parse(keystore / "enclaves" / "governance.xml").getroot()
     rules = dds.findall("domain_access_rules/domain_rule")
     assert len(rules) == 1
     r = rules[0]
-    assert r.find("domains/id_range/min").text == "0" and r.find("domains/id_range/max").text == "232"
+    assert r.find("domains/id_range/min").text == "0" and r.find("domains/id_range/max").text == "230"
     expect = {"allow_unauthenticated_participants": "false", "enable_join_access_control": "true",
               "discovery_protection_kind": "ENCRYPT", "liveliness_protection_kind": "ENCRYPT",
               "rtps_protection_kind": "SIGN"}
@@ -224,7 +225,7 @@ def test_the_pi_may_publish_servo_state_and_not_xyz_target(keystore):
     name, subject, validity, domains, pi = grant_topics(enclave(keystore, "/eezybot/pi") / "permissions.xml")
     assert (name, subject) == ("/eezybot/pi", "CN=/eezybot/pi")
     assert validity == cert_dates(enclave(keystore, "/eezybot/pi") / "cert.pem")
-    assert domains.find("id_range/min").text == "0" and domains.find("id_range/max").text == "232"
+    assert domains.find("id_range/min").text == "0" and domains.find("id_range/max").text == "230"
     assert {"rt/servo_state", "rt/diagnostics"} <= pi["publish"]
     for t in ("rt/xyz_target", "rt/xyz_line_target", "rt/gripper_target", "rt/joint_target", "rt/estop",
               "rt/servo_angles", "rt/joint_states", "rt/tf", "rt/robot_description"):
@@ -382,11 +383,11 @@ def test_no_new_ca_is_made_over_existing_enclaves(fresh):
 
 
 @pytest.mark.parametrize("args", [[], ["--enclave", "/eezybot/x"], ["{dir}", "--role", "ops"],
-                                  ["{dir}", "--domain", "233"], ["{dir}", "--domain", "x"], ["{dir}", "--frobnicate"],
+                                  ["{dir}", "--domain", "231"], ["{dir}", "--domain", "x"], ["{dir}", "--frobnicate"],
                                   ["{dir}", "--enclave", "eezybot/pc2"], ["{dir}", "--enclave", "/eezybot/pc-2"],
                                   ["{dir}", "--enclave"], ["{dir}", "--namespace", "arm2"], ["{dir}", "{dir}2"],
                                   ["{file}"], ["{dir}", "--role", "pi"]],
-                         ids=["no_dir", "no_dir_with_enclave", "bad_role", "domain_233", "domain_text", "unknown_option",
+                         ids=["no_dir", "no_dir_with_enclave", "bad_role", "domain_231", "domain_text", "unknown_option",
                               "relative_enclave", "dash_in_enclave", "enclave_without_value", "relative_namespace",
                               "two_dirs", "dir_is_a_file", "role_without_enclave"])
 def test_bad_usage_exits_2_and_makes_nothing(args, tmp_path):

@@ -84,7 +84,7 @@ pub enum Sros2Error {
         /// End.
         not_after: String,
     },
-    /// A ROS domain id outside 0 … 232.
+    /// A ROS domain id outside 0 … [`MAX_DOMAIN_ID`].
     #[error("ROS domain id {domain} is outside 0 ... {}", MAX_DOMAIN_ID)]
     Domain {
         /// The id given.
@@ -92,8 +92,11 @@ pub enum Sros2Error {
     },
 }
 
-/// The highest ROS domain id (rcl's limit for the default port mapping).
-pub const MAX_DOMAIN_ID: u32 = 232;
+/// The highest ROS domain id a policy document names: sros2's default range, 0 … 230.
+/// rcl allows up to 232, but Cyclone DDS's access control refuses a governance or
+/// permissions document with a domain id above 230 ("Can not parse governance file":
+/// its parser's limit), and the WAN bridge's participant is Cyclone's.
+pub const MAX_DOMAIN_ID: u32 = 230;
 
 /// The nodes of the operator's PC (`launch_scripts/pc.sh`; the recorder beside them,
 /// where the datasets are kept, and the physics twin, which stands in for the Pi's arm).
@@ -932,7 +935,7 @@ mod tests {
             "<domains>",
             "<id_range>",
             "<min>0</min>",
-            "<max>232</max>",
+            "<max>230</max>",
             "</domains>",
             "<publish>",
             "<topics>",
@@ -982,7 +985,7 @@ mod tests {
             "<metadata_protection_kind>ENCRYPT</metadata_protection_kind>",
             "<data_protection_kind>ENCRYPT</data_protection_kind>",
             "<min>0</min>",
-            "<max>232</max>",
+            "<max>230</max>",
         ] {
             assert!(xml.contains(line), "{line}");
         }
@@ -1120,8 +1123,8 @@ mod tests {
         assert!(Validity::new("2030-01-01T00:00:00", "2020-01-01T00:00:00").is_err());
         let v = Validity::from_unix(0, 86_400).unwrap();
         assert_eq!(v.not_after(), "1970-01-02T00:00:00");
-        assert!(Domains::id(233).is_err());
-        assert_eq!(Domains::id(232).unwrap(), Domains::Id(232));
+        assert!(Domains::id(231).is_err());
+        assert_eq!(Domains::id(230).unwrap(), Domains::Id(230));
     }
 
     #[test]

@@ -34,7 +34,8 @@ options:
                    both ways, /rosout, every service) (default: pi for /eezybot/pi,
                    else pc)
   --namespace NS   the nodes' namespace, for -r __ns:=NS (default /)
-  --domain N       only ROS domain N (default: every domain, 0 ... 232)
+  --domain N       only ROS domain N (default: every domain, 0 ... 230, sros2's
+                   range: Cyclone DDS refuses a document with a higher one)
   --cert FILE      the enclave's certificate: the grant's validity is its validity
                    (and its subject must be CN=PATH)
   --not-before T, --not-after T
@@ -91,7 +92,7 @@ fn parse_options(args: &[String]) -> Result<Options, Failure> {
                 let v = value()?;
                 let n: u32 = v
                     .parse()
-                    .map_err(|_| Failure::Usage(format!("--domain {v}: a number 0 ... 232")))?;
+                    .map_err(|_| Failure::Usage(format!("--domain {v}: a number 0 ... 230")))?;
                 o.domain = Some(Domains::id(n).map_err(|e| Failure::Usage(e.to_string()))?);
             }
             "--cert" => o.cert = Some(value()?),
