@@ -3,17 +3,22 @@
 # names of `ros2 security create_keystore` / `create_enclave`, made with the openssl
 # command and `eezybot_sros2` (the policy documents, generated from the topic contract).
 #
-#   launch_scripts/keystore.sh DIR                       CA, governance, /eezybot/pc, /eezybot/pi
+#   launch_scripts/keystore.sh DIR                       CA, governance, /eezybot/pc, /eezybot/pi,
+#                                                        /eezybot/bridge_pc, /eezybot/bridge_pi
 #   launch_scripts/keystore.sh DIR --enclave /eezybot/pc2   one more enclave (e.g. a second PC)
 #
 # Options:
-#   --enclave PATH    make this enclave (repeatable) instead of /eezybot/pc and /eezybot/pi
-#   --role pc|pi|tools  the permissions of the --enclave ones: pc = what gui_bridge,
+#   --enclave PATH    make this enclave (repeatable) instead of the four default ones
+#   --role ROLE       the permissions of the --enclave ones: pc = what gui_bridge,
 #                     compute_ik, state_publisher, the recorder and the twin use (the
 #                     operator PC: a second PC); pi = what serial_node and camera_node use; tools = for stock ROS 2 tools (`ros2
 #                     topic echo`, `ros2 param set`, RViz2): every topic of the contract
-#                     both ways, /rosout, every service. Default: pi for /eezybot/pi, pc
-#                     for any other enclave.
+#                     both ways, /rosout, every service; bridge_pc, bridge_pi = the WAN
+#                     bridge of that site (eezybot_wan_bridge pc|pi, when pc.sh or pi.sh
+#                     run with ZENOH_ROUTER): exactly the topics that cross the WAN there
+#                     (wan/src/crossing.rs), each way, and ros_discovery_info. Default: pi
+#                     for /eezybot/pi, bridge_pc and bridge_pi for /eezybot/bridge_pc and
+#                     /eezybot/bridge_pi, pc for any other enclave.
 #   --namespace NS    the nodes run with -r __ns:=NS (their topics are rt/NS/...)
 #   --domain N        only ROS domain N in the governance and permissions (default: every
 #                     domain, 0 ... 230: sros2's range; Cyclone DDS refuses documents
@@ -41,7 +46,7 @@
 set -euo pipefail
 EEZYBOT_SCRIPT=keystore.sh
 . "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-eezybot_tool "usage: keystore.sh DIR [--enclave PATH]... [--role pc|pi|tools] [--namespace NS] [--domain N] [--renew] (--help)"
+eezybot_tool "usage: keystore.sh DIR [--enclave PATH]... [--role pc|pi|tools|bridge_pc|bridge_pi] [--namespace NS] [--domain N] [--renew] (--help)"
 
 DIR=""
 ENCLAVES=()
@@ -75,15 +80,15 @@ for e in "${ENCLAVES[@]}"; do
   [[ $e =~ $ROS_NAME ]] || eezybot_bad_usage "enclave '$e' is not an absolute ROS name such as /eezybot/pc2 (letters, digits, _)"
 done
 case "$ROLE" in
-  ""|pc|pi|tools) ;;
-  *) eezybot_bad_usage "--role $ROLE: pc, pi or tools" ;;
+  ""|pc|pi|tools|bridge_pc|bridge_pi) ;;
+  *) eezybot_bad_usage "--role $ROLE: pc, pi, tools, bridge_pc or bridge_pi" ;;
 esac
 [ -z "$ROLE" ] || [ ${#ENCLAVES[@]} -gt 0 ] || eezybot_bad_usage "--role applies to --enclave PATH"
 [ "$NAMESPACE" = / ] || [[ $NAMESPACE =~ $ROS_NAME ]] || eezybot_bad_usage "namespace '$NAMESPACE' is not an absolute ROS namespace such as /arm2"
 if [ -n "$DOMAIN" ]; then
   [[ $DOMAIN =~ ^[0-9]+$ ]] && [ "$DOMAIN" -le 230 ] || eezybot_bad_usage "--domain $DOMAIN: a ROS domain id 0 ... 230 (the keystore's documents: Cyclone DDS refuses higher ones)"
 fi
-[ ${#ENCLAVES[@]} -gt 0 ] || ENCLAVES=(/eezybot/pc /eezybot/pi)
+[ ${#ENCLAVES[@]} -gt 0 ] || ENCLAVES=(/eezybot/pc /eezybot/pi /eezybot/bridge_pc /eezybot/bridge_pi)
 command -v openssl >/dev/null 2>&1 || { eezybot_say "the openssl command is needed (Debian: apt install openssl)"; exit 1; }
 
 # in a source tree: build only the generator, not every node
@@ -160,7 +165,14 @@ for enclave in "${ENCLAVES[@]}"; do
   fi
   chmod 600 "$d/key.pem"
   role=$ROLE
-  [ -n "$role" ] || { [ "$enclave" = /eezybot/pi ] && role=pi || role=pc; }
+  if [ -z "$role" ]; then
+    case "$enclave" in
+      /eezybot/pi) role=pi ;;
+      /eezybot/bridge_pc) role=bridge_pc ;;
+      /eezybot/bridge_pi) role=bridge_pi ;;
+      *) role=pc ;;
+    esac
+  fi
   if [ ! -f "$d/permissions.p7s" ] || [ ! -f "$d/permissions.xml" ] || [ "$RENEW" = 1 ] || [ "$what" = created ]; then
     "$SROS2" permissions --enclave "$enclave" --role "$role" --namespace "$NAMESPACE" "${POLICY_ARGS[@]}" \
       --cert "$d/cert.pem" >"$WORK/permissions.xml"
@@ -171,6 +183,7 @@ for enclave in "${ENCLAVES[@]}"; do
       pc) nodes="gui_bridge, compute_ik, state_publisher, recorder, twin" ;;
       pi) nodes="serial_node, camera_node" ;;
       tools) nodes="ROS 2 tools" ;;
+      bridge_pc | bridge_pi) nodes="eezybot_wan_bridge ${role#bridge_} (what crosses the WAN)" ;;
     esac
     eezybot_say "enclave $enclave: $what ($d; permissions of $nodes in namespace $NAMESPACE)"
   else

@@ -27,6 +27,8 @@ ENCLAVE_FILES = ("cert.pem", "key.pem", "identity_ca.cert.pem", "permissions_ca.
                  "permissions.p7s", "permissions.xml")
 PC_NODES = {"gui_bridge", "compute_ik", "state_publisher", "recorder", "twin"}  # sros2.rs PC_NODES
 PI_NODES = {"serial_node", "camera_node"}  # libs/ros_plumbing/src/sros2.rs PI_NODES
+# the enclaves keystore.sh makes by default: the nodes' two, and the WAN bridges' two
+ENCLAVES = ("/eezybot/pc", "/eezybot/pi", "/eezybot/bridge_pc", "/eezybot/bridge_pi")
 # roles that run beside either half, wherever their hardware is (ros_plumbing::sros2::EITHER_HALF):
 # a leader arm's reader
 EITHER_HALF = {"serial_node (leader)"}
@@ -129,8 +131,8 @@ def test_the_layout_and_file_names_are_sros2s(keystore):
     for f in ("governance.xml", "governance.p7s"):
         assert (keystore / "enclaves" / f).is_file()
     found = sorted(str(p.parent.relative_to(keystore / "enclaves")) for p in (keystore / "enclaves").rglob("key.pem"))
-    assert found == ["eezybot/pc", "eezybot/pi"]
-    for name in ("/eezybot/pc", "/eezybot/pi"):
+    assert found == sorted(e.lstrip("/") for e in ENCLAVES)
+    for name in ENCLAVES:
         d = enclave(keystore, name)
         assert sorted(p.name for p in d.iterdir()) == sorted(ENCLAVE_FILES)
         assert os.readlink(d / "identity_ca.cert.pem") == "../../../public/identity_ca.cert.pem"
@@ -143,7 +145,7 @@ def test_the_layout_and_file_names_are_sros2s(keystore):
 def test_private_keys_are_owner_only(keystore):
     assert (keystore / "private").stat().st_mode & 0o777 == 0o700
     assert (keystore / "private" / "ca.key.pem").stat().st_mode & 0o777 == 0o600
-    for name in ("/eezybot/pc", "/eezybot/pi"):
+    for name in ENCLAVES:
         assert (enclave(keystore, name) / "key.pem").stat().st_mode & 0o077 == 0
         assert enclave(keystore, name).stat().st_mode & 0o077 == 0
 
@@ -157,7 +159,7 @@ def test_every_certificate_verifies_against_the_ca_and_names_its_enclave(keystor
     text = openssl("x509", "-noout", "-text", "-in", ca).stdout
     assert "CA:TRUE" in text and "prime256v1" in text
     assert openssl("x509", "-noout", "-subject", "-nameopt", "RFC2253", "-in", ca).stdout.strip() == "subject=CN=sros2CA"
-    for name in ("/eezybot/pc", "/eezybot/pi"):
+    for name in ENCLAVES:
         d = enclave(keystore, name)
         assert "OK" in openssl("verify", "-CAfile", keystore / "public" / "identity_ca.cert.pem", d / "cert.pem").stdout
         openssl("verify", "-CAfile", d / "identity_ca.cert.pem", d / "cert.pem")
@@ -182,7 +184,7 @@ def test_governance_and_permissions_are_signed_by_the_ca(keystore, tmp_path):
     ca = keystore / "public" / "permissions_ca.cert.pem"
     pairs = [(keystore / "enclaves" / "governance.p7s", keystore / "enclaves" / "governance.xml")]
     pairs += [(enclave(keystore, n) / "permissions.p7s", enclave(keystore, n) / "permissions.xml")
-              for n in ("/eezybot/pc", "/eezybot/pi")]
+              for n in ENCLAVES]
     for p7s, xml in pairs:
         out = tmp_path / "content"
         openssl("smime", "-verify", "-text", "-in", p7s, "-CAfile", ca, "-out", out)
@@ -308,7 +310,7 @@ def test_every_contract_topic_is_granted_exactly_to_the_enclaves_of_its_nodes(ke
 
 def test_a_rerun_keeps_the_ca_the_governance_and_the_enclaves(fresh):
     files = [fresh / "public" / "ca.cert.pem", fresh / "private" / "ca.key.pem", fresh / "enclaves" / "governance.p7s"]
-    for n in ("/eezybot/pc", "/eezybot/pi"):
+    for n in ENCLAVES:
         files += [enclave(fresh, n) / f for f in ("cert.pem", "key.pem", "permissions.p7s", "permissions.xml")]
     before = {f: sha256(f) for f in files}
     ca = fingerprint(fresh / "public" / "ca.cert.pem")
@@ -317,6 +319,35 @@ def test_a_rerun_keeps_the_ca_the_governance_and_the_enclaves(fresh):
     assert {f: sha256(f) for f in files} == before
     assert fingerprint(fresh / "public" / "ca.cert.pem") == ca
     assert "CA: kept" in r.stderr and "enclave /eezybot/pi: kept" in r.stderr
+
+
+def test_a_rerun_adds_the_bridges_enclaves_to_a_keystore_made_without_them(fresh):
+    """A keystore made before the WAN bridges had enclaves (only /eezybot/pc and
+    /eezybot/pi): `keystore.sh DIR` again adds /eezybot/bridge_pc and /eezybot/bridge_pi,
+    signed by the same CA, each with the role of its name (what its site's bridge
+    carries), and keeps the rest. A second site's bridge enclave takes `--role`."""
+    for name in ("/eezybot/bridge_pc", "/eezybot/bridge_pi"):
+        shutil.rmtree(enclave(fresh, name))
+    kept = {f: sha256(f) for n in ("/eezybot/pc", "/eezybot/pi") for f in enclave(fresh, n).glob("*.p*")}
+    r = keystore_sh(fresh)
+    assert r.returncode == 0, r.stderr
+    assert {f: sha256(f) for f in kept} == kept
+    grants = {}
+    for name in ("/eezybot/bridge_pc", "/eezybot/bridge_pi"):
+        d = enclave(fresh, name)
+        assert f"enclave {name}: created" in r.stderr, r.stderr
+        openssl("verify", "-CAfile", fresh / "public" / "ca.cert.pem", d / "cert.pem")
+        grants[name] = grant_topics(d / "permissions.xml")[4]
+    pc, pi = grants["/eezybot/bridge_pc"], grants["/eezybot/bridge_pi"]
+    # what one site's bridge reads from its nodes, the other's writes to its own: the
+    # Pi's servo_state out, the PC's servo_angles out; no target and no service crosses
+    assert "rt/servo_state" in pi["subscribe"] and "rt/servo_state" in pc["publish"]
+    assert "rt/servo_angles" in pc["subscribe"] and "rt/servo_angles" in pi["publish"]
+    for g in (pc, pi):
+        assert not {t for t in g["publish"] | g["subscribe"] if t.startswith(("rq/", "rr/")) or "target" in t}
+        assert "ros_discovery_info" in g["publish"] and "ros_discovery_info" in g["subscribe"]
+    assert keystore_sh(fresh, "--enclave", "/eezybot/bridge_pc2", "--role", "bridge_pc").returncode == 0
+    assert grant_topics(enclave(fresh, "/eezybot/bridge_pc2") / "permissions.xml")[4] == pc
 
 
 def test_enclave_adds_one_more_signed_by_the_same_ca(fresh):
@@ -401,7 +432,7 @@ def test_bad_usage_exits_2_and_makes_nothing(args, tmp_path):
 
 def test_help_exits_0():
     r = keystore_sh("--help")
-    assert r.returncode == 0 and "--enclave PATH" in r.stdout and "--role pc|pi|tools" in r.stdout
+    assert r.returncode == 0 and "--enclave PATH" in r.stdout and "--role ROLE" in r.stdout
 
 
 # ---------------------------------------------------------------------------------------

@@ -1,9 +1,11 @@
 //! Which topics cross the WAN and in which direction: pure constants, with no
-//! dependency, so that the main workspace's test of the topic contract
-//! (libs/ros_plumbing/tests/crossing.rs) includes this file and checks [`CROSSING`]
-//! against `ros_plumbing::topics`: every crossing topic is in the contract, published on
-//! its `from` side and subscribed on each `to` side, and every topic published on one
-//! side and subscribed on the other crosses.
+//! dependency, so that the main workspace includes this file too
+//! (`ros_plumbing::crossing`): its SROS2 permissions of the bridges' enclaves
+//! (`ros_plumbing::sros2`, `Role::Bridge`: exactly what crosses, each way) are made from
+//! [`CROSSING`], and its test of the topic contract (libs/ros_plumbing/tests/crossing.rs)
+//! checks [`CROSSING`] against `ros_plumbing::topics`: every crossing topic is in the
+//! contract, published on its `from` side and subscribed on each `to` side, and every
+//! topic published on one side and subscribed on the other crosses.
 
 use std::str::FromStr;
 

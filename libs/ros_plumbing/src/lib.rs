@@ -6,6 +6,11 @@ pub mod action_client;
 pub mod args;
 pub mod burst;
 pub mod controller_manager;
+/// Which topics cross the WAN bridge and in which direction: wan/'s `CROSSING`, the one
+/// list, read by wan/'s own workspace and here (the bridges' SROS2 permissions,
+/// [`sros2`], and the contract test `tests/crossing.rs`).
+#[path = "../../../wan/src/crossing.rs"]
+pub mod crossing;
 pub mod diagnostics;
 pub mod docs;
 pub mod episodes;

@@ -16,6 +16,11 @@
 //!   (`rt/servo_state`, `rq/serial_node/get_parametersRequest`, …) and
 //!   `<default>DENY</default>`.
 //!
+//! The WAN bridges' enclaves (`/eezybot/bridge_pc`, `/eezybot/bridge_pi`,
+//! [`Role::Bridge`]) are granted exactly what crosses the WAN at their site, each way
+//! ([`crate::crossing::CROSSING`], wan/'s list): the bridge subscribes to what its site
+//! sends out and publishes what comes in, and nothing else but `ros_discovery_info`.
+//!
 //! `launch_scripts/keystore.sh` prints them with the `eezybot_sros2` binary and signs
 //! them with the CA (openssl).
 //!
@@ -36,6 +41,7 @@
 //! assert!(!rules.publish.contains("rt/xyz_target"));
 //! ```
 
+use crate::crossing;
 use crate::topics;
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
@@ -114,6 +120,14 @@ pub const PI_NODES: &[&str] = &["serial_node", "camera_node"];
 pub const PC_ENCLAVE: &str = "/eezybot/pc";
 /// The Raspberry Pi's enclave.
 pub const PI_ENCLAVE: &str = "/eezybot/pi";
+/// The enclave of the operator PC's WAN bridge (`eezybot_wan_bridge pc`).
+pub const BRIDGE_PC_ENCLAVE: &str = "/eezybot/bridge_pc";
+/// The enclave of the Raspberry Pi's WAN bridge (`eezybot_wan_bridge pi`).
+pub const BRIDGE_PI_ENCLAVE: &str = "/eezybot/bridge_pi";
+/// The DDS topics of the ROS graph a WAN bridge's participant uses besides the crossing
+/// ones (zenoh-plugin-ros2dds reads and writes `ros_discovery_info`; it creates no
+/// other topic: no `rosout`, no `parameter_events`, no services).
+pub const BRIDGE_GRAPH: &[&str] = &["ros_discovery_info"];
 
 /// The parameter services ros2-client starts for every node (`rq/<node>/<srv>Request`,
 /// `rr/<node>/<srv>Reply`).
@@ -169,15 +183,23 @@ pub enum Role {
     /// read, and every service (`rq/*`, `rr/*`: a tool's node has a random name and
     /// parameter services of its own, and `ros2 param` calls any node's).
     Tools,
+    /// The WAN bridge of a site (`eezybot_wan_bridge pc|pi`): exactly what crosses there
+    /// ([`crossing::CROSSING`]): it subscribes to the topics its site sends out
+    /// ([`crossing::Side::outgoing`]: it reads them from the local publishers), publishes
+    /// those that come in ([`crossing::Side::incoming`]: it writes them to the local
+    /// subscribers), and reads and writes `ros_discovery_info` ([`BRIDGE_GRAPH`]).
+    Bridge(crossing::Side),
 }
 
 impl Role {
-    /// `pc`, `pi` or `tools`.
+    /// `pc`, `pi`, `tools`, `bridge_pc` or `bridge_pi`.
     pub fn parse(s: &str) -> Option<Role> {
         match s {
             "pc" => Some(Role::Pc),
             "pi" => Some(Role::Pi),
             "tools" => Some(Role::Tools),
+            "bridge_pc" => Some(Role::Bridge(crossing::Side::Pc)),
+            "bridge_pi" => Some(Role::Bridge(crossing::Side::Pi)),
             _ => None,
         }
     }
@@ -187,12 +209,15 @@ impl Role {
         match self {
             Role::Pc => PC_NODES,
             Role::Pi => PI_NODES,
-            Role::Tools => &[],
+            Role::Tools | Role::Bridge(_) => &[],
         }
     }
 
     /// What an enclave of this role in `namespace` may publish and subscribe.
     pub fn rules(self, namespace: &str) -> Result<Rules, Sros2Error> {
+        if let Role::Bridge(side) = self {
+            return bridge_rules(side, namespace);
+        }
         let mut r = rules(self.nodes(), namespace)?;
         if self == Role::Tools {
             for t in topics::all() {
@@ -212,13 +237,26 @@ impl Role {
         Ok(r)
     }
 
-    /// The role of an enclave when none is given: the Pi's for `/eezybot/pi`, the
-    /// operator PC's for any other (a second operator PC, a tools enclave).
+    /// The role of an enclave when none is given: the Pi's for `/eezybot/pi`, a WAN
+    /// bridge's for `/eezybot/bridge_pc` and `/eezybot/bridge_pi`, the operator PC's for
+    /// any other (a second operator PC, a tools enclave).
     pub fn of_enclave(enclave: &str) -> Role {
-        if enclave == PI_ENCLAVE {
-            Role::Pi
-        } else {
-            Role::Pc
+        match enclave {
+            PI_ENCLAVE => Role::Pi,
+            BRIDGE_PC_ENCLAVE => Role::Bridge(crossing::Side::Pc),
+            BRIDGE_PI_ENCLAVE => Role::Bridge(crossing::Side::Pi),
+            _ => Role::Pc,
+        }
+    }
+
+    /// The name `parse` takes (`pc`, `bridge_pi`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Role::Pc => "pc",
+            Role::Pi => "pi",
+            Role::Tools => "tools",
+            Role::Bridge(crossing::Side::Pc) => "bridge_pc",
+            Role::Bridge(crossing::Side::Pi) => "bridge_pi",
         }
     }
 }
@@ -564,6 +602,24 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
         .extend(GRAPH_PUBLISH.iter().map(|s| s.to_string()));
     r.subscribe
         .extend(GRAPH_SUBSCRIBE.iter().map(|s| s.to_string()));
+    Ok(r)
+}
+
+/// What the WAN bridge of `side` in `namespace` publishes and subscribes
+/// ([`Role::Bridge`]): the topics of [`crossing::CROSSING`] that come in there
+/// (published: the bridge writes them to the local subscribers), those that go out
+/// from there (subscribed: it reads them from the local publishers), and
+/// [`BRIDGE_GRAPH`] both ways.
+pub fn bridge_rules(side: crossing::Side, namespace: &str) -> Result<Rules, Sros2Error> {
+    check_namespace(namespace)?;
+    let dds = |t: &str| format!("rt/{}", in_namespace(namespace, t));
+    let mut r = Rules::default();
+    r.publish.extend(side.incoming().into_iter().map(dds));
+    r.subscribe.extend(side.outgoing().into_iter().map(dds));
+    for t in BRIDGE_GRAPH {
+        r.publish.insert(t.to_string());
+        r.subscribe.insert(t.to_string());
+    }
     Ok(r)
 }
 
@@ -1095,6 +1151,74 @@ mod tests {
         assert_eq!(Role::parse("pi"), Some(Role::Pi));
         assert_eq!(Role::parse("tools"), Some(Role::Tools));
         assert_eq!(Role::parse("PC"), None);
+        for (enclave, role) in [
+            (BRIDGE_PC_ENCLAVE, Role::Bridge(crossing::Side::Pc)),
+            (BRIDGE_PI_ENCLAVE, Role::Bridge(crossing::Side::Pi)),
+        ] {
+            assert_eq!(Role::of_enclave(enclave), role);
+            assert_eq!(Role::parse(role.name()), Some(role));
+        }
+    }
+
+    #[test]
+    fn a_bridge_may_publish_what_comes_in_and_subscribe_what_goes_out_and_nothing_else() {
+        let pi = Role::Bridge(crossing::Side::Pi).rules("/").unwrap();
+        let set = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<BTreeSet<_>>();
+        assert_eq!(
+            pi.publish,
+            set(&["ros_discovery_info", "rt/estop", "rt/servo_angles"])
+        );
+        assert_eq!(
+            pi.subscribe,
+            set(&[
+                "ros_discovery_info",
+                "rt/camera/image_raw/compressed",
+                "rt/diagnostics",
+                "rt/servo_state"
+            ])
+        );
+        let pc = Role::Bridge(crossing::Side::Pc).rules("/arm2").unwrap();
+        assert_eq!(
+            pc.publish,
+            set(&[
+                "ros_discovery_info",
+                "rt/arm2/camera/image_raw/compressed",
+                "rt/arm2/diagnostics",
+                "rt/arm2/estop",
+                "rt/arm2/robot_description",
+                "rt/arm2/servo_state"
+            ])
+        );
+        assert_eq!(
+            pc.subscribe,
+            set(&[
+                "ros_discovery_info",
+                "rt/arm2/estop",
+                "rt/arm2/robot_description",
+                "rt/arm2/servo_angles"
+            ])
+        );
+        // what one site's bridge writes, the other's reads: the same topics
+        for (a, b) in [(&pi, &pc), (&pc, &pi)] {
+            for t in a.publish.iter().filter(|t| t.starts_with("rt/")) {
+                let name = t.trim_start_matches("rt/").trim_start_matches("arm2/");
+                assert!(
+                    crossing::CROSSING.iter().any(|c| c.topic == name),
+                    "{t} does not cross"
+                );
+            }
+            assert!(!b.publish.contains("rt/xyz_target"));
+        }
+        assert!(Role::Bridge(crossing::Side::Pc).rules("arm2").is_err());
+        assert!(Role::Bridge(crossing::Side::Pc).nodes().is_empty());
+        let xml = permissions_xml(&grant(
+            BRIDGE_PI_ENCLAVE,
+            Role::Bridge(crossing::Side::Pi),
+            "/",
+        ))
+        .unwrap();
+        assert!(xml.contains("<subject_name>CN=/eezybot/bridge_pi</subject_name>"));
+        assert_eq!(section(&xml, "publish").len(), 3);
     }
 
     #[test]

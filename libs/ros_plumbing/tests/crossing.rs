@@ -1,13 +1,9 @@
 //! wan/'s `CROSSING` (which topics cross the WAN bridge, from which side to which)
 //! against the topic contract ([`ros_plumbing::topics`]). wan/ is a workspace of its
-//! own (it builds Zenoh), so its table lives in a file of pure constants that this
-//! test includes.
+//! own (it builds Zenoh), so its table lives in a file of pure constants that
+//! ros_plumbing includes ([`ros_plumbing::crossing`]).
 
-#[allow(dead_code)] // the bridge's helpers of Side, unused here
-#[path = "../../../wan/src/crossing.rs"]
-mod crossing;
-
-use crossing::{Side, CROSSING};
+use ros_plumbing::crossing::{Side, CROSSING};
 use ros_plumbing::sros2::{node_of, EITHER_HALF, PC_NODES, PI_NODES};
 use ros_plumbing::topics::{self, TopicEntry};
 

@@ -14,9 +14,9 @@ contract (libs/ros_plumbing/src/topics.rs), printed on stdout.
 
 usage:
   eezybot_sros2 governance [--domain N]
-  eezybot_sros2 permissions --enclave PATH [--role pc|pi|tools] [--namespace NS] [--domain N]
+  eezybot_sros2 permissions --enclave PATH [--role ROLE] [--namespace NS] [--domain N]
                             [--cert CERT.PEM | --not-before T --not-after T]
-  eezybot_sros2 topics --enclave PATH [--role pc|pi|tools] [--namespace NS]
+  eezybot_sros2 topics --enclave PATH [--role ROLE] [--namespace NS]
 
   governance    sros2's default governance: authentication required, discovery,
                 liveliness and data encrypted, RTPS signed, access control on every topic
@@ -27,12 +27,15 @@ usage:
                 (`publish rt/servo_state`)
 
 options:
-  --enclave PATH   the enclave (/eezybot/pc, /eezybot/pi, /eezybot/tools ...)
-  --role pc|pi|tools
+  --enclave PATH   the enclave (/eezybot/pc, /eezybot/pi, /eezybot/bridge_pc, /eezybot/tools ...)
+  --role pc|pi|tools|bridge_pc|bridge_pi
                    what runs in it: pc = gui_bridge, compute_ik, state_publisher;
                    pi = serial_node; tools = stock ROS 2 tools (every contract topic
-                   both ways, /rosout, every service) (default: pi for /eezybot/pi,
-                   else pc)
+                   both ways, /rosout, every service); bridge_pc, bridge_pi = that
+                   site's WAN bridge (eezybot_wan_bridge pc|pi: exactly the topics
+                   that cross the WAN there, each way, and ros_discovery_info)
+                   (default: pi for /eezybot/pi, bridge_pc and bridge_pi for
+                   /eezybot/bridge_pc and /eezybot/bridge_pi, else pc)
   --namespace NS   the nodes' namespace, for -r __ns:=NS (default /)
   --domain N       only ROS domain N (default: every domain, 0 ... 230, sros2's
                    range: Cyclone DDS refuses a document with a higher one)
@@ -82,10 +85,9 @@ fn parse_options(args: &[String]) -> Result<Options, Failure> {
             "--enclave" | "-e" => o.enclave = Some(value()?),
             "--role" => {
                 let v = value()?;
-                o.role = Some(
-                    Role::parse(&v)
-                        .ok_or_else(|| Failure::Usage(format!("--role {v}: pc, pi or tools")))?,
-                );
+                o.role = Some(Role::parse(&v).ok_or_else(|| {
+                    Failure::Usage(format!("--role {v}: pc, pi, tools, bridge_pc or bridge_pi"))
+                })?);
             }
             "--namespace" => o.namespace = Some(value()?),
             "--domain" => {
