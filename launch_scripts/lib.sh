@@ -100,23 +100,26 @@ eezybot_find_wan_binaries() {
 # tests), this site's bridge `eezybot_wan_bridge SIDE` runs beside the nodes, in their ROS
 # domain and namespace, and joins the router with the certificate NAME.pem of
 # ZENOH_TLS_DIR (NAME: ZENOH_CERT, default SIDE). Without ZENOH_ROUTER nothing changes.
+# With SROS2 on as well (eezybot_security), the bridge's DDS participant joins the secured
+# LAN under the enclave /eezybot/bridge_SIDE of the same keystore (keystore.sh makes it:
+# exactly what crosses the WAN there, each way), checked here as the nodes' are.
 #   eezybot_wan SIDE      (after eezybot_ros_args and eezybot_security) -> EEZYBOT_WAN=1 when
 #                         on. Checks the bridge's configuration first, as the bridge does
-#                         (endpoint, TLS files: exit 2 with its message, before any node starts).
+#                         (endpoint, TLS files, its enclave: exit 2 with its message, before
+#                         any node starts).
 #   eezybot_start_wan     starts the bridge (when on), stopped with the nodes
 EEZYBOT_WAN=0
 eezybot_wan() {
   local side=$1 code=0
   EEZYBOT_WAN=0
   [ -n "${ZENOH_ROUTER:-}" ] || return 0
-  if [ "$EEZYBOT_SECURE" = 1 ]; then
-    eezybot_say "ZENOH_ROUTER and ROS_SECURITY_ENABLE=true do not go together: the WAN bridge's DDS participant has no SROS2 enclave, so secured nodes would not talk to it. The WAN leg has its own TLS (ZENOH_TLS_DIR); unset ROS_SECURITY_ENABLE on a site that uses the bridge (README: Across the internet)"
-    trap - EXIT
-    exit 2
-  fi
   eezybot_find_wan_binaries eezybot_wan_bridge
   EEZYBOT_WAN_ARGS=("$side" --namespace "$(eezybot_namespace)")
   [ -z "${ZENOH_CERT:-}" ] || EEZYBOT_WAN_ARGS+=(--cert "$ZENOH_CERT")
+  if [ "$EEZYBOT_SECURE" = 1 ]; then
+    eezybot_security "/eezybot/bridge_$side" "eezybot_wan_bridge $side"
+    EEZYBOT_WAN_ARGS+=(--enclave "/eezybot/bridge_$side")
+  fi
   "$EEZYBOT_WAN_BIN/eezybot_wan_bridge" "${EEZYBOT_WAN_ARGS[@]}" --print-config >/dev/null || code=$?
   if [ "$code" != 0 ]; then
     eezybot_say "the WAN bridge's configuration is unusable (above): not starting"

@@ -1,7 +1,7 @@
 //! What the WAN router (`eezybot_wan_router`) and bridge (`eezybot_wan_bridge`) share:
 //! which topics cross and in which direction ([`Side`]), the TLS files of
 //! `launch_scripts/wan_certs.sh` ([`TlsFiles`]), the endpoint check and the exit status
-//! of a configuration error ([`fail`]).
+//! of a configuration error ([`fail`]); and the bridge's SROS2 enclave ([`sros2`]).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -17,6 +17,7 @@ pub mod expiry;
 pub mod health;
 pub mod refusals;
 pub use crossing::{Crossing, Side, CROSSING};
+pub mod sros2;
 
 /// Exit status for a configuration error: a missing or unusable TLS file, a bad
 /// endpoint, a bad argument.

@@ -10,13 +10,21 @@
 //!   --cert NAME                    client certificate name (default: the side, pc or pi)
 //!   --domain N      ROS_DOMAIN_ID  DDS domain (default 0)
 //!   --namespace NS                 the nodes' ROS namespace (-r __ns:=NS), default /
-//!   --print-config                 print the Zenoh configuration and exit
-//! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint).
+//!   --enclave PATH                 SROS2: the DDS participant's enclave when
+//!                                  ROS_SECURITY_ENABLE=true (default /eezybot/bridge_SIDE;
+//!                                  ROS_SECURITY_ENCLAVE_OVERRIDE wins, as in rcl), in
+//!                                  ROS_SECURITY_KEYSTORE; ROS_SECURITY_STRATEGY=Enforce:
+//!                                  an unusable enclave is a configuration error
+//!   --print-config                 print the Zenoh configuration and exit (after the
+//!                                  checks, the enclave's included)
+//! Exit status 2 on a configuration error (missing or unreadable TLS file, bad endpoint,
+//! under Enforce an enclave that is missing or that Cyclone DDS refuses).
 //!
 //! Its own `diagnostics` on the site's LAN, once a second ([`eezybot_wan::health`]):
 //! whether the router is connected and, over TLS, when its certificate (or the CA's)
 //! runs out, a warning within 30 days of it (also said on stderr at start).
 
+use eezybot_wan::sros2::{self, Strategy};
 use eezybot_wan::{
     base_config, check_endpoint, check_namespace, fail, json, topic_regex, CommandLine, Role, Side,
     TlsFiles,
@@ -28,7 +36,7 @@ use zenoh_plugin_trait::Plugin;
 
 const PROGRAM: &str = "eezybot_wan_bridge";
 const USAGE: &str = "usage: eezybot_wan_bridge pc|pi [--router tls/HOST:PORT] [--tls-dir DIR] \
-[--cert NAME] [--domain N] [--namespace /NS] [--print-config]";
+[--cert NAME] [--domain N] [--namespace /NS] [--enclave /PATH] [--print-config]";
 
 struct Args {
     side: Side,
@@ -37,6 +45,7 @@ struct Args {
     cert: Option<String>,
     domain: Option<String>,
     namespace: String,
+    enclave: Option<String>,
     print_config: bool,
 }
 
@@ -48,6 +57,7 @@ fn parse_args() -> Args {
     let mut cert = None;
     let mut domain = None;
     let mut namespace = "/".to_string();
+    let mut enclave = None;
     let mut print_config = false;
     while let Some(arg) = args.next() {
         match arg.as_str() {
@@ -56,6 +66,7 @@ fn parse_args() -> Args {
             "--cert" => cert = Some(args.value("--cert")),
             "--domain" => domain = Some(args.value("--domain")),
             "--namespace" => namespace = args.value("--namespace"),
+            "--enclave" => enclave = Some(args.value("--enclave")),
             "--print-config" => print_config = true,
             "-h" | "--help" => args.help(),
             s if side.is_none() && !s.starts_with('-') => {
@@ -72,6 +83,7 @@ fn parse_args() -> Args {
         cert,
         domain: domain.or_else(|| env("ROS_DOMAIN_ID")),
         namespace,
+        enclave,
         print_config,
     }
 }
@@ -79,6 +91,17 @@ fn parse_args() -> Args {
 /// Set `key` to the JSON5 `value` ([`eezybot_wan::set`]).
 fn set(config: &mut Config, key: &str, value: &str) {
     eezybot_wan::set(PROGRAM, config, key, value)
+}
+
+/// The DDS domain: `--domain` or `ROS_DOMAIN_ID`, 0…232, default 0.
+fn domain(args: &Args) -> u32 {
+    match args.domain.as_deref() {
+        None => 0,
+        Some(d) => match d.parse::<u32>() {
+            Ok(n) if n <= 232 => n,
+            _ => fail(PROGRAM, format!("ROS_DOMAIN_ID=`{d}` is not 0…232")),
+        },
+    }
 }
 
 fn config(args: &Args) -> Config {
@@ -89,13 +112,7 @@ fn config(args: &Args) -> Config {
         )
     });
     let router = check_endpoint("ZENOH_ROUTER", router).unwrap_or_else(|e| fail(PROGRAM, e));
-    let domain = match args.domain.as_deref() {
-        None => 0,
-        Some(d) => match d.parse::<u32>() {
-            Ok(n) if n <= 232 => n,
-            _ => fail(PROGRAM, format!("ROS_DOMAIN_ID=`{d}` is not 0…232")),
-        },
-    };
+    let domain = domain(args);
     let ns = check_namespace(&args.namespace).unwrap_or_else(|e| fail(PROGRAM, e));
     let side = args.side;
     let regexes = |topics: Vec<&str>| {
@@ -153,6 +170,7 @@ async fn main() {
     zenoh::init_log_from_env_or("warn,zenoh_plugin_ros2dds=info");
     let args = parse_args();
     let config = config(&args);
+    let secured = security(&args);
     if args.print_config {
         println!("{config}");
         return;
@@ -168,12 +186,16 @@ async fn main() {
         eprintln!("{PROGRAM}: {}", e.summary(eezybot_wan::expiry::now_unix()));
     }
     eprintln!(
-        "{PROGRAM}: {} side, ROS domain {}, router {}; out: {}; in: {}",
+        "{PROGRAM}: {} side, ROS domain {}, router {}; out: {}; in: {}; {}",
         side.name(),
         args.domain.as_deref().unwrap_or("0"),
         args.router.as_deref().unwrap_or_default(),
         side.outgoing().join(", "),
-        side.incoming().join(", ")
+        side.incoming().join(", "),
+        match &secured {
+            Some(e) => format!("DDS secured, SROS2 enclave {}", e.name),
+            None => "DDS unsecured".to_string(),
+        }
     );
     let mut plugins = PluginsManager::static_plugins_only();
     plugins.declare_static_plugin::<zenoh_plugin_ros2dds::ROS2Plugin, &str>("ros2dds", true);
@@ -267,6 +289,91 @@ async fn watch_router(
             tokio::time::sleep(std::time::Duration::from_secs(1)).await;
         }
     });
+}
+
+/// SROS2 for the plugin's DDS participant ([`sros2`]): when `ROS_SECURITY_ENABLE=true`,
+/// the enclave's files are checked, Cyclone DDS is asked to make a participant with
+/// them (one that sends nothing: [`sros2::ISOLATED`]), and `CYCLONEDDS_URI` gets the
+/// enclave's configuration for the plugin's participant. An unusable enclave stops the
+/// bridge under Enforce (exit status 2); otherwise it warns and runs unsecured, as our
+/// nodes do. The enclave in use, or None.
+fn security(args: &Args) -> Option<sros2::Enclave> {
+    let default = sros2::default_enclave(args.side);
+    let arg = args.enclave.as_deref().unwrap_or(&default);
+    let user_uri = std::env::var("CYCLONEDDS_URI").ok();
+    let checked =
+        sros2::plan(|name| std::env::var(name).ok(), arg).and_then(|plan| match plan {
+            None => Ok(None),
+            Some(enclave) => {
+                let uri =
+                    sros2::with_fragment(user_uri.as_deref(), &sros2::cyclone_config(&enclave));
+                match cyclone_takes(domain(args), &uri) {
+                    Ok(()) => Ok(Some((enclave, uri))),
+                    Err(why) => Err((
+                        enclave.strategy,
+                        format!(
+                            "enclave {} ({}): Cyclone DDS refused it{}: {why} (its reason is logged above)",
+                            enclave.name,
+                            enclave.dir.display(),
+                            if user_uri.is_some() {
+                                " or the CYCLONEDDS_URI it is added to"
+                            } else {
+                                ""
+                            }
+                        ),
+                    )),
+                }
+            }
+        });
+    match checked {
+        Ok(None) => None,
+        Ok(Some((enclave, uri))) => {
+            eprintln!(
+                "{PROGRAM}: SROS2 on: enclave {} ({}), strategy {}",
+                enclave.name,
+                enclave.dir.display(),
+                enclave.strategy
+            );
+            std::env::set_var("CYCLONEDDS_URI", uri);
+            Some(enclave)
+        }
+        Err((Strategy::Enforce, why)) => fail(
+            PROGRAM,
+            format!("{why}; ROS_SECURITY_STRATEGY=Enforce: not starting unsecured"),
+        ),
+        Err((Strategy::Permissive, why)) => {
+            eprintln!("{PROGRAM}: WARNING: {why}; ROS_SECURITY_STRATEGY is not Enforce: the bridge's DDS participant runs unsecured (secured nodes will not talk to it)");
+            None
+        }
+    }
+}
+
+/// Whether Cyclone DDS makes a participant in `domain` with the configuration `uri`:
+/// the enclave checked as the plugin's participant will be (certificates, key,
+/// signatures, the permissions for this domain). The participant is isolated
+/// ([`sros2::ISOLATED`]: nothing sent) and deleted at once; `CYCLONEDDS_URI` is as
+/// before afterwards.
+fn cyclone_takes(domain: u32, uri: &str) -> Result<(), String> {
+    let before = std::env::var_os("CYCLONEDDS_URI");
+    std::env::set_var("CYCLONEDDS_URI", format!("{uri},{}", sros2::ISOLATED));
+    // SAFETY: plain C calls with no pointers of ours: a null QoS and listener; the
+    // handle returned is used only to delete that participant.
+    let participant =
+        unsafe { cyclors::dds_create_participant(domain, std::ptr::null(), std::ptr::null()) };
+    let result = if participant < 0 {
+        // SAFETY: dds_strretcode returns a static C string for any code.
+        let why = unsafe { std::ffi::CStr::from_ptr(cyclors::dds_strretcode(participant)) };
+        Err(why.to_string_lossy().into_owned())
+    } else {
+        // SAFETY: a participant made here and used by nothing else.
+        unsafe { cyclors::dds_delete(participant) };
+        Ok(())
+    };
+    match before {
+        Some(v) => std::env::set_var("CYCLONEDDS_URI", v),
+        None => std::env::remove_var("CYCLONEDDS_URI"),
+    }
+    result
 }
 
 /// Ctrl-C or SIGTERM ([`eezybot_wan::stop_signal`]).
