@@ -152,10 +152,19 @@ for arch in "${arches[@]}"; do
   # runs bindgen, which passes the target to libclang: clang finds the target's headers in
   # /usr/TOOLS itself (the bindings say __SIZEOF_PTHREAD_MUTEX_T 48, aarch64's, not the
   # host's 40). The linker and runner: .cargo/config.toml (found from wan/ too).
+  # Cyclone DDS is built with DDS Security (wan/Cargo.toml: SROS2 on the Pi's LAN with the
+  # bridge): its cmake finds OpenSSL for the target (OPENSSL_ROOT_DIR) and openssl-sys
+  # links it statically, both the OpenSSL built for the Pi above (kept, or in this build's
+  # tree), so the bridge needs no libssl on the Pi either.
   bridge=()
   if [ "$wan" = 1 ]; then
-    _say "building eezybot_wan_bridge for $t (wan/, release; the first build takes about 10 CPU-minutes: Zenoh, Cyclone DDS)"
+    ssl=$openssl_kept
+    [ -f "$ssl/lib/libssl.a" ] || ssl=$(dirname "$(find "$out"/build/openssl-sys-*/out/openssl-build/install/lib \
+      -name libssl.a -print -quit 2>/dev/null)")/..
+    [ -f "$ssl/lib/libssl.a" ] || { _say "no OpenSSL built for $t (expected in $openssl_kept or $out/build)"; exit 1; }
+    _say "building eezybot_wan_bridge for $t (wan/, release, DDS Security with OpenSSL from $ssl; the first build takes about 10 CPU-minutes: Zenoh, Cyclone DDS)"
     (cd wan && env "CC_${t//-/_}=$(cc_of "$arch")" "CXX_${t//-/_}=$(tools "$arch")-g++" "AR_${t//-/_}=$(ar_of "$arch")" \
+      "${T}_OPENSSL_NO_VENDOR=1" "${T}_OPENSSL_DIR=$ssl" "${T}_OPENSSL_STATIC=1" "OPENSSL_ROOT_DIR=$ssl" \
       cargo build -q --release --target "$t" --target-dir target --bin eezybot_wan_bridge)
     bridge=("wan/target/$t/release/eezybot_wan_bridge")
     # It starts on the target's CPU (qemu-user cannot open its DDS sockets: the
@@ -232,7 +241,11 @@ the Pi's side of the WAN bridge (a Zenoh client of eezybot_wan_router, with
 zenoh-plugin-ros2dds and Cyclone DDS built in; needs glibc ${bridge_glibc[$arch]} or later).
 pi.sh starts it beside serial_node when ZENOH_ROUTER is set (tls/HOST:PORT of the
 router); ZENOH_TLS_DIR holds ca.pem, pi.pem and pi.key (launch_scripts/wan_certs.sh on
-the PC makes them). raspberry_pi.md, "The WAN bridge".
+the PC makes them). raspberry_pi.md, "The WAN bridge". With SROS2 on as well
+(ROS_SECURITY_ENABLE=true), the bridge joins the Pi's secured LAN under its own enclave,
+/eezybot/bridge_pi, of the same keystore (DDS Security built in, OpenSSL linked
+statically): install it beside the Pi's,
+  sudo deploy/install.sh --keystore DIR --enclave /eezybot/bridge_pi
 EOF
   tar -C dist --owner=0 --group=0 -czf "$bundle.tar.gz" "$name"
 done
