@@ -353,7 +353,7 @@ class Keystore:
 
 class Capture:
     """tcpdump on `iface` of namespace `netns` (UDP, or the packets of `expression`;
-    whole packets) into `path`; `promiscuous=False` leaves the interface as it is (a
+    whole packets; `any`: every interface of the namespace) into `path`; `promiscuous=False` leaves the interface as it is (a
     change of its flags is a network change to a browser, which then aborts its loads)."""
 
     def __init__(self, netns, iface, path, expression="udp", promiscuous=True):
@@ -500,9 +500,13 @@ def wait_at_rest(peer, topic="servo_state", quiet=0.5, timeout=10.0):
         time.sleep(quiet / 4)
 
 
-def udp_datagrams(pcap):
-    """The UDP payloads (RTPS messages) of a pcap capture (Ethernet link type, as tcpdump
-    writes on a veth), with IPv4 fragments reassembled, in capture order."""
+# pcap link types: the IPv4 packet's offset in a frame, and where its EtherType is
+_LINK_TYPES = {1: (14, 12), 113: (16, 14), 276: (20, 0)}  # Ethernet, Linux cooked (SLL, SLL2: `-i any`)
+
+
+def ipv4_packets(pcap):
+    """The IPv4 packets of a pcap capture (Ethernet, as tcpdump writes on a veth, or
+    Linux cooked, as it writes with `-i any`), in capture order."""
     magic = pcap[:4]
     if magic == b"\xd4\xc3\xb2\xa1" or magic == b"\x4d\x3c\xb2\xa1":
         endian = "<"
@@ -511,17 +515,43 @@ def udp_datagrams(pcap):
     else:
         raise ValueError("not a pcap file")
     linktype = struct.unpack(endian + "I", pcap[20:24])[0]
-    if linktype != 1:
-        raise ValueError(f"pcap link type {linktype}, not Ethernet")
-    out, frags = [], {}
+    if linktype not in _LINK_TYPES:
+        raise ValueError(f"pcap link type {linktype}, not Ethernet or Linux cooked")
+    start, ethertype = _LINK_TYPES[linktype]
     pos = 24
     while pos + 16 <= len(pcap):
         incl = struct.unpack(endian + "I", pcap[pos + 8:pos + 12])[0]
         frame = pcap[pos + 16:pos + 16 + incl]
         pos += 16 + incl
-        if len(frame) < 34 or frame[12:14] != b"\x08\x00":
+        if len(frame) >= start + 20 and frame[ethertype:ethertype + 2] == b"\x08\x00":
+            yield frame[start:]
+
+
+def tcp_streams(pcap):
+    """The bytes of each TCP connection's direction in a pcap capture, {(source,
+    destination, source port, destination port): bytes}: segments in sequence order, a
+    retransmitted or twice-captured one (loopback with `-i any`) once."""
+    segments = {}
+    for ip in ipv4_packets(pcap):
+        if ip[9] != 6:
             continue
-        ip = frame[14:]
+        ihl = (ip[0] & 15) * 4
+        total = struct.unpack(">H", ip[2:4])[0]
+        tcp = ip[ihl:total]
+        if len(tcp) < 20:
+            continue
+        body = tcp[(tcp[12] >> 4) * 4:]
+        if body:
+            key = (ip[12:16], ip[16:20], *struct.unpack(">HH", tcp[0:4]))
+            segments.setdefault(key, {})[struct.unpack(">I", tcp[4:8])[0]] = body
+    return {key: b"".join(parts[seq] for seq in sorted(parts)) for key, parts in segments.items()}
+
+
+def udp_datagrams(pcap):
+    """The UDP payloads (RTPS messages) of a pcap capture (ipv4_packets), with IPv4
+    fragments reassembled, in capture order."""
+    out, frags = [], {}
+    for ip in ipv4_packets(pcap):
         ihl = (ip[0] & 15) * 4
         total = struct.unpack(">H", ip[2:4])[0]
         ident, flags_off = struct.unpack(">HH", ip[4:8])
