@@ -52,7 +52,8 @@ def keystore(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def certs(tmp_path_factory):
-    return wanhost.make_certs(tmp_path_factory.mktemp("wan-certs") / "certs")
+    """Our CA with the clients pc, pi and pc2 (a second operator PC)."""
+    return wanhost.make_certs(tmp_path_factory.mktemp("wan-certs") / "certs", "pc2")
 
 
 def bins():
@@ -60,24 +61,34 @@ def bins():
             "EEZYBOT_WAN_BIN_DIR": str(wanhost.wan_bin_dir())}
 
 
-def outsider(hosts, site, domain, seconds):
-    """tests/site_user.py (rclpy, no security) at `site`, subscribed to the topics that
-    cross, listing the topics its DDS graph has; `.result()` waits for its JSON."""
+def site_user(hosts, site, domain, seconds, *args):
+    """tests/site_user.py (rclpy, no security) at `site` with ARGS; `.result()` waits for
+    its JSON."""
     argv = [sys.executable, str(REPO / "tests" / "site_user.py"), "--domain", str(domain), "--for", str(seconds),
-            "--topics"]
-    for t in OUTSIDER_TOPICS:
-        argv += ["--sub", t]
+            *args]
     p = hosts.popen(site, ["env", *(f"{k}={v}" for k, v in NO_SECURITY.items()), *argv], stdout=subprocess.PIPE,
                     stderr=subprocess.PIPE, text=True)
 
     def result():
         out, err = p.communicate(timeout=seconds + 60)
         lines = [line for line in out.splitlines() if line.startswith("{")]
-        assert p.returncode == 0 and lines, f"outsider at {site}: exit {p.returncode}\n{out[-2000:]}\n{err[-2000:]}"
+        assert p.returncode == 0 and lines, f"site_user at {site}: exit {p.returncode}\n{out[-2000:]}\n{err[-2000:]}"
         return json.loads(lines[-1])
 
     p.result = result
     return p
+
+
+def outsider(hosts, site, domain, seconds):
+    """An unsecured rclpy peer at `site` (site_user) subscribed to the topics that
+    cross, listing the topics its DDS graph has."""
+    return site_user(hosts, site, domain, seconds, "--topics", *(a for t in OUTSIDER_TOPICS for a in ("--sub", t)))
+
+
+def urdf_summary():
+    """What site_user says of the URDF state_publisher serves (urdf/eezybot.urdf)."""
+    text = (REPO / "urdf" / "eezybot.urdf").read_text()
+    return {"len": len(text), "head": text[:200]}
 
 
 def robot_name():
@@ -117,11 +128,13 @@ def run_graph(secured, domain, workdir, keystore, certs):
     (neither: plain TCP to the router): a target from the operator in `pc` answered by
     serial_node in `pi` at ROBOT.md's angles, then 10 s more of targets while an
     unsecured outsider listens on each LAN; every interface of `pc`, `wan` and `pi`
-    captured throughout."""
+    captured throughout. A second operator PC (`pc2`, its LAN unsecured, its bridge with
+    the certificate pc2) takes robot_description from state_publisher in `pc`: a sample
+    larger than a datagram, through the pc bridge's secured participant."""
     workdir.mkdir()
     r = Run()
-    hosts = wanhost.WanHosts(tag="q")
-    captures, procs, peer, arduino, outsiders = {}, [], None, None, []
+    hosts = wanhost.WanHosts(tag="q", sites=("pc", "pi", "pc2"))
+    captures, procs, peer, arduino, outsiders, second = {}, [], None, None, [], None
     codes = {}
     try:
         for leg, ns in (("pc", hosts.pc), ("wan", hosts.wan), ("pi", hosts.pi)):
@@ -134,6 +147,9 @@ def run_graph(secured, domain, workdir, keystore, certs):
         procs.append(NodeProcess(str(REPO / "launch_scripts" / "pc.sh"), [], domain, env=env, netns=hosts.pc))
         procs.append(NodeProcess(str(REPO / "launch_scripts" / "pi.sh"), [], domain,
                                  env={**env, "SERIAL_PORT": str(arduino.path)}, netns=hosts.pi))
+        procs.append(NodeProcess(str(wanhost.wan_bin_dir() / BRIDGE), ["pc", "--cert", "pc2"], domain,
+                                 env={**env, **NO_SECURITY}, netns=hosts.ns["pc2"]))
+        second = site_user(hosts, "pc2", domain, 60, "--sub", "/robot_description", "--until", "/robot_description")
         # the operator joins once compute_ik is up, as an operator's tool would (a
         # RustDDS participant that starts its handshakes with a node still starting
         # sometimes never completes one: BENCHMARKS.md, SROS2, start)
@@ -166,10 +182,11 @@ def run_graph(secured, domain, workdir, keystore, certs):
             peer.publish("xyz_target", payload)
             peer.wait(lambda: False, 0.25)
         r.seen = dict(zip(("pc", "pi"), (o.result() for o in outsiders)))
+        r.second = second.result()
         assert len(peer.received("servo_state")) > len(sent), "the targets of the outsiders' window got no answer"
     finally:
         r.pcaps = {leg: c.stop() for leg, c in captures.items()}
-        for o in outsiders:
+        for o in [*outsiders, *([second] if second else [])]:
             if o.poll() is None:
                 o.kill()
                 o.wait(10)
@@ -239,8 +256,10 @@ def test_both_sites_secured_a_target_crosses_and_neither_outsiders_nor_captures_
     topics; a capture of every interface of `pc`, of `wan` and of `pi` holds none of the
     targets, servo_angles and servo_state samples the operator sent and received, nor a
     joint's name or the URDF, only ciphertext (RTPS-protected on the LANs, TLS on the
-    WAN). The control, the same run with neither SROS2 nor TLS: the outsiders get the
-    data, and each leg's capture holds what crosses it."""
+    WAN). A second operator PC gets robot_description, a sample larger than a datagram,
+    from state_publisher through the pc bridge's secured participant. The control, the
+    same run with neither SROS2 nor TLS: the outsiders get the data, and each leg's
+    capture holds what crosses it."""
     secured = run_graph(True, domain, tmp_path / "secured", keystore, certs)
     assert "SROS2 on: enclave /eezybot/bridge_pc" in secured.logs[0], secured.logs[0][-3000:]
     assert "SROS2 on: enclave /eezybot/bridge_pi" in secured.logs[1], secured.logs[1][-3000:]
@@ -249,6 +268,8 @@ def test_both_sites_secured_a_target_crosses_and_neither_outsiders_nor_captures_
         assert not topics, f"an unsecured peer at {site} sees {topics}"
     found = in_clear(secured, "secured")
     assert not any(any(f.values()) for f in found.values()), f"in clear on the wire: {found}"
+    assert secured.second["got"]["/robot_description"]["first"] == urdf_summary(), \
+        f"the second PC's robot_description: {secured.second}"
 
     plain = run_graph(False, domain, tmp_path / "plain", keystore, certs)
     saw = outsiders_saw(plain, "plain")
@@ -258,8 +279,9 @@ def test_both_sites_secured_a_target_crosses_and_neither_outsiders_nor_captures_
     # back over every leg; the targets and the URDF stay on the PC's LAN
     for leg in ("pc", "wan", "pi"):
         assert found[leg]["servo_angles"] and found[leg]["servo_state"] and found[leg]["joint names"], (leg, found[leg])
-    assert found["pc"]["targets"] and found["pc"]["URDF"], found["pc"]
+    assert found["pc"]["targets"] and found["pc"]["URDF"] and found["wan"]["URDF"], found
     assert not found["pi"]["targets"] and not found["wan"]["targets"], found
+    assert plain.second["got"]["/robot_description"]["first"] == urdf_summary(), plain.second
 
 
 def print_config(side, *args, env=None):
