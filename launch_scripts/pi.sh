@@ -16,7 +16,9 @@
 # (eezybot_wan_bridge pi) runs beside the node and carries the contract's topics
 # through that Zenoh router to pc.sh on the PC, wherever it is; TLS files from
 # ZENOH_TLS_DIR (launch_scripts/wan_certs.sh; ZENOH_CERT: another client certificate
-# name). A bad endpoint or TLS file: exit 2 before anything starts.
+# name). A bad endpoint or TLS file: exit 2 before anything starts. With SROS2 on as
+# well, the bridge joins the secured LAN under the enclave /eezybot/bridge_pi of the same
+# keystore (docs/security.md: SROS2 with the WAN).
 #
 # The arm configuration: ARM_CONFIG=FILE, else the calibration wizard's saved
 # ${XDG_CONFIG_HOME:-~/.config}/eezybot/arm.yaml if it exists (copy it here from the PC
