@@ -1692,6 +1692,9 @@ impl Discovery {
           for msg in dr_iter {
             security.volatile_message_secure_read(&msg);
           }
+          // a Cyclone DDS participant's tokens release ours (secure_discovery.rs)
+          security
+            .send_deferred_key_exchange(&self.dcps_participant_volatile_message_secure.writer);
         }
         Err(e) => {
           error!("receive_participant_volatile_message: {e:?}");
@@ -1869,7 +1872,10 @@ impl Discovery {
   // rediscovered.
   fn forget_participant_samples(&self, guid_prefix: GuidPrefix) {
     self.dcps_participant.reader.forget_participant(guid_prefix);
-    self.dcps_subscription.reader.forget_participant(guid_prefix);
+    self
+      .dcps_subscription
+      .reader
+      .forget_participant(guid_prefix);
     self.dcps_publication.reader.forget_participant(guid_prefix);
     self.dcps_topic.reader.forget_participant(guid_prefix);
     self

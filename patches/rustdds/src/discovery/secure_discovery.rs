@@ -1,6 +1,7 @@
 use std::{
   collections::{HashMap, HashSet},
   sync::{Arc, RwLock},
+  time::{Duration as StdDuration, Instant},
 };
 
 #[allow(unused_imports)]
@@ -120,7 +121,23 @@ pub(crate) struct SecureDiscovery {
   // To tell the event loop that a key exchange is complete: it matches a remote
   // endpoint only then (see RemoteEndpointKeysExchanged)
   discovery_updated_sender: WakeSender<DiscoveryNotificationType>,
+
+  // Our built-in key exchange messages for a Cyclone DDS participant, held until it has
+  // sent us its participant crypto tokens (or DEFERRED_KEY_EXCHANGE_MAX_WAIT has
+  // passed), with when they were made: Cyclone drops volatile messages that come
+  // before it has processed the handshake's final message and never asks for them
+  // again (see start_key_exchange_with_remote_participant)
+  deferred_key_exchange: HashMap<GuidPrefix, (Instant, Vec<ParticipantVolatileMessageSecure>)>,
+  // Remote participants whose participant crypto tokens we have set
+  participant_tokens_received: HashSet<GuidPrefix>,
 }
+
+// How long built-in key exchange messages for a Cyclone DDS participant wait for its
+// own participant crypto tokens before they go anyway
+const DEFERRED_KEY_EXCHANGE_MAX_WAIT: StdDuration = StdDuration::from_secs(3);
+
+// The vendor id of Eclipse Cyclone DDS (the OMG's list of RTPS vendor ids)
+const VENDOR_ECLIPSE_CYCLONE_DDS: [u8; 2] = [0x01, 0x10];
 
 impl SecureDiscovery {
   pub fn new(
@@ -263,6 +280,8 @@ impl SecureDiscovery {
       generic_message_helper: ParticipantGenericMessageHelper::new(),
       handshake_states: HashMap::new(),
       cached_key_exchange_messages_for_resend: HashSet::new(),
+      deferred_key_exchange: HashMap::new(),
+      participant_tokens_received: HashSet::new(),
       stored_authentication_messages: HashMap::new(),
       cached_received_key_exchange_messages: HashMap::new(),
       user_data_endpoints_with_keys_already_sent_to: HashSet::new(),
@@ -1429,7 +1448,8 @@ impl SecureDiscovery {
   ) {
     // The DB's guard is dropped before the notification: its channel is bounded and
     // only the event loop drains it, which needs the DB to do so.
-    discovery_db_write(discovery_db).update_authentication_status(participant_guid_prefix, new_status);
+    discovery_db_write(discovery_db)
+      .update_authentication_status(participant_guid_prefix, new_status);
 
     send_discovery_notification(
       discovery_updated_sender,
@@ -1550,6 +1570,9 @@ impl SecureDiscovery {
     self
       .stored_authentication_messages
       .retain(|_guid_prefix, message| message.remaining_resend_counter > 0);
+
+    // Held key exchange messages whose remote has answered, or waited too long
+    self.send_deferred_key_exchange(key_exchange_writer);
 
     // Then try to send those key exchange messages that we haven't been able to
     // send yet
@@ -1996,6 +2019,10 @@ impl SecureDiscovery {
           );
         } else {
           info!("Set crypto tokens for remote participant {remote_participant_guidp:?}");
+          // it has processed the handshake: our held messages can go
+          self
+            .participant_tokens_received
+            .insert(remote_participant_guidp);
         }
       }
 
@@ -2199,15 +2226,36 @@ impl SecureDiscovery {
     key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
   ) {
-    // Read remote's available endpoints from DB
-    let remotes_builtin_endpoints =
+    // Read remote's available endpoints and vendor from DB
+    let (remotes_builtin_endpoints, remote_vendor) =
       match discovery_db_read(discovery_db).find_participant_proxy(remote_guid_prefix) {
-        Some(data) => data.available_builtin_endpoints,
+        Some(data) => (data.available_builtin_endpoints, data.vendor_id),
         None => {
           error!("Could not find participant {remote_guid_prefix:?} from DiscoveryDB");
           return;
         }
       };
+    // A Cyclone DDS participant that has not yet sent us its participant crypto
+    // tokens may not have processed the handshake's final message yet (we sent it
+    // just now when we started the handshake): it drops volatile messages that come
+    // before, and its volatile reader, connected once it has, never asks for them
+    // again, so our built-in endpoints stay unknown to it and its to us, for good.
+    // It sends its own tokens right after connecting its volatile endpoints, so ours
+    // wait for them (send_deferred_key_exchange), at most
+    // DEFERRED_KEY_EXCHANGE_MAX_WAIT.
+    let defer = remote_vendor.vendor_id == VENDOR_ECLIPSE_CYCLONE_DDS
+      && !self
+        .participant_tokens_received
+        .contains(&remote_guid_prefix);
+    if defer {
+      debug!(
+        "Holding our key exchange messages for Cyclone DDS participant {remote_guid_prefix:?} \
+         until it has sent its participant crypto tokens"
+      );
+      self
+        .deferred_key_exchange
+        .insert(remote_guid_prefix, (Instant::now(), Vec::new()));
+    }
 
     // Send local participant crypto tokens to remote
     // TODO: do this only if needed?
@@ -2230,7 +2278,12 @@ impl SecureDiscovery {
           GUID::GUID_UNKNOWN, // No destination endpoint, just the participant
           &tokens,
         );
-        if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+        if let Err(e) = self.send_or_hold_key_exchange_message(
+          defer,
+          remote_guid_prefix,
+          key_exchange_writer,
+          &message,
+        ) {
           create_security_error_and_log!(
             "Failed to send participant crypto tokens to {remote_guid_prefix:?}: {e}. Trying \
              again later."
@@ -2271,7 +2324,12 @@ impl SecureDiscovery {
               remote_reader_guid,
               &tokens,
             );
-            if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+            if let Err(e) = self.send_or_hold_key_exchange_message(
+              defer,
+              remote_guid_prefix,
+              key_exchange_writer,
+              &message,
+            ) {
               create_security_error_and_log!(
                 "Failed to send local writer {writer_eid:?} crypto tokens to \
                  {remote_reader_guid:?}: {e}. Trying again later."
@@ -2317,7 +2375,12 @@ impl SecureDiscovery {
               remote_writer_guid,
               &tokens,
             );
-            if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+            if let Err(e) = self.send_or_hold_key_exchange_message(
+              defer,
+              remote_guid_prefix,
+              key_exchange_writer,
+              &message,
+            ) {
               create_security_error_and_log!(
                 "Failed to send local reader {reader_eid:?} crypto tokens to \
                  {remote_writer_guid:?}: {e}. Trying again later."
@@ -2330,6 +2393,65 @@ impl SecureDiscovery {
               );
             }
           }
+        }
+      }
+    }
+  }
+
+  // Send a built-in key exchange message now, or hold it for a Cyclone DDS remote
+  // (`defer`, see start_key_exchange_with_remote_participant).
+  fn send_or_hold_key_exchange_message(
+    &mut self,
+    defer: bool,
+    remote_guid_prefix: GuidPrefix,
+    key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
+    message: &ParticipantVolatileMessageSecure,
+  ) -> Result<(), String> {
+    if defer {
+      if let Some((_, held)) = self.deferred_key_exchange.get_mut(&remote_guid_prefix) {
+        held.push(message.clone());
+        return Ok(());
+      }
+    }
+    self.send_key_exchange_message(key_exchange_writer, message)
+  }
+
+  // Send the held key exchange messages of each remote that has sent us its
+  // participant crypto tokens, or whose messages have waited
+  // DEFERRED_KEY_EXCHANGE_MAX_WAIT.
+  pub fn send_deferred_key_exchange(
+    &mut self,
+    key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
+  ) {
+    let due: Vec<GuidPrefix> = self
+      .deferred_key_exchange
+      .iter()
+      .filter(|(remote, (since, _))| {
+        self.participant_tokens_received.contains(remote)
+          || since.elapsed() >= DEFERRED_KEY_EXCHANGE_MAX_WAIT
+      })
+      .map(|(remote, _)| *remote)
+      .collect();
+    for remote in due {
+      let Some((since, held)) = self.deferred_key_exchange.remove(&remote) else {
+        continue;
+      };
+      debug!(
+        "Sending {} held key exchange messages to {remote:?} after {:?}{}",
+        held.len(),
+        since.elapsed(),
+        if self.participant_tokens_received.contains(&remote) {
+          ""
+        } else {
+          " (its participant crypto tokens have not come)"
+        }
+      );
+      for message in held {
+        if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+          create_security_error_and_log!(
+            "Failed to send held crypto tokens to {remote:?}: {e}. Trying again later."
+          );
+          self.cached_key_exchange_messages_for_resend.insert(message);
         }
       }
     }
@@ -2610,12 +2732,14 @@ impl SecureDiscovery {
     self
       .cached_received_key_exchange_messages
       .retain(|(_, remote), _| !is_gone(remote));
-    self.cached_key_exchange_messages_for_resend.retain(|msg| {
-      msg.generic.destination_participant_guid.prefix != remote_guid_prefix
-    });
+    self
+      .cached_key_exchange_messages_for_resend
+      .retain(|msg| msg.generic.destination_participant_guid.prefix != remote_guid_prefix);
     self
       .relay_only_remote_readers
       .retain(|remote| !is_gone(remote));
+    self.deferred_key_exchange.remove(&remote_guid_prefix);
+    self.participant_tokens_received.remove(&remote_guid_prefix);
   }
 
   fn remote_endpoint_keys_received_for(
