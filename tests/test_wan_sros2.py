@@ -305,8 +305,8 @@ def grant(permissions_xml):
 def test_the_bridges_enclaves_grant_exactly_what_the_bridges_carry(namespace, keystore):
     """Each bridge enclave keystore.sh makes may subscribe to exactly the topics its
     bridge sends out (the plugin's allow-list of local publishers, as the bridge itself
-    prints its configuration), publish exactly those it brings in (local subscribers),
-    and use ros_discovery_info: nothing else. In a namespace too (`--namespace /arm2`,
+    prints its configuration), publish exactly those it brings in (local subscribers)
+    and its own diagnostics, and use ros_discovery_info: nothing else. In a namespace too (`--namespace /arm2`,
     the nodes' `-r __ns:=/arm2`)."""
     for side in ("pc", "pi"):
         name = f"/eezybot/bridge_{side}"
@@ -317,8 +317,10 @@ def test_the_bridges_enclaves_grant_exactly_what_the_bridges_carry(namespace, ke
         code, config, err = print_config(side, "--namespace", namespace)
         assert code == 0, err
         allow = config["plugins"]["ros2dds"]["allow"]
+        ns = namespace.rstrip("/")
+        # and its own diagnostics on its LAN (wan/src/health.rs), on either side
         want = {"subscribe": {f"rt{t}" for t in allow["publishers"]} | {"ros_discovery_info"},
-                "publish": {f"rt{t}" for t in allow["subscribers"]} | {"ros_discovery_info"}}
+                "publish": {f"rt{t}" for t in allow["subscribers"]} | {"ros_discovery_info", f"rt{ns}/diagnostics"}}
         assert allow["publishers"] and allow["subscribers"], allow
         assert grant(keystore.enclave(name) / "permissions.xml") == want, (side, namespace)
 

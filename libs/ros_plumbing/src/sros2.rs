@@ -128,6 +128,10 @@ pub const BRIDGE_PI_ENCLAVE: &str = "/eezybot/bridge_pi";
 /// ones (zenoh-plugin-ros2dds reads and writes `ros_discovery_info`; it creates no
 /// other topic: no `rosout`, no `parameter_events`, no services).
 pub const BRIDGE_GRAPH: &[&str] = &["ros_discovery_info"];
+/// The contract topics a WAN bridge publishes of its own, besides what it brings in:
+/// its `diagnostics` on its site's LAN (wan/src/health.rs: the WAN link's state and its
+/// certificate's expiry), on the Pi's side too.
+pub const BRIDGE_OWN_PUBLISH: &[&str] = &["diagnostics"];
 
 /// The parameter services ros2-client starts for every node (`rq/<node>/<srv>Request`,
 /// `rr/<node>/<srv>Reply`).
@@ -187,7 +191,8 @@ pub enum Role {
     /// ([`crossing::CROSSING`]): it subscribes to the topics its site sends out
     /// ([`crossing::Side::outgoing`]: it reads them from the local publishers), publishes
     /// those that come in ([`crossing::Side::incoming`]: it writes them to the local
-    /// subscribers), and reads and writes `ros_discovery_info` ([`BRIDGE_GRAPH`]).
+    /// subscribers) and its own diagnostics ([`BRIDGE_OWN_PUBLISH`]), and reads and
+    /// writes `ros_discovery_info` ([`BRIDGE_GRAPH`]).
     Bridge(crossing::Side),
 }
 
@@ -608,13 +613,14 @@ pub fn rules<S: AsRef<str>>(nodes: &[S], namespace: &str) -> Result<Rules, Sros2
 /// What the WAN bridge of `side` in `namespace` publishes and subscribes
 /// ([`Role::Bridge`]): the topics of [`crossing::CROSSING`] that come in there
 /// (published: the bridge writes them to the local subscribers), those that go out
-/// from there (subscribed: it reads them from the local publishers), and
-/// [`BRIDGE_GRAPH`] both ways.
+/// from there (subscribed: it reads them from the local publishers), its own
+/// diagnostics ([`BRIDGE_OWN_PUBLISH`], published) and [`BRIDGE_GRAPH`] both ways.
 pub fn bridge_rules(side: crossing::Side, namespace: &str) -> Result<Rules, Sros2Error> {
     check_namespace(namespace)?;
     let dds = |t: &str| format!("rt/{}", in_namespace(namespace, t));
     let mut r = Rules::default();
     r.publish.extend(side.incoming().into_iter().map(dds));
+    r.publish.extend(BRIDGE_OWN_PUBLISH.iter().map(|t| dds(t)));
     r.subscribe.extend(side.outgoing().into_iter().map(dds));
     for t in BRIDGE_GRAPH {
         r.publish.insert(t.to_string());
@@ -1166,7 +1172,12 @@ mod tests {
         let set = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<BTreeSet<_>>();
         assert_eq!(
             pi.publish,
-            set(&["ros_discovery_info", "rt/estop", "rt/servo_angles"])
+            set(&[
+                "ros_discovery_info",
+                "rt/diagnostics",
+                "rt/estop",
+                "rt/servo_angles"
+            ])
         );
         assert_eq!(
             pi.subscribe,
@@ -1218,7 +1229,7 @@ mod tests {
         ))
         .unwrap();
         assert!(xml.contains("<subject_name>CN=/eezybot/bridge_pi</subject_name>"));
-        assert_eq!(section(&xml, "publish").len(), 3);
+        assert_eq!(section(&xml, "publish").len(), 4);
     }
 
     #[test]
