@@ -263,6 +263,9 @@ def test_both_sites_secured_a_target_crosses_and_neither_outsiders_nor_captures_
     secured = run_graph(True, domain, tmp_path / "secured", keystore, certs)
     assert "SROS2 on: enclave /eezybot/bridge_pc" in secured.logs[0], secured.logs[0][-3000:]
     assert "SROS2 on: enclave /eezybot/bridge_pi" in secured.logs[1], secured.logs[1][-3000:]
+    # each bridge's own diagnostics writer (a second participant, same enclave) is allowed
+    for log in secured.logs[:2]:
+        assert "no diagnostics on" not in log and "diagnostics not written" not in log, log[-3000:]
     for site, (counts, topics) in outsiders_saw(secured, "secured").items():
         assert not any(counts.values()), f"an unsecured peer at {site} got samples: {counts}"
         assert not topics, f"an unsecured peer at {site} sees {topics}"
